@@ -1,0 +1,1 @@
+//! Exports: OBJ + MTL, binary glTF.

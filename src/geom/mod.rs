@@ -1,0 +1,203 @@
+//! Triangle meshes and the quantities derived from them.
+//!
+//! Positions are `Vec<Vec3>`, triangles `Vec<[u32; 3]>` (DESIGN.md, Conventions). Derived
+//! quantities (adjacency, normals) are computed on first request and kept with the mesh, as
+//! geometry-central does, so an algorithm asks for what it needs and pays for it once.
+
+pub mod io;
+
+use glam::Vec3;
+use std::sync::OnceLock;
+
+/// A triangle mesh. Vertices not referenced by any triangle are allowed and ignored by the
+/// algorithms (they keep the file's vertex numbering stable, so config entries that name a
+/// vertex by index mean what the user sees in their modelling tool).
+#[derive(Debug, Default)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Optional per-vertex RGBA colours in [0, 1] (COFF, PLY with colour properties).
+    pub colors: Option<Vec<[f32; 4]>>,
+    adjacency: OnceLock<VertexAdjacency>,
+    vertex_normals: OnceLock<Vec<Vec3>>,
+}
+
+impl Clone for Mesh {
+    fn clone(&self) -> Self {
+        Mesh::with_colors(
+            self.positions.clone(),
+            self.triangles.clone(),
+            self.colors.clone(),
+        )
+    }
+}
+
+impl Mesh {
+    pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Self {
+        Self::with_colors(positions, triangles, None)
+    }
+
+    pub fn with_colors(
+        positions: Vec<Vec3>,
+        triangles: Vec<[u32; 3]>,
+        colors: Option<Vec<[f32; 4]>>,
+    ) -> Self {
+        Mesh {
+            positions,
+            triangles,
+            colors,
+            adjacency: OnceLock::new(),
+            vertex_normals: OnceLock::new(),
+        }
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn face_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Axis-aligned bounding box (min, max) of the referenced vertices.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for t in &self.triangles {
+            for &v in t {
+                let p = self.positions[v as usize];
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        (lo, hi)
+    }
+
+    pub fn face_normal_unnormalized(&self, f: usize) -> Vec3 {
+        let [a, b, c] = self.triangles[f];
+        let (a, b, c) = (
+            self.positions[a as usize],
+            self.positions[b as usize],
+            self.positions[c as usize],
+        );
+        (b - a).cross(c - a)
+    }
+
+    /// Area-weighted vertex normals, unit length (zero for unreferenced vertices).
+    pub fn vertex_normals(&self) -> &[Vec3] {
+        self.vertex_normals.get_or_init(|| {
+            let mut n = vec![Vec3::ZERO; self.positions.len()];
+            for (f, t) in self.triangles.iter().enumerate() {
+                let fn_ = self.face_normal_unnormalized(f);
+                for &v in t {
+                    n[v as usize] += fn_;
+                }
+            }
+            for x in &mut n {
+                *x = x.normalize_or_zero();
+            }
+            n
+        })
+    }
+
+    /// Vertex-to-vertex adjacency (one-ring), built on first use.
+    pub fn adjacency(&self) -> &VertexAdjacency {
+        self.adjacency
+            .get_or_init(|| VertexAdjacency::build(self.positions.len(), &self.triangles))
+    }
+
+    /// Mean edge length over all triangle edges.
+    pub fn mean_edge_length(&self) -> f32 {
+        let mut sum = 0.0f64;
+        let mut n = 0usize;
+        for t in &self.triangles {
+            for k in 0..3 {
+                let a = self.positions[t[k] as usize];
+                let b = self.positions[t[(k + 1) % 3] as usize];
+                sum += (a - b).length() as f64;
+                n += 1;
+            }
+        }
+        if n == 0 { 0.0 } else { (sum / n as f64) as f32 }
+    }
+}
+
+/// One-ring adjacency in compressed-row form: the neighbours of vertex `v` are
+/// `neighbors[offsets[v]..offsets[v + 1]]`, sorted ascending, without duplicates.
+#[derive(Debug, Clone)]
+pub struct VertexAdjacency {
+    pub offsets: Vec<u32>,
+    pub neighbors: Vec<u32>,
+}
+
+impl VertexAdjacency {
+    pub fn build(vertex_count: usize, triangles: &[[u32; 3]]) -> Self {
+        let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(triangles.len() * 6);
+        for t in triangles {
+            for k in 0..3 {
+                let a = t[k];
+                let b = t[(k + 1) % 3];
+                if a != b {
+                    pairs.push((a, b));
+                    pairs.push((b, a));
+                }
+            }
+        }
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut offsets = vec![0u32; vertex_count + 1];
+        for &(a, _) in &pairs {
+            offsets[a as usize + 1] += 1;
+        }
+        for i in 0..vertex_count {
+            offsets[i + 1] += offsets[i];
+        }
+        let neighbors = pairs.into_iter().map(|(_, b)| b).collect();
+        VertexAdjacency { offsets, neighbors }
+    }
+
+    pub fn neighbors(&self, v: usize) -> &[u32] {
+        &self.neighbors[self.offsets[v] as usize..self.offsets[v + 1] as usize]
+    }
+
+    pub fn degree(&self, v: usize) -> usize {
+        (self.offsets[v + 1] - self.offsets[v]) as usize
+    }
+
+    /// Index into the half-edge arrays of the directed edge `a -> b`, if it exists.
+    pub fn half_edge(&self, a: usize, b: u32) -> Option<usize> {
+        let start = self.offsets[a] as usize;
+        self.neighbors(a)
+            .binary_search(&b)
+            .ok()
+            .map(|i| start + i)
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.offsets.len() - 1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn adjacency_of_two_triangles_is_symmetric_and_sorted() {
+        let m = Mesh::new(
+            vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE],
+            vec![[0, 1, 2], [2, 1, 3]],
+        );
+        let adj = m.adjacency();
+        assert_eq!(adj.neighbors(0), &[1, 2]);
+        assert_eq!(adj.neighbors(1), &[0, 2, 3]);
+        assert_eq!(adj.neighbors(3), &[1, 2]);
+        for v in 0..4 {
+            for &n in adj.neighbors(v) {
+                assert!(adj.neighbors(n as usize).contains(&(v as u32)));
+            }
+        }
+        assert_eq!(adj.half_edge(1, 3), Some(adj.offsets[1] as usize + 2));
+        assert_eq!(adj.half_edge(0, 3), None);
+    }
+}

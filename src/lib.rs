@@ -1,0 +1,9 @@
+//! texsyn: texture synthesis on shapes from examples. See README.md and DESIGN.md.
+pub mod export;
+pub mod geom;
+pub mod image;
+pub mod render;
+
+/// The stage algorithms, one file per algorithm (DESIGN.md, Layout).
+#[path = "../stages/mod.rs"]
+pub mod stages;

@@ -1,0 +1,1 @@
+//! Software rasterizer for previews and texture baking.
