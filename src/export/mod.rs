@@ -1,1 +1,10 @@
-//! Exports: OBJ + MTL, binary glTF.
+//! Exports: OBJ + MTL ([`obj`]) and binary glTF ([`glb`]).
+//!
+//! Writers return bytes or strings and never touch the file system, so the pipeline can hash
+//! and store what they produce. Output is deterministic: fixed formatting, fixed key order.
+
+pub mod glb;
+pub mod obj;
+
+pub use glb::{GlbAttribute, GlbMaterial, GlbMesh, write_glb};
+pub use obj::{MtlMaps, write_mtl, write_obj};

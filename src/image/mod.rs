@@ -6,6 +6,11 @@
 //! Texture coordinates written to files follow OBJ/glTF conventions and are converted in one
 //! place ([`texel_to_uv`]).
 
+pub mod knn;
+pub mod neighbourhood;
+pub mod pca;
+pub mod pyramid;
+
 use glam::Vec2;
 use std::path::{Path, PathBuf};
 

@@ -1,1 +1,2 @@
 //! Stage: reconstruct.
+pub mod blend2d;

@@ -1,0 +1,198 @@
+//! Wavefront OBJ and MTL writers.
+//!
+//! Numbers are written with Rust's `{}` for `f32` (the shortest text that reads back to the
+//! same value), so files are deterministic and round-trip exactly.
+
+use crate::geom::Mesh;
+use glam::Vec2;
+use std::collections::HashMap;
+use std::fmt::Write;
+
+/// Writes `mesh` as OBJ text: every vertex (`v`, in order, so vertex numbers are kept), the
+/// distinct texture coordinates (`vt`, deduplicated by exact bit equality, in order of first
+/// use) and one `f v/vt` line per triangle (`f v` without uvs). `corner_uv` holds each face's
+/// three corner coordinates in OBJ convention (v up); when its length differs from the face
+/// count it is ignored. With `mtl_file`, the file starts with `mtllib` and the faces use
+/// `material`.
+pub fn write_obj(
+    mesh: &Mesh,
+    corner_uv: Option<&[[Vec2; 3]]>,
+    mtl_file: Option<&str>,
+    material: &str,
+) -> String {
+    let corner_uv = corner_uv.filter(|c| c.len() == mesh.triangles.len());
+    let mut out = String::with_capacity(mesh.positions.len() * 32 + mesh.triangles.len() * 40);
+    out.push_str("# texsyn\n");
+    if let Some(m) = mtl_file {
+        let _ = writeln!(out, "mtllib {m}");
+    }
+    for p in &mesh.positions {
+        let _ = writeln!(out, "v {} {} {}", p.x, p.y, p.z);
+    }
+    // Index (1-based) of each face corner's vt.
+    let mut corner_vt: Vec<[u32; 3]> = Vec::new();
+    if let Some(uvs) = corner_uv {
+        let mut index: HashMap<(u32, u32), u32> = HashMap::new();
+        corner_vt.reserve(uvs.len());
+        for c in uvs {
+            let mut vt = [0u32; 3];
+            for k in 0..3 {
+                let key = (c[k].x.to_bits(), c[k].y.to_bits());
+                let next = index.len() as u32 + 1;
+                vt[k] = *index.entry(key).or_insert_with(|| {
+                    let _ = writeln!(out, "vt {} {}", c[k].x, c[k].y);
+                    next
+                });
+            }
+            corner_vt.push(vt);
+        }
+    }
+    if mtl_file.is_some() {
+        let _ = writeln!(out, "usemtl {material}");
+    }
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        let [a, b, c] = t.map(|v| v as u64 + 1);
+        match corner_vt.get(f) {
+            Some([ta, tb, tc]) => {
+                let _ = writeln!(out, "f {a}/{ta} {b}/{tb} {c}/{tc}");
+            }
+            None => {
+                let _ = writeln!(out, "f {a} {b} {c}");
+            }
+        }
+    }
+    out
+}
+
+/// Texture files of a material, by name relative to the MTL file. Default: none.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct MtlMaps {
+    /// Base colour (`map_Kd`).
+    pub diffuse: Option<String>,
+    /// Tangent-space normal map (`norm`, and `map_Bump` for readers that take bump maps as
+    /// normal maps, like Blender's and tobj). Written without the `-bm 1` option: 1 is the
+    /// default, and simple readers (tobj) would take the option as part of the file name.
+    pub normal: Option<String>,
+    /// Roughness (`map_Pr`, the PBR extension of MTL).
+    pub roughness: Option<String>,
+    /// Height / displacement (`disp`).
+    pub height: Option<String>,
+}
+
+/// Writes an MTL file with one material: white diffuse (modulated by `map_Kd` if given), no
+/// specular, opaque, plus the given maps.
+pub fn write_mtl(material: &str, maps: &MtlMaps) -> String {
+    let mut out = String::new();
+    out.push_str("# texsyn\n");
+    let _ = writeln!(out, "newmtl {material}");
+    out.push_str("Ka 0 0 0\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n");
+    if let Some(f) = &maps.diffuse {
+        let _ = writeln!(out, "map_Kd {f}");
+    }
+    if let Some(f) = &maps.normal {
+        let _ = writeln!(out, "norm {f}");
+        let _ = writeln!(out, "map_Bump {f}");
+    }
+    if let Some(f) = &maps.roughness {
+        let _ = writeln!(out, "map_Pr {f}");
+    }
+    if let Some(f) = &maps.height {
+        let _ = writeln!(out, "disp {f}");
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn read_back(obj: &str) -> Vec<tobj::Model> {
+        let opts = tobj::LoadOptions {
+            triangulate: true,
+            ..Default::default()
+        };
+        let (models, _) = tobj::load_obj_buf(&mut obj.as_bytes(), &opts, |_| {
+            Err(tobj::LoadError::OpenFileFailed)
+        })
+        .unwrap();
+        models
+    }
+
+    #[test]
+    fn obj_round_trips_through_tobj_with_shared_uvs() {
+        let mesh = Mesh::new(
+            vec![
+                Vec3::new(0.1, -2.5, 3.0),
+                Vec3::new(1e-7, 0.0, -0.0),
+                Vec3::new(123456.79, 1.0 / 3.0, 0.5),
+                Vec3::new(-1.0, 2.0, 7.25),
+            ],
+            vec![[0, 1, 2], [2, 1, 3]],
+        );
+        let uv = [
+            [
+                Vec2::new(0.0, 0.0),
+                Vec2::new(0.1, 0.9),
+                Vec2::new(1.0 / 3.0, 0.5),
+            ],
+            [
+                Vec2::new(1.0 / 3.0, 0.5),
+                Vec2::new(0.1, 0.9),
+                Vec2::new(1.0, 1.0),
+            ],
+        ];
+        let text = write_obj(&mesh, Some(&uv), Some("out.mtl"), "synth");
+        assert_eq!(text.lines().filter(|l| l.starts_with("vt ")).count(), 4);
+        assert!(text.contains("mtllib out.mtl\n") && text.contains("usemtl synth\n"));
+        let models = read_back(&text);
+        assert_eq!(models.len(), 1);
+        let m = &models[0].mesh;
+        assert_eq!(m.indices.len(), 6);
+        for (f, (tri, fuv)) in mesh.triangles.iter().zip(&uv).enumerate() {
+            for k in 0..3 {
+                let vi = m.indices[3 * f + k] as usize;
+                let p = Vec3::from_slice(&m.positions[3 * vi..3 * vi + 3]);
+                assert_eq!(p, mesh.positions[tri[k] as usize]);
+                let ti = m.texcoord_indices[3 * f + k] as usize;
+                let t = Vec2::from_slice(&m.texcoords[2 * ti..2 * ti + 2]);
+                assert_eq!(t, fuv[k]);
+            }
+        }
+        // Deterministic text.
+        assert_eq!(text, write_obj(&mesh, Some(&uv), Some("out.mtl"), "synth"));
+    }
+
+    #[test]
+    fn obj_without_uvs_or_material_has_plain_faces() {
+        let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]);
+        let text = write_obj(&mesh, None, None, "unused");
+        assert_eq!(text, "# texsyn\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    }
+
+    #[test]
+    fn mtl_names_every_map() {
+        let maps = MtlMaps {
+            diffuse: Some("albedo.png".into()),
+            normal: Some("normal.png".into()),
+            roughness: Some("rough.png".into()),
+            height: Some("height.png".into()),
+        };
+        let text = write_mtl("synth", &maps);
+        for line in [
+            "newmtl synth",
+            "map_Kd albedo.png",
+            "norm normal.png",
+            "map_Bump normal.png",
+            "map_Pr rough.png",
+            "disp height.png",
+        ] {
+            assert!(
+                text.lines().any(|l| l == line),
+                "missing {line:?} in\n{text}"
+            );
+        }
+        let plain = write_mtl("m", &MtlMaps::default());
+        assert!(!plain.contains("map_") && plain.contains("newmtl m\n"));
+    }
+}

@@ -1,0 +1,371 @@
+//! A small kd-tree over f32 points of a dimension chosen at run time, with a filtered k-nearest
+//! query: the k nearest points *for which a predicate holds*. Jump maps need this: a pixel's
+//! nearest neighbours in feature space are its own spatial neighbours, which must be skipped,
+//! and a plain kNN would spend k on them.
+//!
+//! Results are exact (with [`KdTree::nearest`]) and ordered by (squared distance, index), so
+//! they are deterministic and do not depend on the tree's shape. The tree is built by median
+//! splits along the widest coordinate, the median chosen under the total order (coordinate,
+//! index).
+
+/// Points per leaf.
+const LEAF_SIZE: usize = 8;
+const NO_CHILD: u32 = u32::MAX;
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    /// Range of `ids` / `points` (tree order) under this node.
+    start: u32,
+    end: u32,
+    /// Split dimension; `u32::MAX` for a leaf.
+    axis: u32,
+    split: f32,
+    left: u32,
+    right: u32,
+}
+
+/// A kd-tree; see the module docs.
+#[derive(Clone, Debug)]
+pub struct KdTree {
+    dim: usize,
+    /// Points in tree order, `dim` values each.
+    points: Vec<f32>,
+    /// Original index of each point in tree order.
+    ids: Vec<u32>,
+    nodes: Vec<Node>,
+}
+
+/// Squared Euclidean distance, summed in coordinate order (the value every query reports).
+#[inline]
+pub fn squared_distance(a: &[f32], b: &[f32]) -> f32 {
+    let mut s = 0.0f32;
+    for (x, y) in a.iter().zip(b) {
+        let d = x - y;
+        s += d * d;
+    }
+    s
+}
+
+/// [`squared_distance`] if it is at most `bound`, else `None` (possibly without summing every
+/// coordinate: partial sums only grow).
+#[inline]
+fn distance_within(a: &[f32], b: &[f32], bound: f32) -> Option<f32> {
+    let mut s = 0.0f32;
+    let mut ca = a.chunks_exact(4);
+    let mut cb = b.chunks_exact(4);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for t in 0..4 {
+            let d = x[t] - y[t];
+            s += d * d;
+        }
+        if s > bound {
+            return None;
+        }
+    }
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        let d = x - y;
+        s += d * d;
+    }
+    (s <= bound).then_some(s)
+}
+
+/// A bounded, sorted list of the best candidates so far.
+struct Best {
+    k: usize,
+    items: Vec<(u32, f32)>,
+}
+
+impl Best {
+    #[inline]
+    fn worse(a: (u32, f32), b: (u32, f32)) -> bool {
+        a.1 > b.1 || (a.1 == b.1 && a.0 > b.0)
+    }
+
+    /// Squared distance a candidate must not exceed to be of interest.
+    #[inline]
+    fn bound(&self) -> f32 {
+        if self.items.len() < self.k {
+            f32::INFINITY
+        } else {
+            self.items[self.k - 1].1
+        }
+    }
+
+    #[inline]
+    fn offer(&mut self, id: u32, d: f32) {
+        let c = (id, d);
+        if self.items.len() == self.k {
+            if !Self::worse(self.items[self.k - 1], c) {
+                return;
+            }
+            self.items.pop();
+        }
+        let pos = self.items.partition_point(|&x| !Self::worse(x, c));
+        self.items.insert(pos, c);
+    }
+}
+
+impl KdTree {
+    /// Builds a tree over `points.len() / dim` points stored one after the other.
+    /// Panics if `dim == 0`, if the length is not a multiple of `dim`, or if there are 2³² or
+    /// more points.
+    pub fn build(points: &[f32], dim: usize) -> KdTree {
+        assert!(
+            dim > 0 && points.len().is_multiple_of(dim),
+            "points are not a whole number of vectors"
+        );
+        let n = points.len() / dim;
+        assert!(n < u32::MAX as usize, "too many points for a kd-tree");
+        let mut perm: Vec<u32> = (0..n as u32).collect();
+        let mut nodes = Vec::with_capacity(2 * n / LEAF_SIZE + 1);
+        if n > 0 {
+            build_node(points, dim, &mut perm, 0, &mut nodes);
+        }
+        let mut tree_points = Vec::with_capacity(points.len());
+        for &i in &perm {
+            tree_points.extend_from_slice(&points[i as usize * dim..(i as usize + 1) * dim]);
+        }
+        KdTree {
+            dim,
+            points: tree_points,
+            ids: perm,
+            nodes,
+        }
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// The `k` nearest points to `query` among those whose index passes `filter`, as
+    /// `(index, squared distance)` by increasing distance, ties by increasing index. Fewer than
+    /// `k` if fewer points pass.
+    pub fn nearest(
+        &self,
+        query: &[f32],
+        k: usize,
+        filter: impl Fn(u32) -> bool,
+    ) -> Vec<(u32, f32)> {
+        self.nearest_approx(query, k, 0.0, filter)
+    }
+
+    /// As [`Self::nearest`], but a subtree is skipped once every point in it is farther than
+    /// `1 + eps` times the current k-th distance, so the i-th result is within `1 + eps` of the
+    /// true i-th nearest distance (Arya & Mount's approximate search). Still deterministic.
+    pub fn nearest_approx(
+        &self,
+        query: &[f32],
+        k: usize,
+        eps: f32,
+        filter: impl Fn(u32) -> bool,
+    ) -> Vec<(u32, f32)> {
+        assert_eq!(query.len(), self.dim, "query dimension");
+        let mut best = Best {
+            k,
+            items: Vec::with_capacity(k + 1),
+        };
+        if k == 0 || self.nodes.is_empty() {
+            return best.items;
+        }
+        // Bounds are compared with a little slack so float rounding in the incremental cell
+        // distance never prunes a cell holding a point at exactly the k-th distance.
+        let scale = (1.0 + eps.max(0.0)).powi(2) * (1.0 - 1e-5);
+        let mut off = vec![0.0f32; self.dim];
+        self.search(0, query, 0.0, &mut off, scale, &filter, &mut best);
+        best.items
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn search(
+        &self,
+        node: u32,
+        q: &[f32],
+        rd: f32,
+        off: &mut [f32],
+        scale: f32,
+        filter: &impl Fn(u32) -> bool,
+        best: &mut Best,
+    ) {
+        let nd = self.nodes[node as usize];
+        if nd.axis == u32::MAX {
+            let dim = self.dim;
+            for i in nd.start as usize..nd.end as usize {
+                let bound = best.bound();
+                if let Some(d) = distance_within(q, &self.points[i * dim..(i + 1) * dim], bound) {
+                    let id = self.ids[i];
+                    if filter(id) {
+                        best.offer(id, d);
+                    }
+                }
+            }
+            return;
+        }
+        let axis = nd.axis as usize;
+        let diff = q[axis] - nd.split;
+        let (near, far) = if diff < 0.0 {
+            (nd.left, nd.right)
+        } else {
+            (nd.right, nd.left)
+        };
+        self.search(near, q, rd, off, scale, filter, best);
+        let old = off[axis];
+        let new_rd = rd - old * old + diff * diff;
+        if new_rd * scale <= best.bound() {
+            off[axis] = diff;
+            self.search(far, q, new_rd, off, scale, filter, best);
+            off[axis] = old;
+        }
+    }
+}
+
+fn build_node(
+    points: &[f32],
+    dim: usize,
+    perm: &mut [u32],
+    start: usize,
+    nodes: &mut Vec<Node>,
+) -> u32 {
+    let me = nodes.len() as u32;
+    let n = perm.len();
+    nodes.push(Node {
+        start: start as u32,
+        end: (start + n) as u32,
+        axis: u32::MAX,
+        split: 0.0,
+        left: NO_CHILD,
+        right: NO_CHILD,
+    });
+    if n <= LEAF_SIZE {
+        return me;
+    }
+    // Widest coordinate (lowest index on ties).
+    let mut axis = 0;
+    let mut widest = -1.0f32;
+    for d in 0..dim {
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for &i in perm.iter() {
+            let x = points[i as usize * dim + d];
+            lo = lo.min(x);
+            hi = hi.max(x);
+        }
+        if hi - lo > widest {
+            widest = hi - lo;
+            axis = d;
+        }
+    }
+    if widest <= 0.0 {
+        // All points coincide: keep them in one (large) leaf.
+        return me;
+    }
+    let mid = n / 2;
+    let key = |i: u32| points[i as usize * dim + axis];
+    perm.select_nth_unstable_by(mid, |&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
+    let split = key(perm[mid]);
+    let (lo, hi) = perm.split_at_mut(mid);
+    let left = build_node(points, dim, lo, start, nodes);
+    let right = build_node(points, dim, hi, start + mid, nodes);
+    let node = &mut nodes[me as usize];
+    node.axis = axis as u32;
+    node.split = split;
+    node.left = left;
+    node.right = right;
+    me
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn brute(
+        points: &[f32],
+        dim: usize,
+        q: &[f32],
+        k: usize,
+        filter: impl Fn(u32) -> bool,
+    ) -> Vec<(u32, f32)> {
+        let mut all: Vec<(u32, f32)> = points
+            .chunks(dim)
+            .enumerate()
+            .filter(|(i, _)| filter(*i as u32))
+            .map(|(i, p)| (i as u32, squared_distance(q, p)))
+            .collect();
+        all.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        all.truncate(k);
+        all
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+        #[test]
+        fn matches_brute_force(
+            dim in 1usize..6,
+            n in 0usize..300,
+            // Small integer coordinates make exact ties common.
+            seed in any::<u64>(),
+            k in 1usize..12,
+            modulus in 1u32..5,
+            coarse in any::<bool>(),
+        ) {
+            let mut s = seed | 1;
+            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s };
+            let points: Vec<f32> = (0..n * dim).map(|_| {
+                let r = next();
+                if coarse { (r % 5) as f32 } else { (r % 100_000) as f32 / 997.0 }
+            }).collect();
+            let tree = KdTree::build(&points, dim);
+            for t in 0..5 {
+                let q: Vec<f32> = (0..dim).map(|_| {
+                    let r = next();
+                    if coarse { (r % 6) as f32 - 0.5 } else { (r % 100_000) as f32 / 997.0 }
+                }).collect();
+                let keep = t % modulus;
+                let filter = |i: u32| i % modulus != keep || modulus == 1;
+                let got = tree.nearest(&q, k, filter);
+                let want = brute(&points, dim, &q, k, filter);
+                prop_assert_eq!(got, want);
+            }
+        }
+    }
+
+    #[test]
+    fn approximate_search_stays_within_factor() {
+        let dim = 8;
+        let mut s = 12345u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s % 10_000) as f32 / 10_000.0
+        };
+        let points: Vec<f32> = (0..4000 * dim).map(|_| next()).collect();
+        let tree = KdTree::build(&points, dim);
+        let eps = 0.5f32;
+        for _ in 0..50 {
+            let q: Vec<f32> = (0..dim).map(|_| next()).collect();
+            let got = tree.nearest_approx(&q, 5, eps, |_| true);
+            let want = brute(&points, dim, &q, 5, |_| true);
+            assert_eq!(got.len(), 5);
+            for (g, w) in got.iter().zip(&want) {
+                assert!(g.1 <= w.1 * (1.0 + eps).powi(2) + 1e-6);
+            }
+        }
+    }
+
+    #[test]
+    fn duplicate_points_do_not_break_the_tree() {
+        let points = vec![1.0f32; 3 * 100];
+        let tree = KdTree::build(&points, 3);
+        let got = tree.nearest(&[1.0, 1.0, 1.0], 3, |i| i >= 50);
+        assert_eq!(got, vec![(50, 0.0), (51, 0.0), (52, 0.0)]);
+    }
+}
