@@ -15,6 +15,7 @@
 //! converted from OBJ to OFF with identical content does not invalidate anything downstream.
 
 pub mod executor;
+pub mod outputs;
 pub mod progress;
 
 use crate::artifact::{Artifact, ContentHash};
@@ -242,4 +243,3 @@ impl Dag {
 fn escape(s: &str) -> String {
     s.replace('\\', "\\\\").replace('"', "\\\"")
 }
-pub mod outputs;

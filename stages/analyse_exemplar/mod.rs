@@ -1,1 +1,2 @@
 //! Stage: analyse_exemplar.
+pub mod jump_map;
