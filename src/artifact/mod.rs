@@ -16,6 +16,7 @@
 //! The content hash covers the whole payload, so it changes exactly when the bytes a reader
 //! could see change. It is what downstream node keys are built from (early cutoff).
 
+pub mod jump_maps;
 pub mod kinds;
 
 use memmap2::Mmap;

@@ -1,1 +1,2 @@
 //! Software rasterizer for previews and texture baking.
+pub mod shader;

@@ -1,1 +1,2 @@
 //! Stage: reconstruct.
+pub mod jump_blend;

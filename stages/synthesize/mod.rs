@@ -1,1 +1,2 @@
 //! Stage: synthesize.
+pub mod jump_walk;
