@@ -235,7 +235,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                 return Err(NodeError::internal("texel addresses and mesh disagree on the vertex count"));
             }
             let sets = corner_sets(&mesh.triangles, &param, walk.addresses).map_err(NodeError::internal)?;
-            let single = random_base_set(&sets, p.seed);
+            let single = random_base_set(&sets);
             let mut surfaces = vec![ExportSurface {
                 name: "basecolor".into(),
                 extension: exemplar_ext.clone(),

@@ -47,11 +47,12 @@ pub fn corner_sets(
         .collect()
 }
 
-/// One set per face with a random base corner (§4.3), for formats that hold one set.
-pub fn random_base_set(sets: &CornerSets, seed: u64) -> Vec<[Vec2; 3]> {
+/// One set per face with a random base corner (§4.3), for formats that hold one set. The
+/// choice is a fixed hash of the face index: §4.3 found no strategy better than random.
+pub fn random_base_set(sets: &CornerSets) -> Vec<[Vec2; 3]> {
     sets.iter()
         .enumerate()
-        .map(|(f, s)| s[(counter_hash(seed, 7, f as u64) % 3) as usize])
+        .map(|(f, s)| s[(counter_hash(0, 7, f as u64) % 3) as usize])
         .collect()
 }
 

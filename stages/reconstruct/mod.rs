@@ -1,2 +1,3 @@
 //! Stage: reconstruct.
 pub mod jump_blend;
+pub mod textured_export;
