@@ -1,7 +1,15 @@
 //! texsyn: texture synthesis on shapes from examples. See README.md and DESIGN.md.
+pub mod artifact;
+pub mod bench;
+pub mod cache;
+pub mod config;
 pub mod export;
 pub mod geom;
 pub mod image;
+pub mod linalg;
+pub mod methods;
+pub mod pipeline;
+pub mod random;
 pub mod render;
 
 /// The stage algorithms, one file per algorithm (DESIGN.md, Layout).

@@ -5,6 +5,7 @@
 //! geometry-central does, so an algorithm asks for what it needs and pays for it once.
 
 pub mod io;
+pub mod laplacian;
 
 use glam::Vec3;
 use std::sync::OnceLock;

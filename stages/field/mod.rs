@@ -1,1 +1,2 @@
 //! Stage: field.
+pub mod orientation_field;

@@ -1,1 +1,3 @@
 //! Stage: parameterize.
+pub mod edge_offsets;
+pub mod region_growing;

@@ -1,2 +1,4 @@
-//! Stage: reconstruct.
+//! Stage: reconstruct: what users open (textured meshes, baked textures, images, previews).
 pub mod blend2d;
+pub mod jump_blend;
+pub mod textured_export;

@@ -1,2 +1,3 @@
-//! Stage: synthesize.
+//! Stage: synthesize: the methods' synthesis proper.
+pub mod jump_walk;
 pub mod synth2d;

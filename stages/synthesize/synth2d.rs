@@ -26,9 +26,10 @@
 //! - The default continuation weight (300) is far above the paper's "relatively rare" jumps
 //!   of one in a dozen pixels or so: with exemplars of 64–128 pixels, small weights gave
 //!   visibly noisy, fragmented output.
-//! - Randomness comes from [`counter_hash`] of (seed, draw, output pixel index), never from a
+//! - Randomness comes from [`crate::random::counter_hash`] of (seed, draw, output pixel index), never from a
 //!   shared stream, so any output pixel's choices can be recomputed independently.
 
+use crate::random::counter_unit;
 use crate::stages::analyse_exemplar::jump_map::JumpMapRef;
 
 /// Parameters of the 2D jump-map synthesis.
@@ -79,28 +80,6 @@ impl Synth2dParams {
     }
 }
 
-#[inline]
-fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// Counter-based hash of (seed, stream, index): the only source of randomness in synthesis.
-/// Every input bit affects every output bit (three rounds of the splitmix64 finalizer).
-#[inline]
-pub fn counter_hash(seed: u64, stream: u64, index: u64) -> u64 {
-    let h = splitmix64(seed);
-    let h = splitmix64(h ^ stream.wrapping_mul(0xD6E8_FEB8_6659_FD93));
-    splitmix64(h ^ index.wrapping_mul(0xA076_1D64_78BD_642F))
-}
-
-/// [`counter_hash`] as a uniform f32 in [0, 1) (24 random bits).
-#[inline]
-pub fn counter_unit(seed: u64, stream: u64, index: u64) -> f32 {
-    (counter_hash(seed, stream, index) >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
-}
 
 /// Draw numbers (hash streams) used per output pixel.
 const DRAW_SOURCE: u64 = 0;
@@ -353,31 +332,6 @@ mod tests {
             c.windows(2)
                 .all(|s| s[0][0].abs_diff(s[1][0]) + s[0][1].abs_diff(s[1][1]) == 1)
         );
-    }
-
-    #[test]
-    fn counter_hash_is_uniform_and_sensitive_to_every_input() {
-        let a = counter_hash(1, 2, 3);
-        assert_ne!(a, counter_hash(0, 2, 3));
-        assert_ne!(a, counter_hash(1, 3, 3));
-        assert_ne!(a, counter_hash(1, 2, 4));
-        assert_ne!(counter_hash(0, 1, 0), counter_hash(0, 0, 1));
-        let n = 100_000;
-        let mut buckets = [0u32; 10];
-        let mut sum = 0.0f64;
-        for i in 0..n {
-            let u = counter_unit(42, 7, i);
-            assert!((0.0..1.0).contains(&u));
-            buckets[(u * 10.0) as usize] += 1;
-            sum += u as f64;
-        }
-        for b in buckets {
-            assert!(
-                (b as f64 - n as f64 / 10.0).abs() < 0.05 * n as f64 / 10.0,
-                "{buckets:?}"
-            );
-        }
-        assert!((sum / n as f64 - 0.5).abs() < 0.01);
     }
 
     #[test]

@@ -1,0 +1,183 @@
+//! Artifact formats of the jump-map method: the jump map, the orientation field, the
+//! parameterization (order, edge offsets, validity boxes) and the walk's texel addresses.
+//! Each is a few raw arrays viewed in place; readers check lengths against each other so a
+//! damaged artifact is an error, never an out-of-bounds index later.
+
+use super::{Artifact, ArtifactError, ArtifactWriter, Kind};
+use crate::stages::analyse_exemplar::jump_map::{Jump, JumpMap, JumpMapRef};
+use crate::stages::parameterize::edge_offsets::OffsetBox;
+use crate::stages::synthesize::jump_walk::{Walk, WalkInput};
+use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+
+fn bad(msg: impl Into<String>) -> ArtifactError {
+    ArtifactError::Meta(msg.into())
+}
+
+#[derive(Serialize, Deserialize)]
+struct JumpMapMeta {
+    width: u32,
+    height: u32,
+    k: u32,
+}
+
+pub fn write_jump_map(jm: &JumpMap) -> Vec<u8> {
+    ArtifactWriter::new(
+        Kind::JumpMap,
+        &JumpMapMeta {
+            width: jm.width,
+            height: jm.height,
+            k: jm.k,
+        },
+    )
+    .array("jumps", &jm.jumps)
+    .finish()
+}
+
+pub fn view_jump_map(a: &Artifact) -> Result<JumpMapRef<'_>, ArtifactError> {
+    a.expect_kind(Kind::JumpMap)?;
+    let m: JumpMapMeta = a.meta()?;
+    let jumps: &[Jump] = a.array("jumps")?;
+    JumpMapRef::new(m.width, m.height, m.k, jumps).map_err(bad)
+}
+
+pub fn write_field(up: &[Vec3]) -> Vec<u8> {
+    ArtifactWriter::new(Kind::OrientationField, &(up.len() as u64))
+        .array("up", up)
+        .finish()
+}
+
+pub fn view_field(a: &Artifact) -> Result<&[Vec3], ArtifactError> {
+    a.expect_kind(Kind::OrientationField)?;
+    let n: u64 = a.meta()?;
+    let up: &[Vec3] = a.array("up")?;
+    if up.len() as u64 != n {
+        return Err(bad("field length disagrees with metadata"));
+    }
+    Ok(up)
+}
+
+/// Metadata of a parameterization.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct ParamMeta {
+    pub vertices: u64,
+    /// Texels per object-space unit actually used.
+    pub scale: f32,
+    /// The exemplar size the boxes were checked against.
+    pub exemplar: (u32, u32),
+    /// Connected components (= seeds of the order).
+    pub components: u32,
+}
+
+pub struct ParamParts<'a> {
+    pub meta: ParamMeta,
+    pub order: &'a [u32],
+    pub seeds: &'a [u32],
+    pub adj_offsets: &'a [u32],
+    pub neighbors: &'a [u32],
+    pub edge_offsets: &'a [Vec2],
+    pub boxes: &'a [OffsetBox],
+}
+
+pub fn write_parameterization(p: &ParamParts) -> Vec<u8> {
+    ArtifactWriter::new(Kind::JumpParameterization, &p.meta)
+        .array("order", p.order)
+        .array("seeds", p.seeds)
+        .array("adj_offsets", p.adj_offsets)
+        .array("neighbors", p.neighbors)
+        .array("edge_offsets", p.edge_offsets)
+        .array("boxes", p.boxes)
+        .finish()
+}
+
+pub fn view_parameterization(a: &Artifact) -> Result<ParamParts<'_>, ArtifactError> {
+    a.expect_kind(Kind::JumpParameterization)?;
+    let p = ParamParts {
+        meta: a.meta()?,
+        order: a.array("order")?,
+        seeds: a.array("seeds")?,
+        adj_offsets: a.array("adj_offsets")?,
+        neighbors: a.array("neighbors")?,
+        edge_offsets: a.array("edge_offsets")?,
+        boxes: a.array("boxes")?,
+    };
+    let n = p.meta.vertices as usize;
+    let ok = p.boxes.len() == n
+        && p.adj_offsets.len() == n + 1
+        && p.adj_offsets.first() == Some(&0)
+        && p.adj_offsets.windows(2).all(|w| w[0] <= w[1])
+        && *p.adj_offsets.last().unwrap() as usize == p.neighbors.len()
+        && p.edge_offsets.len() == p.neighbors.len()
+        && p.neighbors.iter().all(|&v| (v as usize) < n)
+        && p.order.iter().all(|&v| (v as usize) < n)
+        && p.order.len() <= n
+        && p.seeds.iter().all(|&s| (s as usize) < p.order.len().max(1));
+    if !ok {
+        return Err(bad("parameterization arrays are inconsistent"));
+    }
+    Ok(p)
+}
+
+impl ParamParts<'_> {
+    pub fn walk_input(&self) -> WalkInput<'_> {
+        WalkInput {
+            adj_offsets: self.adj_offsets,
+            neighbors: self.neighbors,
+            edge_offsets: self.edge_offsets,
+            boxes: self.boxes,
+            order: self.order,
+        }
+    }
+
+    /// Offset of the half-edge a → b, if the edge exists.
+    pub fn offset(&self, a: u32, b: u32) -> Option<Vec2> {
+        let start = self.adj_offsets[a as usize] as usize;
+        let end = self.adj_offsets[a as usize + 1] as usize;
+        self.neighbors[start..end]
+            .binary_search(&b)
+            .ok()
+            .map(|k| self.edge_offsets[start + k])
+    }
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct WalkMeta {
+    pub vertices: u64,
+    pub jumps: u64,
+    pub random_assignments: u64,
+    pub exemplar: (u32, u32),
+}
+
+pub fn write_walk(walk: &Walk, exemplar: (u32, u32)) -> Vec<u8> {
+    ArtifactWriter::new(
+        Kind::TexelAddresses,
+        &WalkMeta {
+            vertices: walk.addresses.len() as u64,
+            jumps: walk.jumps,
+            random_assignments: walk.random_assignments,
+            exemplar,
+        },
+    )
+    .array("addresses", &walk.addresses)
+    .array("patches", &walk.patches)
+    .finish()
+}
+
+pub struct WalkView<'a> {
+    pub meta: WalkMeta,
+    pub addresses: &'a [Vec2],
+    pub patches: &'a [u32],
+}
+
+pub fn view_walk(a: &Artifact) -> Result<WalkView<'_>, ArtifactError> {
+    a.expect_kind(Kind::TexelAddresses)?;
+    let v = WalkView {
+        meta: a.meta()?,
+        addresses: a.array("addresses")?,
+        patches: a.array("patches")?,
+    };
+    if v.addresses.len() as u64 != v.meta.vertices || v.patches.len() != v.addresses.len() {
+        return Err(bad("texel address arrays disagree with metadata"));
+    }
+    Ok(v)
+}

@@ -1,0 +1,176 @@
+//! Typed artifact formats shared by several methods: meshes, images and file bundles.
+//! Method-specific formats (jump maps, fields, parameterizations) live beside the algorithm
+//! that writes them.
+
+use super::{Artifact, ArtifactError, ArtifactWriter, ContentHash, Kind};
+use crate::geom::Mesh;
+use crate::image::{Image, ImageView};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+#[derive(Serialize, Deserialize)]
+struct MeshMeta {
+    vertices: u64,
+    faces: u64,
+    has_colors: bool,
+}
+
+pub fn write_mesh(mesh: &Mesh) -> Vec<u8> {
+    let mut w = ArtifactWriter::new(
+        Kind::Mesh,
+        &MeshMeta {
+            vertices: mesh.positions.len() as u64,
+            faces: mesh.triangles.len() as u64,
+            has_colors: mesh.colors.is_some(),
+        },
+    )
+    .array("positions", &mesh.positions)
+    .array("triangles", &mesh.triangles);
+    if let Some(c) = &mesh.colors {
+        w = w.array("colors", c);
+    }
+    w.finish()
+}
+
+/// A mesh artifact as a [`Mesh`] (one copy: algorithms want owned, adjacency-caching meshes).
+pub fn read_mesh(a: &Artifact) -> Result<Mesh, ArtifactError> {
+    a.expect_kind(Kind::Mesh)?;
+    let meta: MeshMeta = a.meta()?;
+    let positions: &[Vec3] = a.array("positions")?;
+    let triangles: &[[u32; 3]] = a.array("triangles")?;
+    if positions.len() as u64 != meta.vertices || triangles.len() as u64 != meta.faces {
+        return Err(ArtifactError::Meta("mesh array lengths disagree with metadata".into()));
+    }
+    if triangles
+        .iter()
+        .any(|t| t.iter().any(|&v| v as usize >= positions.len()))
+    {
+        return Err(ArtifactError::Meta("mesh index out of range".into()));
+    }
+    let colors = if meta.has_colors {
+        Some(a.array::<[f32; 4]>("colors")?.to_vec())
+    } else {
+        None
+    };
+    Ok(Mesh::with_colors(
+        positions.to_vec(),
+        triangles.to_vec(),
+        colors,
+    ))
+}
+
+#[derive(Serialize, Deserialize)]
+struct ImageMeta {
+    width: u32,
+    height: u32,
+}
+
+pub fn write_image(img: &Image) -> Vec<u8> {
+    ArtifactWriter::new(
+        Kind::Image,
+        &ImageMeta {
+            width: img.width,
+            height: img.height,
+        },
+    )
+    .array("pixels", &img.pixels)
+    .finish()
+}
+
+/// An image artifact viewed in place.
+pub fn view_image(a: &Artifact) -> Result<ImageView<'_>, ArtifactError> {
+    a.expect_kind(Kind::Image)?;
+    let meta: ImageMeta = a.meta()?;
+    let pixels: &[[f32; 4]] = a.array("pixels")?;
+    if pixels.len() != meta.width as usize * meta.height as usize {
+        return Err(ArtifactError::Meta("image size disagrees with metadata".into()));
+    }
+    Ok(ImageView {
+        width: meta.width,
+        height: meta.height,
+        pixels,
+    })
+}
+
+/// One file of a bundle.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct BundleEntry {
+    pub name: String,
+    pub len: u64,
+    /// blake3 of the uncompressed bytes: compared with files already on disk, so a rerun
+    /// rewrites only what differs.
+    pub hash: ContentHash,
+}
+
+/// The files a reconstruct node exports, zstd-compressed (DESIGN.md: zstd for what is not
+/// read by random access).
+pub fn write_bundle(files: &[(String, Vec<u8>)]) -> Vec<u8> {
+    let entries: Vec<BundleEntry> = files
+        .iter()
+        .map(|(name, bytes)| BundleEntry {
+            name: name.clone(),
+            len: bytes.len() as u64,
+            hash: ContentHash::of(bytes),
+        })
+        .collect();
+    let mut w = ArtifactWriter::new(Kind::FileBundle, &entries);
+    for (name, bytes) in files {
+        // Level 3, single-threaded: deterministic bytes for a given zstd version (pinned by
+        // Cargo.lock).
+        let packed = zstd::bulk::compress(bytes, 3).expect("zstd compression of memory");
+        w = w.array_bytes(name, packed);
+    }
+    w.finish()
+}
+
+pub fn bundle_entries(a: &Artifact) -> Result<Vec<BundleEntry>, ArtifactError> {
+    a.expect_kind(Kind::FileBundle)?;
+    a.meta()
+}
+
+pub fn bundle_file(a: &Artifact, entry: &BundleEntry) -> Result<Vec<u8>, ArtifactError> {
+    let packed = a.raw_array(&entry.name)?;
+    let bytes = zstd::bulk::decompress(packed, entry.len as usize)
+        .map_err(|e| ArtifactError::Meta(format!("{}: {e}", entry.name)))?;
+    if ContentHash::of(&bytes) != entry.hash {
+        return Err(ArtifactError::HashMismatch);
+    }
+    Ok(bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mesh_round_trips_with_colors() {
+        let m = Mesh::with_colors(
+            vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            vec![[0, 1, 2]],
+            Some(vec![[1.0, 0.0, 0.0, 1.0]; 3]),
+        );
+        let a = Artifact::from_bytes(write_mesh(&m)).unwrap();
+        let r = read_mesh(&a).unwrap();
+        assert_eq!(r.positions, m.positions);
+        assert_eq!(r.triangles, m.triangles);
+        assert_eq!(r.colors, m.colors);
+    }
+
+    #[test]
+    fn bundle_round_trips_and_detects_damage() {
+        let files = vec![
+            ("a.txt".to_string(), b"hello hello hello".to_vec()),
+            ("b.bin".to_string(), vec![7u8; 1000]),
+        ];
+        let a = Artifact::from_bytes(write_bundle(&files)).unwrap();
+        let entries = bundle_entries(&a).unwrap();
+        assert_eq!(entries.len(), 2);
+        for (e, (name, bytes)) in entries.iter().zip(&files) {
+            assert_eq!(&e.name, name);
+            assert_eq!(&bundle_file(&a, e).unwrap(), bytes);
+        }
+        let mut wrong = entries[0].clone();
+        wrong.hash = ContentHash::of(b"other");
+        assert!(bundle_file(&a, &wrong).is_err());
+    }
+}

@@ -1,0 +1,246 @@
+//! `texsyn bench`: measures the speed goals of BENCHMARKS.md and writes the table.
+//!
+//! Each figure is the median of several runs. Inputs come from `../shared/data` (or
+//! `$TEXSYN_SHARED_DATA`) when it is there; otherwise the report says which rows it could not
+//! measure. Speed is only measured here, never asserted in tests (the machines are shared).
+
+use crate::artifact::jump_maps::{ParamParts, ParamMeta, view_parameterization, write_parameterization};
+use crate::artifact::Artifact;
+use crate::geom::Mesh;
+use crate::stages::analyse_exemplar::jump_map::{JumpMapParams, build_jump_map};
+use crate::stages::field::orientation_field::{FieldParams, orientation_field};
+use crate::stages::parameterize::edge_offsets::{edge_offsets, validity_boxes};
+use crate::stages::parameterize::region_growing::region_growing_order;
+use crate::stages::synthesize::jump_walk::{WalkParams, jump_walk};
+use anyhow::{Context, Result};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+fn shared_data() -> Option<PathBuf> {
+    let candidates = [
+        std::env::var_os("TEXSYN_SHARED_DATA").map(PathBuf::from),
+        Some(Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data")),
+        Some(PathBuf::from("../shared/data")),
+    ];
+    candidates.into_iter().flatten().find(|p| p.join("meshes").is_dir())
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut times = Vec::with_capacity(runs);
+    let mut last = None;
+    for _ in 0..runs {
+        let t = Instant::now();
+        let r = f();
+        times.push(t.elapsed().as_secs_f64());
+        last = Some(r);
+    }
+    (median(times), last.unwrap())
+}
+
+/// Midpoint subdivision: every triangle into four, edge midpoints shared.
+pub fn subdivide(mesh: &Mesh) -> Mesh {
+    let mut positions = mesh.positions.clone();
+    let mut mid: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.triangles.len() * 2);
+    let mut triangles = Vec::with_capacity(mesh.triangles.len() * 4);
+    for t in &mesh.triangles {
+        let mut m = [0u32; 3];
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let key = (a.min(b), a.max(b));
+            m[k] = *mid.entry(key).or_insert_with(|| {
+                positions.push((positions[a as usize] + positions[b as usize]) * 0.5);
+                positions.len() as u32 - 1
+            });
+        }
+        triangles.push([t[0], m[0], m[2]]);
+        triangles.push([t[1], m[1], m[0]]);
+        triangles.push([t[2], m[2], m[1]]);
+        triangles.push([m[0], m[1], m[2]]);
+    }
+    Mesh::new(positions, triangles)
+}
+
+struct Row {
+    what: String,
+    measured: String,
+    goal: String,
+    verdict: String,
+}
+
+fn verdict_below(measured: f64, goal: f64) -> String {
+    if measured <= goal {
+        "met".into()
+    } else {
+        format!("missed: {:.1}× over", measured / goal)
+    }
+}
+
+fn verdict_above(measured: f64, goal: f64) -> String {
+    if measured >= goal {
+        "met".into()
+    } else {
+        format!("missed: {:.1}× short", goal / measured)
+    }
+}
+
+/// Parameterization (order, offsets, boxes) and the walk on one mesh; returns rows.
+fn surface_rows(name: &str, mesh: &Mesh, runs: usize, jm: &crate::stages::analyse_exemplar::jump_map::JumpMap, rows: &mut Vec<Row>) {
+    let n = mesh.vertex_count();
+    let field = orientation_field(mesh, &FieldParams { isotropic: true, ..Default::default() }).expect("isotropic field");
+    // A scale at which the mean edge spans about 4 texels, as in the demo.
+    let scale = 4.0 / mesh.mean_edge_length().max(1e-9);
+    let (t_param, bytes) = time(runs, || {
+        let adj = crate::geom::VertexAdjacency::build(n, &mesh.triangles);
+        let off = edge_offsets(mesh, &adj, &field, scale);
+        let boxes = validity_boxes(&adj, &off);
+        let order = region_growing_order(&adj, 0);
+        write_parameterization(&ParamParts {
+            meta: ParamMeta { vertices: n as u64, scale, exemplar: (jm.width, jm.height), components: order.seeds.len() as u32 },
+            order: &order.order,
+            seeds: &order.seeds,
+            adj_offsets: &adj.offsets,
+            neighbors: &adj.neighbors,
+            edge_offsets: &off,
+            boxes: &boxes,
+        })
+    });
+    let art = Artifact::from_bytes(bytes).expect("own artifact");
+    let param = view_parameterization(&art).expect("own artifact");
+    let per_million = t_param / (n as f64 / 1e6);
+    rows.push(Row {
+        what: format!("parameterize {name} ({n} vertices): order + offsets + boxes"),
+        measured: format!("{:.3} s ({per_million:.3} s per million vertices)", t_param),
+        goal: "< 0.3 s per million vertices".into(),
+        verdict: verdict_below(per_million, 0.3),
+    });
+    let params = WalkParams::default();
+    let (t_walk, _) = time(runs, || jump_walk(param.walk_input(), jm.as_ref(), &params, &|_| {}));
+    let rate = n as f64 / t_walk;
+    rows.push(Row {
+        what: format!("synthesize {name} ({n} vertices): jump walk (sequential, 1 core)"),
+        measured: format!("{:.4} s = {:.2} M vertices/s per core", t_walk, rate / 1e6),
+        goal: "5 M vertices/s per core (paper: 0.15 M/s, Athlon 1.5 GHz)".into(),
+        verdict: verdict_above(rate, 5e6),
+    });
+}
+
+pub fn run_all(runs: usize) -> Result<String> {
+    let mut rows = Vec::new();
+    let mut notes = Vec::new();
+    let data = shared_data();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+
+    let load_image = |p: &Path| -> Result<crate::image::Image> {
+        let bytes = std::fs::read(p).with_context(|| p.display().to_string())?;
+        Ok(crate::image::decode_image(p, &bytes)?)
+    };
+    let jm_params = JumpMapParams::default();
+    let small = match &data {
+        Some(d) => d.join("exemplars/marble1.png"),
+        None => repo.join("tests/data/exemplars/marble1.png"),
+    };
+    let mut small_jm = None;
+    if small.exists() {
+        let img = load_image(&small)?;
+        let (t, jm) = time(runs, || build_jump_map(img.view(), &jm_params, &|_| {}));
+        rows.push(Row {
+            what: format!("analyse_exemplar: jump map of {} ({}×{})", small.file_name().unwrap().to_string_lossy(), img.width, img.height),
+            measured: format!("{t:.3} s"),
+            goal: "< 1 s on 2 cores".into(),
+            verdict: verdict_below(t, 1.0),
+        });
+        small_jm = Some(jm);
+    } else {
+        notes.push(format!("{} is missing: 128×128 jump-map row not measured", small.display()));
+    }
+    if let Some(d) = &data {
+        let p = d.join("exemplars/brick_wall_512.png");
+        let img = load_image(&p)?;
+        let (t, _) = time(runs.min(3), || build_jump_map(img.view(), &jm_params, &|_| {}));
+        rows.push(Row {
+            what: format!("analyse_exemplar: jump map of brick_wall_512.png ({}×{})", img.width, img.height),
+            measured: format!("{t:.3} s"),
+            goal: "< 10 s on 2 cores".into(),
+            verdict: verdict_below(t, 10.0),
+        });
+    } else {
+        notes.push("../shared/data is not here: the 512×512 jump-map row is not measured".into());
+    }
+    if let Some(jm) = &small_jm {
+        match &data {
+            Some(d) => {
+                let p = d.join("meshes/refined_elephant.off");
+                let bytes = std::fs::read(&p).with_context(|| p.display().to_string())?;
+                let mesh = crate::geom::io::read_mesh_bytes(&p, &bytes)?;
+                surface_rows("refined_elephant.off", &mesh, runs, jm, &mut rows);
+                let big = subdivide(&subdivide(&mesh));
+                surface_rows("refined_elephant.off subdivided twice", &big, runs.min(3), jm, &mut rows);
+            }
+            None => {
+                let p = repo.join("configs/assets/cow.obj");
+                let bytes = std::fs::read(&p)?;
+                let mesh = crate::geom::io::read_mesh_bytes(&p, &bytes)?;
+                surface_rows("cow.obj (refined_elephant.off not available)", &mesh, runs, jm, &mut rows);
+                notes.push("../shared/data is not here: surface rows use the demo's cow instead of refined_elephant.off".into());
+            }
+        }
+    }
+    rows.push(rerun_row(runs)?);
+
+    let threads = rayon::current_num_threads();
+    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let mut s = String::new();
+    s += "# texsyn benchmarks\n\n";
+    s += "Produced by `cargo run --release -- bench -o BENCHMARKS.md` (median of ";
+    s += &format!("{runs} runs; at most 3 for the largest inputs). Machine: {cores} cores, {threads} worker threads.\n\n");
+    s += "| what | measured | goal | verdict |\n|---|---|---|---|\n";
+    for r in &rows {
+        s += &format!("| {} | {} | {} | {} |\n", r.what, r.measured, r.goal, r.verdict);
+    }
+    if !notes.is_empty() {
+        s += "\n";
+        for n in notes {
+            s += &format!("- {n}\n");
+        }
+    }
+    Ok(s)
+}
+
+/// Wall time of `texsyn run configs/demo.toml` with nothing to do, as a user sees it (a new
+/// process each time).
+fn rerun_row(runs: usize) -> Result<Row> {
+    let exe = std::env::current_exe()?;
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let tmp = std::env::temp_dir().join(format!("texsyn-bench-{}", std::process::id()));
+    let run = || -> Result<f64> {
+        let t = Instant::now();
+        let status = std::process::Command::new(&exe)
+            .current_dir(repo)
+            .args(["run", "configs/demo.toml", "--quiet", "--cache"])
+            .arg(tmp.join("cache"))
+            .arg("--out")
+            .arg(tmp.join("out"))
+            .status()?;
+        anyhow::ensure!(status.success(), "texsyn run configs/demo.toml failed");
+        Ok(t.elapsed().as_secs_f64())
+    };
+    let first = run()?;
+    let mut times = Vec::new();
+    for _ in 0..runs.max(3) {
+        times.push(run()?);
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+    let t = median(times);
+    Ok(Row {
+        what: format!("rerun of configs/demo.toml with nothing changed (first run: {first:.2} s)"),
+        measured: format!("{:.1} ms wall", t * 1e3),
+        goal: "< 50 ms wall".into(),
+        verdict: verdict_below(t, 0.05),
+    })
+}

@@ -1,0 +1,352 @@
+//! The object store (DESIGN.md, "The cache"): one immutable file per artifact under
+//! `objects-v1/ab/cdef…`, named by its node key.
+//!
+//! Writes go to a temporary file in the same directory, are fsynced, renamed into place, and
+//! the directory is fsynced: an artifact is whole or absent, after a crash too. A rename that
+//! finds the target already present is success (two processes computed the same key; by
+//! determinism they wrote the same bytes). Reads map the file; a header or length that does
+//! not check out is a miss with a warning, never an error. Least-recently-used order for `gc`
+//! is kept in file modification times, refreshed on every hit.
+
+use crate::artifact::{Artifact, ArtifactError, Backing, ContentHash, HEADER_LEN, Header};
+use std::fs::{self, File};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, SystemTime};
+
+/// The format version is in the directory name, so a future layout change starts a fresh
+/// store beside the old one instead of misreading it.
+const OBJECTS_DIR: &str = "objects-v1";
+const TMP_PREFIX: &str = ".tmp-";
+/// Temporary files older than this are left over from a crashed process.
+const STALE_TMP_AGE: Duration = Duration::from_secs(3600);
+
+/// A node key: the blake3 hash naming a cache object.
+pub type Key = ContentHash;
+
+#[derive(Debug, thiserror::Error)]
+pub enum CacheError {
+    #[error("cache {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> CacheError + '_ {
+    move |source| CacheError::Io {
+        path: path.to_owned(),
+        source,
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct Cache {
+    root: PathBuf,
+}
+
+/// The outcome of looking a key up.
+pub enum Lookup {
+    Hit(Artifact),
+    Miss,
+    /// Present but unreadable; the file was removed and the reason is given for the warning.
+    Invalid(ArtifactError),
+}
+
+impl Cache {
+    /// Opens (creating if needed) a cache rooted at `root`, and removes stale temporary files.
+    pub fn open(root: &Path) -> Result<Cache, CacheError> {
+        let objects = root.join(OBJECTS_DIR);
+        fs::create_dir_all(&objects).map_err(io_err(&objects))?;
+        let cache = Cache {
+            root: root.to_owned(),
+        };
+        cache.remove_stale_temporaries();
+        Ok(cache)
+    }
+
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    pub fn object_path(&self, key: &Key) -> PathBuf {
+        let hex = key.to_hex();
+        self.root
+            .join(OBJECTS_DIR)
+            .join(&hex[..2])
+            .join(&hex[2..])
+    }
+
+    /// Reads only the header of the object for `key`: enough to learn its content hash
+    /// without touching the payload (what a rerun with nothing changed needs).
+    pub fn peek(&self, key: &Key) -> Lookup {
+        let path = self.object_path(key);
+        let mut file = match File::open(&path) {
+            Ok(f) => f,
+            Err(_) => return Lookup::Miss,
+        };
+        let len = match file.metadata() {
+            Ok(m) => m.len() as usize,
+            Err(_) => return Lookup::Miss,
+        };
+        let mut head = [0u8; HEADER_LEN];
+        let read = read_up_to(&mut file, &mut head);
+        match Header::parse(&head[..read], Some(len)) {
+            Ok(_) => {
+                touch(&file);
+                self.get_mapped(key, file)
+            }
+            Err(e) => {
+                let _ = fs::remove_file(&path);
+                Lookup::Invalid(e)
+            }
+        }
+    }
+
+    fn get_mapped(&self, key: &Key, file: File) -> Lookup {
+        // Safety: cache objects are immutable once renamed into place, and texsyn never
+        // writes to them afterwards; another process could only replace the path (rename),
+        // which leaves our mapping of the old inode intact.
+        let map = match unsafe { memmap2::Mmap::map(&file) } {
+            Ok(m) => m,
+            Err(e) => return Lookup::Invalid(ArtifactError::Meta(e.to_string())),
+        };
+        match Artifact::open(Backing::Mapped(map)) {
+            Ok(a) => Lookup::Hit(a),
+            Err(e) => {
+                let _ = fs::remove_file(self.object_path(key));
+                Lookup::Invalid(e)
+            }
+        }
+    }
+
+    /// Removes an object (found corrupted by a full verification).
+    pub fn remove(&self, key: &Key) {
+        let _ = fs::remove_file(self.object_path(key));
+    }
+
+    /// Stores artifact bytes under `key` atomically and returns the mapped artifact.
+    pub fn put(&self, key: &Key, bytes: &[u8]) -> Result<(), CacheError> {
+        let path = self.object_path(key);
+        let dir = path.parent().expect("object paths have a parent");
+        fs::create_dir_all(dir).map_err(io_err(dir))?;
+        let tmp = dir.join(format!(
+            "{TMP_PREFIX}{}-{}",
+            std::process::id(),
+            unique_suffix()
+        ));
+        let write = || -> std::io::Result<()> {
+            let mut f = File::create(&tmp)?;
+            f.write_all(bytes)?;
+            f.sync_all()?;
+            Ok(())
+        };
+        if let Err(e) = write() {
+            let _ = fs::remove_file(&tmp);
+            return Err(io_err(&tmp)(e));
+        }
+        if let Err(e) = fs::rename(&tmp, &path) {
+            let _ = fs::remove_file(&tmp);
+            if !path.exists() {
+                return Err(io_err(&path)(e));
+            }
+        }
+        if let Ok(d) = File::open(dir) {
+            let _ = d.sync_all();
+        }
+        Ok(())
+    }
+
+    /// All objects with their sizes and last-use times.
+    pub fn objects(&self) -> Vec<(PathBuf, u64, SystemTime)> {
+        let mut out = Vec::new();
+        let Ok(shards) = fs::read_dir(self.root.join(OBJECTS_DIR)) else {
+            return out;
+        };
+        for shard in shards.flatten() {
+            let Ok(files) = fs::read_dir(shard.path()) else {
+                continue;
+            };
+            for f in files.flatten() {
+                let name = f.file_name();
+                if name.to_string_lossy().starts_with(TMP_PREFIX) {
+                    continue;
+                }
+                if let Ok(m) = f.metadata() {
+                    let t = m.modified().unwrap_or(SystemTime::UNIX_EPOCH);
+                    out.push((f.path(), m.len(), t));
+                }
+            }
+        }
+        out.sort();
+        out
+    }
+
+    /// Deletes least recently used objects until the store is within `max_bytes`.
+    /// Returns (objects removed, bytes removed, bytes kept).
+    pub fn gc(&self, max_bytes: u64) -> (usize, u64, u64) {
+        let mut objects = self.objects();
+        // Oldest first; ties by path so the choice is deterministic.
+        objects.sort_by(|a, b| a.2.cmp(&b.2).then_with(|| a.0.cmp(&b.0)));
+        let mut total: u64 = objects.iter().map(|o| o.1).sum();
+        let (mut removed, mut removed_bytes) = (0, 0);
+        for (path, size, _) in objects {
+            if total <= max_bytes {
+                break;
+            }
+            if fs::remove_file(&path).is_ok() {
+                total -= size;
+                removed += 1;
+                removed_bytes += size;
+            }
+        }
+        (removed, removed_bytes, total)
+    }
+
+    fn remove_stale_temporaries(&self) {
+        let now = SystemTime::now();
+        let Ok(shards) = fs::read_dir(self.root.join(OBJECTS_DIR)) else {
+            return;
+        };
+        for shard in shards.flatten() {
+            let Ok(files) = fs::read_dir(shard.path()) else {
+                continue;
+            };
+            for f in files.flatten() {
+                if !f.file_name().to_string_lossy().starts_with(TMP_PREFIX) {
+                    continue;
+                }
+                let old = f
+                    .metadata()
+                    .and_then(|m| m.modified())
+                    .map(|t| now.duration_since(t).unwrap_or_default() > STALE_TMP_AGE)
+                    .unwrap_or(false);
+                if old {
+                    let _ = fs::remove_file(f.path());
+                }
+            }
+        }
+    }
+}
+
+fn read_up_to(file: &mut File, buf: &mut [u8]) -> usize {
+    let mut n = 0;
+    while n < buf.len() {
+        match file.read(&mut buf[n..]) {
+            Ok(0) | Err(_) => break,
+            Ok(k) => n += k,
+        }
+    }
+    n
+}
+
+/// Marks an object as recently used (for `gc`). Best effort: a read-only cache still works.
+fn touch(file: &File) {
+    let _ = file.set_modified(SystemTime::now());
+}
+
+fn unique_suffix() -> u64 {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let nanos = SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0);
+    nanos ^ COUNTER.fetch_add(1, Ordering::Relaxed).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
+/// Parses sizes like `500M`, `2G`, `1.5GiB`, `1000000`.
+pub fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let value: f64 = num
+        .parse()
+        .map_err(|_| format!("{s:?} is not a size (examples: 500M, 2G, 1000000)"))?;
+    let mult: f64 = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1.0,
+        "k" | "kb" | "kib" => 1024.0,
+        "m" | "mb" | "mib" => 1024.0 * 1024.0,
+        "g" | "gb" | "gib" => 1024.0 * 1024.0 * 1024.0,
+        "t" | "tb" | "tib" => 1024.0f64.powi(4),
+        other => return Err(format!("{s:?}: unknown size unit {other:?} (use K, M, G or T)")),
+    };
+    Ok((value * mult) as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::artifact::{ArtifactWriter, Kind};
+
+    fn art(v: f32) -> Vec<u8> {
+        ArtifactWriter::new(Kind::Image, &1u8)
+            .array("x", &[v; 100])
+            .finish()
+    }
+
+    #[test]
+    fn put_then_peek_hits_with_the_same_content_hash() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(dir.path()).unwrap();
+        let key = ContentHash::of(b"k");
+        assert!(matches!(cache.peek(&key), Lookup::Miss));
+        let bytes = art(1.0);
+        cache.put(&key, &bytes).unwrap();
+        cache.put(&key, &bytes).unwrap(); // a second writer of the same key is harmless
+        match cache.peek(&key) {
+            Lookup::Hit(a) => {
+                assert_eq!(a.file_bytes(), &bytes[..]);
+                a.verify().unwrap();
+            }
+            _ => panic!("expected a hit"),
+        }
+    }
+
+    #[test]
+    fn truncated_object_is_a_miss_and_is_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(dir.path()).unwrap();
+        let key = ContentHash::of(b"k");
+        let bytes = art(2.0);
+        cache.put(&key, &bytes).unwrap();
+        fs::write(cache.object_path(&key), &bytes[..bytes.len() - 10]).unwrap();
+        assert!(matches!(cache.peek(&key), Lookup::Invalid(_)));
+        assert!(!cache.object_path(&key).exists());
+    }
+
+    #[test]
+    fn gc_removes_least_recently_used_first() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(dir.path()).unwrap();
+        let keys: Vec<Key> = (0..3u8).map(|i| ContentHash::of(&[i])).collect();
+        for (i, k) in keys.iter().enumerate() {
+            cache.put(k, &art(i as f32)).unwrap();
+            let f = File::options()
+                .write(true)
+                .open(cache.object_path(k))
+                .unwrap();
+            f.set_modified(SystemTime::UNIX_EPOCH + Duration::from_secs(1000 + i as u64))
+                .unwrap();
+        }
+        // Use the oldest one: it becomes the newest.
+        assert!(matches!(cache.peek(&keys[0]), Lookup::Hit(_)));
+        let one = fs::metadata(cache.object_path(&keys[0])).unwrap().len();
+        let (removed, _, kept) = cache.gc(one);
+        assert_eq!(removed, 2);
+        assert_eq!(kept, one);
+        assert!(cache.object_path(&keys[0]).exists());
+        assert!(!cache.object_path(&keys[1]).exists());
+    }
+
+    #[test]
+    fn sizes_parse_with_units() {
+        assert_eq!(parse_size("1000").unwrap(), 1000);
+        assert_eq!(parse_size("2K").unwrap(), 2048);
+        assert_eq!(parse_size("1.5G").unwrap(), 1610612736);
+        assert!(parse_size("big").is_err());
+        assert!(parse_size("5X").is_err());
+    }
+}

@@ -1,0 +1,219 @@
+//! Run configs: a TOML file naming a method, its inputs and per-stage parameters.
+//!
+//! Paths in a config are relative to the config file's directory. `--set stage.key=value`
+//! overrides any value (the value is read as TOML, falling back to a plain string). Unknown
+//! keys and out-of-range values are errors that name the key.
+
+use serde::de::DeserializeOwned;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Syntax { path: PathBuf, message: String },
+    #[error("--set {arg:?}: {message}")]
+    Set { arg: String, message: String },
+    #[error("{path}: {key}: {message}")]
+    Invalid {
+        path: PathBuf,
+        key: String,
+        message: String,
+    },
+}
+
+/// A loaded config with its overrides applied.
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub path: PathBuf,
+    /// The directory relative paths are resolved against.
+    pub dir: PathBuf,
+    /// The file name without extension: names the default output directory.
+    pub stem: String,
+    pub table: toml::Table,
+}
+
+impl Config {
+    pub fn load(path: &Path, sets: &[String]) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_str(path, &text, sets)
+    }
+
+    pub fn from_str(path: &Path, text: &str, sets: &[String]) -> Result<Config, ConfigError> {
+        let mut table: toml::Table = toml::from_str(text).map_err(|e| ConfigError::Syntax {
+            path: path.to_owned(),
+            message: e.to_string().trim_end().to_owned(),
+        })?;
+        for arg in sets {
+            apply_set(&mut table, arg)?;
+        }
+        let dir = path
+            .parent()
+            .map(|p| if p.as_os_str().is_empty() { Path::new(".") } else { p })
+            .unwrap_or(Path::new("."))
+            .to_owned();
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "run".into());
+        Ok(Config {
+            path: path.to_owned(),
+            dir,
+            stem,
+            table,
+        })
+    }
+
+    /// The `method` key.
+    pub fn method(&self) -> Result<&str, ConfigError> {
+        match self.table.get("method") {
+            Some(toml::Value::String(s)) => Ok(s),
+            Some(_) => Err(self.invalid("method", "must be a string")),
+            None => Err(self.invalid(
+                "method",
+                "missing: say which method to run (e.g. method = \"jump_maps\")",
+            )),
+        }
+    }
+
+    /// Deserializes the whole config into a method's config type, reporting the path of the
+    /// offending key on error.
+    pub fn parse<T: DeserializeOwned>(&self) -> Result<T, ConfigError> {
+        let value = toml::Value::Table(self.table.clone());
+        serde_path_to_error::deserialize(value).map_err(|e| {
+            let key = e.path().to_string();
+            let key = if key == "." { "(top level)".to_owned() } else { key };
+            self.invalid(&key, &e.into_inner().to_string())
+        })
+    }
+
+    pub fn invalid(&self, key: &str, message: &str) -> ConfigError {
+        ConfigError::Invalid {
+            path: self.path.clone(),
+            key: key.to_owned(),
+            message: message.to_owned(),
+        }
+    }
+
+    /// Resolves a path from the config against the config's directory.
+    pub fn resolve(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() {
+            p.to_owned()
+        } else {
+            self.dir.join(p)
+        }
+    }
+}
+
+fn apply_set(table: &mut toml::Table, arg: &str) -> Result<(), ConfigError> {
+    let err = |message: &str| ConfigError::Set {
+        arg: arg.to_owned(),
+        message: message.to_owned(),
+    };
+    let (key, raw) = arg
+        .split_once('=')
+        .ok_or_else(|| err("expected KEY=VALUE, e.g. synthesize.seed=2"))?;
+    let parts: Vec<&str> = key.trim().split('.').collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        return Err(err("the key has an empty part"));
+    }
+    let value = parse_value(raw.trim());
+    let mut t = table;
+    for p in &parts[..parts.len() - 1] {
+        let entry = t
+            .entry(p.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        t = match entry {
+            toml::Value::Table(inner) => inner,
+            _ => return Err(err(&format!("`{p}` is not a table"))),
+        };
+    }
+    t.insert(parts[parts.len() - 1].to_string(), value);
+    Ok(())
+}
+
+fn parse_value(raw: &str) -> toml::Value {
+    let doc = format!("v = {raw}");
+    match toml::from_str::<toml::Table>(&doc) {
+        Ok(mut t) => t.remove("v").unwrap_or_else(|| toml::Value::String(raw.into())),
+        Err(_) => toml::Value::String(raw.into()),
+    }
+}
+
+/// Range check used by validators: the message names the key, the range and the value.
+pub fn check_range<T: PartialOrd + std::fmt::Display>(key: &str, v: T, lo: T, hi: T) -> Result<(), String> {
+    if v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(format!("{key} must be in {lo}..={hi}, got {v}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(serde::Deserialize, Debug)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Demo {
+        method: String,
+        synthesize: Synth,
+    }
+    #[derive(serde::Deserialize, Debug)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Synth {
+        seed: u64,
+        #[serde(default)]
+        name: String,
+    }
+
+    #[test]
+    fn set_overrides_and_creates_keys() {
+        let c = Config::from_str(
+            Path::new("x/demo.toml"),
+            "method = \"m\"\n[synthesize]\nseed = 1\n",
+            &["synthesize.seed=2".into(), "synthesize.name=abc".into()],
+        )
+        .unwrap();
+        let d: Demo = c.parse().unwrap();
+        assert_eq!(d.synthesize.seed, 2);
+        assert_eq!(d.synthesize.name, "abc");
+        assert_eq!(c.stem, "demo");
+        assert_eq!(c.resolve(Path::new("a.png")), Path::new("x/a.png"));
+    }
+
+    #[test]
+    fn unknown_keys_are_named_with_their_path() {
+        let c = Config::from_str(
+            Path::new("demo.toml"),
+            "method = \"m\"\n[synthesize]\nseed = 1\nsede = 3\n",
+            &[],
+        )
+        .unwrap();
+        let e = c.parse::<Demo>().unwrap_err().to_string();
+        assert!(e.starts_with("demo.toml: synthesize"), "{e}");
+        assert!(e.contains("sede"), "{e}");
+        let c = Config::from_str(Path::new("demo.toml"), "method = \"m\"\n[synthesize]\nseed = -1\n", &[]).unwrap();
+        let e = c.parse::<Demo>().unwrap_err().to_string();
+        assert!(e.contains("synthesize.seed"), "{e}");
+    }
+
+    #[test]
+    fn syntax_errors_name_the_file_and_bad_set_args_are_rejected() {
+        let e = Config::from_str(Path::new("bad.toml"), "method = \n", &[]).unwrap_err();
+        assert!(e.to_string().starts_with("bad.toml:"), "{e}");
+        let e = Config::from_str(Path::new("a.toml"), "", &["noequals".into()]).unwrap_err();
+        assert!(e.to_string().contains("KEY=VALUE"));
+        let e = Config::from_str(Path::new("a.toml"), "x = 1", &["x.y=2".into()]).unwrap_err();
+        assert!(e.to_string().contains("not a table"));
+    }
+}

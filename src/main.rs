@@ -1,0 +1,445 @@
+//! The `texsyn` command line. `main` only calls [`real_main`] and reports its error.
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use texsyn::cache::{Cache, parse_size};
+use texsyn::config::Config;
+use texsyn::pipeline::{self, ProgressMode, RunOptions, outputs::materialize};
+
+#[derive(Parser)]
+#[command(name = "texsyn", version, about = "Texture synthesis on shapes from examples")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+    /// Cache directory. Default: $TEXSYN_CACHE, else ./cache.
+    #[arg(long, global = true)]
+    cache: Option<PathBuf>,
+    /// Worker threads. Default: $RAYON_NUM_THREADS, else one per core. Results do not depend on it.
+    #[arg(short = 'j', long = "jobs", global = true)]
+    jobs: Option<usize>,
+    /// Print nothing but errors.
+    #[arg(short, long, global = true)]
+    quiet: bool,
+    /// Machine-readable output on stdout.
+    #[arg(long, global = true)]
+    json: bool,
+    /// More log output (-v: info, -vv: debug).
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a config: compute what is not cached, write the outputs.
+    Run {
+        config: PathBuf,
+        /// Override a config value: --set synthesize.seed=2 (repeatable).
+        #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
+        sets: Vec<String>,
+        /// Output directory. Default: out/<config name>.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Show what `run` would compute, without computing (like make -n).
+    Status {
+        config: PathBuf,
+        #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
+        sets: Vec<String>,
+    },
+    /// Print one line per artifact: node, key, content hash (computing what is missing).
+    /// Redirect it into a lock file for `verify`.
+    Hashes {
+        config: PathBuf,
+        #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
+        sets: Vec<String>,
+    },
+    /// Check a config's artifacts against a lock file written by `hashes`; exits non-zero
+    /// naming each mismatch.
+    Verify {
+        config: PathBuf,
+        lockfile: PathBuf,
+        #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
+        sets: Vec<String>,
+        /// Recompute everything in an empty temporary cache instead of re-reading the cache.
+        #[arg(long)]
+        fresh: bool,
+    },
+    /// Print the config's DAG in Graphviz DOT.
+    Graph {
+        config: PathBuf,
+        #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
+        sets: Vec<String>,
+    },
+    /// Render three views of a mesh (textured through its OBJ texture coordinates) to a PNG.
+    Render {
+        mesh: PathBuf,
+        /// Texture image for the mesh's texture coordinates.
+        #[arg(long)]
+        texture: Option<PathBuf>,
+        /// Output PNG.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Side of each view in pixels.
+        #[arg(long, default_value_t = 512)]
+        size: u32,
+        /// Up axis: x, y, z, -x, -y or -z.
+        #[arg(long, default_value = "y")]
+        up: String,
+    },
+    /// Trim the cache to a size, least recently used objects first.
+    Gc {
+        /// Budget, e.g. 500M or 2G.
+        #[arg(long)]
+        max_size: String,
+    },
+    /// Measure the speed goals of BENCHMARKS.md and print (or write) the table.
+    Bench {
+        /// Write the Markdown report here.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// Runs per measurement (the median is reported).
+        #[arg(long, default_value_t = 5)]
+        runs: usize,
+    },
+}
+
+fn main() {
+    let code = match real_main() {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            1
+        }
+    };
+    std::process::exit(code);
+}
+
+fn real_main() -> Result<i32> {
+    let cli = Cli::parse();
+    let level = match (cli.quiet, cli.verbose) {
+        (true, _) => tracing::Level::ERROR,
+        (false, 0) => tracing::Level::WARN,
+        (false, 1) => tracing::Level::INFO,
+        _ => tracing::Level::DEBUG,
+    };
+    tracing_subscriber::fmt()
+        .with_max_level(level)
+        .with_writer(std::io::stderr)
+        .without_time()
+        .with_target(false)
+        .init();
+    if let Some(j) = cli.jobs {
+        if j == 0 {
+            bail!("-j must be at least 1");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(j)
+            .build_global()
+            .context("setting the thread count")?;
+    }
+    let cache_dir = cli
+        .cache
+        .clone()
+        .or_else(|| std::env::var_os("TEXSYN_CACHE").map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from("cache"));
+    let progress = if cli.quiet || cli.json {
+        ProgressMode::Hidden
+    } else {
+        ProgressMode::Bars
+    };
+    match &cli.command {
+        Command::Run { config, sets, out } => {
+            let start = Instant::now();
+            let cfg = Config::load(config, sets)?;
+            let plan = texsyn::methods::plan(&cfg)?;
+            let cache = Cache::open(&cache_dir)?;
+            let result = pipeline::run(
+                &plan.dag,
+                &cache,
+                RunOptions {
+                    progress,
+                    verify_all: false,
+                },
+            )?;
+            let out_dir = out.clone().unwrap_or(plan.default_out.clone());
+            let mut written = Vec::new();
+            for (i, node) in plan.dag.nodes.iter().enumerate() {
+                if node.exports {
+                    written.extend(materialize(&result.artifacts[i], &out_dir)?);
+                }
+            }
+            let seconds = start.elapsed().as_secs_f64();
+            if cli.json {
+                let outputs: Vec<_> = written
+                    .iter()
+                    .map(|(p, w)| serde_json::json!({ "path": p, "written": w }))
+                    .collect();
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&serde_json::json!({
+                        "nodes": result.reports,
+                        "outputs": outputs,
+                        "warnings": result.warnings,
+                        "seconds": seconds,
+                    }))?
+                );
+            } else if !cli.quiet {
+                print_table(&result.reports);
+                let changed = written.iter().filter(|w| w.1).count();
+                println!(
+                    "outputs: {} ({} written, {} unchanged) in {:.3} s",
+                    out_dir.display(),
+                    changed,
+                    written.len() - changed,
+                    seconds
+                );
+            }
+            Ok(0)
+        }
+        Command::Status { config, sets } => {
+            let cfg = Config::load(config, sets)?;
+            let plan = texsyn::methods::plan(&cfg)?;
+            let cache = Cache::open(&cache_dir)?;
+            let lines = pipeline::status(&plan.dag, &cache);
+            if cli.json {
+                println!("{}", serde_json::to_string_pretty(&lines)?);
+            } else {
+                println!("{:<24} {:<17} {:<20} state", "node", "stage", "algorithm");
+                for l in &lines {
+                    let state = match l.state {
+                        "cached" => "cached",
+                        "run" => "would run",
+                        _ => "would run if its inputs change",
+                    };
+                    println!("{:<24} {:<17} {:<20} {state}", l.node, l.stage, l.algorithm);
+                }
+            }
+            Ok(0)
+        }
+        Command::Hashes { config, sets } => {
+            let cfg = Config::load(config, sets)?;
+            let plan = texsyn::methods::plan(&cfg)?;
+            let cache = Cache::open(&cache_dir)?;
+            let result = pipeline::run(&plan.dag, &cache, RunOptions { progress, verify_all: false })?;
+            print!("{}", lock_text(&result.reports));
+            Ok(0)
+        }
+        Command::Verify {
+            config,
+            lockfile,
+            sets,
+            fresh,
+        } => {
+            let cfg = Config::load(config, sets)?;
+            let plan = texsyn::methods::plan(&cfg)?;
+            let lock = std::fs::read_to_string(lockfile)
+                .with_context(|| format!("reading lock file {}", lockfile.display()))?;
+            let temp = fresh.then(|| TempDir::new("texsyn-verify"));
+            let cache = match &temp {
+                Some(t) => Cache::open(t.path())?,
+                None => Cache::open(&cache_dir)?,
+            };
+            let result = pipeline::run(&plan.dag, &cache, RunOptions { progress, verify_all: true })?;
+            let problems = compare_lock(&lock, &result.reports, lockfile)?;
+            if problems.is_empty() {
+                if !cli.quiet {
+                    println!(
+                        "verified: {} artifacts match {}",
+                        result.reports.len(),
+                        lockfile.display()
+                    );
+                }
+                Ok(0)
+            } else {
+                for p in &problems {
+                    eprintln!("mismatch: {p}");
+                }
+                eprintln!("{} mismatch(es) against {}", problems.len(), lockfile.display());
+                Ok(1)
+            }
+        }
+        Command::Graph { config, sets } => {
+            let cfg = Config::load(config, sets)?;
+            let plan = texsyn::methods::plan(&cfg)?;
+            print!("{}", plan.dag.to_dot());
+            Ok(0)
+        }
+        Command::Render {
+            mesh,
+            texture,
+            output,
+            size,
+            up,
+        } => {
+            let up = parse_axis(up)?;
+            let opts = texsyn::render::views::ViewOptions {
+                size: *size,
+                up,
+                ..Default::default()
+            };
+            let img = texsyn::render::load::render_mesh_file(mesh, texture.as_deref(), &opts)?;
+            let png = texsyn::stages::reconstruct::textured_export::encode_png(&img, false);
+            write_atomic(output, &png)?;
+            if !cli.quiet {
+                println!("wrote {}", output.display());
+            }
+            Ok(0)
+        }
+        Command::Gc { max_size } => {
+            let budget = parse_size(max_size).map_err(anyhow::Error::msg)?;
+            let cache = Cache::open(&cache_dir)?;
+            let (removed, bytes, kept) = cache.gc(budget);
+            if !cli.quiet {
+                println!(
+                    "removed {removed} objects ({}), {} kept in {}",
+                    human_bytes(bytes),
+                    human_bytes(kept),
+                    cache.root().display()
+                );
+            }
+            Ok(0)
+        }
+        Command::Bench { output, runs } => {
+            let report = texsyn::bench::run_all(*runs.max(&1))?;
+            match output {
+                Some(p) => write_atomic(p, report.as_bytes())?,
+                None => print!("{report}"),
+            }
+            Ok(0)
+        }
+    }
+}
+
+fn parse_axis(s: &str) -> Result<glam::Vec3> {
+    Ok(match s {
+        "x" | "+x" => glam::Vec3::X,
+        "y" | "+y" => glam::Vec3::Y,
+        "z" | "+z" => glam::Vec3::Z,
+        "-x" => -glam::Vec3::X,
+        "-y" => -glam::Vec3::Y,
+        "-z" => -glam::Vec3::Z,
+        other => bail!("--up {other:?}: expected x, y, z, -x, -y or -z"),
+    })
+}
+
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let tmp = dir.join(format!(
+        ".{}.tmp-{}",
+        path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
+        std::process::id()
+    ));
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+fn human_bytes(b: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut v = b as f64;
+    let mut u = 0;
+    while v >= 1024.0 && u < UNITS.len() - 1 {
+        v /= 1024.0;
+        u += 1;
+    }
+    if u == 0 { format!("{b} B") } else { format!("{v:.1} {}", UNITS[u]) }
+}
+
+fn print_table(reports: &[pipeline::NodeReport]) {
+    println!(
+        "{:<24} {:<17} {:<7} {:>9} {:>11}",
+        "node", "stage", "status", "seconds", "bytes"
+    );
+    for r in reports {
+        let status = match r.status {
+            pipeline::NodeStatus::Cached => "cached",
+            pipeline::NodeStatus::Ran => "ran",
+        };
+        println!(
+            "{:<24} {:<17} {:<7} {:>9.3} {:>11}",
+            r.node,
+            r.stage,
+            status,
+            r.seconds,
+            human_bytes(r.bytes)
+        );
+    }
+}
+
+const LOCK_HEADER: &str = "# texsyn lock file: node, key, content hash (written by `texsyn hashes`)\n";
+
+fn lock_text(reports: &[pipeline::NodeReport]) -> String {
+    let mut s = String::from(LOCK_HEADER);
+    for r in reports {
+        s += &format!("{} {} {}\n", r.node, r.key, r.content_hash);
+    }
+    s
+}
+
+/// Each difference between a lock file and a run, named.
+fn compare_lock(lock: &str, reports: &[pipeline::NodeReport], path: &Path) -> Result<Vec<String>> {
+    let mut expected = Vec::new();
+    for (i, line) in lock.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let f: Vec<&str> = line.split_whitespace().collect();
+        if f.len() != 3 || f[1].len() != 64 || f[2].len() != 64 {
+            bail!(
+                "{}:{}: expected `node key content-hash`, found {line:?}",
+                path.display(),
+                i + 1
+            );
+        }
+        expected.push((f[0], f[1], f[2]));
+    }
+    let mut problems = Vec::new();
+    for (node, key, hash) in &expected {
+        match reports.iter().find(|r| r.node == *node) {
+            None => problems.push(format!("{node}: in the lock file but not produced by this config")),
+            Some(r) => {
+                if r.content_hash != *hash {
+                    problems.push(format!("{node}: content hash {} differs from the locked {hash}", r.content_hash));
+                }
+                if r.key != *key {
+                    problems.push(format!(
+                        "{node}: key {} differs from the locked {key} (parameters, inputs or code version changed)",
+                        r.key
+                    ));
+                }
+            }
+        }
+    }
+    for r in reports {
+        if !expected.iter().any(|e| e.0 == r.node) {
+            problems.push(format!("{}: produced by this config but missing from the lock file", r.node));
+        }
+    }
+    Ok(problems)
+}
+
+/// A directory removed when dropped.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(prefix: &str) -> TempDir {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0);
+        TempDir(std::env::temp_dir().join(format!("{prefix}-{}-{nanos}", std::process::id())))
+    }
+    fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}

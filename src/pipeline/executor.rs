@@ -1,0 +1,307 @@
+//! Runs a DAG against the cache: looks each node's key up, computes what is missing, and
+//! recovers from corrupted objects by recomputing them.
+//!
+//! Nodes run one after another in topological order; each node parallelizes its own work
+//! with rayon. (With two cores, node-level parallelism would only compete with that.)
+//! Payloads are re-hashed before a node reads them, so a corrupted object is caught where it
+//! would do harm, while a rerun with nothing changed reads nothing but headers.
+
+use super::{Dag, InputData, InputRef, NodeContext, NodeError, Progress, ProgressMode};
+use crate::artifact::{Artifact, ContentHash};
+use crate::cache::{Cache, CacheError, Key, Lookup};
+use serde::Serialize;
+use std::time::Instant;
+
+#[derive(Clone, Copy, Debug)]
+pub struct RunOptions {
+    pub progress: ProgressMode,
+    /// Re-hash every artifact's payload, cached or not (`texsyn verify`).
+    pub verify_all: bool,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            progress: ProgressMode::Hidden,
+            verify_all: false,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NodeStatus {
+    /// Found in the cache.
+    Cached,
+    /// Computed in this run.
+    Ran,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct NodeReport {
+    pub node: String,
+    pub stage: &'static str,
+    pub algorithm: &'static str,
+    pub status: NodeStatus,
+    pub seconds: f64,
+    pub bytes: u64,
+    pub key: String,
+    pub content_hash: String,
+}
+
+pub struct RunResult {
+    pub reports: Vec<NodeReport>,
+    /// Each node's artifact, by node index.
+    pub artifacts: Vec<Artifact>,
+    /// Cache problems met and repaired on the way (corrupted or truncated objects).
+    pub warnings: Vec<String>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error("{node}: {source}")]
+    Node { node: String, source: NodeError },
+    #[error(transparent)]
+    Cache(#[from] CacheError),
+    #[error("{node}: produced an unreadable artifact: {message} (a bug in texsyn)")]
+    BadOutput { node: String, message: String },
+}
+
+struct State {
+    key: Key,
+    artifact: Artifact,
+    verified: bool,
+    status: NodeStatus,
+    seconds: f64,
+}
+
+struct Executor<'a> {
+    dag: &'a Dag,
+    cache: &'a Cache,
+    opts: RunOptions,
+    states: Vec<Option<State>>,
+    warnings: Vec<String>,
+}
+
+/// Brings every node of the DAG up to date and returns their artifacts.
+pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, PipelineError> {
+    let mut ex = Executor {
+        dag,
+        cache,
+        opts,
+        states: (0..dag.nodes.len()).map(|_| None).collect(),
+        warnings: Vec::new(),
+    };
+    for i in 0..dag.nodes.len() {
+        ex.resolve(i)?;
+    }
+    let mut reports = Vec::new();
+    let mut artifacts = Vec::new();
+    for (node, state) in dag.nodes.iter().zip(ex.states) {
+        let s = state.expect("every node resolved");
+        reports.push(NodeReport {
+            node: node.name.clone(),
+            stage: node.stage.name(),
+            algorithm: node.algorithm,
+            status: s.status,
+            seconds: s.seconds,
+            bytes: s.artifact.len() as u64,
+            key: s.key.to_hex(),
+            content_hash: s.artifact.content_hash().to_hex(),
+        });
+        artifacts.push(s.artifact);
+    }
+    Ok(RunResult {
+        reports,
+        artifacts,
+        warnings: ex.warnings,
+    })
+}
+
+impl Executor<'_> {
+    fn input_hashes(&self, i: usize) -> Vec<ContentHash> {
+        self.dag.nodes[i]
+            .inputs
+            .iter()
+            .map(|input| match *input {
+                InputRef::Node(j) => self.states[j]
+                    .as_ref()
+                    .expect("inputs resolve first")
+                    .artifact
+                    .content_hash(),
+                InputRef::File(j) => self.dag.files[j].hash,
+            })
+            .collect()
+    }
+
+    fn warn(&mut self, msg: String) {
+        tracing::warn!("{msg}");
+        self.warnings.push(msg);
+    }
+
+    fn resolve(&mut self, i: usize) -> Result<(), PipelineError> {
+        let dag = self.dag;
+        let node = &dag.nodes[i];
+        let key = self.dag.key(node, &self.input_hashes(i));
+        let start = Instant::now();
+        match self.cache.peek(&key) {
+            Lookup::Hit(artifact) => {
+                let mut verified = false;
+                if self.opts.verify_all {
+                    if let Err(e) = artifact.verify() {
+                        self.warn(format!(
+                            "{}: cached artifact {} is corrupted ({e}); recomputing",
+                            node.name,
+                            key.to_hex()
+                        ));
+                        self.cache.remove(&key);
+                        return self.compute(i, key);
+                    }
+                    verified = true;
+                }
+                self.states[i] = Some(State {
+                    key,
+                    artifact,
+                    verified,
+                    status: NodeStatus::Cached,
+                    seconds: start.elapsed().as_secs_f64(),
+                });
+                Ok(())
+            }
+            Lookup::Invalid(e) => {
+                self.warn(format!(
+                    "{}: cached artifact {} is unreadable ({e}); recomputing",
+                    node.name,
+                    key.to_hex()
+                ));
+                self.compute(i, key)
+            }
+            Lookup::Miss => self.compute(i, key),
+        }
+    }
+
+    /// Makes sure the payload of node `j`'s artifact is intact, recomputing it if not.
+    /// Returns whether its content hash changed (only if the header itself was damaged).
+    fn ensure_verified(&mut self, j: usize) -> Result<bool, PipelineError> {
+        let state = self.states[j].as_ref().expect("inputs resolve first");
+        if state.verified {
+            return Ok(false);
+        }
+        match state.artifact.verify() {
+            Ok(()) => {
+                self.states[j].as_mut().unwrap().verified = true;
+                Ok(false)
+            }
+            Err(e) => {
+                let (key, old) = (state.key, state.artifact.content_hash());
+                self.warn(format!(
+                    "{}: cached artifact {} is corrupted ({e}); recomputing",
+                    self.dag.nodes[j].name,
+                    key.to_hex()
+                ));
+                self.cache.remove(&key);
+                self.compute(j, key)?;
+                let new = self.states[j].as_ref().unwrap().artifact.content_hash();
+                Ok(new != old)
+            }
+        }
+    }
+
+    fn compute(&mut self, i: usize, key: Key) -> Result<(), PipelineError> {
+        let dag = self.dag;
+        let node = &dag.nodes[i];
+        let mut changed = false;
+        for input in &node.inputs {
+            if let InputRef::Node(j) = *input {
+                changed |= self.ensure_verified(j)?;
+            }
+        }
+        if changed {
+            // A repaired input came back with other content: this node's key is different.
+            return self.resolve(i);
+        }
+        let start = Instant::now();
+        let progress = Progress::new(self.opts.progress, &node.name);
+        let result = {
+            let inputs = node
+                .inputs
+                .iter()
+                .map(|input| match *input {
+                    InputRef::Node(j) => InputData::Artifact(&self.states[j].as_ref().unwrap().artifact),
+                    InputRef::File(j) => InputData::File(&self.dag.files[j]),
+                })
+                .collect();
+            let ctx = NodeContext {
+                inputs,
+                progress: &progress,
+            };
+            (node.compute)(&ctx)
+        };
+        progress.finish();
+        let bytes = result.map_err(|source| PipelineError::Node {
+            node: node.name.clone(),
+            source,
+        })?;
+        let artifact = Artifact::from_bytes(bytes).map_err(|e| PipelineError::BadOutput {
+            node: node.name.clone(),
+            message: e.to_string(),
+        })?;
+        self.cache.put(&key, artifact.file_bytes())?;
+        self.states[i] = Some(State {
+            key,
+            artifact,
+            verified: true,
+            status: NodeStatus::Ran,
+            seconds: start.elapsed().as_secs_f64(),
+        });
+        Ok(())
+    }
+}
+
+/// What `run` would do, without doing it (like `make -n`).
+#[derive(Clone, Debug, Serialize)]
+pub struct StatusLine {
+    pub node: String,
+    pub stage: &'static str,
+    pub algorithm: &'static str,
+    /// "cached", "run" (its key is not in the cache) or "maybe" (an input will be recomputed;
+    /// whether this node reruns depends on whether that changes the input's content).
+    pub state: &'static str,
+    pub key: Option<String>,
+}
+
+pub fn status(dag: &Dag, cache: &Cache) -> Vec<StatusLine> {
+    let mut hashes: Vec<Option<ContentHash>> = vec![None; dag.nodes.len()];
+    let mut lines = Vec::new();
+    for (i, node) in dag.nodes.iter().enumerate() {
+        let known: Option<Vec<ContentHash>> = node
+            .inputs
+            .iter()
+            .map(|input| match *input {
+                InputRef::Node(j) => hashes[j],
+                InputRef::File(j) => Some(dag.files[j].hash),
+            })
+            .collect();
+        let (state, key) = match known {
+            None => ("maybe", None),
+            Some(h) => {
+                let key = dag.key(node, &h);
+                match cache.peek(&key) {
+                    Lookup::Hit(a) => {
+                        hashes[i] = Some(a.content_hash());
+                        ("cached", Some(key))
+                    }
+                    _ => ("run", Some(key)),
+                }
+            }
+        };
+        lines.push(StatusLine {
+            node: node.name.clone(),
+            stage: node.stage.name(),
+            algorithm: node.algorithm,
+            state,
+            key: key.map(|k| k.to_hex()),
+        });
+    }
+    lines
+}

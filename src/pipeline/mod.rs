@@ -1,0 +1,245 @@
+//! The make-like pipeline: content-hashed nodes in a DAG (DESIGN.md, "Content-hashed nodes").
+//!
+//! A method's wiring (`src/methods/`) expands a config into a [`Dag`]. Each [`Node`] is one
+//! algorithm of one stage with its canonical parameter bytes and its inputs: files (hashed by
+//! their bytes) or other nodes (hashed by their artifacts' content). A node's key is
+//! blake3(stage, algorithm, code version, parameters, input content hashes); the node's
+//! output is stored in the cache under that key. Because keys are built from input
+//! *content*, an upstream node that reruns and produces identical bytes leaves everything
+//! downstream cached (early cutoff).
+//!
+//! Departure from DESIGN.md: the key hashes the *algorithm* name rather than the method name,
+//! so two methods that run the same algorithm on the same inputs (the jump map is shared by
+//! `jump_maps` and `synth2d`) share one cache object. Input files are first turned into
+//! artifacts by `import` nodes (parsed, validated meshes and decoded images), so a mesh
+//! converted from OBJ to OFF with identical content does not invalidate anything downstream.
+
+pub mod executor;
+pub mod outputs;
+pub mod progress;
+
+use crate::artifact::{Artifact, ContentHash};
+use crate::cache::Key;
+pub use executor::{NodeReport, NodeStatus, RunOptions, RunResult, run, status};
+pub use progress::{Progress, ProgressMode};
+use std::path::{Path, PathBuf};
+
+/// The pipeline stages (DESIGN.md, "A run"), plus `import` for turning input files into
+/// artifacts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    Import,
+    Parameterize,
+    Extract,
+    AnalyseExemplar,
+    Field,
+    Synthesize,
+    Reconstruct,
+}
+
+impl Stage {
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Import => "import",
+            Stage::Parameterize => "parameterize",
+            Stage::Extract => "extract",
+            Stage::AnalyseExemplar => "analyse_exemplar",
+            Stage::Field => "field",
+            Stage::Synthesize => "synthesize",
+            Stage::Reconstruct => "reconstruct",
+        }
+    }
+}
+
+/// Where a node input comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputRef {
+    /// The artifact of another node (index into [`Dag::nodes`]).
+    Node(usize),
+    /// An input file (index into [`Dag::files`]).
+    File(usize),
+}
+
+/// An input file, read and hashed once when the DAG is built.
+#[derive(Debug)]
+pub struct FileInput {
+    pub path: PathBuf,
+    pub bytes: Vec<u8>,
+    pub hash: ContentHash,
+}
+
+/// An error from a node's computation. Messages name the input file and element when the
+/// problem is in user input.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    #[error("{0}")]
+    Input(String),
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+impl NodeError {
+    pub fn input(msg: impl std::fmt::Display) -> Self {
+        NodeError::Input(msg.to_string())
+    }
+    pub fn internal(msg: impl std::fmt::Display) -> Self {
+        NodeError::Internal(msg.to_string())
+    }
+}
+
+impl From<crate::artifact::ArtifactError> for NodeError {
+    fn from(e: crate::artifact::ArtifactError) -> Self {
+        NodeError::Internal(format!("reading an input artifact: {e}"))
+    }
+}
+
+/// What a node's computation sees: its inputs in the order it declared them.
+pub struct NodeContext<'a> {
+    pub(crate) inputs: Vec<InputData<'a>>,
+    pub progress: &'a Progress,
+}
+
+pub(crate) enum InputData<'a> {
+    Artifact(&'a Artifact),
+    File(&'a FileInput),
+}
+
+impl<'a> NodeContext<'a> {
+    /// The artifact of the `i`-th input (which must be a node input).
+    pub fn artifact(&self, i: usize) -> &'a Artifact {
+        match self.inputs[i] {
+            InputData::Artifact(a) => a,
+            InputData::File(_) => panic!("input {i} is a file, not an artifact (wiring bug)"),
+        }
+    }
+
+    /// The `i`-th input file (which must be a file input).
+    pub fn file(&self, i: usize) -> &'a FileInput {
+        match self.inputs[i] {
+            InputData::File(f) => f,
+            InputData::Artifact(_) => panic!("input {i} is an artifact, not a file (wiring bug)"),
+        }
+    }
+}
+
+pub type ComputeFn = Box<dyn Fn(&NodeContext) -> Result<Vec<u8>, NodeError> + Send + Sync>;
+
+/// One node of the DAG.
+pub struct Node {
+    /// Unique within the DAG; what reports, lock files and `--set` name.
+    pub name: String,
+    pub stage: Stage,
+    pub algorithm: &'static str,
+    /// Bumped whenever the algorithm's output for the same input changes.
+    pub version: u32,
+    /// Canonical bytes of the parameters (part of the key).
+    pub params: Vec<u8>,
+    /// The same parameters for people (graph, status, --json).
+    pub params_json: serde_json::Value,
+    pub inputs: Vec<InputRef>,
+    /// The output is a file bundle to write into the run's output directory.
+    pub exports: bool,
+    pub compute: ComputeFn,
+}
+
+/// A method's nodes in topological order (every input refers to an earlier node).
+#[derive(Default)]
+pub struct Dag {
+    pub nodes: Vec<Node>,
+    pub files: Vec<FileInput>,
+}
+
+impl Dag {
+    /// Reads and hashes an input file, returning its reference (the same path twice gives the
+    /// same input).
+    pub fn add_file(&mut self, path: &Path, role: &str) -> Result<InputRef, std::io::Error> {
+        if let Some(i) = self.files.iter().position(|f| f.path == path) {
+            return Ok(InputRef::File(i));
+        }
+        let bytes = std::fs::read(path).map_err(|e| {
+            std::io::Error::new(e.kind(), format!("{} ({role}): {e}", path.display()))
+        })?;
+        let hash = ContentHash::of(&bytes);
+        self.files.push(FileInput {
+            path: path.to_owned(),
+            bytes,
+            hash,
+        });
+        Ok(InputRef::File(self.files.len() - 1))
+    }
+
+    /// Appends a node; its inputs must already be in the DAG.
+    pub fn add(&mut self, node: Node) -> InputRef {
+        for input in &node.inputs {
+            match *input {
+                InputRef::Node(i) => assert!(i < self.nodes.len(), "node input out of order"),
+                InputRef::File(i) => assert!(i < self.files.len(), "file input unknown"),
+            }
+        }
+        assert!(
+            self.nodes.iter().all(|n| n.name != node.name),
+            "duplicate node name {}",
+            node.name
+        );
+        self.nodes.push(node);
+        InputRef::Node(self.nodes.len() - 1)
+    }
+
+    pub fn node_index(&self, name: &str) -> Option<usize> {
+        self.nodes.iter().position(|n| n.name == name)
+    }
+
+    /// The node's key, given the content hashes of its inputs.
+    pub fn key(&self, node: &Node, input_hashes: &[ContentHash]) -> Key {
+        let mut h = blake3::Hasher::new();
+        h.update(b"texsyn node key v1\0");
+        h.update(node.stage.name().as_bytes());
+        h.update(b"\0");
+        h.update(node.algorithm.as_bytes());
+        h.update(b"\0");
+        h.update(&node.version.to_le_bytes());
+        h.update(&(node.params.len() as u64).to_le_bytes());
+        h.update(&node.params);
+        for (input, hash) in node.inputs.iter().zip(input_hashes) {
+            h.update(match input {
+                InputRef::Node(_) => b"N",
+                InputRef::File(_) => b"F",
+            });
+            h.update(&hash.0);
+        }
+        ContentHash(*h.finalize().as_bytes())
+    }
+
+    /// Graphviz DOT of the DAG.
+    pub fn to_dot(&self) -> String {
+        let mut s = String::from("digraph texsyn {\n  rankdir=LR;\n  node [shape=box, fontname=\"monospace\"];\n");
+        for (i, f) in self.files.iter().enumerate() {
+            s += &format!(
+                "  f{i} [shape=note, label=\"{}\"];\n",
+                escape(&f.path.display().to_string())
+            );
+        }
+        for (i, n) in self.nodes.iter().enumerate() {
+            s += &format!(
+                "  n{i} [label=\"{}\\n{} / {} v{}\"];\n",
+                escape(&n.name),
+                n.stage.name(),
+                n.algorithm,
+                n.version
+            );
+            for input in &n.inputs {
+                match input {
+                    InputRef::Node(j) => s += &format!("  n{j} -> n{i};\n"),
+                    InputRef::File(j) => s += &format!("  f{j} -> n{i};\n"),
+                }
+            }
+        }
+        s += "}\n";
+        s
+    }
+}
+
+fn escape(s: &str) -> String {
+    s.replace('\\', "\\\\").replace('"', "\\\"")
+}
