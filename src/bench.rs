@@ -4,8 +4,10 @@
 //! `$TEXSYN_SHARED_DATA`) when it is there; otherwise the report says which rows it could not
 //! measure. Speed is only measured here, never asserted in tests (the machines are shared).
 
-use crate::artifact::jump_maps::{ParamParts, ParamMeta, view_parameterization, write_parameterization};
 use crate::artifact::Artifact;
+use crate::artifact::jump_maps::{
+    ParamMeta, ParamParts, view_parameterization, write_parameterization,
+};
 use crate::geom::Mesh;
 use crate::stages::analyse_exemplar::jump_map::{JumpMapParams, build_jump_map};
 use crate::stages::field::orientation_field::{FieldParams, orientation_field};
@@ -23,7 +25,10 @@ fn shared_data() -> Option<PathBuf> {
         Some(Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data")),
         Some(PathBuf::from("../shared/data")),
     ];
-    candidates.into_iter().flatten().find(|p| p.join("meshes").is_dir())
+    candidates
+        .into_iter()
+        .flatten()
+        .find(|p| p.join("meshes").is_dir())
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -90,9 +95,22 @@ fn verdict_above(measured: f64, goal: f64) -> String {
 }
 
 /// Parameterization (order, offsets, boxes) and the walk on one mesh; returns rows.
-fn surface_rows(name: &str, mesh: &Mesh, runs: usize, jm: &crate::stages::analyse_exemplar::jump_map::JumpMap, rows: &mut Vec<Row>) {
+fn surface_rows(
+    name: &str,
+    mesh: &Mesh,
+    runs: usize,
+    jm: &crate::stages::analyse_exemplar::jump_map::JumpMap,
+    rows: &mut Vec<Row>,
+) {
     let n = mesh.vertex_count();
-    let field = orientation_field(mesh, &FieldParams { isotropic: true, ..Default::default() }).expect("isotropic field");
+    let field = orientation_field(
+        mesh,
+        &FieldParams {
+            isotropic: true,
+            ..Default::default()
+        },
+    )
+    .expect("isotropic field");
     // A scale at which the mean edge spans about 4 texels, as in the demo.
     let scale = 4.0 / mesh.mean_edge_length().max(1e-9);
     let (t_param, bytes) = time(runs, || {
@@ -101,7 +119,12 @@ fn surface_rows(name: &str, mesh: &Mesh, runs: usize, jm: &crate::stages::analys
         let boxes = validity_boxes(&adj, &off);
         let order = region_growing_order(&adj, 0);
         write_parameterization(&ParamParts {
-            meta: ParamMeta { vertices: n as u64, scale, exemplar: (jm.width, jm.height), components: order.seeds.len() as u32 },
+            meta: ParamMeta {
+                vertices: n as u64,
+                scale,
+                exemplar: (jm.width, jm.height),
+                components: order.seeds.len() as u32,
+            },
             order: &order.order,
             seeds: &order.seeds,
             adj_offsets: &adj.offsets,
@@ -120,7 +143,9 @@ fn surface_rows(name: &str, mesh: &Mesh, runs: usize, jm: &crate::stages::analys
         verdict: verdict_below(per_million, 0.3),
     });
     let params = WalkParams::default();
-    let (t_walk, _) = time(runs, || jump_walk(param.walk_input(), jm.as_ref(), &params, &|_| {}));
+    let (t_walk, _) = time(runs, || {
+        jump_walk(param.walk_input(), jm.as_ref(), &params, &|_| {})
+    });
     let rate = n as f64 / t_walk;
     rows.push(Row {
         what: format!("synthesize {name} ({n} vertices): jump walk (sequential, 1 core)"),
@@ -150,21 +175,34 @@ pub fn run_all(runs: usize) -> Result<String> {
         let img = load_image(&small)?;
         let (t, jm) = time(runs, || build_jump_map(img.view(), &jm_params, &|_| {}));
         rows.push(Row {
-            what: format!("analyse_exemplar: jump map of {} ({}×{})", small.file_name().unwrap().to_string_lossy(), img.width, img.height),
+            what: format!(
+                "analyse_exemplar: jump map of {} ({}×{})",
+                small.file_name().unwrap().to_string_lossy(),
+                img.width,
+                img.height
+            ),
             measured: format!("{t:.3} s"),
             goal: "< 1 s on 2 cores".into(),
             verdict: verdict_below(t, 1.0),
         });
         small_jm = Some(jm);
     } else {
-        notes.push(format!("{} is missing: 128×128 jump-map row not measured", small.display()));
+        notes.push(format!(
+            "{} is missing: 128×128 jump-map row not measured",
+            small.display()
+        ));
     }
     if let Some(d) = &data {
         let p = d.join("exemplars/brick_wall_512.png");
         let img = load_image(&p)?;
-        let (t, _) = time(runs.min(3), || build_jump_map(img.view(), &jm_params, &|_| {}));
+        let (t, _) = time(runs.min(3), || {
+            build_jump_map(img.view(), &jm_params, &|_| {})
+        });
         rows.push(Row {
-            what: format!("analyse_exemplar: jump map of brick_wall_512.png ({}×{})", img.width, img.height),
+            what: format!(
+                "analyse_exemplar: jump map of brick_wall_512.png ({}×{})",
+                img.width, img.height
+            ),
             measured: format!("{t:.3} s"),
             goal: "< 10 s on 2 cores".into(),
             verdict: verdict_below(t, 10.0),
@@ -180,13 +218,25 @@ pub fn run_all(runs: usize) -> Result<String> {
                 let mesh = crate::geom::io::read_mesh_bytes(&p, &bytes)?;
                 surface_rows("refined_elephant.off", &mesh, runs, jm, &mut rows);
                 let big = subdivide(&subdivide(&mesh));
-                surface_rows("refined_elephant.off subdivided twice", &big, runs.min(3), jm, &mut rows);
+                surface_rows(
+                    "refined_elephant.off subdivided twice",
+                    &big,
+                    runs.min(3),
+                    jm,
+                    &mut rows,
+                );
             }
             None => {
                 let p = repo.join("configs/assets/cow.obj");
                 let bytes = std::fs::read(&p)?;
                 let mesh = crate::geom::io::read_mesh_bytes(&p, &bytes)?;
-                surface_rows("cow.obj (refined_elephant.off not available)", &mesh, runs, jm, &mut rows);
+                surface_rows(
+                    "cow.obj (refined_elephant.off not available)",
+                    &mesh,
+                    runs,
+                    jm,
+                    &mut rows,
+                );
                 notes.push("../shared/data is not here: surface rows use the demo's cow instead of refined_elephant.off".into());
             }
         }
@@ -194,14 +244,21 @@ pub fn run_all(runs: usize) -> Result<String> {
     rows.push(rerun_row(runs)?);
 
     let threads = rayon::current_num_threads();
-    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
     let mut s = String::new();
     s += "# texsyn benchmarks\n\n";
     s += "Produced by `cargo run --release -- bench -o BENCHMARKS.md` (median of ";
-    s += &format!("{runs} runs; at most 3 for the largest inputs). Machine: {cores} cores, {threads} worker threads.\n\n");
+    s += &format!(
+        "{runs} runs; at most 3 for the largest inputs). Machine: {cores} cores, {threads} worker threads.\n\n"
+    );
     s += "| what | measured | goal | verdict |\n|---|---|---|---|\n";
     for r in &rows {
-        s += &format!("| {} | {} | {} | {} |\n", r.what, r.measured, r.goal, r.verdict);
+        s += &format!(
+            "| {} | {} | {} | {} |\n",
+            r.what, r.measured, r.goal, r.verdict
+        );
     }
     if !notes.is_empty() {
         s += "\n";

@@ -56,7 +56,13 @@ impl Config {
         }
         let dir = path
             .parent()
-            .map(|p| if p.as_os_str().is_empty() { Path::new(".") } else { p })
+            .map(|p| {
+                if p.as_os_str().is_empty() {
+                    Path::new(".")
+                } else {
+                    p
+                }
+            })
             .unwrap_or(Path::new("."))
             .to_owned();
         let stem = path
@@ -89,7 +95,11 @@ impl Config {
         let value = toml::Value::Table(self.table.clone());
         serde_path_to_error::deserialize(value).map_err(|e| {
             let key = e.path().to_string();
-            let key = if key == "." { "(top level)".to_owned() } else { key };
+            let key = if key == "." {
+                "(top level)".to_owned()
+            } else {
+                key
+            };
             self.invalid(&key, &e.into_inner().to_string())
         })
     }
@@ -142,13 +152,20 @@ fn apply_set(table: &mut toml::Table, arg: &str) -> Result<(), ConfigError> {
 fn parse_value(raw: &str) -> toml::Value {
     let doc = format!("v = {raw}");
     match toml::from_str::<toml::Table>(&doc) {
-        Ok(mut t) => t.remove("v").unwrap_or_else(|| toml::Value::String(raw.into())),
+        Ok(mut t) => t
+            .remove("v")
+            .unwrap_or_else(|| toml::Value::String(raw.into())),
         Err(_) => toml::Value::String(raw.into()),
     }
 }
 
 /// Range check used by validators: the message names the key, the range and the value.
-pub fn check_range<T: PartialOrd + std::fmt::Display>(key: &str, v: T, lo: T, hi: T) -> Result<(), String> {
+pub fn check_range<T: PartialOrd + std::fmt::Display>(
+    key: &str,
+    v: T,
+    lo: T,
+    hi: T,
+) -> Result<(), String> {
     if v >= lo && v <= hi {
         Ok(())
     } else {
@@ -202,7 +219,12 @@ mod tests {
         let e = c.parse::<Demo>().unwrap_err().to_string();
         assert!(e.starts_with("demo.toml: synthesize"), "{e}");
         assert!(e.contains("sede"), "{e}");
-        let c = Config::from_str(Path::new("demo.toml"), "method = \"m\"\n[synthesize]\nseed = -1\n", &[]).unwrap();
+        let c = Config::from_str(
+            Path::new("demo.toml"),
+            "method = \"m\"\n[synthesize]\nseed = -1\n",
+            &[],
+        )
+        .unwrap();
         let e = c.parse::<Demo>().unwrap_err().to_string();
         assert!(e.contains("synthesize.seed"), "{e}");
     }

@@ -9,7 +9,11 @@ use texsyn::config::Config;
 use texsyn::pipeline::{self, ProgressMode, RunOptions, outputs::materialize};
 
 #[derive(Parser)]
-#[command(name = "texsyn", version, about = "Texture synthesis on shapes from examples")]
+#[command(
+    name = "texsyn",
+    version,
+    about = "Texture synthesis on shapes from examples"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -222,7 +226,14 @@ fn real_main() -> Result<i32> {
             let cfg = Config::load(config, sets)?;
             let plan = texsyn::methods::plan(&cfg)?;
             let cache = Cache::open(&cache_dir)?;
-            let result = pipeline::run(&plan.dag, &cache, RunOptions { progress, verify_all: false })?;
+            let result = pipeline::run(
+                &plan.dag,
+                &cache,
+                RunOptions {
+                    progress,
+                    verify_all: false,
+                },
+            )?;
             print!("{}", lock_text(&result.reports));
             Ok(0)
         }
@@ -241,7 +252,14 @@ fn real_main() -> Result<i32> {
                 Some(t) => Cache::open(t.path())?,
                 None => Cache::open(&cache_dir)?,
             };
-            let result = pipeline::run(&plan.dag, &cache, RunOptions { progress, verify_all: true })?;
+            let result = pipeline::run(
+                &plan.dag,
+                &cache,
+                RunOptions {
+                    progress,
+                    verify_all: true,
+                },
+            )?;
             let problems = compare_lock(&lock, &result.reports, lockfile)?;
             if problems.is_empty() {
                 if !cli.quiet {
@@ -256,7 +274,11 @@ fn real_main() -> Result<i32> {
                 for p in &problems {
                     eprintln!("mismatch: {p}");
                 }
-                eprintln!("{} mismatch(es) against {}", problems.len(), lockfile.display());
+                eprintln!(
+                    "{} mismatch(es) against {}",
+                    problems.len(),
+                    lockfile.display()
+                );
                 Ok(1)
             }
         }
@@ -325,11 +347,16 @@ fn parse_axis(s: &str) -> Result<glam::Vec3> {
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let tmp = dir.join(format!(
         ".{}.tmp-{}",
-        path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
+        path.file_name()
+            .map(|n| n.to_string_lossy())
+            .unwrap_or_default(),
         std::process::id()
     ));
     std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
@@ -345,7 +372,11 @@ fn human_bytes(b: u64) -> String {
         v /= 1024.0;
         u += 1;
     }
-    if u == 0 { format!("{b} B") } else { format!("{v:.1} {}", UNITS[u]) }
+    if u == 0 {
+        format!("{b} B")
+    } else {
+        format!("{v:.1} {}", UNITS[u])
+    }
 }
 
 fn print_table(reports: &[pipeline::NodeReport]) {
@@ -369,7 +400,8 @@ fn print_table(reports: &[pipeline::NodeReport]) {
     }
 }
 
-const LOCK_HEADER: &str = "# texsyn lock file: node, key, content hash (written by `texsyn hashes`)\n";
+const LOCK_HEADER: &str =
+    "# texsyn lock file: node, key, content hash (written by `texsyn hashes`)\n";
 
 fn lock_text(reports: &[pipeline::NodeReport]) -> String {
     let mut s = String::from(LOCK_HEADER);
@@ -400,10 +432,15 @@ fn compare_lock(lock: &str, reports: &[pipeline::NodeReport], path: &Path) -> Re
     let mut problems = Vec::new();
     for (node, key, hash) in &expected {
         match reports.iter().find(|r| r.node == *node) {
-            None => problems.push(format!("{node}: in the lock file but not produced by this config")),
+            None => problems.push(format!(
+                "{node}: in the lock file but not produced by this config"
+            )),
             Some(r) => {
                 if r.content_hash != *hash {
-                    problems.push(format!("{node}: content hash {} differs from the locked {hash}", r.content_hash));
+                    problems.push(format!(
+                        "{node}: content hash {} differs from the locked {hash}",
+                        r.content_hash
+                    ));
                 }
                 if r.key != *key {
                     problems.push(format!(
@@ -416,7 +453,10 @@ fn compare_lock(lock: &str, reports: &[pipeline::NodeReport], path: &Path) -> Re
     }
     for r in reports {
         if !expected.iter().any(|e| e.0 == r.node) {
-            problems.push(format!("{}: produced by this config but missing from the lock file", r.node));
+            problems.push(format!(
+                "{}: produced by this config but missing from the lock file",
+                r.node
+            ));
         }
     }
     Ok(problems)

@@ -39,7 +39,9 @@ pub fn read_mesh(a: &Artifact) -> Result<Mesh, ArtifactError> {
     let positions: &[Vec3] = a.array("positions")?;
     let triangles: &[[u32; 3]] = a.array("triangles")?;
     if positions.len() as u64 != meta.vertices || triangles.len() as u64 != meta.faces {
-        return Err(ArtifactError::Meta("mesh array lengths disagree with metadata".into()));
+        return Err(ArtifactError::Meta(
+            "mesh array lengths disagree with metadata".into(),
+        ));
     }
     if triangles
         .iter()
@@ -83,7 +85,9 @@ pub fn view_image(a: &Artifact) -> Result<ImageView<'_>, ArtifactError> {
     let meta: ImageMeta = a.meta()?;
     let pixels: &[[f32; 4]] = a.array("pixels")?;
     if pixels.len() != meta.width as usize * meta.height as usize {
-        return Err(ArtifactError::Meta("image size disagrees with metadata".into()));
+        return Err(ArtifactError::Meta(
+            "image size disagrees with metadata".into(),
+        ));
     }
     Ok(ImageView {
         width: meta.width,

@@ -104,7 +104,9 @@ pub enum ArtifactError {
     Meta(String),
     #[error("artifact has no array named {0:?}")]
     MissingArray(String),
-    #[error("artifact array {name:?} holds {bytes} bytes, not a whole number of {elem}-byte elements")]
+    #[error(
+        "artifact array {name:?} holds {bytes} bytes, not a whole number of {elem}-byte elements"
+    )]
     ArrayShape {
         name: String,
         bytes: usize,
@@ -446,8 +448,8 @@ mod tests {
         assert_eq!(art.array::<f32>("a").unwrap(), &[1.0, 2.0, 3.0]);
         assert_eq!(art.array::<[u32; 3]>("b").unwrap(), &[[1, 2, 3], [4, 5, 6]]);
         for name in ["a", "b"] {
-            let off = art.raw_array(name).unwrap().as_ptr() as usize
-                - art.file_bytes().as_ptr() as usize;
+            let off =
+                art.raw_array(name).unwrap().as_ptr() as usize - art.file_bytes().as_ptr() as usize;
             assert_eq!(off % 64, 0, "{name} not aligned");
         }
         assert!(matches!(
@@ -472,7 +474,10 @@ mod tests {
     fn truncation_and_corruption_are_detected() {
         let bytes = sample();
         for cut in [0, 10, HEADER_LEN, bytes.len() - 1] {
-            assert!(Artifact::from_bytes(bytes[..cut].to_vec()).is_err(), "cut {cut}");
+            assert!(
+                Artifact::from_bytes(bytes[..cut].to_vec()).is_err(),
+                "cut {cut}"
+            );
         }
         let mut flipped = bytes.clone();
         let last = flipped.len() - 70;

@@ -71,10 +71,7 @@ impl Cache {
 
     pub fn object_path(&self, key: &Key) -> PathBuf {
         let hex = key.to_hex();
-        self.root
-            .join(OBJECTS_DIR)
-            .join(&hex[..2])
-            .join(&hex[2..])
+        self.root.join(OBJECTS_DIR).join(&hex[..2]).join(&hex[2..])
     }
 
     /// Reads only the header of the object for `key`: enough to learn its content hash
@@ -252,7 +249,10 @@ fn unique_suffix() -> u64 {
         .duration_since(SystemTime::UNIX_EPOCH)
         .map(|d| d.as_nanos() as u64)
         .unwrap_or(0);
-    nanos ^ COUNTER.fetch_add(1, Ordering::Relaxed).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+    nanos
+        ^ COUNTER
+            .fetch_add(1, Ordering::Relaxed)
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
 }
 
 /// Parses sizes like `500M`, `2G`, `1.5GiB`, `1000000`.
@@ -271,7 +271,11 @@ pub fn parse_size(s: &str) -> Result<u64, String> {
         "m" | "mb" | "mib" => 1024.0 * 1024.0,
         "g" | "gb" | "gib" => 1024.0 * 1024.0 * 1024.0,
         "t" | "tb" | "tib" => 1024.0f64.powi(4),
-        other => return Err(format!("{s:?}: unknown size unit {other:?} (use K, M, G or T)")),
+        other => {
+            return Err(format!(
+                "{s:?}: unknown size unit {other:?} (use K, M, G or T)"
+            ));
+        }
     };
     Ok((value * mult) as u64)
 }

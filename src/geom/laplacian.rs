@@ -20,7 +20,11 @@ pub fn cotan_weights(mesh: &Mesh) -> Vec<(u32, u32, f64)> {
             let pc = mesh.positions[c as usize].as_dvec3();
             let (u, v) = (pa - pc, pb - pc);
             let cross = u.cross(v).length();
-            let cot = if cross > 1e-300 { u.dot(v) / cross } else { 0.0 };
+            let cot = if cross > 1e-300 {
+                u.dot(v) / cross
+            } else {
+                0.0
+            };
             let (i, j) = if a < b { (a, b) } else { (b, a) };
             if i != j {
                 w.push((i, j, 0.5 * cot));
@@ -127,7 +131,11 @@ mod tests {
         let mut p = Vec::new();
         for y in 0..n {
             for x in 0..n {
-                p.push(Vec3::new(x as f32 / (n - 1) as f32, y as f32 / (n - 1) as f32, 0.0));
+                p.push(Vec3::new(
+                    x as f32 / (n - 1) as f32,
+                    y as f32 / (n - 1) as f32,
+                    0.0,
+                ));
             }
         }
         let mut t = Vec::new();

@@ -168,10 +168,7 @@ impl VertexAdjacency {
     /// Index into the half-edge arrays of the directed edge `a -> b`, if it exists.
     pub fn half_edge(&self, a: usize, b: u32) -> Option<usize> {
         let start = self.offsets[a] as usize;
-        self.neighbors(a)
-            .binary_search(&b)
-            .ok()
-            .map(|i| start + i)
+        self.neighbors(a).binary_search(&b).ok().map(|i| start + i)
     }
 
     pub fn vertex_count(&self) -> usize {

@@ -170,7 +170,11 @@ pub fn decode_image(path: &Path, bytes: &[u8]) -> Result<Image, ImageError> {
             message: "image is empty (0 pixels)".into(),
         });
     }
-    if let Some(i) = img.pixels.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+    if let Some(i) = img
+        .pixels
+        .iter()
+        .position(|p| p.iter().any(|c| !c.is_finite()))
+    {
         return Err(ImageError::Invalid {
             path: path.to_owned(),
             message: format!(

@@ -1,8 +1,8 @@
 //! Sparse linear algebra: a symmetric positive definite solver that keeps its factorization
 //! (faer's sparse Cholesky), so several right-hand sides reuse one factorization.
 
-use faer::sparse::{SparseColMat, Triplet};
 use faer::linalg::solvers::Solve;
+use faer::sparse::{SparseColMat, Triplet};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SolveError {
@@ -41,7 +41,11 @@ impl SpdSolver {
     /// Solves A X = B in place for `k` right-hand sides stored column-major in `rhs`
     /// (length n·k).
     pub fn solve(&self, rhs: &mut [f64], k: usize) {
-        assert_eq!(rhs.len(), self.n * k, "right-hand side has the wrong length");
+        assert_eq!(
+            rhs.len(),
+            self.n * k,
+            "right-hand side has the wrong length"
+        );
         faer::set_global_parallelism(faer::Par::Seq);
         let mat = faer::MatMut::from_column_major_slice_mut(rhs, self.n, k);
         self.llt.solve_in_place(mat);

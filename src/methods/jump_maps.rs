@@ -15,18 +15,24 @@
 use super::{MethodError, import_image, import_mesh, to_json};
 use crate::artifact::canonical_bytes;
 use crate::artifact::jump_maps::{
-    ParamMeta, ParamParts, view_field, view_jump_map, view_parameterization, view_walk, write_field,
-    write_jump_map, write_parameterization, write_walk,
+    ParamMeta, ParamParts, view_field, view_jump_map, view_parameterization, view_walk,
+    write_field, write_jump_map, write_parameterization, write_walk,
 };
 use crate::artifact::kinds::{read_mesh, view_image, write_bundle};
 use crate::config::{Config, check_range};
 use crate::pipeline::{Dag, Node, NodeError, Stage};
-use crate::stages::analyse_exemplar::jump_map::{JumpMapParams, build_jump_map, check_exemplar_size};
+use crate::stages::analyse_exemplar::jump_map::{
+    JumpMapParams, build_jump_map, check_exemplar_size,
+};
 use crate::stages::field::orientation_field::{FieldParams, orientation_field};
-use crate::stages::parameterize::edge_offsets::{edge_offsets, largest_fitting_scale, validity_boxes};
+use crate::stages::parameterize::edge_offsets::{
+    edge_offsets, largest_fitting_scale, validity_boxes,
+};
 use crate::stages::parameterize::region_growing::region_growing_order;
 use crate::stages::reconstruct::jump_blend::{BlendShader, corner_sets, random_base_set};
-use crate::stages::reconstruct::textured_export::{ExportParams, ExportSurface, export_textured_mesh};
+use crate::stages::reconstruct::textured_export::{
+    ExportParams, ExportSurface, encode_png, export_textured_mesh,
+};
 use crate::stages::synthesize::jump_walk::{WalkParams, jump_walk};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -80,14 +86,26 @@ pub struct ParameterizeParams {
     pub scale: Option<f32>,
     /// The vertex where region growing starts (§4.1). Default: 0.
     pub seed_vertex: u32,
+    /// Turns the exemplar against the field, in degrees counter-clockwise, -360..=360: the
+    /// field says where the exemplar's "up" goes, and 90 makes an exemplar's horizontal
+    /// features (wood grain, stripes) follow the field instead of crossing it. Default: 0.
+    pub rotation: f32,
 }
 
 impl ParameterizeParams {
     fn validate(&self) -> Result<(), String> {
         if let Some(s) = self.scale {
             if !(s.is_finite() && s > 0.0) {
-                return Err(format!("parameterize.scale must be a positive number of texels per unit, got {s}"));
+                return Err(format!(
+                    "parameterize.scale must be a positive number of texels per unit, got {s}"
+                ));
             }
+        }
+        if !(self.rotation.is_finite() && (-360.0..=360.0).contains(&self.rotation)) {
+            return Err(format!(
+                "parameterize.rotation must be in -360..=360 degrees, got {}",
+                self.rotation
+            ));
         }
         Ok(())
     }
@@ -102,17 +120,34 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     check("synthesize", c.synthesize.validate())?;
     check("reconstruct", c.reconstruct.validate())?;
     for name in c.inputs.maps.keys() {
-        if name.is_empty() || !name.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-') {
+        if name.is_empty()
+            || !name
+                .chars()
+                .all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-')
+        {
             return Err(config
-                .invalid(&format!("inputs.maps.{name}"), "map names may use letters, digits, '_' and '-'")
+                .invalid(
+                    &format!("inputs.maps.{name}"),
+                    "map names may use letters, digits, '_' and '-'",
+                )
                 .into());
         }
     }
 
     let mut dag = Dag::default();
-    let mesh = import_mesh(&mut dag, "import.mesh", &config.resolve(&c.inputs.mesh), "inputs.mesh")?;
+    let mesh = import_mesh(
+        &mut dag,
+        "import.mesh",
+        &config.resolve(&c.inputs.mesh),
+        "inputs.mesh",
+    )?;
     let exemplar_path = config.resolve(&c.inputs.exemplar);
-    let exemplar = import_image(&mut dag, "import.exemplar", &exemplar_path, "inputs.exemplar")?;
+    let exemplar = import_image(
+        &mut dag,
+        "import.exemplar",
+        &exemplar_path,
+        "inputs.exemplar",
+    )?;
     let exemplar_file = dag.add_file(&exemplar_path, "inputs.exemplar")?;
 
     let p = c.analyse_exemplar.clone();
@@ -185,6 +220,12 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                 return Err(NodeError::internal("parameterization and jump map disagree on the exemplar size"));
             }
             let walk = jump_walk(param.walk_input(), jm, &p, &|f| ctx.progress.set(f));
+            tracing::info!(
+                "synthesize: {} vertices, {} jumps, {} random assignments",
+                param.order.len(),
+                walk.jumps,
+                walk.random_assignments
+            );
             if walk.random_assignments > 0 {
                 tracing::warn!(
                     "synthesize: {} of {} vertices had no valid continuation or jump and got a random address; \
@@ -265,6 +306,17 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                 ctx.progress.set(f)
             })
             .map_err(NodeError::input)?;
+            let mut files = files;
+            // Fig. 3 (right) of the paper: the surface textured with a colour ramp instead of
+            // the exemplar shows where patches meet.
+            let ramp = colour_ramp(exemplar.width, exemplar.height);
+            let opts = crate::render::ViewOptions {
+                size: p.preview_size,
+                up: glam::Vec3::from(p.up),
+                ..Default::default()
+            };
+            let view = crate::render::render_views(&mesh, &BlendShader { sets: &sets, texture: ramp.view() }, &opts);
+            files.push(("patches.png".into(), encode_png(&view, false)));
             Ok(write_bundle(&files))
         }),
     });
@@ -282,7 +334,11 @@ fn extension_of(p: &std::path::Path) -> String {
 fn automatic_scale(mesh: &crate::geom::Mesh, width: u32) -> f32 {
     let (lo, hi) = mesh.bounds();
     let diag = (hi - lo).length();
-    if diag > 0.0 && diag.is_finite() { width as f32 / (0.25 * diag) } else { 1.0 }
+    if diag > 0.0 && diag.is_finite() {
+        width as f32 / (0.25 * diag)
+    } else {
+        1.0
+    }
 }
 
 fn parameterize(
@@ -292,16 +348,38 @@ fn parameterize(
     p: &ParameterizeParams,
 ) -> Result<Vec<u8>, NodeError> {
     if up.len() != mesh.vertex_count() {
-        return Err(NodeError::internal("field and mesh disagree on the vertex count"));
+        return Err(NodeError::internal(
+            "field and mesh disagree on the vertex count",
+        ));
     }
     let n = mesh.vertex_count();
-    check_range("parameterize.seed_vertex", p.seed_vertex as usize, 0, n.saturating_sub(1)).map_err(NodeError::input)?;
+    check_range(
+        "parameterize.seed_vertex",
+        p.seed_vertex as usize,
+        0,
+        n.saturating_sub(1),
+    )
+    .map_err(NodeError::input)?;
     if w < 2 || h < 2 {
-        return Err(NodeError::input(format!("the exemplar ({w}×{h}) is too small to texture a surface")));
+        return Err(NodeError::input(format!(
+            "the exemplar ({w}×{h}) is too small to texture a surface"
+        )));
     }
     let adj = mesh.adjacency();
     let mut scale = p.scale.unwrap_or_else(|| automatic_scale(mesh, w));
-    let mut offsets = edge_offsets(mesh, adj, up, scale);
+    let offsets_at = |scale: f32| {
+        let mut o = edge_offsets(mesh, adj, up, scale);
+        if p.rotation != 0.0 {
+            // Texel y points down, so a counter-clockwise turn on screen is clockwise in
+            // (x, y). Negation commutes with the rotation exactly, keeping offsets antisymmetric.
+            let (s, c) = (-p.rotation.to_radians()).sin_cos();
+            for d in &mut o {
+                *d = glam::Vec2::new(c * d.x - s * d.y, s * d.x + c * d.y);
+            }
+        }
+        o
+    };
+    let mut offsets = offsets_at(scale);
     let mut boxes = validity_boxes(adj, &offsets);
     let fit = largest_fitting_scale(&boxes, scale, w, h);
     if p.scale.is_some() {
@@ -322,11 +400,17 @@ fn parameterize(
         }
     } else if fit < 2.0 * scale {
         scale = 0.5 * fit;
-        tracing::info!("parameterize: automatic scale lowered to {scale} so that triangles fit the exemplar");
-        offsets = edge_offsets(mesh, adj, up, scale);
+        tracing::info!(
+            "parameterize: automatic scale lowered to {scale} so that triangles fit the exemplar"
+        );
+        offsets = offsets_at(scale);
         boxes = validity_boxes(adj, &offsets);
     }
-    let seed = if (p.seed_vertex as usize) < n { p.seed_vertex } else { 0 };
+    let seed = if (p.seed_vertex as usize) < n {
+        p.seed_vertex
+    } else {
+        0
+    };
     let order = region_growing_order(adj, seed);
     Ok(write_parameterization(&ParamParts {
         meta: ParamMeta {
@@ -342,4 +426,22 @@ fn parameterize(
         edge_offsets: &offsets,
         boxes: &boxes,
     }))
+}
+
+/// An image whose colour encodes the texel address (red along x, green along y, blue in a
+/// checker of 8-texel cells), so a surface textured with it shows its patches.
+fn colour_ramp(w: u32, h: u32) -> crate::image::Image {
+    let mut img = crate::image::Image::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let checker = ((x / 8 + y / 8) % 2) as f32;
+            img.pixels[(y * w + x) as usize] = [
+                x as f32 / (w - 1).max(1) as f32,
+                y as f32 / (h - 1).max(1) as f32,
+                0.25 + 0.5 * checker,
+                1.0,
+            ];
+        }
+    }
+    img
 }

@@ -62,7 +62,12 @@ fn extension(path: &Path) -> String {
 }
 
 /// Adds the node that parses and validates a mesh file.
-pub(crate) fn import_mesh(dag: &mut Dag, name: &str, path: &Path, role: &str) -> Result<InputRef, MethodError> {
+pub(crate) fn import_mesh(
+    dag: &mut Dag,
+    name: &str,
+    path: &Path,
+    role: &str,
+) -> Result<InputRef, MethodError> {
     let file = dag.add_file(path, role)?;
     // The format is part of the key: the same bytes read as another format mean something else.
     let format = extension(path);
@@ -77,14 +82,20 @@ pub(crate) fn import_mesh(dag: &mut Dag, name: &str, path: &Path, role: &str) ->
         exports: false,
         compute: Box::new(move |ctx| {
             let f = ctx.file(0);
-            let mesh = crate::geom::io::read_mesh_bytes(&f.path, &f.bytes).map_err(NodeError::input)?;
+            let mesh =
+                crate::geom::io::read_mesh_bytes(&f.path, &f.bytes).map_err(NodeError::input)?;
             Ok(write_mesh(&mesh))
         }),
     }))
 }
 
 /// Adds the node that decodes an image file (PNG, JPEG, EXR).
-pub(crate) fn import_image(dag: &mut Dag, name: &str, path: &Path, role: &str) -> Result<InputRef, MethodError> {
+pub(crate) fn import_image(
+    dag: &mut Dag,
+    name: &str,
+    path: &Path,
+    role: &str,
+) -> Result<InputRef, MethodError> {
     let file = dag.add_file(path, role)?;
     let format = extension(path);
     Ok(dag.add(Node {

@@ -13,7 +13,9 @@ use crate::artifact::{ArtifactWriter, Kind, canonical_bytes};
 use crate::config::{Config, check_range};
 use crate::image::Image;
 use crate::pipeline::{Dag, Node, NodeError, Stage};
-use crate::stages::analyse_exemplar::jump_map::{JumpMapParams, build_jump_map, check_exemplar_size};
+use crate::stages::analyse_exemplar::jump_map::{
+    JumpMapParams, build_jump_map, check_exemplar_size,
+};
 use crate::stages::reconstruct::blend2d::render_2d;
 use crate::stages::reconstruct::textured_export::encode_png;
 use crate::stages::synthesize::synth2d::{Synth2dParams, synthesize_2d};
@@ -101,15 +103,26 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         combine_neighbours: s.combine_neighbours,
     };
     check("synthesize", sp.validate())?;
-    check("synthesize.width", check_range("synthesize.width", s.width, 1, 16384))?;
-    check("synthesize.height", check_range("synthesize.height", s.height, 1, 16384))?;
+    check(
+        "synthesize.width",
+        check_range("synthesize.width", s.width, 1, 16384),
+    )?;
+    check(
+        "synthesize.height",
+        check_range("synthesize.height", s.height, 1, 16384),
+    )?;
     check(
         "reconstruct.blend_radius",
         check_range("reconstruct.blend_radius", c.reconstruct.blend_radius, 0, 8),
     )?;
 
     let mut dag = Dag::default();
-    let exemplar = import_image(&mut dag, "import.exemplar", &config.resolve(&c.inputs.exemplar), "inputs.exemplar")?;
+    let exemplar = import_image(
+        &mut dag,
+        "import.exemplar",
+        &config.resolve(&c.inputs.exemplar),
+        "inputs.exemplar",
+    )?;
     let p = c.analyse_exemplar.clone();
     let jump_map = dag.add(Node {
         name: "analyse_exemplar".into(),
@@ -123,7 +136,9 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         compute: Box::new(move |ctx| {
             let img = view_image(ctx.artifact(0))?;
             check_exemplar_size(img.width, img.height).map_err(NodeError::input)?;
-            Ok(write_jump_map(&build_jump_map(img, &p, &|f| ctx.progress.set(f))))
+            Ok(write_jump_map(&build_jump_map(img, &p, &|f| {
+                ctx.progress.set(f)
+            })))
         }),
     });
     let synth = dag.add(Node {
@@ -138,9 +153,11 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         compute: Box::new(move |ctx| {
             let jm = view_jump_map(ctx.artifact(0))?;
             let addr = synthesize_2d(jm, s.width, s.height, &sp, s.seed);
-            Ok(ArtifactWriter::new(Kind::AddressImage, &(s.width, s.height))
-                .array("addresses", &addr)
-                .finish())
+            Ok(
+                ArtifactWriter::new(Kind::AddressImage, &(s.width, s.height))
+                    .array("addresses", &addr)
+                    .finish(),
+            )
         }),
     });
     let r = c.reconstruct.clone();
@@ -159,7 +176,9 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             let (w, h): (u32, u32) = a.meta()?;
             let addr: &[[u16; 2]] = a.array("addresses")?;
             if addr.len() != w as usize * h as usize {
-                return Err(NodeError::internal("address image size disagrees with metadata"));
+                return Err(NodeError::internal(
+                    "address image size disagrees with metadata",
+                ));
             }
             let exemplar = view_image(ctx.artifact(1))?;
             let img = render_2d(exemplar, addr, w, h, r.blend_radius);
@@ -176,7 +195,10 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             }
             Ok(write_bundle(&[
                 ("synthesized.png".into(), encode_png(&img.to_rgba8(), false)),
-                ("coordinates.png".into(), encode_png(&coords.to_rgba8(), false)),
+                (
+                    "coordinates.png".into(),
+                    encode_png(&coords.to_rgba8(), false),
+                ),
             ]))
         }),
     });

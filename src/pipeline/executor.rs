@@ -227,7 +227,9 @@ impl Executor<'_> {
                 .inputs
                 .iter()
                 .map(|input| match *input {
-                    InputRef::Node(j) => InputData::Artifact(&self.states[j].as_ref().unwrap().artifact),
+                    InputRef::Node(j) => {
+                        InputData::Artifact(&self.states[j].as_ref().unwrap().artifact)
+                    }
                     InputRef::File(j) => InputData::File(&self.dag.files[j]),
                 })
                 .collect();

@@ -213,7 +213,9 @@ impl Dag {
 
     /// Graphviz DOT of the DAG.
     pub fn to_dot(&self) -> String {
-        let mut s = String::from("digraph texsyn {\n  rankdir=LR;\n  node [shape=box, fontname=\"monospace\"];\n");
+        let mut s = String::from(
+            "digraph texsyn {\n  rankdir=LR;\n  node [shape=box, fontname=\"monospace\"];\n",
+        );
         for (i, f) in self.files.iter().enumerate() {
             s += &format!(
                 "  f{i} [shape=note, label=\"{}\"];\n",

@@ -4,8 +4,8 @@
 //! file and a rename, so a failed or interrupted run leaves earlier outputs whole.
 
 use crate::artifact::Artifact;
-use crate::artifact::kinds::{bundle_entries, bundle_file};
 use crate::artifact::ContentHash;
+use crate::artifact::kinds::{bundle_entries, bundle_file};
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]

@@ -75,7 +75,9 @@ pub struct FieldParams {
 pub enum FieldError {
     #[error("field.{what}[{index}]: give exactly one of `at` or `vertex`")]
     PointSpec { what: &'static str, index: usize },
-    #[error("field.{what}[{index}]: vertex {vertex} is out of range (the mesh has {count} vertices)")]
+    #[error(
+        "field.{what}[{index}]: vertex {vertex} is out of range (the mesh has {count} vertices)"
+    )]
     VertexRange {
         what: &'static str,
         index: usize,
@@ -145,9 +147,10 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
         Some(a) => Vec3::from(a).normalize(),
         None => longest_axis(mesh),
     };
-    let resolve = |what: &'static str, index: usize, at: &Option<[f32; 3]>, vertex: &Option<u32>| {
-        resolve_point(mesh, &referenced, what, index, at, vertex)
-    };
+    let resolve =
+        |what: &'static str, index: usize, at: &Option<[f32; 3]>, vertex: &Option<u32>| {
+            resolve_point(mesh, &referenced, what, index, at, vertex)
+        };
 
     let mut field: Vec<Vec3>;
     if params.isotropic {
@@ -163,7 +166,10 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
         }
         let mut anchors = Vec::new();
         for (i, a) in params.anchors.iter().enumerate() {
-            anchors.push((resolve("anchors", i, &a.at, &a.vertex)?, Vec3::from(a.direction)));
+            anchors.push((
+                resolve("anchors", i, &a.at, &a.vertex)?,
+                Vec3::from(a.direction),
+            ));
         }
         let weights = cotan_weights(mesh);
         let solve_err = |e: crate::linalg::SolveError| FieldError::Other(e.to_string());
@@ -374,7 +380,12 @@ fn vertex_gradients(mesh: &Mesh, phi: &[f64]) -> Vec<DVec3> {
 /// Replaces zero vectors by a neighbour's direction (projected into the local tangent
 /// plane), spreading breadth-first from vertices that have one. Components with no valid
 /// vector at all use the projected axis, and failing that any tangent.
-fn fill_from_neighbours(mesh: &Mesh, referenced: &[bool], mut field: Vec<Vec3>, axis: Vec3) -> Vec<Vec3> {
+fn fill_from_neighbours(
+    mesh: &Mesh,
+    referenced: &[bool],
+    mut field: Vec<Vec3>,
+    axis: Vec3,
+) -> Vec<Vec3> {
     let adj = mesh.adjacency();
     let normals = mesh.vertex_normals();
     let n = field.len();
@@ -428,7 +439,11 @@ mod tests {
             let th = std::f32::consts::PI * r as f32 / rings as f32;
             for s in 0..segments {
                 let ph = 2.0 * std::f32::consts::PI * s as f32 / segments as f32;
-                p.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()));
+                p.push(Vec3::new(
+                    th.sin() * ph.cos(),
+                    th.cos(),
+                    th.sin() * ph.sin(),
+                ));
             }
         }
         p.push(-Vec3::Y);
@@ -450,7 +465,11 @@ mod tests {
 
     fn check_unit_tangent(mesh: &Mesh, f: &[Vec3]) {
         for (v, (d, n)) in f.iter().zip(mesh.vertex_normals()).enumerate() {
-            assert!((d.length() - 1.0).abs() < 1e-4, "vertex {v}: |d| = {}", d.length());
+            assert!(
+                (d.length() - 1.0).abs() < 1e-4,
+                "vertex {v}: |d| = {}",
+                d.length()
+            );
             assert!(d.dot(*n).abs() < 1e-4, "vertex {v} not tangent");
         }
     }
@@ -459,8 +478,14 @@ mod tests {
     fn sink_and_source_make_the_field_flow_from_one_to_the_other() {
         let m = sphere(16, 24);
         let params = FieldParams {
-            sinks: vec![Point { at: Some([0.0, 1.0, 0.0]), vertex: None }],
-            sources: vec![Point { at: Some([0.0, -1.0, 0.0]), vertex: None }],
+            sinks: vec![Point {
+                at: Some([0.0, 1.0, 0.0]),
+                vertex: None,
+            }],
+            sources: vec![Point {
+                at: Some([0.0, -1.0, 0.0]),
+                vertex: None,
+            }],
             ..Default::default()
         };
         let f = orientation_field(&m, &params).unwrap();
@@ -468,7 +493,11 @@ mod tests {
         // Away from the poles the flow climbs towards +y, the sink.
         for (v, p) in m.positions.iter().enumerate() {
             if p.y.abs() < 0.8 {
-                assert!(f[v].y > 0.9 * (1.0 - p.y * p.y).sqrt(), "vertex {v} at {p}: {}", f[v]);
+                assert!(
+                    f[v].y > 0.9 * (1.0 - p.y * p.y).sqrt(),
+                    "vertex {v} at {p}: {}",
+                    f[v]
+                );
             }
         }
     }
@@ -477,7 +506,11 @@ mod tests {
     fn a_single_anchor_orients_the_whole_mesh() {
         let m = sphere(12, 16);
         let params = FieldParams {
-            anchors: vec![Anchor { at: Some([1.0, 0.0, 0.0]), vertex: None, direction: [0.0, 0.0, 1.0] }],
+            anchors: vec![Anchor {
+                at: Some([1.0, 0.0, 0.0]),
+                vertex: None,
+                direction: [0.0, 0.0, 1.0],
+            }],
             ..Default::default()
         };
         let f = orientation_field(&m, &params).unwrap();
@@ -495,8 +528,14 @@ mod tests {
     fn anchors_turn_the_flow_without_moving_its_singularities() {
         let m = sphere(16, 24);
         let base = FieldParams {
-            sinks: vec![Point { vertex: Some(0), at: None }],
-            sources: vec![Point { vertex: Some(m.vertex_count() as u32 - 1), at: None }],
+            sinks: vec![Point {
+                vertex: Some(0),
+                at: None,
+            }],
+            sources: vec![Point {
+                vertex: Some(m.vertex_count() as u32 - 1),
+                at: None,
+            }],
             ..Default::default()
         };
         let f0 = orientation_field(&m, &base).unwrap();
@@ -509,7 +548,11 @@ mod tests {
         let n = m.vertex_normals()[v];
         let turned = n.cross(f0[v]);
         let params = FieldParams {
-            anchors: vec![Anchor { vertex: Some(v as u32), at: None, direction: turned.into() }],
+            anchors: vec![Anchor {
+                vertex: Some(v as u32),
+                at: None,
+                direction: turned.into(),
+            }],
             ..base
         };
         let f1 = orientation_field(&m, &params).unwrap();
@@ -527,7 +570,13 @@ mod tests {
     #[test]
     fn default_and_isotropic_fields_are_unit_tangents() {
         let m = sphere(10, 12);
-        for p in [FieldParams::default(), FieldParams { isotropic: true, ..Default::default() }] {
+        for p in [
+            FieldParams::default(),
+            FieldParams {
+                isotropic: true,
+                ..Default::default()
+            },
+        ] {
             let f = orientation_field(&m, &p).unwrap();
             check_unit_tangent(&m, &f);
         }
@@ -537,21 +586,39 @@ mod tests {
     fn bad_points_are_named() {
         let m = sphere(6, 8);
         let p = FieldParams {
-            sinks: vec![Point { vertex: Some(9999), at: None }],
+            sinks: vec![Point {
+                vertex: Some(9999),
+                at: None,
+            }],
             ..Default::default()
         };
         let e = orientation_field(&m, &p).unwrap_err().to_string();
         assert!(e.contains("field.sinks[0]") && e.contains("9999"), "{e}");
         let p = FieldParams {
-            sources: vec![Point { vertex: Some(1), at: Some([0.0; 3]) }],
+            sources: vec![Point {
+                vertex: Some(1),
+                at: Some([0.0; 3]),
+            }],
             ..Default::default()
         };
         let e = orientation_field(&m, &p).unwrap_err().to_string();
-        assert!(e.contains("field.sources[0]") && e.contains("exactly one"), "{e}");
+        assert!(
+            e.contains("field.sources[0]") && e.contains("exactly one"),
+            "{e}"
+        );
         let p = FieldParams {
-            anchors: vec![Anchor { vertex: Some(1), at: None, direction: [0.0; 3] }],
+            anchors: vec![Anchor {
+                vertex: Some(1),
+                at: None,
+                direction: [0.0; 3],
+            }],
             ..Default::default()
         };
-        assert!(orientation_field(&m, &p).unwrap_err().to_string().contains("field.anchors[0]"));
+        assert!(
+            orientation_field(&m, &p)
+                .unwrap_err()
+                .to_string()
+                .contains("field.anchors[0]")
+        );
     }
 }

@@ -63,7 +63,14 @@ pub fn edge_offsets(mesh: &Mesh, adj: &VertexAdjacency, up: &[Vec3], scale: f32)
                     v += 1;
                 }
                 let w = adj.neighbors[h] as usize;
-                *slot = edge_offset(mesh.positions[w] - mesh.positions[v], up[v], up[w], right[v], right[w], scale);
+                *slot = edge_offset(
+                    mesh.positions[w] - mesh.positions[v],
+                    up[v],
+                    up[w],
+                    right[v],
+                    right[w],
+                    scale,
+                );
             }
         });
     out
@@ -76,7 +83,11 @@ fn edge_offset(e: Vec3, ui: Vec3, uj: Vec3, vi: Vec3, vj: Vec3, scale: f32) -> V
     if u == Vec3::ZERO {
         // Opposite orientations have no average: take the lexicographically larger one, a
         // rule that is symmetric in the endpoints.
-        u = if ui.to_array() > uj.to_array() { ui } else { uj };
+        u = if ui.to_array() > uj.to_array() {
+            ui
+        } else {
+            uj
+        };
     }
     let vbar = vi + vj;
     let mut v = (vbar - vbar.dot(u) * u).normalize_or_zero();
@@ -153,7 +164,11 @@ mod tests {
         let h = adj.half_edge(0, 1).unwrap();
         assert!((off[h] - Vec2::new(2.0, 0.0)).length() < 1e-5, "{}", off[h]);
         let h = adj.half_edge(0, 5).unwrap();
-        assert!((off[h] - Vec2::new(0.0, -2.0)).length() < 1e-5, "{}", off[h]);
+        assert!(
+            (off[h] - Vec2::new(0.0, -2.0)).length() < 1e-5,
+            "{}",
+            off[h]
+        );
     }
 
     #[test]

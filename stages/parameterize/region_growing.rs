@@ -101,7 +101,11 @@ mod tests {
         let mut done = [false; 8];
         for (i, &v) in o.order.iter().enumerate() {
             let has_done_neighbour = adj.neighbors(v as usize).iter().any(|&w| done[w as usize]);
-            assert_eq!(!has_done_neighbour, o.seeds.contains(&(i as u32)), "position {i}");
+            assert_eq!(
+                !has_done_neighbour,
+                o.seeds.contains(&(i as u32)),
+                "position {i}"
+            );
             done[v as usize] = true;
         }
     }
@@ -119,7 +123,10 @@ mod tests {
         let mut done = [false; 7];
         for &v in &o.order {
             let prop = |w: usize| {
-                adj.neighbors(w).iter().filter(|&&x| done[x as usize]).count() as f64
+                adj.neighbors(w)
+                    .iter()
+                    .filter(|&&x| done[x as usize])
+                    .count() as f64
                     / adj.degree(w) as f64
             };
             let best = (0..7).filter(|&w| !done[w]).map(prop).fold(0.0, f64::max);

@@ -37,7 +37,10 @@ pub fn corner_sets(
                         base
                     } else {
                         base + param.offset(t[b], t[c]).ok_or_else(|| {
-                            format!("face {f}: edge {}-{} is not in the parameterization", t[b], t[c])
+                            format!(
+                                "face {f}: edge {}-{} is not in the parameterization",
+                                t[b], t[c]
+                            )
                         })?
                     };
                 }
@@ -102,10 +105,21 @@ mod tests {
         for (i, p) in img.pixels.iter_mut().enumerate() {
             *p = [i as f32 / 64.0, 0.5, 1.0 - i as f32 / 64.0, 1.0];
         }
-        let tri = [Vec2::new(1.0, 1.0), Vec2::new(5.0, 1.5), Vec2::new(2.0, 6.0)];
+        let tri = [
+            Vec2::new(1.0, 1.0),
+            Vec2::new(5.0, 1.5),
+            Vec2::new(2.0, 6.0),
+        ];
         let sets = vec![[tri; 3]];
-        let shader = BlendShader { sets: &sets, texture: img.view() };
-        for bary in [Vec3::new(0.2, 0.3, 0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.1, 0.8, 0.1)] {
+        let shader = BlendShader {
+            sets: &sets,
+            texture: img.view(),
+        };
+        for bary in [
+            Vec3::new(0.2, 0.3, 0.5),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.1, 0.8, 0.1),
+        ] {
             let p = tri[0] * bary.x + tri[1] * bary.y + tri[2] * bary.z;
             let want = img.view().sample(p);
             let got = shader.rgba(0, bary);
@@ -124,9 +138,18 @@ mod tests {
         let a = [Vec2::new(0.0, 0.0); 3];
         let b = [Vec2::new(3.0, 0.0); 3];
         let sets = vec![[a, b, b]];
-        let shader = BlendShader { sets: &sets, texture: img.view() };
-        assert_eq!(shader.rgba(0, Vec3::new(1.0, 0.0, 0.0)), [1.0, 0.0, 0.0, 1.0]);
-        assert_eq!(shader.rgba(0, Vec3::new(0.0, 1.0, 0.0)), [0.0, 0.0, 1.0, 1.0]);
+        let shader = BlendShader {
+            sets: &sets,
+            texture: img.view(),
+        };
+        assert_eq!(
+            shader.rgba(0, Vec3::new(1.0, 0.0, 0.0)),
+            [1.0, 0.0, 0.0, 1.0]
+        );
+        assert_eq!(
+            shader.rgba(0, Vec3::new(0.0, 1.0, 0.0)),
+            [0.0, 0.0, 1.0, 1.0]
+        );
         let mid = shader.rgba(0, Vec3::new(0.5, 0.25, 0.25));
         assert!((mid[0] - 0.5).abs() < 1e-6 && (mid[2] - 0.5).abs() < 1e-6);
     }

@@ -49,7 +49,10 @@ impl ExportParams {
         crate::config::check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
         let up = Vec3::from(self.up);
         if !up.is_finite() || up.length() < 1e-12 {
-            return Err(format!("reconstruct.up must be a finite non-zero vector, got {:?}", self.up));
+            return Err(format!(
+                "reconstruct.up must be a finite non-zero vector, got {:?}",
+                self.up
+            ));
         }
         Ok(())
     }
@@ -69,10 +72,23 @@ pub fn encode_png(img: &image::RgbaImage, keep_alpha: bool) -> Vec<u8> {
     let encoder = image::codecs::png::PngEncoder::new(&mut out);
     use image::ImageEncoder;
     let result = if keep_alpha {
-        encoder.write_image(img.as_raw(), img.width(), img.height(), image::ExtendedColorType::Rgba8)
+        encoder.write_image(
+            img.as_raw(),
+            img.width(),
+            img.height(),
+            image::ExtendedColorType::Rgba8,
+        )
     } else {
-        let rgb: Vec<u8> = img.pixels().flat_map(|p| [p.0[0], p.0[1], p.0[2]]).collect();
-        encoder.write_image(&rgb, img.width(), img.height(), image::ExtendedColorType::Rgb8)
+        let rgb: Vec<u8> = img
+            .pixels()
+            .flat_map(|p| [p.0[0], p.0[1], p.0[2]])
+            .collect();
+        encoder.write_image(
+            &rgb,
+            img.width(),
+            img.height(),
+            image::ExtendedColorType::Rgb8,
+        )
     };
     result.expect("PNG encoding into memory");
     out
@@ -98,7 +114,10 @@ pub fn export_textured_mesh<S: SurfaceShader>(
 ) -> Result<Vec<(String, Vec<u8>)>, String> {
     let mut files: Vec<(String, Vec<u8>)> = Vec::new();
     let (w, h) = exemplar;
-    let uv: Vec<[Vec2; 3]> = single_set.iter().map(|t| t.map(|a| texel_to_uv(a, w, h))).collect();
+    let uv: Vec<[Vec2; 3]> = single_set
+        .iter()
+        .map(|t| t.map(|a| texel_to_uv(a, w, h)))
+        .collect();
     let find = |n: &str| surfaces.iter().find(|s| s.name == n);
     let mut maps = MtlMaps {
         diffuse: surfaces.first().map(|s| file_name(&s.name, &s.extension)),
@@ -107,14 +126,21 @@ pub fn export_textured_mesh<S: SurfaceShader>(
     maps.normal = find("normal").map(|s| file_name(&s.name, &s.extension));
     maps.roughness = find("roughness").map(|s| file_name(&s.name, &s.extension));
     maps.height = find("height").map(|s| file_name(&s.name, &s.extension));
-    files.push(("textured.obj".into(), write_obj(mesh, Some(&uv), Some("textured.mtl"), "texsyn").into_bytes()));
-    files.push(("textured.mtl".into(), write_mtl("texsyn", &maps).into_bytes()));
+    files.push((
+        "textured.obj".into(),
+        write_obj(mesh, Some(&uv), Some("textured.mtl"), "texsyn").into_bytes(),
+    ));
+    files.push((
+        "textured.mtl".into(),
+        write_mtl("texsyn", &maps).into_bytes(),
+    ));
     for s in surfaces {
         files.push((file_name(&s.name, &s.extension), s.file.to_vec()));
     }
     progress(0.05);
 
-    let atlas = build_atlas(mesh, p.atlas_size).map_err(|e| format!("reconstruct.atlas_size: {e}"))?;
+    let atlas =
+        build_atlas(mesh, p.atlas_size).map_err(|e| format!("reconstruct.atlas_size: {e}"))?;
     let frames = TangentFrames::new(mesh, single_set, &atlas);
     let mut material = GlbMaterial {
         double_sided: true,
@@ -122,7 +148,14 @@ pub fn export_textured_mesh<S: SurfaceShader>(
     };
     for (k, s) in surfaces.iter().enumerate() {
         let baked = if s.name == "normal" {
-            bake(&atlas, mesh, &NormalRebase { inner: &s.shader, frames: &frames })
+            bake(
+                &atlas,
+                mesh,
+                &NormalRebase {
+                    inner: &s.shader,
+                    frames: &frames,
+                },
+            )
         } else {
             bake(&atlas, mesh, &s.shader)
         };
@@ -143,7 +176,10 @@ pub fn export_textured_mesh<S: SurfaceShader>(
         files.push((format!("baked_{}.png", s.name), png));
         progress(0.1 + 0.6 * (k + 1) as f32 / surfaces.len() as f32);
     }
-    files.push(("textured.glb".into(), write_glb(&glb_mesh(mesh, &atlas, &frames, material))));
+    files.push((
+        "textured.glb".into(),
+        write_glb(&glb_mesh(mesh, &atlas, &frames, material)),
+    ));
     progress(0.75);
 
     if let Some(base) = surfaces.first() {
@@ -202,7 +238,10 @@ impl TangentFrames {
                 .unwrap_or((Vec3::ZERO, Vec3::ZERO));
             at.push((ax, ay));
         }
-        TangentFrames { exemplar, atlas: at }
+        TangentFrames {
+            exemplar,
+            atlas: at,
+        }
     }
 }
 
@@ -240,12 +279,24 @@ fn glb_mesh(mesh: &Mesh, atlas: &Atlas, frames: &TangentFrames, material: GlbMat
         for c in 0..3 {
             let v = t[c] as usize;
             positions.push(mesh.positions[v]);
-            let n = if normals[v] != Vec3::ZERO { normals[v] } else { n_face };
+            let n = if normals[v] != Vec3::ZERO {
+                normals[v]
+            } else {
+                n_face
+            };
             vnormals.push(n);
             // glTF: bitangent = cross(normal, tangent.xyz) * w.
             let tan = (ax - ax.dot(n) * n).normalize_or_zero();
-            let w = if n.cross(tan).dot(ay) < 0.0 { -1.0 } else { 1.0 };
-            tangents.push(if tan == Vec3::ZERO { Vec4::new(1.0, 0.0, 0.0, 1.0) } else { tan.extend(w) });
+            let w = if n.cross(tan).dot(ay) < 0.0 {
+                -1.0
+            } else {
+                1.0
+            };
+            tangents.push(if tan == Vec3::ZERO {
+                Vec4::new(1.0, 0.0, 0.0, 1.0)
+            } else {
+                tan.extend(w)
+            });
             uv.push(atlas.corner_uv[f][c]);
         }
     }

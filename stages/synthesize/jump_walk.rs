@@ -27,8 +27,9 @@ use glam::Vec2;
 pub struct WalkParams {
     /// Seed of the counter-based random numbers. Default: 1.
     pub seed: u64,
-    /// Weight of a continuation entry per texel of edge offset: the mean run, in texels,
-    /// between jumps (§4.2.5). Larger gives bigger patches. Range 0.01..=10000. Default: 12.
+    /// Weight of a continuation entry per texel of edge offset: about the mean run, in
+    /// texels, between jumps (§4.2.5). Larger gives bigger patches (fewer seams); patches
+    /// still end where they would leave the exemplar. Range 0.01..=10000. Default: 200.
     pub continuation: f32,
     /// Fraction of the exemplar's size within which a continuation's weight fades to zero
     /// towards the border (boundary avoidance, §4.2.1). Range 0..=0.5. Default: 0.1.
@@ -39,7 +40,7 @@ impl Default for WalkParams {
     fn default() -> Self {
         WalkParams {
             seed: 1,
-            continuation: 12.0,
+            continuation: 200.0,
             boundary_fraction: 0.1,
         }
     }
@@ -96,7 +97,12 @@ enum Source {
     Jump,
 }
 
-pub fn jump_walk(input: WalkInput, jm: JumpMapRef, params: &WalkParams, progress: &dyn Fn(f32)) -> Walk {
+pub fn jump_walk(
+    input: WalkInput,
+    jm: JumpMapRef,
+    params: &WalkParams,
+    progress: &dyn Fn(f32),
+) -> Walk {
     let n = input.boxes.len();
     let (w, h) = (jm.width, jm.height);
     let mut addresses = vec![Vec2::ZERO; n];
@@ -111,7 +117,9 @@ pub fn jump_walk(input: WalkInput, jm: JumpMapRef, params: &WalkParams, progress
             return 1.0;
         }
         let near = a.min(top - a);
-        (near.x / margin.x).clamp(0.0, 1.0).min((near.y / margin.y).clamp(0.0, 1.0))
+        (near.x / margin.x)
+            .clamp(0.0, 1.0)
+            .min((near.y / margin.y).clamp(0.0, 1.0))
     };
     let mut dest: Vec<Vec2> = Vec::with_capacity(256);
     let mut cumulative: Vec<f32> = Vec::with_capacity(256);
@@ -188,7 +196,13 @@ pub fn jump_walk(input: WalkInput, jm: JumpMapRef, params: &WalkParams, progress
             }
             let ux = counter_unit(params.seed, STREAM_FALLBACK_X, v as u64);
             let uy = counter_unit(params.seed, STREAM_FALLBACK_Y, v as u64);
-            let pick = |lo: f32, hi: f32, u: f32| if lo <= hi { lo + u * (hi - lo) } else { 0.5 * (lo + hi) };
+            let pick = |lo: f32, hi: f32, u: f32| {
+                if lo <= hi {
+                    lo + u * (hi - lo)
+                } else {
+                    0.5 * (lo + hi)
+                }
+            };
             addresses[vu] = Vec2::new(pick(lo.x, hi.x, ux), pick(lo.y, hi.y, uy));
             patches[vu] = v;
         }
@@ -241,7 +255,11 @@ mod tests {
         (0..w * h)
             .map(|_| match to {
                 Some((x, y)) => Jump { x, y, weight: 1.0 },
-                None => Jump { x: 0, y: 0, weight: 0.0 },
+                None => Jump {
+                    x: 0,
+                    y: 0,
+                    weight: 0.0,
+                },
             })
             .collect()
     }
@@ -259,7 +277,12 @@ mod tests {
         let offsets = edge_offsets(&mesh, mesh.adjacency(), &up, scale);
         let boxes = validity_boxes(mesh.adjacency(), &offsets);
         let order = region_growing_order(mesh.adjacency(), 0).order;
-        Setup { mesh, offsets, boxes, order }
+        Setup {
+            mesh,
+            offsets,
+            boxes,
+            order,
+        }
     }
 
     fn walk(s: &Setup, jumps: &[Jump], w: u32, h: u32, params: &WalkParams) -> Walk {
@@ -279,11 +302,23 @@ mod tests {
     fn every_address_is_valid_for_its_vertex() {
         let s = setup(30, 1.5);
         let jumps = jump_map(40, 40, Some((20, 20)));
-        let wk = walk(&s, &jumps, 40, 40, &WalkParams { continuation: 2.0, ..Default::default() });
+        let wk = walk(
+            &s,
+            &jumps,
+            40,
+            40,
+            &WalkParams {
+                continuation: 2.0,
+                ..Default::default()
+            },
+        );
         for (v, a) in wk.addresses.iter().enumerate() {
             assert!(s.boxes[v].admits(*a, 40, 40), "vertex {v} at {a}");
         }
-        assert!(wk.jumps > 0, "with a weak continuation some jumps must be taken");
+        assert!(
+            wk.jumps > 0,
+            "with a weak continuation some jumps must be taken"
+        );
     }
 
     #[test]
@@ -294,7 +329,10 @@ mod tests {
         // random assignments.
         let s = setup(12, 2.0);
         let jumps = jump_map(48, 48, None);
-        let params = WalkParams { boundary_fraction: 0.0, ..Default::default() };
+        let params = WalkParams {
+            boundary_fraction: 0.0,
+            ..Default::default()
+        };
         let wk = walk(&s, &jumps, 48, 48, &params);
         assert_eq!(wk.jumps, 0);
         let adj = s.mesh.adjacency();
@@ -314,14 +352,20 @@ mod tests {
         patches.sort();
         patches.dedup();
         assert_eq!(patches.len() as u64, 1 + wk.random_assignments);
-        assert!(inside > adj.neighbors.len() / 2, "most edges should lie inside patches");
+        assert!(
+            inside > adj.neighbors.len() / 2,
+            "most edges should lie inside patches"
+        );
     }
 
     #[test]
     fn the_same_seed_gives_the_same_walk_and_another_seed_another() {
         let s = setup(20, 1.0);
         let jumps = jump_map(32, 32, Some((5, 9)));
-        let p1 = WalkParams { continuation: 3.0, ..Default::default() };
+        let p1 = WalkParams {
+            continuation: 3.0,
+            ..Default::default()
+        };
         let a = walk(&s, &jumps, 32, 32, &p1);
         let b = walk(&s, &jumps, 32, 32, &p1);
         assert_eq!(a, b);

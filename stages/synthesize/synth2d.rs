@@ -80,7 +80,6 @@ impl Synth2dParams {
     }
 }
 
-
 /// Draw numbers (hash streams) used per output pixel.
 const DRAW_SOURCE: u64 = 0;
 const DRAW_CHOICE: u64 = 1;
