@@ -81,9 +81,14 @@ struct Executor<'a> {
     opts: RunOptions,
     states: Vec<Option<State>>,
     warnings: Vec<String>,
+    /// While set, computed artifacts are kept in memory instead of stored (see [`run`]).
+    deferred: Option<Vec<(Key, usize)>>,
 }
 
 /// Brings every node of the DAG up to date and returns their artifacts.
+///
+/// The import nodes (parsing the input files) run first and store nothing until all of them
+/// have succeeded, so a bad input file leaves the cache exactly as it was.
 pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, PipelineError> {
     let mut ex = Executor {
         dag,
@@ -91,9 +96,21 @@ pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, Pipe
         opts,
         states: (0..dag.nodes.len()).map(|_| None).collect(),
         warnings: Vec::new(),
+        deferred: Some(Vec::new()),
     };
+    for (i, node) in dag.nodes.iter().enumerate() {
+        if node.stage == super::Stage::Import {
+            ex.resolve(i)?;
+        }
+    }
+    for (key, i) in ex.deferred.take().unwrap_or_default() {
+        let state = ex.states[i].as_ref().expect("resolved above");
+        cache.put(&key, state.artifact.file_bytes())?;
+    }
     for i in 0..dag.nodes.len() {
-        ex.resolve(i)?;
+        if ex.states[i].is_none() {
+            ex.resolve(i)?;
+        }
     }
     let mut reports = Vec::new();
     let mut artifacts = Vec::new();
@@ -248,7 +265,10 @@ impl Executor<'_> {
             node: node.name.clone(),
             message: e.to_string(),
         })?;
-        self.cache.put(&key, artifact.file_bytes())?;
+        match &mut self.deferred {
+            Some(pending) => pending.push((key, i)),
+            None => self.cache.put(&key, artifact.file_bytes())?,
+        }
         self.states[i] = Some(State {
             key,
             artifact,
