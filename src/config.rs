@@ -100,7 +100,10 @@ impl Config {
             } else {
                 key
             };
-            self.invalid(&key, &e.into_inner().to_string())
+            // toml appends "in `section`" on a second line; the key path says it already.
+            let message = e.into_inner().to_string();
+            let first = message.lines().next().unwrap_or_default().to_owned();
+            self.invalid(&key, &first)
         })
     }
 

@@ -28,10 +28,18 @@ fn object_count(cache: &Path) -> usize {
 }
 
 fn walk(dir: &Path) -> usize {
-    let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
     entries
         .flatten()
-        .map(|e| if e.path().is_dir() { walk(&e.path()) } else { 1 })
+        .map(|e| {
+            if e.path().is_dir() {
+                walk(&e.path())
+            } else {
+                1
+            }
+        })
         .sum()
 }
 
@@ -40,7 +48,11 @@ fn scratch() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     std::fs::create_dir_all(dir.path().join("assets")).unwrap();
     for f in ["cow.obj", "wood1.png"] {
-        std::fs::copy(repo().join("configs/assets").join(f), dir.path().join("assets").join(f)).unwrap();
+        std::fs::copy(
+            repo().join("configs/assets").join(f),
+            dir.path().join("assets").join(f),
+        )
+        .unwrap();
     }
     let text = std::fs::read_to_string(repo().join("configs/demo.toml")).unwrap();
     let text = text
@@ -52,8 +64,22 @@ fn scratch() -> tempfile::TempDir {
 
 #[test]
 fn the_committed_lock_file_verifies_from_an_empty_cache() {
-    let o = texsyn(&["verify", "configs/demo.toml", "configs/demo.lock", "--fresh", "--quiet"], &repo());
-    assert!(o.status.success(), "verify failed:\n{}{}", stdout(&o), stderr(&o));
+    let o = texsyn(
+        &[
+            "verify",
+            "configs/demo.toml",
+            "configs/demo.lock",
+            "--fresh",
+            "--quiet",
+        ],
+        &repo(),
+    );
+    assert!(
+        o.status.success(),
+        "verify failed:\n{}{}",
+        stdout(&o),
+        stderr(&o)
+    );
 }
 
 #[test]
@@ -61,12 +87,24 @@ fn a_lock_file_that_disagrees_names_each_mismatching_node() {
     let dir = scratch();
     let d = dir.path();
     let cache = d.join("cache");
-    let o = texsyn(&["hashes", "demo.toml", "--cache", cache.to_str().unwrap()], d);
+    let o = texsyn(
+        &["hashes", "demo.toml", "--cache", cache.to_str().unwrap()],
+        d,
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let lock = stdout(&o);
     assert_eq!(lock.lines().filter(|l| !l.starts_with('#')).count(), 7);
     std::fs::write(d.join("good.lock"), &lock).unwrap();
-    let o = texsyn(&["verify", "demo.toml", "good.lock", "--cache", cache.to_str().unwrap()], d);
+    let o = texsyn(
+        &[
+            "verify",
+            "demo.toml",
+            "good.lock",
+            "--cache",
+            cache.to_str().unwrap(),
+        ],
+        d,
+    );
     assert!(o.status.success(), "{}", stderr(&o));
 
     // Change the locked content hash of the walk: verify must fail and name that node.
@@ -84,7 +122,16 @@ fn a_lock_file_that_disagrees_names_each_mismatching_node() {
         .collect::<Vec<_>>()
         .join("\n");
     std::fs::write(d.join("bad.lock"), tampered).unwrap();
-    let o = texsyn(&["verify", "demo.toml", "bad.lock", "--cache", cache.to_str().unwrap()], d);
+    let o = texsyn(
+        &[
+            "verify",
+            "demo.toml",
+            "bad.lock",
+            "--cache",
+            cache.to_str().unwrap(),
+        ],
+        d,
+    );
     assert_eq!(o.status.code(), Some(1));
     let e = stderr(&o);
     assert!(e.contains("mismatch: synthesize: content hash"), "{e}");
@@ -103,9 +150,19 @@ fn a_mesh_with_a_nan_is_an_error_naming_file_and_line_and_writes_nothing() {
     let o = texsyn(&["run", "demo.toml", "--cache", "c", "--out", "o"], d);
     assert!(!o.status.success());
     let e = stderr(&o);
-    assert!(e.contains("cow.obj") && e.contains(&format!("line {}", i + 1)), "{e}");
-    assert!(e.to_lowercase().contains("nan") || e.contains("finite"), "{e}");
-    assert_eq!(object_count(&d.join("c")), 0, "nothing may be cached from a failed import");
+    assert!(
+        e.contains("cow.obj") && e.contains(&format!("line {}", i + 1)),
+        "{e}"
+    );
+    assert!(
+        e.to_lowercase().contains("nan") || e.contains("finite"),
+        "{e}"
+    );
+    assert_eq!(
+        object_count(&d.join("c")),
+        0,
+        "nothing may be cached from a failed import"
+    );
     assert!(!d.join("o").exists());
 }
 
@@ -115,13 +172,41 @@ fn config_mistakes_are_named_by_key() {
     let d = dir.path();
     let o = texsyn(&["run", "demo.toml", "--set", "synthesize.sede=3"], d);
     assert!(!o.status.success());
-    assert!(stderr(&o).contains("synthesize") && stderr(&o).contains("sede"), "{}", stderr(&o));
-    let o = texsyn(&["run", "demo.toml", "--set", "synthesize.boundary_fraction=2"], d);
+    assert!(
+        stderr(&o).contains("synthesize") && stderr(&o).contains("sede"),
+        "{}",
+        stderr(&o)
+    );
+    let o = texsyn(
+        &[
+            "run",
+            "demo.toml",
+            "--set",
+            "synthesize.boundary_fraction=2",
+        ],
+        d,
+    );
     assert!(!o.status.success());
-    assert!(stderr(&o).contains("synthesize.boundary_fraction"), "{}", stderr(&o));
-    let o = texsyn(&["run", "demo.toml", "--set", "field.sinks=[{ vertex = 999999 }]"], d);
+    assert!(
+        stderr(&o).contains("synthesize.boundary_fraction"),
+        "{}",
+        stderr(&o)
+    );
+    let o = texsyn(
+        &[
+            "run",
+            "demo.toml",
+            "--set",
+            "field.sinks=[{ vertex = 999999 }]",
+        ],
+        d,
+    );
     assert!(!o.status.success());
-    assert!(stderr(&o).contains("field.sinks[0]") && stderr(&o).contains("999999"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("field.sinks[0]") && stderr(&o).contains("999999"),
+        "{}",
+        stderr(&o)
+    );
     let o = texsyn(&["run", "demo.toml", "--set", "method=\"nope\""], d);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("nope"), "{}", stderr(&o));
@@ -134,7 +219,19 @@ fn a_scale_too_large_for_the_mesh_names_one_that_fits_and_keeps_earlier_outputs(
     let o = texsyn(&["run", "demo.toml", "--cache", "c", "--out", "o", "-q"], d);
     assert!(o.status.success(), "{}", stderr(&o));
     let before = std::fs::read(d.join("o/textured.obj")).unwrap();
-    let o = texsyn(&["run", "demo.toml", "--cache", "c", "--out", "o", "--set", "parameterize.scale=5000"], d);
+    let o = texsyn(
+        &[
+            "run",
+            "demo.toml",
+            "--cache",
+            "c",
+            "--out",
+            "o",
+            "--set",
+            "parameterize.scale=5000",
+        ],
+        d,
+    );
     assert!(!o.status.success());
     let e = stderr(&o);
     assert!(e.contains("parameterize.scale = 5000"), "{e}");
@@ -146,10 +243,24 @@ fn a_scale_too_large_for_the_mesh_names_one_that_fits_and_keeps_earlier_outputs(
         .chars()
         .take_while(|c| c.is_ascii_digit() || *c == '.')
         .collect();
-    assert_eq!(std::fs::read(d.join("o/textured.obj")).unwrap(), before, "earlier outputs intact");
+    assert_eq!(
+        std::fs::read(d.join("o/textured.obj")).unwrap(),
+        before,
+        "earlier outputs intact"
+    );
     let fit: f32 = fit.parse().unwrap();
     let o = texsyn(
-        &["run", "demo.toml", "--cache", "c", "--out", "o2", "-q", "--set", &format!("parameterize.scale={}", fit * 0.999)],
+        &[
+            "run",
+            "demo.toml",
+            "--cache",
+            "c",
+            "--out",
+            "o2",
+            "-q",
+            "--set",
+            &format!("parameterize.scale={}", fit * 0.999),
+        ],
         d,
     );
     assert!(o.status.success(), "{}", stderr(&o));
@@ -164,15 +275,44 @@ fn status_graph_gc_and_render_do_their_jobs() {
     let s = stdout(&o);
     assert!(s.contains("import.mesh") && s.contains("would run"), "{s}");
     assert!(!s.contains("cached"), "{s}");
-    assert!(texsyn(&["run", "demo.toml", "--cache", "c", "--out", "o", "-q"], d).status.success());
+    assert!(
+        texsyn(&["run", "demo.toml", "--cache", "c", "--out", "o", "-q"], d)
+            .status
+            .success()
+    );
     let s = stdout(&texsyn(&["status", "demo.toml", "--cache", "c"], d));
-    assert_eq!(s.lines().filter(|l| l.ends_with("cached")).count(), 7, "{s}");
-    let s = stdout(&texsyn(&["status", "demo.toml", "--cache", "c", "--set", "synthesize.seed=9"], d));
-    assert!(s.lines().any(|l| l.starts_with("synthesize") && l.ends_with("would run")), "{s}");
-    assert!(s.lines().any(|l| l.starts_with("reconstruct") && l.contains("if its inputs change")), "{s}");
+    assert_eq!(
+        s.lines().filter(|l| l.ends_with("cached")).count(),
+        7,
+        "{s}"
+    );
+    let s = stdout(&texsyn(
+        &[
+            "status",
+            "demo.toml",
+            "--cache",
+            "c",
+            "--set",
+            "synthesize.seed=9",
+        ],
+        d,
+    ));
+    assert!(
+        s.lines()
+            .any(|l| l.starts_with("synthesize") && l.ends_with("would run")),
+        "{s}"
+    );
+    assert!(
+        s.lines()
+            .any(|l| l.starts_with("reconstruct") && l.contains("if its inputs change")),
+        "{s}"
+    );
 
     let dot = stdout(&texsyn(&["graph", "demo.toml"], d));
-    assert!(dot.starts_with("digraph") && dot.contains("jump_walk") && dot.contains("->"), "{dot}");
+    assert!(
+        dot.starts_with("digraph") && dot.contains("jump_walk") && dot.contains("->"),
+        "{dot}"
+    );
 
     let before = object_count(&d.join("c"));
     let o = texsyn(&["gc", "--max-size", "1M", "--cache", "c"], d);
@@ -187,7 +327,19 @@ fn status_graph_gc_and_render_do_their_jobs() {
         .sum();
     assert!(total <= 1 << 20);
 
-    let o = texsyn(&["render", "o/textured.obj", "--texture", "o/texture.png", "-o", "r.png", "--size", "64"], d);
+    let o = texsyn(
+        &[
+            "render",
+            "o/textured.obj",
+            "--texture",
+            "o/texture.png",
+            "-o",
+            "r.png",
+            "--size",
+            "64",
+        ],
+        d,
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let img = image::open(d.join("r.png")).unwrap();
     assert_eq!((img.width(), img.height()), (192, 64));
@@ -197,13 +349,22 @@ fn status_graph_gc_and_render_do_their_jobs() {
 fn json_output_reports_every_node() {
     let dir = scratch();
     let d = dir.path();
-    let o = texsyn(&["run", "demo.toml", "--cache", "c", "--out", "o", "--json"], d);
+    let o = texsyn(
+        &["run", "demo.toml", "--cache", "c", "--out", "o", "--json"],
+        d,
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     let nodes = v["nodes"].as_array().unwrap();
     assert_eq!(nodes.len(), 7);
     assert!(nodes.iter().all(|n| n["status"] == "ran"));
-    assert!(v["outputs"].as_array().unwrap().iter().any(|f| f["path"].as_str().unwrap().ends_with("textured.glb")));
+    assert!(
+        v["outputs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|f| f["path"].as_str().unwrap().ends_with("textured.glb"))
+    );
 }
 
 #[test]

@@ -8,11 +8,12 @@ use texsyn::image::knn::squared_distance;
 use texsyn::image::neighbourhood::{NeighbourhoodParams, Neighbourhoods};
 use texsyn::image::pca::{Pca, PcaParams};
 use texsyn::image::{Image, ImageView, decode_image};
+use texsyn::random::counter_hash;
 use texsyn::stages::analyse_exemplar::jump_map::{
     Jump, JumpMap, JumpMapParams, JumpMapRef, build_jump_map,
 };
 use texsyn::stages::reconstruct::blend2d::render_2d;
-use texsyn::stages::synthesize::synth2d::{Synth2dParams, counter_hash, synthesize_2d};
+use texsyn::stages::synthesize::synth2d::{Synth2dParams, synthesize_2d};
 
 const EXEMPLARS: [&str; 3] = ["wood1.png", "leopard.png", "marble1.png"];
 

@@ -46,7 +46,11 @@ fn artifact<'a>(r: &'a RunResult, node: &str) -> &'a Artifact {
 fn a_second_run_runs_nothing_and_a_new_seed_reruns_only_synthesis_and_reconstruction() {
     let cache = tempfile::tempdir().unwrap();
     let first = run_config(&demo(), &[], cache.path());
-    assert_eq!(ran(&first).len(), first.reports.len(), "empty cache: everything runs");
+    assert_eq!(
+        ran(&first).len(),
+        first.reports.len(),
+        "empty cache: everything runs"
+    );
     let second = run_config(&demo(), &[], cache.path());
     assert!(ran(&second).is_empty(), "ran: {:?}", ran(&second));
     let seeded = run_config(&demo(), &["synthesize.seed=2"], cache.path());
@@ -82,7 +86,11 @@ fn touching_the_exemplar_reruns_nothing_and_the_same_mesh_in_another_format_is_c
     for f in ["cow.obj", "wood1.png"] {
         std::fs::copy(repo().join("configs/assets").join(f), assets.join(f)).unwrap();
     }
-    std::fs::copy(repo().join("tests/data/meshes/cow.off"), assets.join("cow.off")).unwrap();
+    std::fs::copy(
+        repo().join("tests/data/meshes/cow.off"),
+        assets.join("cow.off"),
+    )
+    .unwrap();
     let config = dir.path().join("demo.toml");
     std::fs::copy(demo(), &config).unwrap();
     run_config(&config, &[], &cache);
@@ -102,17 +110,16 @@ fn touching_the_exemplar_reruns_nothing_and_the_same_mesh_in_another_format_is_c
 
 fn object_path(cache: &Path, r: &RunResult, node: &str) -> PathBuf {
     let key = &r.reports.iter().find(|n| n.node == node).unwrap().key;
-    cache
-        .join("objects-v1")
-        .join(&key[..2])
-        .join(&key[2..])
+    cache.join("objects-v1").join(&key[..2]).join(&key[2..])
 }
 
 #[test]
 fn a_corrupted_artifact_is_detected_and_recomputed_to_the_same_result() {
     let cache = tempfile::tempdir().unwrap();
     let clean = run_config(&demo(), &[], cache.path());
-    let hashes = |r: &RunResult| -> Vec<String> { r.reports.iter().map(|n| n.content_hash.clone()).collect() };
+    let hashes = |r: &RunResult| -> Vec<String> {
+        r.reports.iter().map(|n| n.content_hash.clone()).collect()
+    };
 
     // Flip one byte in the jump map's payload: its header still looks fine, so the damage
     // is found when synthesis reads it (after a new seed makes synthesis run).
@@ -122,7 +129,11 @@ fn a_corrupted_artifact_is_detected_and_recomputed_to_the_same_result() {
     bytes[last] ^= 0x55;
     std::fs::write(&jm, &bytes).unwrap();
     let repaired = run_config(&demo(), &["synthesize.seed=3"], cache.path());
-    assert!(ran(&repaired).contains(&"analyse_exemplar"), "ran: {:?}", ran(&repaired));
+    assert!(
+        ran(&repaired).contains(&"analyse_exemplar"),
+        "ran: {:?}",
+        ran(&repaired)
+    );
     assert!(!repaired.warnings.is_empty());
     assert_eq!(
         artifact(&repaired, "analyse_exemplar").content_hash(),
@@ -145,9 +156,15 @@ fn artifact_hashes_do_not_depend_on_the_thread_count() {
         .iter()
         .map(|&n| {
             let cache = tempfile::tempdir().unwrap();
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap();
             let r = pool.install(|| run_config(&demo(), &[], cache.path()));
-            r.reports.iter().map(|n| format!("{} {}", n.node, n.content_hash)).collect()
+            r.reports
+                .iter()
+                .map(|n| format!("{} {}", n.node, n.content_hash))
+                .collect()
         })
         .collect();
     assert_eq!(results[0], results[1]);
@@ -167,7 +184,8 @@ fn the_walk_honours_order_validity_boxes_and_edge_offsets() {
     let mut seen = vec![false; n];
     for (pos, &v) in param.order.iter().enumerate() {
         assert!(!seen[v as usize], "vertex {v} twice in the order");
-        let nbrs = &param.neighbors[param.adj_offsets[v as usize] as usize..param.adj_offsets[v as usize + 1] as usize];
+        let nbrs = &param.neighbors
+            [param.adj_offsets[v as usize] as usize..param.adj_offsets[v as usize + 1] as usize];
         let has_prior = nbrs.iter().any(|&u| seen[u as usize]);
         assert_eq!(
             !has_prior,
@@ -214,7 +232,10 @@ fn obj_faces(text: &str) -> (Vec<[f32; 2]>, Vec<[(usize, usize); 3]>) {
                 let c: Vec<(usize, usize)> = it
                     .map(|t| {
                         let (a, b) = t.split_once('/').unwrap();
-                        (a.parse::<usize>().unwrap() - 1, b.parse::<usize>().unwrap() - 1)
+                        (
+                            a.parse::<usize>().unwrap() - 1,
+                            b.parse::<usize>().unwrap() - 1,
+                        )
                     })
                     .collect();
                 faces.push([c[0], c[1], c[2]]);
@@ -230,7 +251,11 @@ fn the_exported_obj_gives_each_triangle_corners_that_differ_by_its_edge_offsets(
     let cache = tempfile::tempdir().unwrap();
     let out = tempfile::tempdir().unwrap();
     let r = run_config(&demo(), &[], cache.path());
-    let i = r.reports.iter().position(|n| n.node == "reconstruct").unwrap();
+    let i = r
+        .reports
+        .iter()
+        .position(|n| n.node == "reconstruct")
+        .unwrap();
     pipeline::outputs::materialize(&r.artifacts[i], out.path()).unwrap();
     let text = std::fs::read_to_string(out.path().join("textured.obj")).unwrap();
     let (vt, faces) = obj_faces(&text);
@@ -244,7 +269,9 @@ fn the_exported_obj_gives_each_triangle_corners_that_differ_by_its_edge_offsets(
         let fits = |b: usize| {
             (0..3).filter(|&c| c != b).all(|c| {
                 let got = to_texel(vt[face[c].1]) - to_texel(vt[face[b].1]);
-                let want = param.offset(face[b].0 as u32, face[c].0 as u32).expect("edge exists");
+                let want = param
+                    .offset(face[b].0 as u32, face[c].0 as u32)
+                    .expect("edge exists");
                 (got - want).length() < 1e-3
             })
         };
