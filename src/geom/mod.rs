@@ -133,27 +133,67 @@ pub struct VertexAdjacency {
 
 impl VertexAdjacency {
     pub fn build(vertex_count: usize, triangles: &[[u32; 3]]) -> Self {
-        let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(triangles.len() * 6);
+        use rayon::prelude::*;
+        // Bucket every corner's two other corners under it (a counting sort by vertex),
+        // then sort and deduplicate each vertex's short list: linear work plus tiny sorts,
+        // instead of one sort of all directed edges.
+        let mut counts = vec![0u32; vertex_count + 1];
         for t in triangles {
             for k in 0..3 {
-                let a = t[k];
-                let b = t[(k + 1) % 3];
-                if a != b {
-                    pairs.push((a, b));
-                    pairs.push((b, a));
+                if t[k] != t[(k + 1) % 3] {
+                    counts[t[k] as usize + 1] += 1;
+                    counts[t[(k + 1) % 3] as usize + 1] += 1;
                 }
             }
         }
-        pairs.sort_unstable();
-        pairs.dedup();
-        let mut offsets = vec![0u32; vertex_count + 1];
-        for &(a, _) in &pairs {
-            offsets[a as usize + 1] += 1;
-        }
         for i in 0..vertex_count {
-            offsets[i + 1] += offsets[i];
+            counts[i + 1] += counts[i];
         }
-        let neighbors = pairs.into_iter().map(|(_, b)| b).collect();
+        let mut fill = counts.clone();
+        let mut raw = vec![0u32; counts[vertex_count] as usize];
+        for t in triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                if a != b {
+                    raw[fill[a as usize] as usize] = b;
+                    fill[a as usize] += 1;
+                    raw[fill[b as usize] as usize] = a;
+                    fill[b as usize] += 1;
+                }
+            }
+        }
+        let mut lists: Vec<&mut [u32]> = Vec::with_capacity(vertex_count);
+        let mut rest = raw.as_mut_slice();
+        for v in 0..vertex_count {
+            let (head, tail) = rest.split_at_mut((counts[v + 1] - counts[v]) as usize);
+            lists.push(head);
+            rest = tail;
+        }
+        let degrees: Vec<u32> = lists
+            .par_iter_mut()
+            .map(|l| {
+                l.sort_unstable();
+                let mut n = 0;
+                for i in 0..l.len() {
+                    if i == 0 || l[i] != l[i - 1] {
+                        l[n] = l[i];
+                        n += 1;
+                    }
+                }
+                n as u32
+            })
+            .collect();
+        let mut offsets = vec![0u32; vertex_count + 1];
+        for v in 0..vertex_count {
+            offsets[v + 1] = offsets[v] + degrees[v];
+        }
+        let mut neighbors = vec![0u32; offsets[vertex_count] as usize];
+        for v in 0..vertex_count {
+            let src = counts[v] as usize;
+            let len = degrees[v] as usize;
+            neighbors[offsets[v] as usize..offsets[v] as usize + len]
+                .copy_from_slice(&raw[src..src + len]);
+        }
         VertexAdjacency { offsets, neighbors }
     }
 
@@ -197,5 +237,30 @@ mod tests {
         }
         assert_eq!(adj.half_edge(1, 3), Some(adj.offsets[1] as usize + 2));
         assert_eq!(adj.half_edge(0, 3), None);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn adjacency_matches_the_set_of_triangle_edges(
+            tris in proptest::collection::vec((0u32..12, 0u32..12, 0u32..12), 0..40)
+        ) {
+            let tris: Vec<[u32; 3]> = tris.into_iter().map(|(a, b, c)| [a, b, c]).collect();
+            let adj = VertexAdjacency::build(12, &tris);
+            let mut want = vec![std::collections::BTreeSet::new(); 12];
+            for t in &tris {
+                for k in 0..3 {
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    if a != b {
+                        want[a as usize].insert(b);
+                        want[b as usize].insert(a);
+                    }
+                }
+            }
+            for v in 0..12 {
+                let got: Vec<u32> = adj.neighbors(v).to_vec();
+                let expect: Vec<u32> = want[v].iter().copied().collect();
+                proptest::prop_assert_eq!(got, expect);
+            }
+        }
     }
 }

@@ -42,7 +42,7 @@ use std::path::PathBuf;
 const JUMP_MAP_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 1;
 const PARAMETERIZE_VERSION: u32 = 1;
-const WALK_VERSION: u32 = 1;
+const WALK_VERSION: u32 = 2;
 const RECONSTRUCT_VERSION: u32 = 1;
 
 /// A `jump_maps` config.

@@ -22,23 +22,121 @@ pub struct VertexOrder {
 
 /// Computes the region-growing order starting at `seed` (clamped to a vertex with
 /// neighbours).
+///
+/// The proportions s/d (done neighbours over degree) take few distinct values, so instead of
+/// a binary heap the queue is an array of FIFO buckets, one per distinct fraction, ranked by
+/// value: pushing and popping are O(1), and FIFO order within a bucket is the heap's
+/// tie-break (earliest push first). Meshes with a vertex of very high degree (a fan) would need
+/// too many buckets and use the heap.
 pub fn region_growing_order(adj: &VertexAdjacency, seed: u32) -> VertexOrder {
+    let max_degree = (0..adj.vertex_count())
+        .map(|v| adj.degree(v))
+        .max()
+        .unwrap_or(0);
+    if max_degree <= MAX_BUCKET_DEGREE {
+        grow(adj, seed, BucketQueue::new(max_degree))
+    } else {
+        grow(adj, seed, HeapQueue::default())
+    }
+}
+
+const MAX_BUCKET_DEGREE: usize = 64;
+
+/// A max-priority queue of vertices keyed by (done, degree), FIFO among equal proportions.
+trait ProportionQueue {
+    fn push(&mut self, done: u32, degree: u32, v: u32);
+    fn pop(&mut self) -> Option<u32>;
+}
+
+#[derive(Default)]
+struct HeapQueue {
+    heap: BinaryHeap<(u64, u64, u32)>,
+    pushes: u64,
+}
+
+impl ProportionQueue for HeapQueue {
+    fn push(&mut self, done: u32, degree: u32, v: u32) {
+        // The f64 quotient's bits order like its value for non-negative numbers.
+        let ratio = if degree == 0 {
+            0.0
+        } else {
+            done as f64 / degree as f64
+        };
+        self.pushes += 1;
+        self.heap.push((ratio.to_bits(), u64::MAX - self.pushes, v));
+    }
+    fn pop(&mut self) -> Option<u32> {
+        self.heap.pop().map(|e| e.2)
+    }
+}
+
+struct BucketQueue {
+    /// rank[d * (max_degree + 1) + s]: the rank of s/d among all fractions with d ≤ max_degree.
+    rank: Vec<u32>,
+    stride: usize,
+    buckets: Vec<std::collections::VecDeque<u32>>,
+    /// No bucket above this one holds anything.
+    top: usize,
+}
+
+impl BucketQueue {
+    fn new(max_degree: usize) -> Self {
+        let stride = max_degree + 1;
+        let mut fractions: Vec<(u32, u32)> = vec![(0, 1)];
+        for d in 1..=max_degree as u32 {
+            for s in 1..=d {
+                fractions.push((s, d));
+            }
+        }
+        // Exact comparison of s1/d1 and s2/d2 by cross-multiplication.
+        let cmp = |a: &(u32, u32), b: &(u32, u32)| {
+            (a.0 as u64 * b.1 as u64).cmp(&(b.0 as u64 * a.1 as u64))
+        };
+        fractions.sort_by(cmp);
+        fractions.dedup_by(|a, b| cmp(a, b).is_eq());
+        let mut rank = vec![0u32; stride * stride];
+        for d in 1..=max_degree as u32 {
+            for s in 0..=d {
+                let r = fractions.partition_point(|f| cmp(f, &(s, d)).is_lt());
+                rank[d as usize * stride + s as usize] = r as u32;
+            }
+        }
+        BucketQueue {
+            rank,
+            stride,
+            buckets: vec![std::collections::VecDeque::new(); fractions.len()],
+            top: 0,
+        }
+    }
+}
+
+impl ProportionQueue for BucketQueue {
+    fn push(&mut self, done: u32, degree: u32, v: u32) {
+        let r = self.rank[degree as usize * self.stride + done as usize] as usize;
+        self.buckets[r].push_back(v);
+        self.top = self.top.max(r);
+    }
+    fn pop(&mut self) -> Option<u32> {
+        loop {
+            if let Some(v) = self.buckets[self.top].pop_front() {
+                return Some(v);
+            }
+            if self.top == 0 {
+                return None;
+            }
+            self.top -= 1;
+        }
+    }
+}
+
+fn grow(adj: &VertexAdjacency, seed: u32, mut queue: impl ProportionQueue) -> VertexOrder {
     let n = adj.vertex_count();
     let mut done_count = vec![0u32; n];
     let mut synthesized = vec![false; n];
     let mut order = Vec::with_capacity(n);
     let mut seeds = Vec::new();
-    // Max-heap on (proportion, earliest push). The proportion s/d is compared exactly as
-    // the f64 quotient (its bits order like the value for non-negative numbers).
-    let mut heap: BinaryHeap<(u64, u64, u32)> = BinaryHeap::new();
-    let mut pushes: u64 = 0;
-    let first = if (seed as usize) < n && adj.degree(seed as usize) > 0 {
-        Some(seed)
-    } else {
-        None
-    };
+    let mut start = ((seed as usize) < n && adj.degree(seed as usize) > 0).then_some(seed);
     let mut next_unvisited = 0usize;
-    let mut start = first;
     loop {
         let s = match start.take() {
             Some(s) => s,
@@ -55,25 +153,22 @@ pub fn region_growing_order(adj: &VertexAdjacency, seed: u32) -> VertexOrder {
             }
         };
         seeds.push(order.len() as u32);
-        heap.push((0, u64::MAX, s));
-        while let Some((_, _, v)) = heap.pop() {
+        queue.push(0, adj.degree(s as usize) as u32, s);
+        while let Some(v) = queue.pop() {
             let vu = v as usize;
+            // Proportions only grow, so a vertex's freshest entry pops before its stale
+            // ones, which are then skipped here.
             if synthesized[vu] {
                 continue;
             }
-            // Proportions only grow, so a vertex's freshest entry pops before its stale
-            // ones, which are then skipped here.
             synthesized[vu] = true;
             order.push(v);
             for &w in adj.neighbors(vu) {
                 let wu = w as usize;
-                if synthesized[wu] {
-                    continue;
+                if !synthesized[wu] {
+                    done_count[wu] += 1;
+                    queue.push(done_count[wu], adj.degree(wu) as u32, w);
                 }
-                done_count[wu] += 1;
-                let ratio = done_count[wu] as f64 / adj.degree(wu) as f64;
-                pushes += 1;
-                heap.push((ratio.to_bits(), u64::MAX - pushes, w));
             }
         }
     }
@@ -107,6 +202,35 @@ mod tests {
                 "position {i}"
             );
             done[v as usize] = true;
+        }
+    }
+
+    #[test]
+    fn bucket_queue_and_heap_give_the_same_order() {
+        // A bumpy grid with irregular degrees: both queues must agree exactly.
+        let n = 30u32;
+        let mut tris = Vec::new();
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                let i = y * n + x;
+                if (x * 7 + y * 3) % 5 == 0 {
+                    tris.push([i, i + 1, i + n]);
+                    tris.push([i + 1, i + n + 1, i + n]);
+                } else {
+                    tris.push([i, i + 1, i + n + 1]);
+                    tris.push([i, i + n + 1, i + n]);
+                }
+            }
+        }
+        let adj = VertexAdjacency::build((n * n) as usize, &tris);
+        for seed in [0, 17, 450] {
+            let a = grow(&adj, seed, HeapQueue::default());
+            let max_degree = (0..adj.vertex_count())
+                .map(|v| adj.degree(v))
+                .max()
+                .unwrap();
+            let b = grow(&adj, seed, BucketQueue::new(max_degree));
+            assert_eq!(a, b, "seed {seed}");
         }
     }
 

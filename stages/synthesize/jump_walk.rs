@@ -87,15 +87,11 @@ pub struct Walk {
     pub random_assignments: u64,
 }
 
-const STREAM_CHOICE: u64 = 1;
 const STREAM_FALLBACK_X: u64 = 2;
 const STREAM_FALLBACK_Y: u64 = 3;
-
-#[derive(Clone, Copy)]
-enum Source {
-    Continue(u32),
-    Jump,
-}
+const STREAM_EXACT: u64 = 4;
+/// Rejection attempts use streams STREAM_CHOICE, STREAM_CHOICE + 1, ….
+const STREAM_CHOICE: u64 = 16;
 
 pub fn jump_walk(
     input: WalkInput,
@@ -109,21 +105,28 @@ pub fn jump_walk(
     let mut patches = vec![u32::MAX; n];
     let mut done = vec![false; n];
     let (mut jumps, mut random_assignments) = (0u64, 0u64);
-    let margin = Vec2::new(w as f32, h as f32) * params.boundary_fraction;
+    let inv_margin = if params.boundary_fraction > 0.0 {
+        Vec2::new(w as f32, h as f32).recip() / params.boundary_fraction
+    } else {
+        Vec2::ZERO
+    };
     let top = Vec2::new((w - 1) as f32, (h - 1) as f32);
     // Continuation weight fades to zero near the border.
     let border_factor = |a: Vec2| -> f32 {
         if params.boundary_fraction <= 0.0 {
             return 1.0;
         }
-        let near = a.min(top - a);
-        (near.x / margin.x)
-            .clamp(0.0, 1.0)
-            .min((near.y / margin.y).clamp(0.0, 1.0))
+        let near = a.min(top - a) * inv_margin;
+        near.x.clamp(0.0, 1.0).min(near.y.clamp(0.0, 1.0))
     };
-    let mut dest: Vec<Vec2> = Vec::with_capacity(256);
-    let mut cumulative: Vec<f32> = Vec::with_capacity(256);
-    let mut source: Vec<Source> = Vec::with_capacity(256);
+    // Each pixel's total jump weight: an upper bound of what its jumps offer once invalid
+    // destinations are dropped.
+    let pixel_weight: Vec<f32> = (0..w * h)
+        .map(|p| jm.jumps_at(p % w, p / w).iter().map(|j| j.weight).sum())
+        .collect();
+    let mut conts: Vec<(Vec2, f32, u32)> = Vec::with_capacity(32);
+    let mut sources: Vec<JumpSource> = Vec::with_capacity(32);
+    let mut table = Table::default();
     for (pos, &v) in input.order.iter().enumerate() {
         if pos % 65536 == 0 {
             progress(pos as f32 / input.order.len() as f32);
@@ -131,12 +134,10 @@ pub fn jump_walk(
         let vu = v as usize;
         let (lo, hi) = input.boxes[vu].valid_range(w, h);
         let valid = |a: Vec2| a.x >= lo.x && a.y >= lo.y && a.x <= hi.x && a.y <= hi.y;
-        dest.clear();
-        cumulative.clear();
-        source.clear();
-        let mut total = 0.0f32;
-        let edges = input.adj_offsets[vu] as usize..input.adj_offsets[vu + 1] as usize;
-        for e in edges {
+        conts.clear();
+        sources.clear();
+        let (mut cont_total, mut jump_bound) = (0.0f32, 0.0f32);
+        for e in input.adj_offsets[vu] as usize..input.adj_offsets[vu + 1] as usize {
             let nb = input.neighbors[e];
             if !done[nb as usize] {
                 continue;
@@ -147,64 +148,52 @@ pub fn jump_walk(
             if valid(c) {
                 let weight = params.continuation / d.length().max(0.5) * border_factor(a);
                 if weight > 0.0 {
-                    total += weight;
-                    dest.push(c);
-                    cumulative.push(total);
-                    source.push(Source::Continue(nb));
+                    cont_total += weight;
+                    conts.push((c, cont_total, nb));
                 }
             }
-            let base = a.floor();
-            let t = a - base;
-            let (bx, by) = (base.x as i64, base.y as i64);
-            for (dx, dy, bw) in [
-                (0, 0, (1.0 - t.x) * (1.0 - t.y)),
-                (1, 0, t.x * (1.0 - t.y)),
-                (0, 1, (1.0 - t.x) * t.y),
-                (1, 1, t.x * t.y),
-            ] {
-                let (px, py) = (bx + dx, by + dy);
-                if bw <= 0.0 || px < 0 || py < 0 || px >= w as i64 || py >= h as i64 {
-                    continue;
-                }
-                let shift = a - Vec2::new(px as f32, py as f32) + d;
-                for j in jm.jumps_at(px as u32, py as u32) {
-                    let target = Vec2::new(j.x as f32, j.y as f32) + shift;
-                    if valid(target) {
-                        total += j.weight * bw;
-                        dest.push(target);
-                        cumulative.push(total);
-                        source.push(Source::Jump);
-                    }
-                }
-            }
+            let src = JumpSource::new(a, d, w, h, &pixel_weight);
+            jump_bound += src.bound;
+            sources.push(src);
         }
-        if total > 0.0 {
-            let r = counter_unit(params.seed, STREAM_CHOICE, v as u64) * total;
-            let k = cumulative.partition_point(|&c| c <= r).min(dest.len() - 1);
-            addresses[vu] = dest[k];
-            patches[vu] = match source[k] {
-                Source::Continue(nb) => patches[nb as usize],
-                Source::Jump => {
-                    jumps += 1;
-                    v
-                }
-            };
-        } else {
-            // A seed, or no neighbour could offer a valid address.
-            if cumulative.is_empty() && has_done_neighbour(&input, &done, vu) {
-                random_assignments += 1;
+        let chosen = draw(
+            &conts,
+            cont_total,
+            &sources,
+            jump_bound,
+            jm,
+            valid,
+            &mut table,
+            params.seed,
+            v as u64,
+        );
+        match chosen {
+            Some((a, Some(nb))) => {
+                addresses[vu] = a;
+                patches[vu] = patches[nb as usize];
             }
-            let ux = counter_unit(params.seed, STREAM_FALLBACK_X, v as u64);
-            let uy = counter_unit(params.seed, STREAM_FALLBACK_Y, v as u64);
-            let pick = |lo: f32, hi: f32, u: f32| {
-                if lo <= hi {
-                    lo + u * (hi - lo)
-                } else {
-                    0.5 * (lo + hi)
+            Some((a, None)) => {
+                addresses[vu] = a;
+                patches[vu] = v;
+                jumps += 1;
+            }
+            None => {
+                // A seed, or no neighbour could offer a valid address.
+                if !sources.is_empty() {
+                    random_assignments += 1;
                 }
-            };
-            addresses[vu] = Vec2::new(pick(lo.x, hi.x, ux), pick(lo.y, hi.y, uy));
-            patches[vu] = v;
+                let ux = counter_unit(params.seed, STREAM_FALLBACK_X, v as u64);
+                let uy = counter_unit(params.seed, STREAM_FALLBACK_Y, v as u64);
+                let pick = |lo: f32, hi: f32, u: f32| {
+                    if lo <= hi {
+                        lo + u * (hi - lo)
+                    } else {
+                        0.5 * (lo + hi)
+                    }
+                };
+                addresses[vu] = Vec2::new(pick(lo.x, hi.x, ux), pick(lo.y, hi.y, uy));
+                patches[vu] = v;
+            }
         }
         done[vu] = true;
     }
@@ -217,9 +206,175 @@ pub fn jump_walk(
     }
 }
 
-fn has_done_neighbour(input: &WalkInput, done: &[bool], v: usize) -> bool {
-    (input.adj_offsets[v] as usize..input.adj_offsets[v + 1] as usize)
-        .any(|e| done[input.neighbors[e] as usize])
+const MAX_REJECTIONS: u64 = 8;
+
+/// One weighted choice from the table of §4.2.5: continuations (all valid) and the jumps of
+/// every source whose destination is valid. Returns the address and, for a continuation, the
+/// neighbour it continues.
+///
+/// Draws from continuations plus *all* jumps, rejecting a jump whose destination is not
+/// valid: an accepted draw has exactly the distribution of the filtered table, but the jump
+/// entries (a few percent of the weight) are only enumerated when a draw lands on them. After
+/// a few rejections in a row the filtered table is built outright (still exact: attempts are
+/// independent, so the accepted one is distributed as the table whichever attempt it is).
+#[allow(clippy::too_many_arguments)]
+fn draw(
+    conts: &[(Vec2, f32, u32)],
+    cont_total: f32,
+    sources: &[JumpSource],
+    jump_bound: f32,
+    jm: JumpMapRef,
+    valid: impl Fn(Vec2) -> bool,
+    table: &mut Table,
+    seed: u64,
+    index: u64,
+) -> Option<(Vec2, Option<u32>)> {
+    let total = cont_total + jump_bound;
+    if total <= 0.0 {
+        return None;
+    }
+    for attempt in 0..MAX_REJECTIONS {
+        let r = counter_unit(seed, STREAM_CHOICE + attempt, index) * total;
+        if r < cont_total {
+            let k = conts.partition_point(|c| c.1 <= r).min(conts.len() - 1);
+            return Some((conts[k].0, Some(conts[k].2)));
+        }
+        if let Some(target) = pick_jump(sources, r - cont_total, jm) {
+            if valid(target) {
+                return Some((target, None));
+            }
+        }
+    }
+    table.fill(conts, sources, jm, &valid);
+    if table.total <= 0.0 {
+        return None;
+    }
+    let r = counter_unit(seed, STREAM_EXACT, index) * table.total;
+    let k = table
+        .cumulative
+        .partition_point(|&c| c <= r)
+        .min(table.cumulative.len() - 1);
+    Some(table.entries[k])
+}
+
+/// A synthesized neighbour's jump list at its fractional address (§4.2.3): the four
+/// surrounding pixels with bilinear weights, destinations shifted by the sub-pixel offset and
+/// the edge offset.
+struct JumpSource {
+    /// Pixel index and bilinear weight × the pixel's total jump weight, per corner.
+    corners: [(u32, f32, f32); 4],
+    /// Added to a jump's destination pixel: (address − corner pixel) + edge offset.
+    shifts: [Vec2; 4],
+    bound: f32,
+}
+
+impl JumpSource {
+    #[inline]
+    fn new(a: Vec2, d: Vec2, w: u32, h: u32, pixel_weight: &[f32]) -> Self {
+        let base = a.floor();
+        let t = a - base;
+        let (bx, by) = (base.x as i64, base.y as i64);
+        let mut corners = [(0u32, 0.0f32, 0.0f32); 4];
+        let mut shifts = [Vec2::ZERO; 4];
+        let mut bound = 0.0;
+        for (k, (dx, dy, bw)) in [
+            (0, 0, (1.0 - t.x) * (1.0 - t.y)),
+            (1, 0, t.x * (1.0 - t.y)),
+            (0, 1, (1.0 - t.x) * t.y),
+            (1, 1, t.x * t.y),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let (px, py) = (bx + dx, by + dy);
+            if bw <= 0.0 || px < 0 || py < 0 || px >= w as i64 || py >= h as i64 {
+                continue;
+            }
+            let p = (py as u32) * w + px as u32;
+            let mass = bw * pixel_weight[p as usize];
+            corners[k] = (p, bw, mass);
+            shifts[k] = a - Vec2::new(px as f32, py as f32) + d;
+            bound += mass;
+        }
+        JumpSource {
+            corners,
+            shifts,
+            bound,
+        }
+    }
+}
+
+/// The jump (valid or not) at position `r` of the concatenated jump lists.
+#[inline]
+fn pick_jump(sources: &[JumpSource], mut r: f32, jm: JumpMapRef) -> Option<Vec2> {
+    for s in sources {
+        if r >= s.bound {
+            r -= s.bound;
+            continue;
+        }
+        for (k, &(p, bw, mass)) in s.corners.iter().enumerate() {
+            if r >= mass {
+                r -= mass;
+                continue;
+            }
+            let list = jm.jumps_at(p % jm.width, p / jm.width);
+            for j in list {
+                let m = j.weight * bw;
+                if r < m {
+                    return Some(Vec2::new(j.x as f32, j.y as f32) + s.shifts[k]);
+                }
+                r -= m;
+            }
+            return list
+                .last()
+                .map(|j| Vec2::new(j.x as f32, j.y as f32) + s.shifts[k]);
+        }
+    }
+    None
+}
+
+/// The filtered table of §4.2.5, built only when rejection keeps failing.
+#[derive(Default)]
+struct Table {
+    entries: Vec<(Vec2, Option<u32>)>,
+    cumulative: Vec<f32>,
+    total: f32,
+}
+
+impl Table {
+    fn fill(
+        &mut self,
+        conts: &[(Vec2, f32, u32)],
+        sources: &[JumpSource],
+        jm: JumpMapRef,
+        valid: &impl Fn(Vec2) -> bool,
+    ) {
+        self.entries.clear();
+        self.cumulative.clear();
+        let mut prev = 0.0;
+        for &(c, cum, nb) in conts {
+            self.entries.push((c, Some(nb)));
+            self.cumulative.push(cum);
+            prev = cum;
+        }
+        let mut total = prev;
+        for s in sources {
+            for (k, &(p, bw, _)) in s.corners.iter().enumerate() {
+                if bw <= 0.0 {
+                    continue;
+                }
+                for j in jm.jumps_at(p % jm.width, p / jm.width) {
+                    let target = Vec2::new(j.x as f32, j.y as f32) + s.shifts[k];
+                    if valid(target) {
+                        total += j.weight * bw;
+                        self.entries.push((target, None));
+                        self.cumulative.push(total);
+                    }
+                }
+            }
+        }
+        self.total = total;
+    }
 }
 
 #[cfg(test)]
@@ -356,6 +511,82 @@ mod tests {
             inside > adj.neighbors.len() / 2,
             "most edges should lie inside patches"
         );
+    }
+
+    #[test]
+    fn rejection_sampling_draws_with_the_filtered_tables_probabilities() {
+        // Two sources on a 6×6 exemplar whose jumps partly land outside the valid region.
+        let (w, h) = (6u32, 6u32);
+        let jumps: Vec<Jump> = (0..w * h)
+            .flat_map(|p| {
+                [
+                    Jump {
+                        x: ((p * 5) % w) as u16,
+                        y: ((p * 3) % h) as u16,
+                        weight: 0.7,
+                    },
+                    Jump {
+                        x: ((p + 2) % w) as u16,
+                        y: ((p / 2) % h) as u16,
+                        weight: 0.3,
+                    },
+                ]
+            })
+            .collect();
+        let jm = JumpMapRef::new(w, h, 2, &jumps).unwrap();
+        let pixel_weight = vec![1.0f32; (w * h) as usize];
+        let sources = vec![
+            JumpSource::new(
+                Vec2::new(1.3, 2.6),
+                Vec2::new(0.5, -0.25),
+                w,
+                h,
+                &pixel_weight,
+            ),
+            JumpSource::new(
+                Vec2::new(3.0, 4.5),
+                Vec2::new(-0.75, 0.5),
+                w,
+                h,
+                &pixel_weight,
+            ),
+        ];
+        let bound: f32 = sources.iter().map(|s| s.bound).sum();
+        let conts = vec![
+            (Vec2::new(2.0, 2.0), 0.4, 7u32),
+            (Vec2::new(2.5, 2.0), 1.0, 8u32),
+        ];
+        let valid = |a: Vec2| a.x >= 1.0 && a.y >= 1.0 && a.x <= 3.5 && a.y <= 4.0;
+        let mut table = Table::default();
+        table.fill(&conts, &sources, jm, &valid);
+        assert!(
+            table.entries.len() > 3 && table.entries.len() < 2 + 16,
+            "some jumps must be invalid"
+        );
+        // Expected probability of each distinct outcome.
+        let key = |e: &(Vec2, Option<u32>)| (e.0.x.to_bits(), e.0.y.to_bits(), e.1);
+        let mut expected = std::collections::HashMap::new();
+        let mut prev = 0.0;
+        for (e, &c) in table.entries.iter().zip(&table.cumulative) {
+            *expected.entry(key(e)).or_insert(0.0) += (c - prev) as f64 / table.total as f64;
+            prev = c;
+        }
+        let n = 200_000u64;
+        let mut seen = std::collections::HashMap::new();
+        for i in 0..n {
+            let e = draw(&conts, 1.0, &sources, bound, jm, valid, &mut table, 5, i).unwrap();
+            assert!(valid(e.0));
+            *seen.entry(key(&e)).or_insert(0u64) += 1;
+        }
+        for (k, p) in &expected {
+            let f = *seen.get(k).unwrap_or(&0) as f64 / n as f64;
+            let sigma = (p * (1.0 - p) / n as f64).sqrt();
+            assert!(
+                (f - p).abs() < 5.0 * sigma + 1e-4,
+                "{k:?}: drawn {f}, expected {p}"
+            );
+        }
+        assert_eq!(seen.len(), expected.len());
     }
 
     #[test]
