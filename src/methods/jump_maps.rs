@@ -43,7 +43,7 @@ const JUMP_MAP_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 1;
 const PARAMETERIZE_VERSION: u32 = 1;
 const WALK_VERSION: u32 = 2;
-const RECONSTRUCT_VERSION: u32 = 1;
+const RECONSTRUCT_VERSION: u32 = 2;
 
 /// A `jump_maps` config.
 #[derive(Debug, Clone, Deserialize, Serialize)]

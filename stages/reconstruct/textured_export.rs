@@ -271,7 +271,9 @@ fn glb_mesh(mesh: &Mesh, atlas: &Atlas, frames: &TangentFrames, material: GlbMat
     let corners = mesh.triangles.len() * 3;
     let mut positions = Vec::with_capacity(corners);
     let mut vnormals = Vec::with_capacity(corners);
-    let mut tangents = Vec::with_capacity(corners);
+    // Tangents only matter to a normal map (the validator flags unused ones).
+    let want_tangents = material.normal_png.is_some();
+    let mut tangents = Vec::with_capacity(if want_tangents { corners } else { 0 });
     let mut uv = Vec::with_capacity(corners);
     for (f, t) in mesh.triangles.iter().enumerate() {
         let (ax, ay) = frames.atlas[f];
@@ -310,5 +312,45 @@ fn glb_mesh(mesh: &Mesh, atlas: &Atlas, frames: &TangentFrames, material: GlbMat
         extra: Vec::new(),
         indices: (0..corners as u32).collect(),
         material,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::shader::ConstantShader;
+
+    /// One triangle in the xy plane (normal +z).
+    fn triangle() -> Mesh {
+        Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]])
+    }
+
+    #[test]
+    fn normal_maps_are_turned_from_the_exemplar_frame_into_the_atlas_frame() {
+        let mesh = triangle();
+        // Exemplar: texel x along world +x, texel y (down) along world -y, so the normal
+        // map's +Y (up the image) is world +y.
+        let set = vec![[Vec2::new(0.0, 10.0), Vec2::new(10.0, 10.0), Vec2::new(0.0, 0.0)]];
+        // Atlas: u along world +y, v (down the image) along world +x: image up is world -x.
+        let atlas = Atlas {
+            size: 64,
+            corner_uv: vec![[Vec2::new(0.0, 0.0), Vec2::new(0.0, 0.5), Vec2::new(0.5, 0.0)]],
+        };
+        let frames = TangentFrames::new(&mesh, &set, &atlas);
+        // A normal tilted towards exemplar +X, i.e. world +x.
+        let tilt = Vec3::new(0.6, 0.0, 0.8);
+        let inner = ConstantShader((tilt + Vec3::ONE) * 0.5);
+        let rebased = NormalRebase { inner: &inner, frames: &frames }.albedo(0, Vec3::splat(1.0 / 3.0));
+        let local = rebased * 2.0 - Vec3::ONE;
+        // World +x is atlas -Y (image up is world -x) and has no atlas X component.
+        assert!((local - Vec3::new(0.0, -0.6, 0.8)).length() < 1e-5, "{local}");
+    }
+
+    #[test]
+    fn params_out_of_range_are_named() {
+        let p = ExportParams { atlas_size: 10, ..Default::default() };
+        assert!(p.validate().unwrap_err().contains("reconstruct.atlas_size"));
+        let p = ExportParams { up: [0.0; 3], ..Default::default() };
+        assert!(p.validate().unwrap_err().contains("reconstruct.up"));
     }
 }
