@@ -1,4 +1,9 @@
 //! texsyn: texture synthesis on shapes from examples. See README.md and DESIGN.md.
+
+// Numeric code indexes several parallel arrays by one vertex or corner index; iterator
+// chains over zips of them read worse than the index loop.
+#![allow(clippy::needless_range_loop)]
+
 pub mod artifact;
 pub mod bench;
 pub mod cache;

@@ -1,6 +1,7 @@
 //! The pipeline end to end on the demo config: incrementality, early cutoff, recovery from
 //! damaged cache objects, determinism across thread counts, and the properties of the
 //! jump-map artifacts that a wrong implementation would break.
+#![allow(clippy::needless_range_loop, clippy::type_complexity)]
 
 use std::path::{Path, PathBuf};
 use texsyn::artifact::Artifact;

@@ -31,7 +31,7 @@ pub fn cotan_weights(mesh: &Mesh) -> Vec<(u32, u32, f64)> {
             }
         }
     }
-    w.sort_by(|x, y| (x.0, x.1).cmp(&(y.0, y.1)));
+    w.sort_by_key(|x| (x.0, x.1));
     // Sum duplicates in sorted order: a fixed order, so the sums are deterministic.
     let mut out: Vec<(u32, u32, f64)> = Vec::with_capacity(w.len() / 2 + 1);
     for (i, j, x) in w {

@@ -94,12 +94,12 @@ pub struct ParameterizeParams {
 
 impl ParameterizeParams {
     fn validate(&self) -> Result<(), String> {
-        if let Some(s) = self.scale {
-            if !(s.is_finite() && s > 0.0) {
-                return Err(format!(
-                    "parameterize.scale must be a positive number of texels per unit, got {s}"
-                ));
-            }
+        if let Some(s) = self.scale
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(format!(
+                "parameterize.scale must be a positive number of texels per unit, got {s}"
+            ));
         }
         if !(self.rotation.is_finite() && (-360.0..=360.0).contains(&self.rotation)) {
             return Err(format!(

@@ -55,11 +55,12 @@ impl Progress {
         let p = (fraction.clamp(0.0, 1.0) * STEPS as f32) as u32;
         let prev = self.permille.fetch_max(p, Ordering::Relaxed);
         let Some(bar) = &self.bar else { return };
-        if !self.shown.load(Ordering::Relaxed) && self.start.elapsed() > SHOW_AFTER {
-            if !self.shown.swap(true, Ordering::Relaxed) {
-                bar.set_draw_target(ProgressDrawTarget::stderr());
-                bar.enable_steady_tick(Duration::from_millis(200));
-            }
+        if !self.shown.load(Ordering::Relaxed)
+            && self.start.elapsed() > SHOW_AFTER
+            && !self.shown.swap(true, Ordering::Relaxed)
+        {
+            bar.set_draw_target(ProgressDrawTarget::stderr());
+            bar.enable_steady_tick(Duration::from_millis(200));
         }
         if p > prev {
             bar.set_position(p as u64);

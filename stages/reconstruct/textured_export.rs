@@ -330,27 +330,48 @@ mod tests {
         let mesh = triangle();
         // Exemplar: texel x along world +x, texel y (down) along world -y, so the normal
         // map's +Y (up the image) is world +y.
-        let set = vec![[Vec2::new(0.0, 10.0), Vec2::new(10.0, 10.0), Vec2::new(0.0, 0.0)]];
+        let set = vec![[
+            Vec2::new(0.0, 10.0),
+            Vec2::new(10.0, 10.0),
+            Vec2::new(0.0, 0.0),
+        ]];
         // Atlas: u along world +y, v (down the image) along world +x: image up is world -x.
         let atlas = Atlas {
             size: 64,
-            corner_uv: vec![[Vec2::new(0.0, 0.0), Vec2::new(0.0, 0.5), Vec2::new(0.5, 0.0)]],
+            corner_uv: vec![[
+                Vec2::new(0.0, 0.0),
+                Vec2::new(0.0, 0.5),
+                Vec2::new(0.5, 0.0),
+            ]],
         };
         let frames = TangentFrames::new(&mesh, &set, &atlas);
         // A normal tilted towards exemplar +X, i.e. world +x.
         let tilt = Vec3::new(0.6, 0.0, 0.8);
         let inner = ConstantShader((tilt + Vec3::ONE) * 0.5);
-        let rebased = NormalRebase { inner: &inner, frames: &frames }.albedo(0, Vec3::splat(1.0 / 3.0));
+        let rebased = NormalRebase {
+            inner: &inner,
+            frames: &frames,
+        }
+        .albedo(0, Vec3::splat(1.0 / 3.0));
         let local = rebased * 2.0 - Vec3::ONE;
         // World +x is atlas -Y (image up is world -x) and has no atlas X component.
-        assert!((local - Vec3::new(0.0, -0.6, 0.8)).length() < 1e-5, "{local}");
+        assert!(
+            (local - Vec3::new(0.0, -0.6, 0.8)).length() < 1e-5,
+            "{local}"
+        );
     }
 
     #[test]
     fn params_out_of_range_are_named() {
-        let p = ExportParams { atlas_size: 10, ..Default::default() };
+        let p = ExportParams {
+            atlas_size: 10,
+            ..Default::default()
+        };
         assert!(p.validate().unwrap_err().contains("reconstruct.atlas_size"));
-        let p = ExportParams { up: [0.0; 3], ..Default::default() };
+        let p = ExportParams {
+            up: [0.0; 3],
+            ..Default::default()
+        };
         assert!(p.validate().unwrap_err().contains("reconstruct.up"));
     }
 }

@@ -239,10 +239,10 @@ fn draw(
             let k = conts.partition_point(|c| c.1 <= r).min(conts.len() - 1);
             return Some((conts[k].0, Some(conts[k].2)));
         }
-        if let Some(target) = pick_jump(sources, r - cont_total, jm) {
-            if valid(target) {
-                return Some((target, None));
-            }
+        if let Some(target) = pick_jump(sources, r - cont_total, jm)
+            && valid(target)
+        {
+            return Some((target, None));
         }
     }
     table.fill(conts, sources, jm, &valid);
