@@ -80,10 +80,10 @@ pub struct Inputs {
 #[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ParameterizeParams {
-    /// Texture scale in exemplar texels per object-space unit (§3). Default: automatic, so
+    /// Texture scale in exemplar texels per object-space unit (§3), or "auto". Default: "auto", so
     /// that the exemplar's width spans a quarter of the mesh's bounding-box diagonal (or less
     /// if the mesh's triangles would not fit).
-    pub scale: Option<f32>,
+    pub scale: Scale,
     /// The vertex where region growing starts (§4.1). Default: 0.
     pub seed_vertex: u32,
     /// Turns the exemplar against the field, in degrees counter-clockwise, -360..=360: the
@@ -92,9 +92,30 @@ pub struct ParameterizeParams {
     pub rotation: f32,
 }
 
+/// `parameterize.scale`: a number of texels per object unit, or "auto".
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum Scale {
+    Texels(f32),
+    Auto(AutoWord),
+}
+
+/// The word `"auto"`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AutoWord {
+    Auto,
+}
+
+impl Default for Scale {
+    fn default() -> Self {
+        Scale::Auto(AutoWord::Auto)
+    }
+}
+
 impl ParameterizeParams {
     fn validate(&self) -> Result<(), String> {
-        if let Some(s) = self.scale
+        if let Scale::Texels(s) = self.scale
             && !(s.is_finite() && s > 0.0)
         {
             return Err(format!(
@@ -366,7 +387,10 @@ fn parameterize(
         )));
     }
     let adj = mesh.adjacency();
-    let mut scale = p.scale.unwrap_or_else(|| automatic_scale(mesh, w));
+    let mut scale = match p.scale {
+        Scale::Texels(s) => s,
+        Scale::Auto(_) => automatic_scale(mesh, w),
+    };
     let offsets_at = |scale: f32| {
         let mut o = edge_offsets(mesh, adj, up, scale);
         if p.rotation != 0.0 {
@@ -382,7 +406,7 @@ fn parameterize(
     let mut offsets = offsets_at(scale);
     let mut boxes = validity_boxes(adj, &offsets);
     let fit = largest_fitting_scale(&boxes, scale, w, h);
-    if p.scale.is_some() {
+    if let Scale::Texels(_) = p.scale {
         if fit < scale {
             return Err(NodeError::input(format!(
                 "parameterize.scale = {scale} texels per unit is too large for this mesh and a {w}×{h} exemplar: \
