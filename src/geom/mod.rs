@@ -4,8 +4,12 @@
 //! quantities (adjacency, normals) are computed on first request and kept with the mesh, as
 //! geometry-central does, so an algorithm asks for what it needs and pays for it once.
 
+pub mod cut_graph;
+pub mod geometry_image;
+pub mod half_edge;
 pub mod io;
 pub mod laplacian;
+pub mod mean_value;
 
 use glam::Vec3;
 use std::sync::OnceLock;

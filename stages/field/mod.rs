@@ -1,2 +1,3 @@
 //! Stage: field.
 pub mod orientation_field;
+pub mod param_field;

@@ -1,3 +1,4 @@
 //! Stage: parameterize.
 pub mod edge_offsets;
+pub mod geometry_image;
 pub mod region_growing;

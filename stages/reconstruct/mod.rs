@@ -1,4 +1,5 @@
 //! Stage: reconstruct: what users open (textured meshes, baked textures, images, previews).
 pub mod blend2d;
+pub mod displacement;
 pub mod jump_blend;
 pub mod textured_export;

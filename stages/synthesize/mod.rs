@@ -1,3 +1,4 @@
 //! Stage: synthesize: the methods' synthesis proper.
+pub mod geometry_texture;
 pub mod jump_walk;
 pub mod synth2d;
