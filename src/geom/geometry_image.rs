@@ -108,10 +108,22 @@ pub fn local_frames(n: u32, positions: &[Vec3], normals: &[Vec3], mate_rep: &[u3
             let mut x = (dx - dx.dot(normal) * normal).normalize_or_zero();
             if x == Vec3::ZERO {
                 // Degenerate row (a collapsed boundary): any tangent keeps the frame valid.
-                x = if normal == Vec3::ZERO { Vec3::X } else { normal.any_orthonormal_vector() };
+                x = if normal == Vec3::ZERO {
+                    Vec3::X
+                } else {
+                    normal.any_orthonormal_vector()
+                };
             }
-            let normal = if normal == Vec3::ZERO { x.any_orthonormal_vector() } else { normal };
-            Frame { x, y: normal.cross(x), n: normal }
+            let normal = if normal == Vec3::ZERO {
+                x.any_orthonormal_vector()
+            } else {
+                normal
+            };
+            Frame {
+                x,
+                y: normal.cross(x),
+                n: normal,
+            }
         })
         .collect();
     for k in 0..frames.len() {

@@ -1,1 +1,300 @@
-//! (to be written)
+//! Reconstruction of the textured surface from a geometry image and synthesized geometry
+//! texels (Lai et al., "Geometric Texture Synthesis and Transfer via Geometry Images", §4.4).
+//!
+//! Each sample moves by dx·x̂ + dy·ŷ + dn·n̂ in its local frame (eq. 5 frames of the input
+//! geometry image; mates share their representative's frame, so one texel value is one
+//! displacement on both sides of a cut). Flip avoidance (§4.4.1): the displacement is added
+//! in `steps` increasing steps; after each, a sample whose surface normal has turned by more
+//! than `flip_angle` from the input's is put back to its previous step and frozen there.
+//!
+//! The output mesh triangulates the grid (the shorter diagonal of each cell), merges mated
+//! samples into one vertex so a closed input gives a closed, watertight mesh, and drops the
+//! triangles that merging collapses (they sit where a cut folds back on itself, at its ends).
+//!
+//! Texel amplitudes are in units of the sample's texel spacing (see the extraction stage);
+//! they are scaled here by the input's mean sample spacing S̄ times `amplitude`, so the relief
+//! keeps its proportions to the texture's features on the new surface. The paper transfers
+//! between models of similar scale and leaves this implicit.
+
+use crate::geom::Mesh;
+use crate::geom::geometry_image::{GeometryImage, TexelImage, local_frames};
+use glam::Vec3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// `[reconstruct]` of the geometry-image method.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DisplacementParams {
+    /// Multiplies the relief, 0..=100. Default: 1.
+    pub amplitude: f32,
+    /// Increasing steps in which the texture is added (§4.4.1), 1..=100. Default: 10.
+    pub steps: u32,
+    /// A sample stops growing where its normal turns by more than this, degrees, 1..=180.
+    /// Default: 150 (the paper's example).
+    pub flip_angle: f32,
+}
+
+impl Default for DisplacementParams {
+    fn default() -> Self {
+        DisplacementParams {
+            amplitude: 1.0,
+            steps: 10,
+            flip_angle: 150.0,
+        }
+    }
+}
+
+impl DisplacementParams {
+    pub fn validate(&self) -> Result<(), String> {
+        crate::config::check_range("reconstruct.amplitude", self.amplitude, 0.0, 100.0)?;
+        crate::config::check_range("reconstruct.steps", self.steps, 1, 100)?;
+        crate::config::check_range("reconstruct.flip_angle", self.flip_angle, 1.0, 180.0)
+    }
+}
+
+/// The displaced geometry image: new positions per sample, and which samples were held back
+/// by flip avoidance.
+pub struct Displaced {
+    pub positions: Vec<Vec3>,
+    pub held_back: usize,
+}
+
+/// Both triangles of every grid cell, (i, j) → i·n + j, counter-clockwise in (j, i).
+fn grid_triangles(n: usize) -> Vec<[usize; 3]> {
+    let mut out = Vec::with_capacity(2 * (n - 1) * (n - 1));
+    for i in 0..n - 1 {
+        for j in 0..n - 1 {
+            let a = i * n + j;
+            out.push([a, a + 1, a + n + 1]);
+            out.push([a, a + n + 1, a + n]);
+        }
+    }
+    out
+}
+
+/// Adds the texels to the geometry image with flip avoidance.
+pub fn displace(
+    gi: &GeometryImage,
+    texels: &TexelImage,
+    unit: f32,
+    p: &DisplacementParams,
+) -> Displaced {
+    let n = gi.n as usize;
+    assert_eq!(
+        (texels.width as usize, texels.height as usize),
+        (n, n),
+        "texels match the geometry image"
+    );
+    let frames = local_frames(gi.n, &gi.positions, &gi.normals, &gi.mate_rep);
+    let scale = unit * p.amplitude;
+    let offsets: Vec<Vec3> = (0..n * n)
+        .map(|k| {
+            // Mates take their representative's texel, so they move together.
+            let r = gi.mate_rep[k] as usize;
+            let t = texels.texel((r % n) as u32, (r / n) as u32);
+            let f = frames[k];
+            (t[0] * f.x + t[1] * f.y + t[2] * f.n) * scale
+        })
+        .collect();
+    let cos_limit = p.flip_angle.to_radians().cos();
+    // Flips are judged per grid triangle: a triangle whose normal turns too far unwinds the
+    // last step of all its samples (the "related vertices" of §4.4.1), whichever moved.
+    let cells = grid_triangles(n);
+    let face_normal =
+        |pos: &[Vec3], t: &[usize; 3]| (pos[t[1]] - pos[t[0]]).cross(pos[t[2]] - pos[t[0]]);
+    let base: Vec<Vec3> = cells
+        .iter()
+        .map(|t| face_normal(&gi.positions, t).normalize_or_zero())
+        .collect();
+    let mut frozen = vec![false; n * n];
+    let mut reached = vec![0u32; n * n];
+    let mut positions = gi.positions.clone();
+    for step in 1..=p.steps {
+        let t = step as f32 / p.steps as f32;
+        let trial: Vec<Vec3> = (0..n * n)
+            .map(|k| {
+                if frozen[k] {
+                    positions[k]
+                } else {
+                    gi.positions[k] + offsets[k] * t
+                }
+            })
+            .collect();
+        let flips: Vec<bool> = cells
+            .par_iter()
+            .zip(&base)
+            .map(|(t, b)| {
+                *b != Vec3::ZERO && face_normal(&trial, t).normalize_or_zero().dot(*b) < cos_limit
+            })
+            .collect();
+        let mut flipped = vec![false; n * n];
+        for (t, &f) in cells.iter().zip(&flips) {
+            if f {
+                for &k in t {
+                    // Freeze the whole mate group together.
+                    flipped[gi.mate_rep[k] as usize] = true;
+                }
+            }
+        }
+        for k in 0..n * n {
+            if frozen[k] {
+                continue;
+            }
+            if flipped[gi.mate_rep[k] as usize] {
+                frozen[k] = true;
+            } else {
+                positions[k] = trial[k];
+                reached[k] = step;
+            }
+        }
+    }
+    let held_back = (0..n * n)
+        .filter(|&k| gi.mate_rep[k] as usize == k && reached[k] < p.steps)
+        .count();
+    Displaced {
+        positions,
+        held_back,
+    }
+}
+
+/// Triangulates a grid of positions into a mesh, merging mated samples (one vertex per mate
+/// group, at the representative's position) and dropping collapsed or duplicated triangles.
+/// Returns the mesh and, per output vertex, its representative sample.
+pub fn grid_mesh(gi: &GeometryImage, positions: &[Vec3]) -> (Mesh, Vec<u32>) {
+    let n = gi.n as usize;
+    let mut vertex_of = vec![u32::MAX; n * n];
+    let mut samples = Vec::new();
+    for k in 0..n * n {
+        let r = gi.mate_rep[k] as usize;
+        if vertex_of[r] == u32::MAX {
+            vertex_of[r] = samples.len() as u32;
+            samples.push(r as u32);
+        }
+        vertex_of[k] = vertex_of[r];
+    }
+    let verts: Vec<Vec3> = samples.iter().map(|&s| positions[s as usize]).collect();
+    let mut tris = Vec::with_capacity(2 * (n - 1) * (n - 1));
+    let mut seen = std::collections::HashSet::new();
+    for i in 0..n - 1 {
+        for j in 0..n - 1 {
+            let a = i * n + j; // (i, j)
+            let b = a + 1; // (i, j+1)
+            let c = a + n; // (i+1, j)
+            let d = c + 1; // (i+1, j+1)
+            // Counter-clockwise in (u = j, v = i) keeps the parameterization's orientation.
+            let cells = if positions[a].distance_squared(positions[d])
+                <= positions[b].distance_squared(positions[c])
+            {
+                [[a, b, d], [a, d, c]]
+            } else {
+                [[a, b, c], [b, d, c]]
+            };
+            for t in cells {
+                let v = t.map(|s| vertex_of[s]);
+                if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
+                    continue;
+                }
+                let mut key = v;
+                key.sort_unstable();
+                if seen.insert(key) {
+                    tris.push(v);
+                }
+            }
+        }
+    }
+    (Mesh::new(verts, tris), samples)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plane(n: u32) -> GeometryImage {
+        let mut positions = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                positions.push(Vec3::new(j as f32, i as f32, 0.0));
+            }
+        }
+        let c = (n * n) as usize;
+        GeometryImage {
+            n,
+            positions,
+            normals: vec![Vec3::Z; c],
+            mate_rep: (0..c as u32).collect(),
+        }
+    }
+
+    #[test]
+    fn a_gentle_relief_is_added_along_the_normal_in_full() {
+        let gi = plane(9);
+        let mut t = TexelImage::new(9, 9, 3);
+        for y in 0..9 {
+            for x in 0..9 {
+                t.texel_mut(x, y)[2] = ((x + y) % 3) as f32 * 0.1;
+            }
+        }
+        let d = displace(&gi, &t, 2.0, &DisplacementParams::default());
+        assert_eq!(d.held_back, 0);
+        for y in 0..9u32 {
+            for x in 0..9u32 {
+                let k = (y * 9 + x) as usize;
+                let want = gi.positions[k] + Vec3::Z * (((x + y) % 3) as f32 * 0.2);
+                assert!((d.positions[k] - want).length() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn flip_avoidance_holds_back_a_spike_that_would_fold_the_surface() {
+        let gi = plane(9);
+        let mut t = TexelImage::new(9, 9, 3);
+        // A huge sideways shove of one sample folds its neighbourhood over.
+        t.texel_mut(4, 4)[0] = 3.0;
+        let d = displace(&gi, &t, 1.0, &DisplacementParams::default());
+        assert!(d.held_back > 0);
+        let reached = d.positions[40].x - gi.positions[40].x;
+        assert!(reached > 0.0 && reached < 3.0, "{reached}");
+        let unchecked = displace(
+            &gi,
+            &t,
+            1.0,
+            &DisplacementParams {
+                flip_angle: 180.0,
+                ..Default::default()
+            },
+        );
+        assert_eq!(unchecked.held_back, 0);
+    }
+
+    #[test]
+    fn merging_mates_closes_a_cylinder() {
+        // Columns 0 and n-1 are one seam: merged, every interior edge has two faces.
+        let n = 8u32;
+        let mut gi = plane(n);
+        for i in 0..n as usize {
+            let (l, r) = (i * n as usize, i * n as usize + n as usize - 1);
+            let angle = |j: usize| j as f32 / (n - 1) as f32 * std::f32::consts::TAU;
+            for j in 0..n as usize {
+                let a = angle(j);
+                gi.positions[i * n as usize + j] = Vec3::new(a.cos(), i as f32 * 0.3, a.sin());
+            }
+            gi.positions[r] = gi.positions[l];
+            gi.mate_rep[r] = l as u32;
+        }
+        let (mesh, _) = grid_mesh(&gi, &gi.positions);
+        assert_eq!(mesh.vertex_count(), (n * (n - 1)) as usize);
+        let mut edges: std::collections::HashMap<(u32, u32), u32> = Default::default();
+        for t in &mesh.triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
+                *edges.entry((a, b)).or_default() += 1;
+            }
+        }
+        // Only the two rim loops are boundary.
+        let boundary = edges.values().filter(|&&c| c == 1).count();
+        assert_eq!(boundary, 2 * (n as usize - 1));
+        assert!(edges.values().all(|&c| c <= 2));
+    }
+}
