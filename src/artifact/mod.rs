@@ -16,6 +16,7 @@
 //! The content hash covers the whole payload, so it changes exactly when the bytes a reader
 //! could see change. It is what downstream node keys are built from (early cutoff).
 
+pub mod geometry_images;
 pub mod jump_maps;
 pub mod kinds;
 
@@ -41,6 +42,10 @@ pub enum Kind {
     TexelAddresses = 6,
     FileBundle = 7,
     AddressImage = 8,
+    GeometryImage = 9,
+    TexelImage = 10,
+    ParamField = 11,
+    TexelVariants = 12,
 }
 
 impl Kind {
@@ -55,6 +60,10 @@ impl Kind {
             TexelAddresses,
             FileBundle,
             AddressImage,
+            GeometryImage,
+            TexelImage,
+            ParamField,
+            TexelVariants,
         ]
         .into_iter()
         .find(|k| *k as u32 == code)
