@@ -30,7 +30,11 @@ pub fn read_geometry_image(a: &Artifact) -> Result<GeometryImage, ArtifactError>
     if positions.len() != count || normals.len() != count || mate_rep.len() != count {
         return Err(bad("geometry image arrays disagree with its size"));
     }
-    if mate_rep.iter().enumerate().any(|(k, &r)| r as usize > k || mate_rep[r as usize] != r) {
+    if mate_rep
+        .iter()
+        .enumerate()
+        .any(|(k, &r)| r as usize > k || mate_rep[r as usize] != r)
+    {
         return Err(bad("geometry image mate table is inconsistent"));
     }
     Ok(GeometryImage {
@@ -67,7 +71,9 @@ pub fn read_texels(a: &Artifact) -> Result<TexelImage, ArtifactError> {
     a.expect_kind(Kind::TexelImage)?;
     let m: TexelMeta = a.meta()?;
     let data: &[f32] = a.array("data")?;
-    if data.len() != m.width as usize * m.height as usize * m.channels as usize || !(m.channels == 3 || m.channels == 6) {
+    if data.len() != m.width as usize * m.height as usize * m.channels as usize
+        || !(m.channels == 3 || m.channels == 6)
+    {
         return Err(bad("texel image size disagrees with its metadata"));
     }
     Ok(TexelImage {

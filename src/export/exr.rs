@@ -5,8 +5,16 @@ use glam::Vec3;
 
 /// An RGB float EXR of a `width × height` grid of vectors, row 0 at the top. Uncompressed
 /// (ZIP would be smaller, but uncompressed bytes are the same on every exr version).
-pub fn write_exr_rgb(width: u32, height: u32, values: &[Vec3]) -> std::result::Result<Vec<u8>, String> {
-    assert_eq!(values.len(), width as usize * height as usize, "one value per pixel");
+pub fn write_exr_rgb(
+    width: u32,
+    height: u32,
+    values: &[Vec3],
+) -> std::result::Result<Vec<u8>, String> {
+    assert_eq!(
+        values.len(),
+        width as usize * height as usize,
+        "one value per pixel"
+    );
     let channels = SpecificChannels::rgb(|pos: Vec2<usize>| {
         let v = values[pos.y() * width as usize + pos.x()];
         (v.x, v.y, v.z)
@@ -33,7 +41,9 @@ mod tests {
 
     #[test]
     fn values_read_back_exactly() {
-        let vals: Vec<Vec3> = (0..12).map(|i| Vec3::new(i as f32, -0.5 * i as f32, 1e-3 * i as f32)).collect();
+        let vals: Vec<Vec3> = (0..12)
+            .map(|i| Vec3::new(i as f32, -0.5 * i as f32, 1e-3 * i as f32))
+            .collect();
         let bytes = write_exr_rgb(4, 3, &vals).unwrap();
         let img = crate::image::decode_image(std::path::Path::new("g.exr"), &bytes).unwrap();
         assert_eq!((img.width, img.height), (4, 3));

@@ -1,3 +1,4 @@
 //! Stage: field.
 pub mod orientation_field;
 pub mod param_field;
+pub mod quaternion_field;
