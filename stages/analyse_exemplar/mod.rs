@@ -1,3 +1,4 @@
 //! Stage: analyse_exemplar.
+pub mod candidate_triples;
 pub mod jump_map;
 pub mod texel_variants;

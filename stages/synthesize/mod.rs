@@ -1,4 +1,5 @@
 //! Stage: synthesize: the methods' synthesis proper.
 pub mod geometry_texture;
 pub mod jump_walk;
+pub mod solid_synthesis;
 pub mod synth2d;
