@@ -2,3 +2,4 @@
 pub mod edge_offsets;
 pub mod geometry_image;
 pub mod region_growing;
+pub mod volume_embedding;
