@@ -23,6 +23,7 @@
 use super::square_domain::{Locator, Square, largest_rotated_square, rotate_into};
 use super::{ExtractError, check_range};
 use crate::geom::Mesh;
+use crate::geom::mean_value::convex_combination_map;
 use crate::geom::geometry_image::TexelImage;
 use crate::random::counter_hash;
 use glam::{DVec3, Vec2, Vec3};
@@ -429,8 +430,10 @@ pub fn planar_extract(
             (v, Vec2::new(q.x, q.y))
         })
         .collect();
-    let uv = parameterize(patch, &fixed)
-        .map_err(|message| ExtractError::Parameterize { faces, message })?;
+    let uv = convex_combination_map(patch, &fixed).map_err(|e| ExtractError::Parameterize {
+        faces,
+        message: e.to_string(),
+    })?;
     progress(0.6);
     let (angle, square) =
         largest_rotated_square(&uv, &patch.triangles, super::square_domain::RESOLUTION)
@@ -475,22 +478,6 @@ pub fn planar_extract(
         square,
         inliers: fit.inliers,
     })
-}
-
-/// Places the interior vertices given the boundary's positions: a convex-combination map.
-fn parameterize(patch: &Mesh, fixed: &[(u32, Vec2)]) -> Result<Vec<Vec2>, String> {
-    // Interim until the mean-value map lands: harmonic (clamped cotangent) weights, also a
-    // convex combination.
-    let weights = crate::geom::laplacian::cotan_weights(patch);
-    let fixed: Vec<(u32, Vec<f64>)> = fixed
-        .iter()
-        .map(|(v, q)| (*v, vec![q.x as f64, q.y as f64]))
-        .collect();
-    let values = crate::geom::laplacian::harmonic_interpolate(patch, &weights, &fixed, 2)
-        .map_err(|e| e.to_string())?;
-    Ok((0..patch.positions.len())
-        .map(|v| Vec2::new(values[2 * v] as f32, values[2 * v + 1] as f32))
-        .collect())
 }
 
 #[cfg(test)]
