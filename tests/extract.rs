@@ -682,3 +682,38 @@ fn extraction_does_not_depend_on_the_thread_count() {
     let two = in_pool(2, run);
     assert!(one == two, "results differ between 1 and 2 threads");
 }
+
+#[test]
+fn geometry_image_samples_take_the_colours_of_the_disk_under_them() {
+    // A disk over [0, 3]² in grid units (positions = uv), with a vertex inserted in the middle
+    // of the bottom edge (no patch vertex of its own) and colours linear in position: every
+    // sample must get the linear colour, the inserted vertex's included.
+    use glam::Vec2;
+    use texsyn::stages::extract::bilateral_difference::geometry_image_colors;
+    let uv = vec![
+        Vec2::new(0.0, 0.0),
+        Vec2::new(3.0, 0.0),
+        Vec2::new(3.0, 3.0),
+        Vec2::new(0.0, 3.0),
+        Vec2::new(1.5, 0.0),
+    ];
+    let positions: Vec<Vec3> = uv.iter().map(|q| Vec3::new(q.x, q.y, 0.0)).collect();
+    let disk = Mesh::new(positions, vec![[0, 4, 3], [4, 1, 2], [4, 2, 3]]);
+    let original = vec![0, 1, 2, 3, u32::MAX];
+    let lin = |q: Vec2| [q.x / 3.0, q.y / 3.0, 0.5, 1.0];
+    let patch_colors: Vec<[f32; 4]> = uv[..4].iter().map(|&q| lin(q)).collect();
+    let cols = geometry_image_colors(4, &disk, &uv, &original, &patch_colors);
+    assert_eq!(cols.len(), 16);
+    for i in 0..4 {
+        for j in 0..4 {
+            let want = lin(Vec2::new(j as f32, i as f32));
+            let got = cols[i * 4 + j];
+            for c in 0..3 {
+                assert!(
+                    (got[c] - want[c]).abs() < 1e-5,
+                    "({i}, {j}): {got:?} vs {want:?}"
+                );
+            }
+        }
+    }
+}

@@ -277,3 +277,87 @@ fn grid_area(n: usize, p: &[Vec3]) -> f64 {
     }
     area
 }
+
+/// The colour of each geometry-image sample, for a sample with vertex colours (§4.1.4): the
+/// geometry image's disk (the patch cut open, with `disk_uv` in grid units, u = column,
+/// v = row, and `original_vertex` naming each disk vertex's patch vertex or `u32::MAX` for a
+/// vertex inserted on an edge) is searched for the triangle under each sample and its
+/// corners' colours are interpolated. Inserted vertices take the colour interpolated along
+/// the edge they split (found among their neighbours as the pair they lie between).
+pub fn geometry_image_colors(
+    n: u32,
+    disk: &crate::geom::Mesh,
+    disk_uv: &[glam::Vec2],
+    original_vertex: &[u32],
+    patch_colors: &[[f32; 4]],
+) -> Vec<[f32; 3]> {
+    let nv = disk.positions.len();
+    let mut color: Vec<Option<[f32; 3]>> = (0..nv)
+        .map(|v| {
+            let o = original_vertex.get(v).copied().unwrap_or(u32::MAX);
+            patch_colors.get(o as usize).map(|c| [c[0], c[1], c[2]])
+        })
+        .collect();
+    let adj = disk.adjacency();
+    loop {
+        let mut progressed = false;
+        for v in 0..nv {
+            if color[v].is_some() {
+                continue;
+            }
+            let p = disk.positions[v];
+            let nb: Vec<u32> = adj
+                .neighbors(v)
+                .iter()
+                .copied()
+                .filter(|&w| color[w as usize].is_some())
+                .collect();
+            // The pair of coloured neighbours p lies most nearly between.
+            let mut best: Option<(f32, [f32; 3])> = None;
+            for (x, &a) in nb.iter().enumerate() {
+                for &b in &nb[x + 1..] {
+                    let (pa, pb) = (disk.positions[a as usize], disk.positions[b as usize]);
+                    let ab = (pb - pa).length();
+                    if ab <= 0.0 {
+                        continue;
+                    }
+                    let slack = (p - pa).length() + (p - pb).length() - ab;
+                    if best.is_none_or(|bb| slack < bb.0) {
+                        let t = ((p - pa).dot(pb - pa) / (ab * ab)).clamp(0.0, 1.0);
+                        let (ca, cb) = (color[a as usize].unwrap(), color[b as usize].unwrap());
+                        best = Some((slack, std::array::from_fn(|k| ca[k] + (cb[k] - ca[k]) * t)));
+                    }
+                }
+            }
+            if let Some((_, c)) = best {
+                color[v] = Some(c);
+                progressed = true;
+            } else if nb.len() == 1 {
+                color[v] = color[nb[0] as usize];
+                progressed = true;
+            }
+        }
+        if !progressed {
+            break;
+        }
+    }
+    let color: Vec<[f32; 3]> = color.into_iter().map(|c| c.unwrap_or([1.0; 3])).collect();
+    let locator = super::square_domain::Locator::new(disk_uv, &disk.triangles);
+    (0..n * n)
+        .into_par_iter()
+        .map(|k| {
+            let q = glam::Vec2::new((k % n) as f32, (k / n) as f32);
+            match locator.nearest(q) {
+                Some((f, w)) => {
+                    let t = disk.triangles[f as usize];
+                    std::array::from_fn(|c| {
+                        color[t[0] as usize][c] * w[0]
+                            + color[t[1] as usize][c] * w[1]
+                            + color[t[2] as usize][c] * w[2]
+                    })
+                }
+                None => [1.0; 3],
+            }
+        })
+        .collect()
+}

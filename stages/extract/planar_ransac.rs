@@ -23,8 +23,8 @@
 use super::square_domain::{Locator, Square, largest_rotated_square, rotate_into};
 use super::{ExtractError, check_range};
 use crate::geom::Mesh;
-use crate::geom::mean_value::convex_combination_map;
 use crate::geom::geometry_image::TexelImage;
+use crate::geom::mean_value::convex_combination_map;
 use crate::random::counter_hash;
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
