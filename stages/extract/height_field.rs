@@ -132,7 +132,7 @@ pub fn height_field_image(
     }
     for (i, p) in img.pixels.iter().enumerate() {
         let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-        if !(hi - lo <= GREY_TOLERANCE) {
+        if (hi - lo).is_nan() || hi - lo > GREY_TOLERANCE {
             return Err(ExtractError::NotGreyscale {
                 path: path.to_owned(),
                 x: i as u32 % img.width,

@@ -157,7 +157,7 @@ pub fn fit_plane_ransac(mesh: &Mesh, params: &RansacParams) -> Result<PlaneFit, 
             let (a, b, c) = (pick(0), pick(1), pick(2));
             let n = (b - a).cross(c - a);
             let len = n.length();
-            if !(len > 1e-6 * diagonal * diagonal) {
+            if len.is_nan() || len <= 1e-6 * diagonal * diagonal {
                 return (0, f64::INFINITY);
             }
             let n = n / len;
