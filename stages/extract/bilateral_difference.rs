@@ -10,7 +10,7 @@
 //! Departures from the paper, and why:
 //! - eq. 3 as printed divides the *unsquared* distance by 2σ2²; here β = exp(−‖p − p0‖² / 2σ2²),
 //!   the Gaussian of Tomasi & Manduchi that the paper cites, so σ2 is a length in object units.
-//! - eq. 4 sums over the whole grid; the window is cut at 3σ1 (α < 0.012 beyond it).
+//! - eq. 4 sums over the whole grid; the window is the disc of radius 3σ1 (α < 0.012 beyond).
 //! - Near the grid's edges the window is completed by point reflection (p(−i) = 2p(0) − p(i)),
 //!   so the smoothing of a flat or linearly varying patch is exact up to the edge instead of
 //!   pulling edge samples inward, which would show as false texture along the image's border.
@@ -176,6 +176,14 @@ pub fn bilateral_difference(
             (-d2 / (2.0 * sigma_grid as f64 * sigma_grid as f64)).exp()
         })
         .collect();
+    // The window is the disc of radius r: per window row, the columns within it.
+    let spans: Vec<(usize, usize)> = (0..w)
+        .map(|di| {
+            let dy = di as f64 - r as f64;
+            let half = ((r * r) as f64 - dy * dy).max(0.0).sqrt().floor() as usize;
+            (r - half, r + half + 1)
+        })
+        .collect();
     let inv_two_s2 = 1.0 / (2.0 * sigma_space as f64 * sigma_space as f64);
     let done = AtomicU32::new(0);
     let mut smoothed = vec![Vec3::ZERO; count];
@@ -185,17 +193,17 @@ pub fn bilateral_difference(
             let mut sum = DVec3::ZERO;
             let mut weight = 0.0f64;
             // Window rows i-r..=i+r are ext rows i..=i+2r.
-            for di in 0..w {
-                let row = &ext[(i + di) * m + j..(i + di) * m + j + w];
-                let arow = &alpha[di * w..(di + 1) * w];
+            for (di, &(c0, c1)) in spans.iter().enumerate() {
+                let row = &ext[(i + di) * m + j + c0..(i + di) * m + j + c1];
+                let arow = &alpha[di * w + c0..di * w + c1];
                 for (&p, &a) in row.iter().zip(arow) {
-                    let beta = (-(p - p0).length_squared() * inv_two_s2).exp();
-                    let wt = a * beta;
-                    sum += wt * p;
+                    let d = p - p0;
+                    let wt = a * (-d.length_squared() * inv_two_s2).exp();
+                    sum += wt * d;
                     weight += wt;
                 }
             }
-            *o = (sum / weight).as_vec3();
+            *o = (p0 + sum / weight).as_vec3();
         }
         let d = done.fetch_add(1, Ordering::Relaxed) + 1;
         progress(0.9 * d as f32 / n as f32);
