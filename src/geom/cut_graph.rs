@@ -45,6 +45,8 @@ pub enum CutError {
 
 /// Roots tried by the tree-cotree construction (the shortest cut wins).
 const ROOT_CANDIDATES: usize = 6;
+/// At most this many path replacements when straightening a cut.
+const STRAIGHTEN_CHANGES: usize = 64;
 
 /// A cut graph on the edges of a [`HalfEdgeMesh`].
 #[derive(Debug, Clone)]
@@ -420,6 +422,7 @@ pub fn cut_graph(
             is_cut[e] = true;
         }
     }
+    straighten(he, &aug.len[..ne], &mut is_cut, STRAIGHTEN_CHANGES);
     // Extremity cuts: shortest paths from the cut (and the boundary) to the farthest vertex.
     let mut extremities = Vec::new();
     let mut on_cut = vec![false; nv];
@@ -460,6 +463,262 @@ pub fn cut_graph(
     })
 }
 
+/// The wedges of a cut: per face corner (half-edge `3f + k`) its wedge vertex, and per wedge
+/// its original vertex. A vertex's corners are split wherever the ring around it crosses a
+/// cut edge or the boundary. Wedges are numbered by original vertex, then around it.
+fn split_wedges(he: &HalfEdgeMesh, is_cut: &[bool]) -> (Vec<u32>, Vec<u32>) {
+    let mut corner_vertex = vec![NONE; 3 * he.face_count()];
+    let mut original_vertex = Vec::new();
+    let mut ring = Vec::new();
+    for v in 0..he.vertex_count() as u32 {
+        ring.clear();
+        ring.extend(he.outgoing(v));
+        if ring.is_empty() {
+            continue;
+        }
+        let separates = |h: u32| he.is_boundary_half_edge(h) || is_cut[he.edge(h) as usize];
+        let start = ring.iter().position(|&h| separates(h)).unwrap_or(0);
+        for i in 0..ring.len() {
+            let h = ring[(start + i) % ring.len()];
+            if i == 0 || separates(h) {
+                original_vertex.push(v);
+            }
+            if !he.is_boundary_half_edge(h) {
+                corner_vertex[h as usize] = original_vertex.len() as u32 - 1;
+            }
+        }
+    }
+    (corner_vertex, original_vertex)
+}
+
+/// Whether cutting along `is_cut` (interior edges only) leaves one disk: the triangles stay
+/// connected and the Euler characteristic of the cut surface is 1.
+fn cuts_to_disk(he: &HalfEdgeMesh, is_cut: &[bool]) -> bool {
+    let (_, ov) = split_wedges(he, is_cut);
+    let cut_count = is_cut.iter().filter(|&&c| c).count();
+    let chi = ov.len() as i64 - (he.edge_count() + cut_count) as i64 + he.face_count() as i64;
+    if chi != 1 {
+        return false;
+    }
+    let mut uf = UnionFind::new(he.face_count());
+    let mut parts = he.face_count();
+    for e in 0..he.edge_count() as u32 {
+        let h = he.edge_half_edge(e);
+        let t = he.twin(h);
+        if !is_cut[e as usize] && !he.is_boundary_half_edge(t) && uf.union(he.face(h), he.face(t)) {
+            parts -= 1;
+        }
+    }
+    parts == 1
+}
+
+/// One path of a cut graph between cut-nodes (vertices of cut degree ≠ 2, and cut vertices on
+/// the mesh boundary): its end vertices (the same for a loop at one node) and edges in order.
+struct CutPath {
+    a: u32,
+    b: u32,
+    edges: Vec<u32>,
+    length: f64,
+}
+
+/// The cut graph's paths between cut-nodes (cycles with no node are left out).
+fn cut_paths(he: &HalfEdgeMesh, is_cut: &[bool], len: &[f64]) -> Vec<CutPath> {
+    let mut degree = vec![0u32; he.vertex_count()];
+    for e in 0..he.edge_count() as u32 {
+        if is_cut[e as usize] {
+            let (a, b) = he.edge_vertices(e);
+            degree[a as usize] += 1;
+            degree[b as usize] += 1;
+        }
+    }
+    let is_node = |v: u32| {
+        let d = degree[v as usize];
+        d != 0 && (d != 2 || he.is_boundary_vertex(v))
+    };
+    let mut seen = vec![false; he.edge_count()];
+    let mut paths = Vec::new();
+    for a in 0..he.vertex_count() as u32 {
+        if !is_node(a) {
+            continue;
+        }
+        for h0 in he.outgoing(a) {
+            let e0 = he.edge(h0);
+            if !is_cut[e0 as usize] || seen[e0 as usize] {
+                continue;
+            }
+            seen[e0 as usize] = true;
+            let mut edges = vec![e0];
+            let mut v = he.dest(h0);
+            let mut last = e0;
+            while !is_node(v) {
+                let Some(h) = he
+                    .outgoing(v)
+                    .find(|&h| is_cut[he.edge(h) as usize] && he.edge(h) != last)
+                else {
+                    break;
+                };
+                last = he.edge(h);
+                seen[last as usize] = true;
+                edges.push(last);
+                v = he.dest(h);
+            }
+            let length = edges.iter().map(|&e| len[e as usize]).sum();
+            paths.push(CutPath {
+                a,
+                b: v,
+                edges,
+                length,
+            });
+        }
+    }
+    paths
+}
+
+/// Straightens a cut graph path by path (keeping it a cut to a disk): each path between
+/// cut-nodes a and b is replaced by the shortest path from a to b on the surface cut along
+/// the rest of the cut graph, where running along the rest of the cut (or the mesh boundary)
+/// costs nothing. That surface is an annulus, and the wedges of a and b that the old path
+/// leaves from and arrives at lie on different boundary circles, so any path between them
+/// reopens it into a disk; the replacement is kept when the total cut is
+/// shorter and the result checks out as a disk. This merges cut paths that a shortest-path
+/// tree leaves running side by side (thin strips between them would be crushed by the map to
+/// the square) and shortens the cut. Longest paths are tried first; at most `max_changes`
+/// replacements.
+fn straighten(he: &HalfEdgeMesh, len: &[f64], is_cut: &mut Vec<bool>, max_changes: usize) {
+    let total = |c: &[bool]| -> f64 {
+        c.iter()
+            .enumerate()
+            .filter(|&(_, &x)| x)
+            .map(|(e, _)| len[e])
+            .sum()
+    };
+    let mut current = total(is_cut);
+    for _ in 0..max_changes {
+        let mut paths = cut_paths(he, is_cut, len);
+        paths.sort_by(|p, q| {
+            q.length
+                .total_cmp(&p.length)
+                .then(p.edges[0].cmp(&q.edges[0]))
+        });
+        let mut changed = false;
+        for p in &paths {
+            let mut rest = is_cut.clone();
+            for &e in &p.edges {
+                rest[e as usize] = false;
+            }
+            let ends = ((p.a, p.edges[0]), (p.b, *p.edges.last().unwrap()));
+            let Some(route) = shortest_crossing(he, len, &rest, ends.0, ends.1) else {
+                continue;
+            };
+            let mut candidate = rest;
+            for e in route {
+                if !he.is_boundary_edge(e) {
+                    candidate[e as usize] = true;
+                }
+            }
+            let l = total(&candidate);
+            if l < current * (1.0 - 1e-9) && cuts_to_disk(he, &candidate) {
+                *is_cut = candidate;
+                current = l;
+                changed = true;
+                break;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+}
+
+/// The shortest path on the surface cut along `cut` between the wedges of `a` and `b` that
+/// hold the (uncut) edges `ea` at a and `eb` at b, where edges on the cut surface's boundary
+/// are free; returned as edges of the input (some may be cut or boundary edges already).
+/// Ties go to smaller wedge numbers.
+fn shortest_crossing(
+    he: &HalfEdgeMesh,
+    len: &[f64],
+    cut: &[bool],
+    (a, ea): (u32, u32),
+    (b, eb): (u32, u32),
+) -> Option<Vec<u32>> {
+    let (cv, ov) = split_wedges(he, cut);
+    let nw = ov.len();
+    // Wedge adjacency from the face half-edges, both directions: (to, half-edge).
+    let mut start = vec![0u32; nw + 1];
+    for h in 0..cv.len() {
+        start[cv[h] as usize + 1] += 1;
+        start[cv[he.next(h as u32) as usize] as usize + 1] += 1;
+    }
+    for i in 0..nw {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut adj = vec![(0u32, 0u32); start[nw] as usize];
+    for h in 0..cv.len() as u32 {
+        let (x, y) = (cv[h as usize], cv[he.next(h) as usize]);
+        adj[fill[x as usize] as usize] = (y, h);
+        fill[x as usize] += 1;
+        adj[fill[y as usize] as usize] = (x, h);
+        fill[y as usize] += 1;
+    }
+    let cost = |h: u32| {
+        let e = he.edge(h);
+        if cut[e as usize] || he.is_boundary_half_edge(he.twin(h)) {
+            0.0
+        } else {
+            len[e as usize]
+        }
+    };
+    // The wedge of v at a corner next to edge e (both sides of an uncut edge are one wedge).
+    let wedge_at = |v: u32, e: u32| {
+        let h = he.edge_half_edge(e);
+        let h = if he.origin(h) == v { h } else { he.twin(h) };
+        let h = if he.is_boundary_half_edge(h) {
+            he.next(he.twin(h))
+        } else {
+            h
+        };
+        cv[h as usize]
+    };
+    let (source, target) = (wedge_at(a, ea), wedge_at(b, eb));
+    if source == target {
+        return None;
+    }
+    let mut dist = vec![f64::INFINITY; nw];
+    let mut parent = vec![NONE; nw];
+    let mut heap = BinaryHeap::new();
+    dist[source as usize] = 0.0;
+    heap.push(Reverse((0u64, source)));
+    let mut end = None;
+    while let Some(Reverse((bits, w))) = heap.pop() {
+        let d = f64::from_bits(bits);
+        if d > dist[w as usize] {
+            continue;
+        }
+        if w == target {
+            end = Some(w);
+            break;
+        }
+        for &(x, h) in &adj[start[w as usize] as usize..start[w as usize + 1] as usize] {
+            let nd = d + cost(h);
+            if nd < dist[x as usize] {
+                dist[x as usize] = nd;
+                parent[x as usize] = h;
+                heap.push(Reverse((nd.to_bits(), x)));
+            }
+        }
+    }
+    let mut w = end?;
+    let mut route = Vec::new();
+    while parent[w as usize] != NONE {
+        let h = parent[w as usize];
+        route.push(he.edge(h));
+        let (x, y) = (cv[h as usize], cv[he.next(h) as usize]);
+        w = if x == w { y } else { x };
+    }
+    Some(route)
+}
+
 /// A mesh cut open into a disk.
 #[derive(Debug, Clone)]
 pub struct DiskCut {
@@ -487,27 +746,7 @@ pub fn cut_to_disk(mesh: &Mesh, he: &HalfEdgeMesh, is_cut: &[bool]) -> Result<Di
         });
     }
     let nf = he.face_count();
-    let mut corner_vertex = vec![NONE; 3 * nf];
-    let mut original_vertex = Vec::new();
-    let mut ring = Vec::new();
-    for v in 0..he.vertex_count() as u32 {
-        ring.clear();
-        ring.extend(he.outgoing(v));
-        if ring.is_empty() {
-            continue;
-        }
-        let separates = |h: u32| he.is_boundary_half_edge(h) || is_cut[he.edge(h) as usize];
-        let start = ring.iter().position(|&h| separates(h)).unwrap_or(0);
-        for i in 0..ring.len() {
-            let h = ring[(start + i) % ring.len()];
-            if i == 0 || separates(h) {
-                original_vertex.push(v);
-            }
-            if !he.is_boundary_half_edge(h) {
-                corner_vertex[h as usize] = original_vertex.len() as u32 - 1;
-            }
-        }
-    }
+    let (corner_vertex, original_vertex) = split_wedges(he, is_cut);
     let triangles: Vec<[u32; 3]> = (0..nf)
         .map(|f| [0, 1, 2].map(|k| corner_vertex[3 * f + k]))
         .collect();
@@ -666,6 +905,50 @@ mod tests {
             d.disk.vertex_count(),
             m.vertex_count() + cut.edges.len() + 1
         );
+    }
+
+    #[test]
+    fn straightening_replaces_a_long_loop_by_a_short_one() {
+        // A valid but poor cut of the torus: the tube circle at i = 0 and the outer equator
+        // (j = 0), crossing at vertex 0. Straightening must swap the outer equator (radius
+        // 2.5) for a loop the long way round that is no longer than the inner equator (1.5).
+        let (n, m) = (24u32, 10u32);
+        let mesh = torus(n, m);
+        let he = HalfEdgeMesh::new(&mesh).unwrap();
+        let mut is_cut = vec![false; he.edge_count()];
+        let mut mark = |a: u32, b: u32| {
+            let e = (0..he.edge_count() as u32)
+                .find(|&e| {
+                    let (x, y) = he.edge_vertices(e);
+                    (x, y) == (a, b) || (x, y) == (b, a)
+                })
+                .unwrap();
+            is_cut[e as usize] = true;
+        };
+        for j in 0..m {
+            mark(j, (j + 1) % m);
+        }
+        for i in 0..n {
+            mark(i * m, ((i + 1) % n) * m);
+        }
+        assert!(cuts_to_disk(&he, &is_cut));
+        let len: Vec<f64> = (0..he.edge_count() as u32)
+            .map(|e| {
+                let (a, b) = he.edge_vertices(e);
+                (mesh.positions[a as usize] - mesh.positions[b as usize]).length() as f64
+            })
+            .collect();
+        let total = |c: &[bool]| -> f64 { (0..c.len()).filter(|&e| c[e]).map(|e| len[e]).sum() };
+        let before = total(&is_cut);
+        straighten(&he, &len, &mut is_cut, 16);
+        let after = total(&is_cut);
+        let tube = m as f64 * 2.0 * 0.5 * (std::f64::consts::PI / m as f64).sin();
+        let inner = n as f64 * 2.0 * 1.5 * (std::f64::consts::PI / n as f64).sin();
+        assert!(after < before - 1.0, "{before} -> {after}");
+        assert!(after <= tube + inner + 1e-6, "{after} vs {}", tube + inner);
+        assert!(cuts_to_disk(&he, &is_cut));
+        let d = cut_to_disk(&mesh, &he, &is_cut).unwrap();
+        assert_eq!(d.he.euler_characteristic(), 1);
     }
 
     #[test]

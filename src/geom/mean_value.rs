@@ -310,39 +310,85 @@ pub fn triangle_l2_stretch(q: [DVec3; 3], p: [DVec2; 3]) -> f64 {
 /// triangle stretches, scaled so that an isometry up to scale scores 1. +inf if any
 /// non-degenerate triangle is flipped or flat in the plane.
 pub fn l2_stretch(mesh: &Mesh, uv: &[DVec2]) -> f64 {
-    let (mut num, mut area3, mut area2) = (0.0f64, 0.0f64, 0.0f64);
-    for t in &mesh.triangles {
-        let q = t.map(|v| mesh.positions[v as usize].as_dvec3());
-        let p = t.map(|v| uv[v as usize]);
-        let a3 = 0.5 * (q[1] - q[0]).cross(q[2] - q[0]).length();
+    let q = map_quality(mesh, uv);
+    if q.flipped > 0 {
+        f64::INFINITY
+    } else {
+        q.stretch
+    }
+}
+
+/// How good a map is: the number of flipped or flat triangles (those with positive area in
+/// 3D and non-positive signed area in the plane), and the global L² stretch of the others.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapQuality {
+    pub flipped: usize,
+    pub stretch: f64,
+}
+
+impl MapQuality {
+    /// Fewer flipped triangles first, then lower stretch.
+    pub fn better_than(&self, other: &MapQuality) -> bool {
+        self.flipped < other.flipped
+            || (self.flipped == other.flipped && self.stretch < other.stretch)
+    }
+}
+
+/// Per-triangle L² stretch, 3D area and parameter area; flipped or flat triangles get +inf.
+fn triangle_stretches(mesh: &Mesh, uv: &[DVec2]) -> Vec<(f64, f64, f64)> {
+    mesh.triangles
+        .iter()
+        .map(|t| {
+            let q = t.map(|v| mesh.positions[v as usize].as_dvec3());
+            let p = t.map(|v| uv[v as usize]);
+            let a3 = 0.5 * (q[1] - q[0]).cross(q[2] - q[0]).length();
+            let a2 = 0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]);
+            (triangle_l2_stretch(q, p), a3, a2)
+        })
+        .collect()
+}
+
+/// See [`MapQuality`].
+pub fn map_quality(mesh: &Mesh, uv: &[DVec2]) -> MapQuality {
+    let (mut num, mut area3, mut area2, mut flipped) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+    for (s, a3, a2) in triangle_stretches(mesh, uv) {
         if a3 <= 0.0 {
             continue;
         }
-        let s = triangle_l2_stretch(q, p);
+        if !s.is_finite() {
+            flipped += 1;
+            continue;
+        }
         num += a3 * s * s;
         area3 += a3;
-        area2 += 0.5 * ((p[1] - p[0]).perp_dot(p[2] - p[0]));
+        area2 += a2;
     }
-    if area3 <= 0.0 {
-        return 0.0;
-    }
-    (num / area3).sqrt() * (area2 / area3).sqrt()
+    let stretch = if area3 > 0.0 {
+        (num / area3).sqrt() * (area2 / area3).sqrt()
+    } else {
+        0.0
+    };
+    MapQuality { flipped, stretch }
 }
 
 /// Per-vertex stretch: the area-weighted RMS of the L² stretches of the vertex's triangles
-/// (Yoshizawa et al. 2004, eq. 5). Vertices with no non-degenerate triangle get 1.
+/// (Yoshizawa et al. 2004). Flipped or flat triangles count with ten times the largest finite
+/// triangle stretch, so the reweighting pushes them open. Vertices with no non-degenerate
+/// triangle get 1.
 fn vertex_stretch(mesh: &Mesh, uv: &[DVec2]) -> Vec<f64> {
     let n = mesh.vertex_count();
+    let ts = triangle_stretches(mesh, uv);
+    let max_finite = ts
+        .iter()
+        .filter(|x| x.0.is_finite() && x.1 > 0.0)
+        .fold(1.0f64, |m, x| m.max(x.0));
     let mut num = vec![0.0f64; n];
     let mut den = vec![0.0f64; n];
-    for t in &mesh.triangles {
-        let q = t.map(|v| mesh.positions[v as usize].as_dvec3());
-        let p = t.map(|v| uv[v as usize]);
-        let a3 = 0.5 * (q[1] - q[0]).cross(q[2] - q[0]).length();
+    for (t, &(s, a3, _)) in mesh.triangles.iter().zip(&ts) {
         if a3 <= 0.0 {
             continue;
         }
-        let s = triangle_l2_stretch(q, p);
+        let s = if s.is_finite() { s } else { 10.0 * max_finite };
         for &v in t {
             num[v as usize] += a3 * s * s;
             den[v as usize] += a3;
@@ -366,19 +412,21 @@ pub struct StretchReduction {
     pub uv: Vec<DVec2>,
     /// The weights that produce `uv`.
     pub weights: Vec<f64>,
-    /// Global L² stretch of the input map and of `uv`.
-    pub stretch_before: f64,
-    pub stretch_after: f64,
-    /// Iterations run (stops early when the stretch stops decreasing).
+    /// Quality of the input map and of `uv`.
+    pub before: MapQuality,
+    pub after: MapQuality,
+    /// Iterations that improved the map (the loop stops at the first that does not).
     pub iterations: u32,
 }
 
 /// Stretch reduction by iterative reweighting (Yoshizawa et al. 2004): each iteration divides
 /// every weight w(v → w) by the local stretch σ(w) of the current map and re-solves, so
-/// neighbours in over-stretched regions pull less and those regions grow in the plane. The
-/// weights stay positive, so every iterate is again a convex-combination map (bijective under
-/// the same boundary conditions). Stops after `iterations` solves or as soon as the global L²
-/// stretch does not decrease, and returns the best map.
+/// neighbours of over-stretched (compressed) regions pull less and those regions grow in the
+/// plane. The weights stay positive, so every iterate is again a convex-combination map
+/// (bijective under the same boundary conditions; numerically, extremely compressed regions
+/// can still collapse, which the reweighting then opens up). Runs at most `iterations` solves,
+/// stops at the first that does not improve the map ([`MapQuality::better_than`]: fewer
+/// flipped triangles, then lower global L² stretch), and returns the best map.
 ///
 /// `weights` and `uv` must belong together (`uv` solved from `weights` with `solver`).
 pub fn reduce_stretch(
@@ -389,12 +437,12 @@ pub fn reduce_stretch(
     iterations: u32,
 ) -> Result<StretchReduction, MeanValueError> {
     let adj = mesh.adjacency();
-    let before = l2_stretch(mesh, &uv);
+    let before = map_quality(mesh, &uv);
     let mut best = StretchReduction {
         uv,
         weights,
-        stretch_before: before,
-        stretch_after: before,
+        before,
+        after: before,
         iterations: 0,
     };
     for it in 0..iterations {
@@ -411,13 +459,13 @@ pub fn reduce_stretch(
             sanitize_row(&mut w[range]);
         }
         let uv = solver.solve(mesh, &w)?;
-        let s = l2_stretch(mesh, &uv);
-        if !(s < best.stretch_after) {
+        let q = map_quality(mesh, &uv);
+        if !q.better_than(&best.after) {
             break;
         }
         best.uv = uv;
         best.weights = w;
-        best.stretch_after = s;
+        best.after = q;
         best.iterations = it + 1;
     }
     Ok(best)
@@ -558,11 +606,12 @@ mod tests {
         assert!(signed_areas(&mesh, &uv).iter().all(|&a| a > 0.0));
         let r = reduce_stretch(&mesh, &mut solver, w, uv, 4).unwrap();
         assert!(r.iterations >= 1);
+        assert_eq!((r.before.flipped, r.after.flipped), (0, 0));
         assert!(
-            r.stretch_after < 0.9 * r.stretch_before,
-            "{} -> {} in {} iterations",
-            r.stretch_before,
-            r.stretch_after,
+            r.after.stretch < 0.9 * r.before.stretch,
+            "{:?} -> {:?} in {} iterations",
+            r.before,
+            r.after,
             r.iterations
         );
         assert!(signed_areas(&mesh, &r.uv).iter().all(|&a| a > 0.0));
