@@ -717,3 +717,58 @@ fn geometry_image_samples_take_the_colours_of_the_disk_under_them() {
         }
     }
 }
+
+/// A fine sinusoidal relief (wavelength 0.25, amplitude 0.02): texture, not shape.
+fn ripples(x: f32, y: f32) -> f32 {
+    let k = std::f32::consts::TAU / 0.25;
+    0.02 * (k * x).sin() * (k * y).sin()
+}
+
+#[test]
+fn every_method_returns_texels_that_rebuild_the_sample_on_its_base() {
+    use texsyn::stages::extract::extract_mesh_texture;
+    let place = Placement::tilted();
+    let color = |x: f32, y: f32| [0.5 + 0.5 * x, 0.5 + 0.5 * y, 0.25, 1.0];
+    let mesh = relief_mesh(120, &ripples, &place, Some(&color));
+    for method in [
+        ExtractMethod::Planar,
+        ExtractMethod::HeightField,
+        ExtractMethod::Bilateral,
+    ] {
+        let params = ExtractParams {
+            method,
+            size: 64,
+            ..Default::default()
+        };
+        let e = extract_mesh_texture(&mesh, &params, &no_progress).unwrap();
+        assert_eq!(
+            (e.texels.width, e.texels.height, e.texels.channels),
+            (64, 64, 6)
+        );
+        assert_eq!((e.base.len(), e.frames.len()), (64 * 64, 64 * 64));
+        assert_eq!(e.patch_faces, mesh.triangles.len());
+        let dn_mean = mean(e.texels.data.chunks(6).map(|t| t[2]));
+        let (mut on_surface, mut relief, mut colour) = (0.0f32, 0.0f32, 0.0f32);
+        for (k, t) in e.texels.data.chunks(6).enumerate() {
+            let f = e.frames[k];
+            let q = place.to_local(e.base[k] + t[0] * f.x + t[1] * f.y + t[2] * f.n);
+            on_surface = on_surface.max((q.z - ripples(q.x, q.y)).abs());
+            // Where the base is flat, dn is the relief itself.
+            relief = relief.max(((t[2] - dn_mean) - ripples(q.x, q.y)).abs());
+            let want = color(q.x, q.y);
+            for c in 0..3 {
+                colour = colour.max((t[3 + c] - want[c]).abs());
+            }
+        }
+        eprintln!("{method:?}: off the surface {on_surface}, relief {relief}, colour {colour}");
+        assert!(
+            on_surface < 1e-3,
+            "{method:?}: rebuilt point {on_surface} off the surface"
+        );
+        assert!(
+            relief < 0.004,
+            "{method:?}: dn differs from the relief by {relief}"
+        );
+        assert!(colour < 0.01, "{method:?}: colour off by {colour}");
+    }
+}

@@ -11,7 +11,7 @@
 //! Images: every pixel becomes a texel (0, 0, (grey − mean grey) × height_scale), row y of the
 //! image being texel row y.
 
-use super::planar_ransac::{PlanarExtraction, RansacParams, fit_plane_ransac, interpolate};
+use super::planar_ransac::{PlanarExtraction, Plane, RansacParams, fit_plane_ransac, interpolate};
 use super::square_domain::{Locator, largest_rotated_square, rotate_into};
 use super::{ExtractError, check_range};
 use crate::geom::Mesh;
@@ -22,6 +22,8 @@ use rayon::prelude::*;
 use std::path::Path;
 
 /// §4.1.3 on a connected sample patch: `size`×`size` texels (0, 0, h − mean h[, r, g, b]).
+/// The returned plane is the fitted one moved to the mean height, so that texel heights are
+/// measured from it.
 pub fn mesh_height_field(
     patch: &Mesh,
     size: u32,
@@ -88,7 +90,11 @@ pub fn mesh_height_field(
     progress(1.0);
     Ok(PlanarExtraction {
         texels,
-        plane,
+        // The heights are measured from the mean height.
+        plane: Plane {
+            origin: plane.origin + mean as f32 * plane.normal,
+            ..plane
+        },
         square,
         inliers: fit.inliers,
     })

@@ -1,7 +1,7 @@
 //! Stage: extract: texture or features taken out of a shape.
 //!
 //! Geometric texture (Lai et al., "Geometric Texture Synthesis and Transfer via Geometry
-//! Images", §4.1): a sample model, or a region of it, becomes a [`TexelImage`](crate::geom::geometry_image::TexelImage) of geometry
+//! Images", §4.1): a sample model, or a region of it, becomes a [`TexelImage`] of geometry
 //! texels (dx, dy, dn), or (dx, dy, dn, r, g, b) when the sample has vertex colours (§4.1.4).
 //! Three extractors, chosen by [`ExtractParams::method`]:
 //!
@@ -21,6 +21,9 @@ pub mod sample_region;
 pub mod square_domain;
 
 use crate::geom::Mesh;
+use crate::geom::geometry_image::{Frame, TexelImage};
+use crate::stages::parameterize::geometry_image::{GeometryImageParams, build_geometry_image};
+use glam::Vec3;
 use sample_region::Region;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -241,4 +244,112 @@ pub(crate) fn check_finite(mesh: &Mesh) -> Result<(), ExtractError> {
         }
     }
     Ok(())
+}
+
+/// A texture extracted from a sample mesh by [`extract_mesh_texture`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Extraction {
+    /// `size`×`size` texels (dx, dy, dn[, r, g, b]), row-major.
+    pub texels: TexelImage,
+    /// Per texel, the point of the base surface (the plane, or the smoothed patch) it is
+    /// measured from, and the frame it is measured in: the sample's surface point is
+    /// `base + dx·frame.x + dy·frame.y + dn·frame.n` (§4.4 applied to the base itself).
+    pub base: Vec<Vec3>,
+    pub frames: Vec<Frame>,
+    /// Vertices and triangles of the sample patch cut out of the mesh.
+    pub patch_vertices: usize,
+    pub patch_faces: usize,
+}
+
+/// §4.1 on a sample mesh: cuts the sample patch out with [`ExtractParams::region`]
+/// ([`sample_region::select_region`]) and runs [`ExtractParams::method`] on it.
+///
+/// The bilateral method builds the patch's geometry image at the smallest valid resolution
+/// 2^k + 1 ≥ `size` (one coarse level: the sample needs no synthesis pyramid) and keeps the
+/// central `size`×`size` texels (for size 64, all but the last row and column of the 65×65
+/// image). `progress` receives fractions of the work done.
+pub fn extract_mesh_texture(
+    mesh: &Mesh,
+    params: &ExtractParams,
+    progress: &(dyn Fn(f32) + Sync),
+) -> Result<Extraction, ExtractError> {
+    params.validate().map_err(ExtractError::Params)?;
+    let patch = sample_region::select_region(mesh, params.region.as_ref())?;
+    let (patch_vertices, patch_faces) = (patch.positions.len(), patch.triangles.len());
+    let size = params.size;
+    let planar = |e: planar_ransac::PlanarExtraction| {
+        let frame = Frame {
+            x: e.plane.e1,
+            y: e.plane.e2,
+            n: e.plane.normal,
+        };
+        let base = (0..size * size)
+            .map(|k| e.sample_point(k / size, k % size))
+            .collect();
+        Extraction {
+            base,
+            frames: vec![frame; (size * size) as usize],
+            texels: e.texels,
+            patch_vertices,
+            patch_faces,
+        }
+    };
+    match params.method {
+        ExtractMethod::Planar => {
+            let e = planar_ransac::planar_extract(&patch, size, &params.ransac(), progress)?;
+            Ok(planar(e))
+        }
+        ExtractMethod::HeightField => {
+            let e = height_field::mesh_height_field(&patch, size, &params.ransac(), progress)?;
+            Ok(planar(e))
+        }
+        ExtractMethod::Bilateral => {
+            let gi_size = (size - 1).next_power_of_two().max(4) + 1;
+            let gi_params = GeometryImageParams {
+                size: gi_size,
+                coarse_levels: 1,
+                ..GeometryImageParams::default()
+            };
+            let build = build_geometry_image(&patch, &gi_params, &|f| progress(0.6 * f))
+                .map_err(|e| ExtractError::GeometryImage(e.to_string()))?;
+            let colors = patch.colors.as_ref().map(|c| {
+                bilateral_difference::geometry_image_colors(
+                    gi_size,
+                    &build.disk,
+                    &build.disk_uv,
+                    &build.original_vertex,
+                    c,
+                )
+            });
+            let e = bilateral_difference::bilateral_difference(
+                &build.image,
+                colors.as_deref(),
+                &params.bilateral(),
+                &|f| progress(0.6 + 0.4 * f),
+            )?;
+            // The central size×size texels.
+            let off = (gi_size - size) / 2;
+            let channels = e.texels.channels;
+            let mut texels = TexelImage::new(size, size, channels);
+            let mut base = Vec::with_capacity((size * size) as usize);
+            let mut frames = Vec::with_capacity((size * size) as usize);
+            for i in 0..size {
+                for j in 0..size {
+                    let k = ((i + off) * gi_size + j + off) as usize;
+                    texels
+                        .texel_mut(j, i)
+                        .copy_from_slice(e.texels.texel(j + off, i + off));
+                    base.push(e.smoothed[k]);
+                    frames.push(e.frames[k]);
+                }
+            }
+            Ok(Extraction {
+                texels,
+                base,
+                frames,
+                patch_vertices,
+                patch_faces,
+            })
+        }
+    }
 }
