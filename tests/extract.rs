@@ -14,7 +14,7 @@ use texsyn::stages::extract::planar_ransac::{
     PlanarExtraction, RansacParams, fit_plane_ransac, pca_plane, planar_extract, surface_samples,
 };
 use texsyn::stages::extract::sample_region::{Region, select_region};
-use texsyn::stages::extract::{ExtractError, ExtractMethod, ExtractParams};
+use texsyn::stages::extract::{ExtractError, ExtractMethod, ExtractParams, extract_mesh_texture};
 
 /// A rigid placement of the sample in space: world = rot · local + shift.
 struct Placement {
@@ -659,6 +659,13 @@ fn extraction_does_not_depend_on_the_thread_count() {
     let place = Placement::tilted();
     let mesh = relief_mesh(60, &bumps, &place, None);
     let (gi, _) = curved_geometry_image(48, 0.02, &place);
+    let color = |x: f32, y: f32| [0.5 + 0.5 * x, 0.5 + 0.5 * y, 0.25, 1.0];
+    let coloured = relief_mesh(40, &ripples, &place, Some(&color));
+    let bilateral = ExtractParams {
+        method: ExtractMethod::Bilateral,
+        size: 32,
+        ..Default::default()
+    };
     let run = || {
         (
             bits(
@@ -673,6 +680,11 @@ fn extraction_does_not_depend_on_the_thread_count() {
             ),
             bits(
                 &bilateral_difference(&gi, None, &BilateralParams::default(), &no_progress)
+                    .unwrap()
+                    .texels,
+            ),
+            bits(
+                &extract_mesh_texture(&coloured, &bilateral, &no_progress)
                     .unwrap()
                     .texels,
             ),
@@ -726,7 +738,6 @@ fn ripples(x: f32, y: f32) -> f32 {
 
 #[test]
 fn every_method_returns_texels_that_rebuild_the_sample_on_its_base() {
-    use texsyn::stages::extract::extract_mesh_texture;
     let place = Placement::tilted();
     let color = |x: f32, y: f32| [0.5 + 0.5 * x, 0.5 + 0.5 * y, 0.25, 1.0];
     let mesh = relief_mesh(120, &ripples, &place, Some(&color));

@@ -107,9 +107,9 @@ pub enum ExtractMethod {
 pub struct ExtractParams {
     /// "bilateral" (§4.1.1), "planar" (§4.1.2) or "height_field" (§4.1.3). Default: "planar".
     pub method: ExtractMethod,
-    /// Texels per side of the extracted (square) texel image, 8..=1024. For the bilateral
-    /// method it is also the resolution of the patch's geometry image. Image height fields keep
-    /// the image's own size. Default: 64.
+    /// Texels per side of the extracted (square) texel image, 8..=1024. The bilateral method
+    /// samples the patch's geometry image at the smallest 2^k + 1 ≥ size and keeps its central
+    /// size × size samples. Image height fields keep the image's own size. Default: 64.
     pub size: u32,
     /// The part of the sample model to take the texture from (its largest connected piece is
     /// used). Default: none (the whole model's largest connected piece).
