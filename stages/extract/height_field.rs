@@ -1,1 +1,159 @@
-//! (to be written)
+//! Height-field sampling (Lai et al., "Geometric Texture Synthesis and Transfer via Geometry
+//! Images", §4.1.3) and images as height fields (§5, the leather example: "intensity in the
+//! image is converted to height above a plane").
+//!
+//! Meshes: the plane is fitted as in §4.1.2 ([`fit_plane_ransac`]); the vertices are projected
+//! straight onto it ("without the need to perform a parameterization"), an N×N grid is sampled
+//! in the largest square of the projected patch, and each sample's height is that of the
+//! highest point of the patch on the line through it along the plane's normal (projected
+//! triangles overlap where the relief overhangs). Texels are (0, 0, h − mean h).
+//!
+//! Images: every pixel becomes a texel (0, 0, (grey − mean grey) × height_scale), row y of the
+//! image being texel row y.
+
+use super::planar_ransac::{PlanarExtraction, Plane, RansacParams, fit_plane_ransac, interpolate};
+use super::square_domain::{Locator, largest_rotated_square, rotate_into};
+use super::{ExtractError, check_range};
+use crate::geom::Mesh;
+use crate::geom::geometry_image::TexelImage;
+use crate::image::ImageView;
+use glam::Vec2;
+use rayon::prelude::*;
+use std::path::Path;
+
+/// §4.1.3 on a connected sample patch: `size`×`size` texels (0, 0, h − mean h[, r, g, b]).
+/// The returned plane is the fitted one moved to the mean height, so that texel heights are
+/// measured from it.
+pub fn mesh_height_field(
+    patch: &Mesh,
+    size: u32,
+    params: &RansacParams,
+    progress: &(dyn Fn(f32) + Sync),
+) -> Result<PlanarExtraction, ExtractError> {
+    check_range("size", size, 1, 8192).map_err(ExtractError::Params)?;
+    let fit = fit_plane_ransac(patch, params)?;
+    progress(0.3);
+    let faces = patch.triangles.len();
+    let coords: Vec<glam::Vec3> = patch
+        .positions
+        .iter()
+        .map(|&p| fit.plane.coords(p))
+        .collect();
+    let uv: Vec<Vec2> = coords.iter().map(|c| Vec2::new(c.x, c.y)).collect();
+    let (angle, square) =
+        largest_rotated_square(&uv, &patch.triangles, super::square_domain::RESOLUTION)
+            .ok_or_else(|| ExtractError::DegeneratePatch {
+                faces,
+                message: "its projection onto its plane holds no square".into(),
+            })?;
+    progress(0.7);
+    let plane = fit.plane.rotated(angle);
+    let uv: Vec<Vec2> = uv.iter().map(|&q| rotate_into(q, angle)).collect();
+    let locator = Locator::new(&uv, &patch.triangles);
+    let channels = super::channels_for(patch);
+    let mut texels = TexelImage::new(size, size, channels);
+    texels
+        .data
+        .par_chunks_mut((size * channels) as usize)
+        .enumerate()
+        .for_each(|(row, out)| {
+            for col in 0..size {
+                let q = square.sample(size, row as u32, col);
+                let t = &mut out[(col * channels) as usize..((col + 1) * channels) as usize];
+                // The highest crossing (first triangle on ties), else the nearest triangle.
+                let mut best: Option<(f32, u32, [f32; 3])> = None;
+                for (f, w) in locator.containing(q) {
+                    let tri = patch.triangles[f as usize];
+                    let h = coords[tri[0] as usize].z * w[0]
+                        + coords[tri[1] as usize].z * w[1]
+                        + coords[tri[2] as usize].z * w[2];
+                    if best.is_none_or(|b| h > b.0) {
+                        best = Some((h, f, w));
+                    }
+                }
+                let hit = best.map(|(_, f, w)| (f, w)).or_else(|| locator.nearest(q));
+                let Some((f, w)) = hit else { continue };
+                let (p, c) = interpolate(patch, f, w);
+                t[2] = plane.coords(p).z;
+                if let Some(c) = c {
+                    t[3..6].copy_from_slice(&c);
+                }
+            }
+        });
+    // Mean height in a fixed order.
+    let c = channels as usize;
+    let mean =
+        texels.data.chunks(c).map(|t| t[2] as f64).sum::<f64>() / (size as f64 * size as f64);
+    for t in texels.data.chunks_mut(c) {
+        t[2] = (t[2] as f64 - mean) as f32;
+    }
+    progress(1.0);
+    Ok(PlanarExtraction {
+        texels,
+        // The heights are measured from the mean height.
+        plane: Plane {
+            origin: plane.origin + mean as f32 * plane.normal,
+            ..plane
+        },
+        square,
+        inliers: fit.inliers,
+    })
+}
+
+/// Largest difference between an image's r, g and b that still counts as grey.
+const GREY_TOLERANCE: f32 = 2.0 / 255.0;
+
+/// A greyscale image as a height field (§5): texels (0, 0, (grey − mean grey) ×
+/// `height_scale`), as many as the image has pixels. `path` names the image in errors; the
+/// image must be greyscale (r, g, b within 2/255 of each other) and at least `min_size`
+/// pixels on each side (the synthesis template's size).
+pub fn height_field_image(
+    path: &Path,
+    img: ImageView,
+    height_scale: f32,
+    min_size: u32,
+) -> Result<TexelImage, ExtractError> {
+    if !height_scale.is_finite() {
+        return Err(ExtractError::Params(format!(
+            "height_scale must be a finite number, got {height_scale}"
+        )));
+    }
+    if img.width < min_size.max(1) || img.height < min_size.max(1) {
+        return Err(ExtractError::TooSmall {
+            path: path.to_owned(),
+            width: img.width,
+            height: img.height,
+            min: min_size.max(1),
+        });
+    }
+    let expected = img.width as usize * img.height as usize;
+    if img.pixels.len() != expected {
+        return Err(ExtractError::Params(format!(
+            "{}: the image holds {} pixels, {expected} expected for {}×{}",
+            path.display(),
+            img.pixels.len(),
+            img.width,
+            img.height
+        )));
+    }
+    for (i, p) in img.pixels.iter().enumerate() {
+        let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        if (hi - lo).is_nan() || hi - lo > GREY_TOLERANCE {
+            return Err(ExtractError::NotGreyscale {
+                path: path.to_owned(),
+                x: i as u32 % img.width,
+                y: i as u32 / img.width,
+                r: p[0],
+                g: p[1],
+                b: p[2],
+            });
+        }
+    }
+    let grey = |p: &[f32; 4]| (p[0] as f64 + p[1] as f64 + p[2] as f64) / 3.0;
+    let mean = img.pixels.iter().map(grey).sum::<f64>() / expected as f64;
+    let mut texels = TexelImage::new(img.width, img.height, 3);
+    for (t, p) in texels.data.chunks_mut(3).zip(img.pixels) {
+        t[2] = ((grey(p) - mean) * height_scale as f64) as f32;
+    }
+    Ok(texels)
+}

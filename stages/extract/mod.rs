@@ -1,5 +1,355 @@
 //! Stage: extract: texture or features taken out of a shape.
+//!
+//! Geometric texture (Lai et al., "Geometric Texture Synthesis and Transfer via Geometry
+//! Images", §4.1): a sample model, or a region of it, becomes a [`TexelImage`] of geometry
+//! texels (dx, dy, dn), or (dx, dy, dn, r, g, b) when the sample has vertex colours (§4.1.4).
+//! Three extractors, chosen by [`ExtractParams::method`]:
+//!
+//! - [`bilateral_difference`]: smoothing and differencing on the patch's geometry image
+//!   (§4.1.1), for curved samples;
+//! - [`planar_ransac`]: a RANSAC plane, the patch parameterized with its boundary projected
+//!   onto it, sampled in the largest square of the parameter domain (§4.1.2);
+//! - [`height_field`]: heights above the same plane without a parameterization (§4.1.3), and
+//!   greyscale images read as height fields (§5, the leather example).
+//!
+//! [`sample_region::select_region`] cuts the sample patch out of the sample model first.
+
 pub mod bilateral_difference;
 pub mod height_field;
 pub mod planar_ransac;
 pub mod sample_region;
+pub mod square_domain;
+
+use crate::geom::Mesh;
+use crate::geom::geometry_image::{Frame, TexelImage};
+use crate::stages::parameterize::geometry_image::{GeometryImageParams, build_geometry_image};
+use glam::Vec3;
+use sample_region::Region;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// Why a texture could not be extracted. Messages name the input and what was wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum ExtractError {
+    /// A parameter out of range; the message names the field, its range and the value.
+    #[error("extract: {0}")]
+    Params(String),
+    #[error("the sample mesh has no triangles")]
+    EmptyMesh,
+    #[error(
+        "the sample region ({region}) holds no triangles: no triangle of the sample mesh has \
+         all three vertices inside it (the mesh's bounding box is {bounds})"
+    )]
+    EmptyRegion { region: String, bounds: String },
+    #[error("the sample mesh's vertex {vertex} has a non-finite position {position}")]
+    NonFinite { vertex: usize, position: String },
+    #[error(
+        "the sample patch ({faces} triangles) has no boundary: {method} extraction projects the \
+         patch's boundary onto its plane, so it needs an open patch (choose a region)"
+    )]
+    NoBoundary { faces: usize, method: &'static str },
+    /// A patch that cannot give a texture (zero area, no plane, no square in its domain).
+    #[error("the sample patch ({faces} triangles): {message}")]
+    DegeneratePatch { faces: usize, message: String },
+    #[error("the sample patch ({faces} triangles) could not be parameterized: {message}")]
+    Parameterize { faces: usize, message: String },
+    #[error("the sample patch's geometry image: {0}")]
+    GeometryImage(String),
+    #[error(
+        "{path}: pixel ({x}, {y}) is not grey (r, g, b = {r:.3}, {g:.3}, {b:.3}): a height-field \
+         image must be greyscale (channels equal within 2/255)"
+    )]
+    NotGreyscale {
+        path: PathBuf,
+        x: u32,
+        y: u32,
+        r: f32,
+        g: f32,
+        b: f32,
+    },
+    #[error(
+        "{path}: the image is {width}×{height}, a sample too small for the template: it needs \
+         at least {min}×{min} pixels"
+    )]
+    TooSmall {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+        min: u32,
+    },
+}
+
+/// Which §4.1 extractor to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExtractMethod {
+    /// §4.1.1 smoothing and differencing on the patch's geometry image: for curved samples.
+    Bilateral,
+    /// §4.1.2 planar parameter domain sampling: for almost planar samples whose relief may
+    /// overhang.
+    Planar,
+    /// §4.1.3 height-field sampling: for almost planar samples whose relief is a height field;
+    /// also the only method for greyscale images (§5).
+    HeightField,
+}
+
+/// The `[extract]` section of a config: what to cut out of the sample model and how to turn
+/// it into geometry texels. Fields that only one method reads say so.
+///
+/// ```toml
+/// [extract]
+/// method = "planar"
+/// size = 64
+/// region = { shape = "sphere", center = [0.1, 0.4, 0.0], radius = 0.05 }
+/// ```
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExtractParams {
+    /// "bilateral" (§4.1.1), "planar" (§4.1.2) or "height_field" (§4.1.3). Default: "planar".
+    pub method: ExtractMethod,
+    /// Texels per side of the extracted (square) texel image, 8..=1024. The bilateral method
+    /// samples the patch's geometry image at the smallest 2^k + 1 ≥ size and keeps its central
+    /// size × size samples. Image height fields keep the image's own size. Default: 64.
+    pub size: u32,
+    /// The part of the sample model to take the texture from (its largest connected piece is
+    /// used). Default: none (the whole model's largest connected piece).
+    pub region: Option<Region>,
+    /// Seed of the random surface samples and RANSAC draws. Default: 1.
+    pub seed: u64,
+    /// Bilateral: σ1 of eq. 2, in grid units (samples of the geometry image), 0.5..=size; the
+    /// window is cut at 3σ1. Larger values take larger bumps for texture. Default: size / 12.
+    pub sigma_grid: Option<f32>,
+    /// Bilateral: σ2 of eq. 3, in object units, > 0: positions farther apart than about 2σ2
+    /// hardly smooth each other. Default: 0.1 × the patch's size (the square root of its
+    /// area).
+    pub sigma_space: Option<f32>,
+    /// Planar and height field: RANSAC iterations (planes through 3 random surface samples),
+    /// 1..=1000000. Default: 500.
+    pub ransac_iterations: u32,
+    /// Planar and height field: RANSAC inlier distance δ, in object units, > 0. It should
+    /// exceed the texture's relief and stay below the distance of what is not on the plane.
+    /// Default: 0.01 × the patch's size (the square root of its area: 0.018 × the radius of a
+    /// flat disc).
+    pub inlier_distance: Option<f32>,
+    /// Planar and height field: how many area-uniform random surface samples RANSAC fits,
+    /// 16..=1000000. Default: 4096.
+    pub surface_samples: u32,
+    /// Image height fields (§5): object units of height per unit of grey (black 0, white 1),
+    /// finite, may be negative to invert the relief. Default: 0.02.
+    pub height_scale: f32,
+}
+
+impl Default for ExtractParams {
+    fn default() -> Self {
+        let r = planar_ransac::RansacParams::default();
+        ExtractParams {
+            method: ExtractMethod::Planar,
+            size: 64,
+            region: None,
+            seed: r.seed,
+            sigma_grid: None,
+            sigma_space: None,
+            ransac_iterations: r.iterations,
+            inlier_distance: r.inlier_distance,
+            surface_samples: r.samples,
+            height_scale: 0.02,
+        }
+    }
+}
+
+pub(crate) fn check_range<T: PartialOrd + std::fmt::Display>(
+    name: &str,
+    v: T,
+    lo: T,
+    hi: T,
+) -> Result<(), String> {
+    // Written so that NaN fails.
+    if v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(format!("{name} must be in {lo}..={hi}, got {v}"))
+    }
+}
+
+pub(crate) fn check_positive(name: &str, v: f32) -> Result<(), String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{name} must be a finite number > 0, got {v}"))
+    }
+}
+
+impl ExtractParams {
+    /// Checks every field; the error names the field, its range and the value.
+    pub fn validate(&self) -> Result<(), String> {
+        check_range("size", self.size, 8, 1024)?;
+        if let Some(r) = &self.region {
+            r.validate().map_err(|m| format!("region: {m}"))?;
+        }
+        self.bilateral().validate()?;
+        self.ransac().validate()?;
+        if !self.height_scale.is_finite() {
+            return Err(format!(
+                "height_scale must be a finite number, got {}",
+                self.height_scale
+            ));
+        }
+        Ok(())
+    }
+
+    /// The bilateral extractor's parameters.
+    pub fn bilateral(&self) -> bilateral_difference::BilateralParams {
+        bilateral_difference::BilateralParams {
+            sigma_grid: self.sigma_grid,
+            sigma_space: self.sigma_space,
+        }
+    }
+
+    /// The plane fit's parameters (planar and height-field extractors).
+    pub fn ransac(&self) -> planar_ransac::RansacParams {
+        planar_ransac::RansacParams {
+            iterations: self.ransac_iterations,
+            inlier_distance: self.inlier_distance,
+            samples: self.surface_samples,
+            seed: self.seed,
+        }
+    }
+}
+
+/// Number of texel channels for a sample with or without vertex colours.
+pub(crate) fn channels_for(mesh: &Mesh) -> u32 {
+    if mesh.colors.is_some() { 6 } else { 3 }
+}
+
+/// Fails on a vertex with a non-finite position that a triangle uses.
+pub(crate) fn check_finite(mesh: &Mesh) -> Result<(), ExtractError> {
+    for t in &mesh.triangles {
+        for &v in t {
+            let p =
+                mesh.positions
+                    .get(v as usize)
+                    .ok_or_else(|| ExtractError::DegeneratePatch {
+                        faces: mesh.triangles.len(),
+                        message: format!(
+                            "a triangle names vertex {v}, but there are {} vertices",
+                            mesh.positions.len()
+                        ),
+                    })?;
+            if !p.is_finite() {
+                return Err(ExtractError::NonFinite {
+                    vertex: v as usize,
+                    position: format!("{p}"),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A texture extracted from a sample mesh by [`extract_mesh_texture`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Extraction {
+    /// `size`×`size` texels (dx, dy, dn[, r, g, b]), row-major.
+    pub texels: TexelImage,
+    /// Per texel, the point of the base surface (the plane, or the smoothed patch) it is
+    /// measured from, and the frame it is measured in: the sample's surface point is
+    /// `base + dx·frame.x + dy·frame.y + dn·frame.n` (§4.4 applied to the base itself).
+    pub base: Vec<Vec3>,
+    pub frames: Vec<Frame>,
+    /// Vertices and triangles of the sample patch cut out of the mesh.
+    pub patch_vertices: usize,
+    pub patch_faces: usize,
+}
+
+/// §4.1 on a sample mesh: cuts the sample patch out with [`ExtractParams::region`]
+/// ([`sample_region::select_region`]) and runs [`ExtractParams::method`] on it.
+///
+/// The bilateral method builds the patch's geometry image at the smallest valid resolution
+/// 2^k + 1 ≥ `size` (one coarse level: the sample needs no synthesis pyramid) and keeps the
+/// central `size`×`size` texels (for size 64, all but the last row and column of the 65×65
+/// image). `progress` receives fractions of the work done.
+pub fn extract_mesh_texture(
+    mesh: &Mesh,
+    params: &ExtractParams,
+    progress: &(dyn Fn(f32) + Sync),
+) -> Result<Extraction, ExtractError> {
+    params.validate().map_err(ExtractError::Params)?;
+    let patch = sample_region::select_region(mesh, params.region.as_ref())?;
+    let (patch_vertices, patch_faces) = (patch.positions.len(), patch.triangles.len());
+    let size = params.size;
+    let planar = |e: planar_ransac::PlanarExtraction| {
+        let frame = Frame {
+            x: e.plane.e1,
+            y: e.plane.e2,
+            n: e.plane.normal,
+        };
+        let base = (0..size * size)
+            .map(|k| e.sample_point(k / size, k % size))
+            .collect();
+        Extraction {
+            base,
+            frames: vec![frame; (size * size) as usize],
+            texels: e.texels,
+            patch_vertices,
+            patch_faces,
+        }
+    };
+    match params.method {
+        ExtractMethod::Planar => {
+            let e = planar_ransac::planar_extract(&patch, size, &params.ransac(), progress)?;
+            Ok(planar(e))
+        }
+        ExtractMethod::HeightField => {
+            let e = height_field::mesh_height_field(&patch, size, &params.ransac(), progress)?;
+            Ok(planar(e))
+        }
+        ExtractMethod::Bilateral => {
+            let gi_size = (size - 1).next_power_of_two().max(4) + 1;
+            let gi_params = GeometryImageParams {
+                size: gi_size,
+                coarse_levels: 1,
+                ..GeometryImageParams::default()
+            };
+            let build = build_geometry_image(&patch, &gi_params, &|f| progress(0.6 * f))
+                .map_err(|e| ExtractError::GeometryImage(e.to_string()))?;
+            let colors = patch.colors.as_ref().map(|c| {
+                bilateral_difference::geometry_image_colors(
+                    gi_size,
+                    &build.disk,
+                    &build.disk_uv,
+                    &build.original_vertex,
+                    c,
+                )
+            });
+            let e = bilateral_difference::bilateral_difference(
+                &build.image,
+                colors.as_deref(),
+                &params.bilateral(),
+                &|f| progress(0.6 + 0.4 * f),
+            )?;
+            // The central size×size texels.
+            let off = (gi_size - size) / 2;
+            let channels = e.texels.channels;
+            let mut texels = TexelImage::new(size, size, channels);
+            let mut base = Vec::with_capacity((size * size) as usize);
+            let mut frames = Vec::with_capacity((size * size) as usize);
+            for i in 0..size {
+                for j in 0..size {
+                    let k = ((i + off) * gi_size + j + off) as usize;
+                    texels
+                        .texel_mut(j, i)
+                        .copy_from_slice(e.texels.texel(j + off, i + off));
+                    base.push(e.smoothed[k]);
+                    frames.push(e.frames[k]);
+                }
+            }
+            Ok(Extraction {
+                texels,
+                base,
+                frames,
+                patch_vertices,
+                patch_faces,
+            })
+        }
+    }
+}
