@@ -45,8 +45,8 @@ pub enum CutError {
 
 /// Roots tried by the tree-cotree construction (the shortest cut wins).
 const ROOT_CANDIDATES: usize = 6;
-/// At most this many path replacements when straightening a cut.
-const STRAIGHTEN_CHANGES: usize = 64;
+/// At most this many passes over the cut paths when straightening a cut.
+const STRAIGHTEN_PASSES: usize = 8;
 
 /// A cut graph on the edges of a [`HalfEdgeMesh`].
 #[derive(Debug, Clone)]
@@ -422,7 +422,7 @@ pub fn cut_graph(
             is_cut[e] = true;
         }
     }
-    straighten(he, &aug.len[..ne], &mut is_cut, STRAIGHTEN_CHANGES);
+    straighten(he, &aug.len[..ne], &mut is_cut, STRAIGHTEN_PASSES);
     // Extremity cuts: shortest paths from the cut (and the boundary) to the farthest vertex.
     let mut extremities = Vec::new();
     let mut on_cut = vec![false; nv];
@@ -582,9 +582,9 @@ fn cut_paths(he: &HalfEdgeMesh, is_cut: &[bool], len: &[f64]) -> Vec<CutPath> {
 /// reopens it into a disk; the replacement is kept when the total cut is
 /// shorter and the result checks out as a disk. This merges cut paths that a shortest-path
 /// tree leaves running side by side (thin strips between them would be crushed by the map to
-/// the square) and shortens the cut. Longest paths are tried first; at most `max_changes`
-/// replacements.
-fn straighten(he: &HalfEdgeMesh, len: &[f64], is_cut: &mut Vec<bool>, max_changes: usize) {
+/// the square) and shortens the cut. Each pass tries every path once, longest first; passes
+/// repeat while they change something, at most `max_passes`.
+fn straighten(he: &HalfEdgeMesh, len: &[f64], is_cut: &mut Vec<bool>, max_passes: usize) {
     let total = |c: &[bool]| -> f64 {
         c.iter()
             .enumerate()
@@ -592,8 +592,18 @@ fn straighten(he: &HalfEdgeMesh, len: &[f64], is_cut: &mut Vec<bool>, max_change
             .map(|(e, _)| len[e])
             .sum()
     };
-    let mut current = total(is_cut);
-    for _ in 0..max_changes {
+    let mut scratch = CrossingScratch::new(he);
+    // A path that could not be improved is not retried: other replacements rarely open a
+    // shortcut for it, and the search is the expensive part.
+    let mut failed = std::collections::HashSet::new();
+    // Every replacement keeps a disk (see above), so the disk test runs once per pass; should
+    // it ever fail, the pass is redone testing each replacement.
+    let mut checked = false;
+    let mut pass = 0;
+    while pass < max_passes {
+        let before = is_cut.clone();
+        let failed_before = failed.clone();
+        let mut current = total(is_cut);
         let mut paths = cut_paths(he, is_cut, len);
         paths.sort_by(|p, q| {
             q.length
@@ -602,12 +612,23 @@ fn straighten(he: &HalfEdgeMesh, len: &[f64], is_cut: &mut Vec<bool>, max_change
         });
         let mut changed = false;
         for p in &paths {
+            let key = blake3::hash(bytemuck::cast_slice(&p.edges));
+            // Earlier replacements in this pass may have removed some of its edges. (A path
+            // whose ends stopped being nodes is still fine: any stretch of a cut path whose
+            // inner vertices have cut degree 2 opens the same kind of annulus.)
+            if failed.contains(&key) || p.edges.iter().any(|&e| !is_cut[e as usize]) {
+                continue;
+            }
             let mut rest = is_cut.clone();
             for &e in &p.edges {
                 rest[e as usize] = false;
             }
             let ends = ((p.a, p.edges[0]), (p.b, *p.edges.last().unwrap()));
-            let Some(route) = shortest_crossing(he, len, &rest, ends.0, ends.1) else {
+            let bound = p.length * (1.0 - 1e-9);
+            let Some(route) =
+                shortest_crossing(he, len, &rest, ends.0, ends.1, bound, &mut scratch)
+            else {
+                failed.insert(key);
                 continue;
             };
             let mut candidate = rest;
@@ -617,104 +638,188 @@ fn straighten(he: &HalfEdgeMesh, len: &[f64], is_cut: &mut Vec<bool>, max_change
                 }
             }
             let l = total(&candidate);
-            if l < current * (1.0 - 1e-9) && cuts_to_disk(he, &candidate) {
+            if l < current * (1.0 - 1e-9) && (!checked || cuts_to_disk(he, &candidate)) {
                 *is_cut = candidate;
                 current = l;
                 changed = true;
-                break;
+            } else {
+                failed.insert(key);
             }
+        }
+        if changed && !checked && !cuts_to_disk(he, is_cut) {
+            *is_cut = before;
+            failed = failed_before;
+            checked = true;
+            continue;
         }
         if !changed {
             break;
         }
+        pass += 1;
+    }
+}
+
+/// Scratch space for [`shortest_crossing`], reused across calls: per corner (face
+/// half-edge), the tentative distance and the parent (wedge, edge) of the wedge it names.
+struct CrossingScratch {
+    dist: Vec<f64>,
+    parent: Vec<(u32, u32)>,
+    touched: Vec<u32>,
+    /// Per vertex, its smallest outgoing face half-edge (the name of an uncut ring's wedge).
+    ring_min: Vec<u32>,
+    /// Per vertex, whether its ring is split (by the cut or the boundary).
+    split: Vec<bool>,
+}
+
+impl CrossingScratch {
+    fn new(he: &HalfEdgeMesh) -> Self {
+        let n = 3 * he.face_count();
+        let mut ring_min = vec![NONE; he.vertex_count()];
+        for h in 0..n as u32 {
+            let v = he.origin(h) as usize;
+            ring_min[v] = ring_min[v].min(h);
+        }
+        CrossingScratch {
+            dist: vec![f64::INFINITY; n],
+            parent: vec![(NONE, NONE); n],
+            touched: Vec::new(),
+            ring_min,
+            split: vec![false; he.vertex_count()],
+        }
+    }
+
+    fn reset(&mut self) {
+        for &w in &self.touched {
+            self.dist[w as usize] = f64::INFINITY;
+            self.parent[w as usize] = (NONE, NONE);
+        }
+        self.touched.clear();
     }
 }
 
 /// The shortest path on the surface cut along `cut` between the wedges of `a` and `b` that
 /// hold the (uncut) edges `ea` at a and `eb` at b, where edges on the cut surface's boundary
 /// are free; returned as edges of the input (some may be cut or boundary edges already).
-/// Ties go to smaller wedge numbers.
+/// `None` unless some path costs less than `bound`.
+///
+/// The cut surface is explored lazily: a wedge is named by its first corner counter-clockwise
+/// (the outgoing half-edge just after a separating edge, or the smallest of a whole ring), so
+/// the search touches only the region within `bound` of a.
 fn shortest_crossing(
     he: &HalfEdgeMesh,
     len: &[f64],
     cut: &[bool],
     (a, ea): (u32, u32),
     (b, eb): (u32, u32),
+    bound: f64,
+    scratch: &mut CrossingScratch,
 ) -> Option<Vec<u32>> {
-    let (cv, ov) = split_wedges(he, cut);
-    let nw = ov.len();
-    // Wedge adjacency from the face half-edges, both directions: (to, half-edge).
-    let mut start = vec![0u32; nw + 1];
-    for h in 0..cv.len() {
-        start[cv[h] as usize + 1] += 1;
-        start[cv[he.next(h as u32) as usize] as usize + 1] += 1;
+    let separates = |h: u32| cut[he.edge(h) as usize] || he.is_boundary_half_edge(he.twin(h));
+    let ring_min = std::mem::take(&mut scratch.ring_min);
+    let mut split = std::mem::take(&mut scratch.split);
+    for v in 0..he.vertex_count() as u32 {
+        split[v as usize] = he.is_boundary_vertex(v);
     }
-    for i in 0..nw {
-        start[i + 1] += start[i];
+    for e in 0..he.edge_count() as u32 {
+        if cut[e as usize] {
+            let (x, y) = he.edge_vertices(e);
+            split[x as usize] = true;
+            split[y as usize] = true;
+        }
     }
-    let mut fill = start.clone();
-    let mut adj = vec![(0u32, 0u32); start[nw] as usize];
-    for h in 0..cv.len() as u32 {
-        let (x, y) = (cv[h as usize], cv[he.next(h) as usize]);
-        adj[fill[x as usize] as usize] = (y, h);
-        fill[x as usize] += 1;
-        adj[fill[y as usize] as usize] = (x, h);
-        fill[y as usize] += 1;
-    }
-    let cost = |h: u32| {
-        let e = he.edge(h);
-        if cut[e as usize] || he.is_boundary_half_edge(he.twin(h)) {
-            0.0
-        } else {
-            len[e as usize]
+    // The wedge of the corner `h` (a face half-edge leaving its vertex).
+    let wedge = |h: u32| -> u32 {
+        if !split[he.origin(h) as usize] {
+            return ring_min[he.origin(h) as usize];
+        }
+        let mut g = h;
+        loop {
+            if separates(g) {
+                return g;
+            }
+            // The outgoing half-edge before g, clockwise (g's edge does not separate, so
+            // twin(g) has a face).
+            g = he.next(he.twin(g));
+            if g == h {
+                // A whole ring with no separator: its smallest corner.
+                return ring_min[he.origin(h) as usize];
+            }
         }
     };
-    // The wedge of v at a corner next to edge e (both sides of an uncut edge are one wedge).
-    let wedge_at = |v: u32, e: u32| {
+    let corner_at = |v: u32, e: u32| {
         let h = he.edge_half_edge(e);
         let h = if he.origin(h) == v { h } else { he.twin(h) };
-        let h = if he.is_boundary_half_edge(h) {
+        if he.is_boundary_half_edge(h) {
             he.next(he.twin(h))
         } else {
             h
-        };
-        cv[h as usize]
+        }
     };
-    let (source, target) = (wedge_at(a, ea), wedge_at(b, eb));
+    let (source, target) = (wedge(corner_at(a, ea)), wedge(corner_at(b, eb)));
     if source == target {
+        scratch.ring_min = ring_min;
+        scratch.split = split;
         return None;
     }
-    let mut dist = vec![f64::INFINITY; nw];
-    let mut parent = vec![NONE; nw];
+    scratch.reset();
+    scratch.dist[source as usize] = 0.0;
+    scratch.touched.push(source);
     let mut heap = BinaryHeap::new();
-    dist[source as usize] = 0.0;
     heap.push(Reverse((0u64, source)));
-    let mut end = None;
+    let mut found = false;
     while let Some(Reverse((bits, w))) = heap.pop() {
         let d = f64::from_bits(bits);
-        if d > dist[w as usize] {
+        if d >= bound {
+            break;
+        }
+        if d > scratch.dist[w as usize] {
             continue;
         }
         if w == target {
-            end = Some(w);
+            found = true;
             break;
         }
-        for &(x, h) in &adj[start[w as usize] as usize..start[w as usize + 1] as usize] {
-            let nd = d + cost(h);
-            if nd < dist[x as usize] {
-                dist[x as usize] = nd;
-                parent[x as usize] = h;
-                heap.push(Reverse((nd.to_bits(), x)));
+        // The wedge's corners, counter-clockwise from its first.
+        let mut h = w;
+        loop {
+            // Along edge h to its head (corner next(h)), and along prev(h) to its tail
+            // (corner prev(h)).
+            for (g, corner) in [(h, he.next(h)), (he.prev(h), he.prev(h))] {
+                let e = he.edge(g);
+                let cost = if cut[e as usize] || he.is_boundary_edge(e) {
+                    0.0
+                } else {
+                    len[e as usize]
+                };
+                let x = wedge(corner);
+                let nd = d + cost;
+                if nd < scratch.dist[x as usize] {
+                    if scratch.dist[x as usize] == f64::INFINITY {
+                        scratch.touched.push(x);
+                    }
+                    scratch.dist[x as usize] = nd;
+                    scratch.parent[x as usize] = (w, e);
+                    heap.push(Reverse((nd.to_bits(), x)));
+                }
             }
+            let n = he.twin(he.prev(h));
+            if n == w || he.is_boundary_half_edge(n) || separates(n) {
+                break;
+            }
+            h = n;
         }
     }
-    let mut w = end?;
+    scratch.ring_min = ring_min;
+    scratch.split = split;
+    if !found {
+        return None;
+    }
     let mut route = Vec::new();
-    while parent[w as usize] != NONE {
-        let h = parent[w as usize];
-        route.push(he.edge(h));
-        let (x, y) = (cv[h as usize], cv[he.next(h) as usize]);
-        w = if x == w { y } else { x };
+    let mut w = target;
+    while w != source {
+        let (p, e) = scratch.parent[w as usize];
+        route.push(e);
+        w = p;
     }
     Some(route)
 }
@@ -940,7 +1045,7 @@ mod tests {
             .collect();
         let total = |c: &[bool]| -> f64 { (0..c.len()).filter(|&e| c[e]).map(|e| len[e]).sum() };
         let before = total(&is_cut);
-        straighten(&he, &len, &mut is_cut, 16);
+        straighten(&he, &len, &mut is_cut, 8);
         let after = total(&is_cut);
         let tube = m as f64 * 2.0 * 0.5 * (std::f64::consts::PI / m as f64).sin();
         let inner = n as f64 * 2.0 * 1.5 * (std::f64::consts::PI / n as f64).sin();
