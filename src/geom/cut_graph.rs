@@ -1075,7 +1075,7 @@ mod tests {
             cut.length
         );
         let d = check_disk(&m, &cut);
-        assert!(d.mate.iter().any(|&x| x == NONE));
+        assert!(d.mate.contains(&NONE));
     }
 
     #[test]
