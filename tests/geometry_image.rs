@@ -408,6 +408,24 @@ fn a_non_manifold_edge_is_an_error_naming_it() {
 }
 
 #[test]
+fn vertices_in_no_triangle_are_ignored() {
+    // An unused vertex first and one last, far away: the result is the knot's, renumbered.
+    let k = load("tests/data/meshes/knot.off");
+    let mut p = vec![Vec3::splat(1e6)];
+    p.extend_from_slice(&k.positions);
+    p.push(Vec3::splat(-1e6));
+    let t = k.triangles.iter().map(|x| x.map(|v| v + 1)).collect();
+    let b = build(&Mesh::new(p, t), &params65());
+    let plain = &corpus()[1].2;
+    assert!(b.image.positions == plain.image.positions);
+    assert!(
+        b.original_vertex
+            .iter()
+            .all(|&v| v != 0 && v != k.vertex_count() as u32 + 1)
+    );
+}
+
+#[test]
 fn several_components_are_an_error_naming_the_count() {
     let k = load("tests/data/meshes/knot.off");
     let mut p = k.positions.clone();
