@@ -17,13 +17,35 @@ fn load(rel: &str) -> Mesh {
     texsyn::geom::io::read_mesh(&root().join(rel)).unwrap()
 }
 
-/// The corpus: (path, genus, closed).
-const CORPUS: [(&str, u32, bool); 4] = [
+/// The corpus: (path, genus, closed). The last entry is derived from the knot (see
+/// [`holed_knot`]).
+const CORPUS: [(&str, u32, bool); 5] = [
     ("configs/assets/cow.obj", 0, true),
     ("tests/data/meshes/knot.off", 1, true),
     ("tests/data/meshes/elephant.off", 3, true),
     ("tests/data/meshes/mushroom.off", 0, false),
+    ("knot with two holes", 1, false),
 ];
+
+/// The knot with the triangles near two of its vertices removed: genus 1 with two boundary
+/// loops, so the cut must both open the handle and reach both loops.
+fn holed_knot() -> Mesh {
+    let k = load("tests/data/meshes/knot.off");
+    let centres = [k.positions[0], k.positions[k.vertex_count() / 2]];
+    let r = 3.0 * k.mean_edge_length();
+    let tris = k
+        .triangles
+        .iter()
+        .copied()
+        .filter(|t| {
+            !centres.iter().any(|c| {
+                t.iter()
+                    .all(|&v| (k.positions[v as usize] - *c).length() < r)
+            })
+        })
+        .collect();
+    Mesh::new(k.positions.clone(), tris)
+}
 
 fn params65() -> GeometryImageParams {
     GeometryImageParams {
@@ -44,7 +66,11 @@ fn corpus() -> &'static Vec<(String, Mesh, GeometryImageBuild)> {
         CORPUS
             .iter()
             .map(|(path, _, _)| {
-                let m = load(path);
+                let m = if path.ends_with("two holes") {
+                    holed_knot()
+                } else {
+                    load(path)
+                };
                 let b = build(&m, &params65());
                 (path.to_string(), m, b)
             })
@@ -59,6 +85,10 @@ fn cut_meshes_are_disks_and_the_inputs_have_their_known_genus() {
         assert_eq!(he.components().len(), 1, "{path}");
         assert_eq!(he.components()[0].genus, *genus as i64, "{path}");
         assert_eq!(he.boundary_loops().is_empty(), *closed, "{path}");
+        if path.ends_with("two holes") {
+            assert_eq!(he.boundary_loops().len(), 2);
+            assert_eq!(b.boundary_loops, 2);
+        }
         assert_eq!(b.genus, *genus, "{path}");
         let dhe = HalfEdgeMesh::new(&b.disk).unwrap();
         assert_eq!(dhe.components().len(), 1, "{path}");
@@ -298,6 +328,37 @@ fn border_samples_agree_with_the_disk_parameterization() {
 }
 
 #[test]
+fn the_grid_has_no_spikes() {
+    // Neighbouring samples are neighbours on the surface: at the paper's size 257 no
+    // 4-neighbour pair is farther apart than a small fraction of the model (a spike or a
+    // sample interpolated in the wrong triangle would be), and the largest gap is within a
+    // small multiple of the median.
+    for (path, mesh, _) in corpus() {
+        let b = build(mesh, &GeometryImageParams::default());
+        let gi = &b.image;
+        let n = gi.n as usize;
+        let (lo, hi) = mesh.bounds();
+        let diag = (hi - lo).length();
+        let mut d = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                let p = gi.positions[i * n + j];
+                if j + 1 < n {
+                    d.push((p - gi.positions[i * n + j + 1]).length());
+                }
+                if i + 1 < n {
+                    d.push((p - gi.positions[(i + 1) * n + j]).length());
+                }
+            }
+        }
+        d.sort_by(|a, b| a.total_cmp(b));
+        let (median, max) = (d[d.len() / 2], d[d.len() - 1]);
+        assert!(max < 0.1 * diag, "{path}: gap {max} vs diagonal {diag}");
+        assert!(max < 30.0 * median, "{path}: gap {max} vs median {median}");
+    }
+}
+
+#[test]
 fn the_knot_cut_is_short() {
     let (_, mesh, b) = &corpus()[1];
     let total: f64 = {
@@ -343,6 +404,24 @@ fn a_non_manifold_edge_is_an_error_naming_it() {
     assert!(
         msg.contains(&format!("vertices {} and {}", a.min(c), a.max(c))),
         "{msg}"
+    );
+}
+
+#[test]
+fn vertices_in_no_triangle_are_ignored() {
+    // An unused vertex first and one last, far away: the result is the knot's, renumbered.
+    let k = load("tests/data/meshes/knot.off");
+    let mut p = vec![Vec3::splat(1e6)];
+    p.extend_from_slice(&k.positions);
+    p.push(Vec3::splat(-1e6));
+    let t = k.triangles.iter().map(|x| x.map(|v| v + 1)).collect();
+    let b = build(&Mesh::new(p, t), &params65());
+    let plain = &corpus()[1].2;
+    assert!(b.image.positions == plain.image.positions);
+    assert!(
+        b.original_vertex
+            .iter()
+            .all(|&v| v != 0 && v != k.vertex_count() as u32 + 1)
     );
 }
 
@@ -477,21 +556,32 @@ fn previews_and_timings() {
             files.push(dir.join(name));
         }
     }
-    for f in files {
-        let m = texsyn::geom::io::read_mesh(&f).unwrap();
+    let mut inputs: Vec<(String, Mesh)> = files
+        .iter()
+        .map(|f| {
+            let stem = f.file_stem().unwrap().to_string_lossy().to_string();
+            (stem, texsyn::geom::io::read_mesh(f).unwrap())
+        })
+        .collect();
+    inputs.insert(2, ("holed_knot".to_string(), holed_knot()));
+    for (stem, m) in inputs {
         let extremity_cuts: u32 = std::env::var("TEXSYN_GI_EXTREMITY")
             .ok()
             .and_then(|s| s.parse().ok())
             .unwrap_or(0);
+        let stretch_iterations: u32 = std::env::var("TEXSYN_GI_STRETCH")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(8);
         let p = GeometryImageParams {
             size,
             extremity_cuts,
+            stretch_iterations,
             ..Default::default()
         };
         let t0 = std::time::Instant::now();
         let b = build_geometry_image(&m, &p, &|_| {}).unwrap();
         let dt = t0.elapsed();
-        let stem = f.file_stem().unwrap().to_string_lossy().to_string();
         println!(
             "{stem}: {} vertices, genus {}, {:.3} s, cut length {:.4} ({} edges), stretch {:.3} -> {:.3} ({} iterations), flipped {}",
             m.vertex_count(),

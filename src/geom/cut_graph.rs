@@ -452,7 +452,8 @@ pub fn cut_graph(
         }
     }
     let edges: Vec<u32> = (0..ne as u32).filter(|&e| is_cut[e as usize]).collect();
-    let length = edges.iter().map(|&e| aug.len[e as usize]).sum();
+    // A fold from +0 (an empty float sum is -0).
+    let length = edges.iter().fold(0.0, |acc, &e| acc + aug.len[e as usize]);
     Ok(CutGraph {
         is_cut,
         edges,
@@ -1075,7 +1076,7 @@ mod tests {
             cut.length
         );
         let d = check_disk(&m, &cut);
-        assert!(d.mate.iter().any(|&x| x == NONE));
+        assert!(d.mate.contains(&NONE));
     }
 
     #[test]

@@ -415,7 +415,7 @@ pub struct StretchReduction {
     /// Quality of the input map and of `uv`.
     pub before: MapQuality,
     pub after: MapQuality,
-    /// Iterations that improved the map (the loop stops at the first that does not).
+    /// The iteration that produced the best map (0: the input map).
     pub iterations: u32,
 }
 
@@ -445,9 +445,11 @@ pub fn reduce_stretch(
         after: before,
         iterations: 0,
     };
+    let mut cur_uv = best.uv.clone();
+    let mut cur_w = best.weights.clone();
     for it in 0..iterations {
-        let sigma = vertex_stretch(mesh, &best.uv);
-        let mut w = best.weights.clone();
+        let sigma = vertex_stretch(mesh, &cur_uv);
+        let mut w = cur_w.clone();
         for v in 0..adj.vertex_count() {
             let range = adj.offsets[v] as usize..adj.offsets[v + 1] as usize;
             for k in range.clone() {
@@ -460,13 +462,16 @@ pub fn reduce_stretch(
         }
         let uv = solver.solve(mesh, &w)?;
         let q = map_quality(mesh, &uv);
-        if !q.better_than(&best.after) {
-            break;
+        if q.better_than(&best.after) {
+            best.uv = uv.clone();
+            best.weights = w.clone();
+            best.after = q;
+            best.iterations = it + 1;
         }
-        best.uv = uv;
-        best.weights = w;
-        best.after = q;
-        best.iterations = it + 1;
+        // Carry on from this iterate even when it is worse: the reweighting often overshoots
+        // once and then improves on the best so far.
+        cur_uv = uv;
+        cur_w = w;
     }
     Ok(best)
 }
