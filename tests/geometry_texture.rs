@@ -252,20 +252,30 @@ fn a_cut_folded_at_a_corner_gives_identical_texels_with_turned_frames() {
 
 #[test]
 fn output_statistics_are_close_to_the_sample() {
-    for (name, sample) in [("bumps", bumps(64, 7, false)), ("stripes", stripes(64, 9.0))] {
+    for (name, sample) in [
+        ("bumps", bumps(64, 7, false)),
+        ("stripes", stripes(64, 9.0)),
+    ] {
         let v = variants(&sample);
         let n = 65;
         let out = synth(&flat(n), &field(n, Vec2::Y, 1.0), &v, 0);
         let (sm, ss) = mean_std(&channel(&sample, 2));
         let (om, os) = mean_std(&channel(&out, 2));
-        assert!((om - sm).abs() < 0.15 * ss, "{name}: mean {om} vs {sm} (std {ss})");
+        assert!(
+            (om - sm).abs() < 0.15 * ss,
+            "{name}: mean {om} vs {sm} (std {ss})"
+        );
         assert!((os / ss - 1.0).abs() < 0.2, "{name}: std {os} vs {ss}");
         // Bumps: not a few texels copied over and over, many distinct values.
         if name == "bumps" {
             let mut vals = channel(&out, 2);
             vals.sort_by(f32::total_cmp);
             vals.dedup();
-            assert!(vals.len() > 1000, "{name}: only {} distinct values", vals.len());
+            assert!(
+                vals.len() > 1000,
+                "{name}: only {} distinct values",
+                vals.len()
+            );
         }
     }
 }
@@ -277,7 +287,10 @@ fn stripes_turn_with_the_field_and_so_do_their_vectors() {
     let gi = flat(n);
     let up = synth(&gi, &field(n, Vec2::Y, 1.0), &v, 0);
     let (ex, ey) = gradient_energy(&up);
-    assert!(ex > 6.0 * ey, "up: stripes across x expected, energies {ex} {ey}");
+    assert!(
+        ex > 6.0 * ey,
+        "up: stripes across x expected, energies {ex} {ey}"
+    );
     // The sample's dx (0.3 cos) stays in dx.
     let (_, sx) = mean_std(&channel(&up, 0));
     let (_, sy) = mean_std(&channel(&up, 1));
@@ -287,7 +300,10 @@ fn stripes_turn_with_the_field_and_so_do_their_vectors() {
     // the stripes run across y and (dx, dy) = (c, 0) becomes (0, −c).
     let side = synth(&gi, &field(n, Vec2::X, 1.0), &v, 0);
     let (ex, ey) = gradient_energy(&side);
-    assert!(ey > 6.0 * ex, "side: stripes across y expected, energies {ex} {ey}");
+    assert!(
+        ey > 6.0 * ex,
+        "side: stripes across y expected, energies {ex} {ey}"
+    );
     let (_, sx) = mean_std(&channel(&side, 0));
     let (_, sy) = mean_std(&channel(&side, 1));
     assert!(sy > 4.0 * sx, "turned vectors: dx {sx} dy {sy}");
@@ -408,8 +424,14 @@ fn too_small_samples_and_bad_inputs_are_errors() {
     let v = variants(&stripes(48, 6.0));
     let p = GeometrySynthParams::default();
     // 3 levels need a side 4k + 1.
-    let e = synthesize_geometry_texture(&flat(31), &field(31, Vec2::Y, 1.0), &v.as_ref(), &p, &|_| {})
-        .unwrap_err();
+    let e = synthesize_geometry_texture(
+        &flat(31),
+        &field(31, Vec2::Y, 1.0),
+        &v.as_ref(),
+        &p,
+        &|_| {},
+    )
+    .unwrap_err();
     assert!(e.contains("side 31"), "{e}");
     let mut f = field(33, Vec2::Y, 1.0);
     f.rel_scale[40] = 0.0;
@@ -472,7 +494,10 @@ fn previews() {
     }
     let n = 129;
     let nn = (n * n) as usize;
-    for (name, sample) in [("stripes", stripes(64, 10.0)), ("bumps", bumps(64, 12, false))] {
+    for (name, sample) in [
+        ("stripes", stripes(64, 10.0)),
+        ("bumps", bumps(64, 12, false)),
+    ] {
         save(&sample, &format!("/tmp/gt_{name}_sample.png"));
         let v = variants(&sample);
         let out = synth(&cylinder(n), &field(n, Vec2::Y, 1.0), &v, 1);

@@ -549,7 +549,10 @@ mod tests {
         let mut scratch = Vec::new();
         for t in 0..40 {
             let q = [t as f32 * 0.25, 5.0 - t as f32 * 0.1, (t % 7) as f32];
-            assert_eq!(view.nearest_approx(&q, 4, 0.0, |_| true), tree.nearest(&q, 4, |_| true));
+            assert_eq!(
+                view.nearest_approx(&q, 4, 0.0, |_| true),
+                tree.nearest(&q, 4, |_| true)
+            );
             let one = view.nearest1_approx(&q, 0.0, &mut scratch);
             assert_eq!(one, tree.nearest(&q, 1, |_| true).first().copied());
         }

@@ -27,13 +27,18 @@
 //!   Levoy 2000), when there is a coarser level.
 //!
 //! Choices the paper leaves open:
-//! - Only texels whose whole template lies inside the level are candidates (no padding, so
-//!   no invented neighbourhoods); [`check_sample_size`] rejects samples that leave a level of
-//!   some variant without candidates and names the size needed.
 //! - The boundary template is analysed here, with the rest of the sample (its features and
-//!   trees are part of the cached artifact), rather than per synthesis run: building 2 × 24 × 3
-//!   PCA bases and trees took longer than a whole synthesis. Its size is therefore a parameter
+//!   trees are part of the cached artifact), rather than per synthesis run: building the 24 × 3
+//!   extra PCA bases and trees takes longer than a whole synthesis. Its size is therefore a parameter
 //!   of this stage, not of synthesis.
+//! - The coarser level's taps are multiplied by `coarse_weight` (default 0.3, see the field):
+//!   with equal weights the finer levels copied the oversized blobs that a 64² sample's tiny
+//!   coarse levels produce.
+//! - Only texels whose whole template lies inside the level are candidates (no padding, so no
+//!   invented neighbourhoods). [`check_sample_size`] rejects samples that leave a level of some
+//!   variant without candidates and names the size needed; [`build_texel_variants`] warns when
+//!   one keeps fewer than [`FEW_CANDIDATES`] (a 64² sample does, at the third level of its
+//!   scaled-down variants; 127² is enough for the defaults).
 //! - Feature vectors weight geometric channels (dx, dy, dn) equally and colour channels (r, g, b)
 //!   by `color_weight · σ_geometry / σ_colour` (root-mean-square standard deviations over the
 //!   sample), so colour and geometry count alike whatever their units. The weights are stored
@@ -111,7 +116,9 @@ fn in_range<T: PartialOrd + std::fmt::Display>(
     if v >= lo && v <= hi {
         Ok(())
     } else {
-        Err(format!("texel variants: {name} must be in {lo}..={hi}, got {v}"))
+        Err(format!(
+            "texel variants: {name} must be in {lo}..={hi}, got {v}"
+        ))
     }
 }
 
@@ -426,7 +433,8 @@ impl<'a> TexelVariantsRef<'a> {
         let tree_nodes: &[KdNode] = arr(&get, "tree_nodes")?;
         // The layout is the canonical one (arrays concatenated in order, nothing between or
         // after), so a metadata entry that disagrees with its neighbours is caught.
-        let layout_err = |what: &str| format!("texel variants: {what} is not where the layout puts it");
+        let layout_err =
+            |what: &str| format!("texel variants: {what} is not where the layout puts it");
         let mut next_texel = 0u64;
         let mut levels = Vec::with_capacity(meta.levels.len());
         for (i, lm) in meta.levels.iter().enumerate() {
@@ -461,8 +469,7 @@ impl<'a> TexelVariantsRef<'a> {
             let with_coarse = vl % nl + 1 < nl;
             let want = feature_dim(kind, side, with_coarse, c);
             let what = format!("feature set {i}");
-            if sm.dim_in as usize != want || sm.dims == 0 || sm.dims > sm.dim_in || sm.count == 0
-            {
+            if sm.dim_in as usize != want || sm.dims == 0 || sm.dims > sm.dim_in || sm.count == 0 {
                 return Err(format!(
                     "texel variants: {what} has dimensions {}→{} and {} candidates (raw length {want} expected)",
                     sm.dim_in, sm.dims, sm.count
@@ -487,7 +494,9 @@ impl<'a> TexelVariantsRef<'a> {
             let cs = sub(centres, sm.centre_offset, sm.count as u64, &what)?;
             let texel_count = lv.width * lv.height;
             if cs.iter().any(|&x| x >= texel_count) {
-                return Err(format!("texel variants: {what} has a candidate outside its level"));
+                return Err(format!(
+                    "texel variants: {what} has a candidate outside its level"
+                ));
             }
             let ids = sub(tree_ids, sm.centre_offset, sm.count as u64, &what)?;
             let points = sub(
@@ -650,6 +659,48 @@ fn candidates(kind: Template, side: u32, w: u32, h: u32, coarse: Option<(u32, u3
     out
 }
 
+/// Candidates per feature set below which [`build_texel_variants`] warns that the variant is
+/// too small to synthesize well from.
+pub const FEW_CANDIDATES: usize = 64;
+
+/// The first (scale, orientation, level, level side, candidates) of a `w × h` sample's
+/// variants with fewer than `min` candidates for one of the templates.
+fn shortfall(
+    w: u32,
+    h: u32,
+    p: &TexelVariantParams,
+    min: usize,
+) -> Option<(usize, u32, usize, u32, usize)> {
+    for scale in 0..p.scales as usize {
+        for k in 0..p.orientations {
+            let rs = resampling(w, h, p, scale, k);
+            let sides = level_sides(rs.side, p.levels);
+            for l in 0..sides.len() {
+                let coarse = sides.get(l + 1).map(|&s| (s, s));
+                for (kind, t) in [
+                    (Template::Causal, p.template),
+                    (Template::Full, p.boundary_template),
+                ] {
+                    let count = candidates(kind, t, sides[l], sides[l], coarse).len();
+                    if count < min {
+                        return Some((scale, k, l, sides[l], count));
+                    }
+                }
+            }
+        }
+    }
+    None
+}
+
+/// The smallest square sample side from `start` up whose variants all have `min` candidates.
+fn side_needed(p: &TexelVariantParams, min: usize, start: u32) -> u32 {
+    let mut need = start.max(1);
+    while shortfall(need, need, p, min).is_some() && need < 1 << 16 {
+        need += 1;
+    }
+    need
+}
+
 /// Checks that `width × height` is large enough: every level of every variant must keep at
 /// least one candidate for both templates. The error names the smallest square sample that
 /// would do.
@@ -658,40 +709,17 @@ pub fn check_sample_size(
     height: u32,
     params: &TexelVariantParams,
 ) -> Result<(), String> {
-    fn fits(w: u32, h: u32, p: &TexelVariantParams) -> Option<(usize, u32, usize, u32)> {
-        // Returns the first failing (scale, orientation, level, level side).
-        for scale in 0..p.scales as usize {
-            for k in 0..p.orientations {
-                let rs = resampling(w, h, p, scale, k);
-                let sides = level_sides(rs.side, p.levels);
-                for l in 0..sides.len() {
-                    let coarse = sides.get(l + 1).map(|&s| (s, s));
-                    for (kind, t) in [
-                        (Template::Causal, p.template),
-                        (Template::Full, p.boundary_template),
-                    ] {
-                        if candidates(kind, t, sides[l], sides[l], coarse).is_empty() {
-                            return Some((scale, k, l, sides[l]));
-                        }
-                    }
-                }
-            }
-        }
-        None
-    }
     params.validate()?;
-    let Some((scale, k, l, side)) = fits(width, height, params) else {
+    let Some((scale, k, l, side, _)) = shortfall(width, height, params, 1) else {
         return Ok(());
     };
-    let mut need = width.max(height).max(1);
-    while fits(need, need, params).is_some() && need < 1 << 16 {
-        need += 1;
-    }
+    let need = side_needed(params, 1, width.max(height));
     Err(format!(
         "texel variants: the sample is {width}×{height} texels, too small: at scale {} of {} and \
          orientation {}° its cropped pyramid level {l} has only {side}×{side} texels, too few \
          for the {}×{} template and the {}×{} boundary template (with the coarser level's \
-         neighbourhood above the coarsest level); with these parameters the sample must be at least {need}×{need}",
+         neighbourhood above the coarsest level); with these parameters the sample must be at \
+         least {need}×{need}",
         scale + 1,
         params.scales,
         k as f64 * 360.0 / params.orientations as f64,
@@ -803,7 +831,10 @@ pub fn resample_variant(
     let side = rs.side;
     let mut out = TexelImage::new(side, side, src.channels);
     let half_v = (side as f64 - 1.0) / 2.0;
-    let (cx, cy) = ((src.width as f64 - 1.0) / 2.0, (src.height as f64 - 1.0) / 2.0);
+    let (cx, cy) = (
+        (src.width as f64 - 1.0) / 2.0,
+        (src.height as f64 - 1.0) / 2.0,
+    );
     let m = rs.magnification;
     out.data
         .par_chunks_mut(side as usize * c)
@@ -825,6 +856,7 @@ pub fn resample_variant(
 
 /// Writes the raw feature vector of the template `kind` (side `side`) centred on `(x, y)` of
 /// `level`, with `coarser` the next level if any. The template must lie inside (a candidate).
+#[allow(clippy::too_many_arguments)]
 fn write_feature(
     level: &TexelImage,
     coarser: Option<&TexelImage>,
@@ -864,7 +896,14 @@ fn channel_weights(sample: &TexelImage, color_weight: f32) -> Vec<f32> {
     let n = (sample.width * sample.height) as f64;
     let mut var = vec![0.0f64; c];
     for k in 0..c {
-        let mean: f64 = sample.data.iter().skip(k).step_by(c).map(|&v| v as f64).sum::<f64>() / n;
+        let mean: f64 = sample
+            .data
+            .iter()
+            .skip(k)
+            .step_by(c)
+            .map(|&v| v as f64)
+            .sum::<f64>()
+            / n;
         var[k] = sample
             .data
             .iter()
@@ -878,7 +917,11 @@ fn channel_weights(sample: &TexelImage, color_weight: f32) -> Vec<f32> {
     if c == 6 {
         let geo = (var[..3].iter().sum::<f64>() / 3.0).sqrt();
         let col = (var[3..].iter().sum::<f64>() / 3.0).sqrt();
-        let f = if geo > 0.0 && col > 0.0 { geo / col } else { 1.0 };
+        let f = if geo > 0.0 && col > 0.0 {
+            geo / col
+        } else {
+            1.0
+        };
         for v in &mut w[3..] {
             *v = (f * color_weight as f64) as f32;
         }
@@ -909,7 +952,17 @@ fn features(
         .zip(centres.par_iter())
         .for_each(|(out, &ci)| {
             let (x, y) = (ci % level.width, ci / level.width);
-            write_feature(level, coarser, &taps, &ctaps, weights, coarse_weight, x, y, out);
+            write_feature(
+                level,
+                coarser,
+                &taps,
+                &ctaps,
+                weights,
+                coarse_weight,
+                x,
+                y,
+                out,
+            );
         });
     raw
 }
@@ -947,6 +1000,21 @@ pub fn build_texel_variants(
         ));
     }
     check_sample_size(sample.width, sample.height, params)?;
+    if let Some((scale, k, l, side, count)) =
+        shortfall(sample.width, sample.height, params, FEW_CANDIDATES)
+    {
+        tracing::warn!(
+            target: "texsyn::texel_variants",
+            "the {}×{} sample leaves only {count} candidates ({side}×{side} texels) at pyramid \
+             level {l} of scale {} and orientation {}°: synthesis there will repeat a few \
+             texels; a sample of {n}×{n} would give every level {FEW_CANDIDATES}",
+            sample.width,
+            sample.height,
+            scale + 1,
+            k as f64 * 360.0 / params.orientations as f64,
+            n = side_needed(params, FEW_CANDIDATES, sample.width.max(sample.height)),
+        );
+    }
     progress(0.0);
     let weights = channel_weights(sample, params.color_weight);
     let sources = texel_pyramid(sample, params.middle_scale() + 1);
@@ -1152,7 +1220,10 @@ mod tests {
         assert_eq!(resampling(64, 64, &p, 0, 0).side, 127);
         assert_eq!(resampling(64, 64, &p, 2, 0).side, 32);
         assert_eq!(resampling(64, 64, &p, 1, 2).side, 64); // 90°
-        assert_eq!(resampling(64, 64, &p, 1, 1).side, (63.0 / 2f64.sqrt()) as u32 + 1);
+        assert_eq!(
+            resampling(64, 64, &p, 1, 1).side,
+            (63.0 / 2f64.sqrt()) as u32 + 1
+        );
     }
 
     #[test]
@@ -1203,6 +1274,20 @@ mod tests {
     }
 
     #[test]
+    fn small_variants_are_found_for_the_warning() {
+        let p = TexelVariantParams::default();
+        // 64²: the scaled-down unrotated variant is 32² texels, 8² at level 2: the causal
+        // template has 4 × 6 candidates there.
+        let (scale, k, l, side, count) = shortfall(64, 64, &p, FEW_CANDIDATES).unwrap();
+        assert_eq!((scale, k, l, side, count), (2, 0, 2, 8, 24));
+        assert!(shortfall(64, 64, &p, 1).is_none());
+        let n = side_needed(&p, FEW_CANDIDATES, 64);
+        assert!(shortfall(n, n, &p, FEW_CANDIDATES).is_none());
+        assert!(shortfall(n - 1, n - 1, &p, FEW_CANDIDATES).is_some());
+        println!("a sample of {n}² gives every level {FEW_CANDIDATES} candidates");
+    }
+
+    #[test]
     fn arrays_round_trip_through_an_artifact_and_damage_is_an_error() {
         use crate::artifact::{Artifact, ArtifactWriter, Kind};
         let p = TexelVariantParams {
@@ -1245,7 +1330,11 @@ mod tests {
         assert!(
             TexelVariantsRef::from_arrays(meta.clone(), |n| {
                 let a = art.raw_array(n).ok()?;
-                Some(if n == "tree_points" { &a[..a.len() - 4] } else { a })
+                Some(if n == "tree_points" {
+                    &a[..a.len() - 4]
+                } else {
+                    a
+                })
             })
             .is_err()
         );

@@ -6,24 +6,25 @@
 //! oriented and scaled sample set, its pyramids, features and kd-trees come from
 //! [`crate::stages::analyse_exemplar::texel_variants`].
 //!
-//! 1. Every grid point gets a texel chosen at random from the sample (so the start has the
-//!    sample's statistics), its `(dx, dy)` turned to the field direction; a Gaussian pyramid of
-//!    this noise gives every level's starting values. A geometry image of side `n = 2^k + 1`
-//!    has `(n − 1) / 2^l + 1` samples per side at level `l`, and sample `i` of level `l` is
-//!    sample `i · 2^l` of level 0.
-//! 2. Coarse to fine, each level is synthesized in scanline order with the causal Γ template
-//!    (plus the full neighbourhood one level coarser, above the coarsest level). Each texel is
-//!    matched in one variant, chosen per texel as in §4.3: of the two discretized orientations
-//!    next to the field angle, each with probability by closeness, and of the two scales next to
-//!    `level = log2 R + 2` (clamped to the range of scales), `T_s` with probability
-//!    `s + 1 − level`. The nearest candidate in that variant (PCA-reduced features, approximate
-//!    kd-tree search, `search_eps`) gives the texel: the variant's texel, whose `(dx, dy)` are
-//!    already turned into the variant's axes, which are the grid's.
-//! 3. Boundary resynthesis (§4.2.2), `boundary_passes` times at every level: texels within
-//!    `boundary_strip` texels of a side sample that has a mate are resynthesized in scanline
-//!    order with the full template, which reads both sides of the cut (below). After each pass
-//!    (and after step 2), each mate group takes the value of one member, chosen by a
-//!    counter-based hash, so mated texels end bit-identical.
+//! A geometry image of side `n = 2^k + 1` has `(n − 1) / 2^l + 1` samples per side at pyramid
+//! level `l`; sample `i` of level `l` is sample `i · 2^l` of level 0, and its field values are
+//! that sample's. Coarse to fine, each level is
+//! 1. started: the coarsest level with texels drawn at random from the sample (the variant each
+//!    texel would be matched in, so the start has the sample's statistics), each finer level
+//!    with the finished coarser level, interpolated;
+//! 2. synthesized in scanline order with the causal Γ template, plus the full neighbourhood one
+//!    level coarser above the coarsest level. Each texel is matched in one variant (§4.3): of
+//!    the two discretized orientations next to the field angle, each with probability by
+//!    closeness, and of the two scales next to `level = log2 R + 2` (clamped to the range of
+//!    scales), `T_s` with probability `s + 1 − level`. The nearest candidate in that variant
+//!    (PCA-reduced features, kd-tree search within `1 + search_eps`) gives the texel: the
+//!    variant's texel, whose `(dx, dy)` the analysis already turned into the variant's axes,
+//!    which are the grid's;
+//! 3. resynthesized near the cuts (§4.2.2), `boundary_passes` times: texels within
+//!    `boundary_strip` texels of a side sample that has a mate, in scanline order, with the full
+//!    template, which reads both sides of the cut (below). After each pass (and after step 2)
+//!    each mate group takes the value of one member, chosen by a counter-based hash, so mated
+//!    texels end bit-identical.
 //!
 //! Reading across a cut: the square's sides are taken in perimeter order (top `i = 0` with
 //! `j` increasing, right, bottom, left), each with a tangent `t` along that order and an
@@ -45,24 +46,34 @@
 //! - A tap outside the square across a corner (outside in both `i` and `j`) is first mirrored
 //!   back along the axis it overshoots less (rows on ties), then read across the other side.
 //! - A tap across a side sample without a mate, or whose pairing cannot be confirmed, is
-//!   mirrored into the square (as all outside taps are in the initial pass, which "ignores the
-//!   boundary"). A tap mapped across a cut that falls outside the square again is mirrored.
+//!   mirrored into the square. A tap mapped across a cut that falls outside the square again is
+//!   mirrored.
 //! - A mate whose pairing with its group representative cannot be confirmed directly (e.g. the
 //!   third member where cuts meet) is taken to share the representative's axes.
 //! - Mate groups at a coarse level are those of the level-0 samples `(i · 2^l, j · 2^l)`
 //!   restricted to that lattice (the parameterization puts cut nodes on the coarsest grid).
 //!
-//! Departures:
+//! Departures and choices the paper leaves open:
 //! - The boundary template's size is a parameter of the variant set
 //!   (`TexelVariantParams::boundary_template`), whose analysis builds its features and trees,
 //!   not of this stage.
+//! - The scanline pass reads taps outside the square (across cuts, or mirrored) from the level's
+//!   starting values, not from texels synthesized in this pass. The paper "ignores the
+//!   boundary" there; reading the synthesized texels instead (mirrored) fed each border
+//!   texel's choice back into its neighbours' templates and grew repeating diagonal streaks from
+//!   the left border on the test bumps. Starting finer levels from the coarser result (rather
+//!   than from the pyramid of the random start, whose blurred noise has almost no contrast)
+//!   gives those taps a sensible prediction, across cuts too.
 //! - Scanline order is kept exactly, but texels on one anti-diagonal wave (`j + (r + 1) i`
 //!   constant, `r` the template radius) do not depend on one another, so each wave is computed
-//!   in parallel: the result is the sequential one, for any number of threads. Boundary passes
-//!   are sequential.
-//! - Unsynthesized texels read by a template at the top and left border (mirrored taps) hold the
-//!   pyramid of the random start, as in the paper's step order.
-
+//!   in parallel: the result is the sequential one (a unit test compares them), for any number
+//!   of threads. Boundary passes are sequential.
+//! - The random number that picks the scale is shared by the texels of a cell of a jittered
+//!   grid of template spacing (each texel takes the cell whose jittered centre is nearest); the
+//!   probabilities per texel are the paper's. Drawn per texel, neighbouring texels matched at
+//!   different scales and the texture turned into grain where `R` falls between two scales.
+//!   Orientations are still drawn per texel: per cell, stripes broke into straight pieces at the
+//!   cell borders.
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::random::{counter_hash, counter_unit};
 use crate::stages::analyse_exemplar::texel_variants::{
@@ -436,9 +447,9 @@ impl Ctx<'_, '_> {
     /// Variant for texel `t` of `level` in `pass` (§4.3).
     #[inline]
     fn choose(&self, lv: &Level, level: usize, pass: u32, t: usize) -> usize {
-        // One random number per cell of a jittered grid of spacing `block` (each texel takes the
-        // cell whose jittered centre is nearest), so neighbouring texels mostly match in the
-        // same variant.
+        // Orientation: one random number per texel. Scale: one per cell of a jittered grid of
+        // spacing `block` (each texel takes the cell whose jittered centre is nearest), so
+        // neighbouring texels mostly match at the same scale.
         let n = lv.grid.n as i64;
         let b = self.block.max(1) as i64;
         let (i, j) = (t as i64 / n, t as i64 % n);
@@ -449,7 +460,11 @@ impl Ctx<'_, '_> {
             for dj in -1..=1 {
                 let (gi, gj) = (ci + di, cj + dj);
                 let cell = ((gi + 1) * cells + gj + 1) as u64;
-                let h = counter_hash(self.seed, STREAM_BLOCK, choice_index(level, pass, cell as usize));
+                let h = counter_hash(
+                    self.seed,
+                    STREAM_BLOCK,
+                    choice_index(level, pass, cell as usize),
+                );
                 let pi = gi * b + (h % b as u64) as i64;
                 let pj = gj * b + ((h >> 32) % b as u64) as i64;
                 let d = (pi - i).pow(2) + (pj - j).pow(2);
@@ -461,7 +476,7 @@ impl Ctx<'_, '_> {
         let key = choice_index(level, pass, best.1 as usize);
         let f = lv.orient[t];
         let k0 = f.floor();
-        let u = counter_unit(self.seed, STREAM_ORIENT, key);
+        let u = counter_unit(self.seed, STREAM_ORIENT, choice_index(level, pass, t));
         let k = (if u < 1.0 - (f - k0) {
             k0 as usize
         } else {
@@ -571,11 +586,8 @@ impl Ctx<'_, '_> {
 /// member's axes.
 fn unify_mates(lv: &mut Level, c: usize, seed: u64, level: usize, pass: u32) {
     for g in &lv.grid.groups {
-        let pick = counter_hash(
-            seed,
-            STREAM_MATE,
-            choice_index(level, pass, g[0] as usize),
-        ) % g.len() as u64;
+        let pick = counter_hash(seed, STREAM_MATE, choice_index(level, pass, g[0] as usize))
+            % g.len() as u64;
         let m = g[pick as usize] as usize;
         let mut v = [0.0f32; MAX_CHANNELS];
         v[..c].copy_from_slice(&lv.data[m * c..(m + 1) * c]);
@@ -611,11 +623,7 @@ fn upsample(coarse: &Level, nf: usize, c: usize) -> Vec<f32> {
     fine
 }
 
-fn check_inputs(
-    gi: &GeometryImage,
-    field: &ParamField,
-    levels: usize,
-) -> Result<(), String> {
+fn check_inputs(gi: &GeometryImage, field: &ParamField, levels: usize) -> Result<(), String> {
     let n = gi.n as usize;
     let nn = n * n;
     let step = 1usize << (levels - 1);
@@ -787,7 +795,10 @@ fn synthesize_impl(
     let full_ctaps = coarse_taps(vp.boundary_template);
 
     // Work units for progress: texels per level, times (1 + a share for the boundary).
-    let total: f64 = levels.iter().map(|lv| (lv.grid.n * lv.grid.n) as f64).sum::<f64>()
+    let total: f64 = levels
+        .iter()
+        .map(|lv| (lv.grid.n * lv.grid.n) as f64)
+        .sum::<f64>()
         + levels
             .iter()
             .map(|lv| lv.grid.strip.len() as f64 * p.boundary_passes as f64)
@@ -825,7 +836,11 @@ fn synthesize_impl(
         let last_wave = (n - 1) + f * (n - 1);
         let mut results: Vec<[f32; MAX_CHANNELS]> = Vec::new();
         for w in 0..=last_wave {
-            let i_lo = if w > n - 1 { (w - (n - 1) + f - 1) / f } else { 0 };
+            let i_lo = if w > n - 1 {
+                (w - (n - 1) + f - 1) / f
+            } else {
+                0
+            };
             let i_hi = (w / f).min(n - 1);
             if i_lo > i_hi {
                 continue;
