@@ -402,7 +402,18 @@ fn output_does_not_depend_on_the_thread_count_and_follows_the_seed() {
             .unwrap()
             .install(|| synth(&gi, &f, &v, seed))
     };
-    let a = run(1, 4);
+    // Progress runs from 0 to 1 without stepping back.
+    let seen = std::cell::RefCell::new(Vec::new());
+    let pr = GeometrySynthParams {
+        seed: 4,
+        ..Default::default()
+    };
+    let a = synthesize_geometry_texture(&gi, &f, &v.as_ref(), &pr, &|x| seen.borrow_mut().push(x))
+        .unwrap();
+    let seen = seen.into_inner();
+    assert_eq!((seen[0], *seen.last().unwrap()), (0.0, 1.0));
+    assert!(seen.windows(2).all(|w| w[0] <= w[1]), "{seen:?}");
+    assert_eq!(bits(&a), bits(&run(1, 4)));
     let b = run(2, 4);
     assert_eq!(bits(&a), bits(&b));
     let c = run(2, 5);
@@ -525,5 +536,18 @@ fn previews() {
         };
         let out = synth(&flat(n), &swirl, &v, 2);
         save(&out, &format!("/tmp/gt_{name}_swirl_scale.png"));
+        // The timing case: 257², direction turning along the columns, R from 0.5 to 2 down.
+        let m = 257u32;
+        let mm = (m * m) as usize;
+        let f = ParamField {
+            dir: (0..mm)
+                .map(|k| Vec2::from_angle((k as u32 % m) as f32 * 0.02).rotate(Vec2::Y))
+                .collect(),
+            rel_scale: (0..mm)
+                .map(|k| 0.5 + 1.5 * (k as u32 / m) as f32 / m as f32)
+                .collect(),
+        };
+        let out = synth(&cylinder(m), &f, &v, 3);
+        save(&out, &format!("/tmp/gt_{name}_257.png"));
     }
 }
