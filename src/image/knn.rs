@@ -7,21 +7,44 @@
 //! they are deterministic and do not depend on the tree's shape. The tree is built by median
 //! splits along the widest coordinate, the median chosen under the total order (coordinate,
 //! index).
+//!
+//! A tree can be exported as flat Pod arrays ([`KdTree::parts`]) and viewed in place again
+//! ([`KdTreeRef::from_parts`]), so it can be stored in a cached artifact and searched straight
+//! from the memory-mapped file.
 
 /// Points per leaf.
 const LEAF_SIZE: usize = 8;
 const NO_CHILD: u32 = u32::MAX;
 
-#[derive(Clone, Copy, Debug)]
-struct Node {
+/// One node of a [`KdTree`], as stored in its flat node array. Nodes are in pre-order: the
+/// root is node 0 and both children of a node come after it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct KdNode {
     /// Range of `ids` / `points` (tree order) under this node.
-    start: u32,
-    end: u32,
+    pub start: u32,
+    pub end: u32,
     /// Split dimension; `u32::MAX` for a leaf.
-    axis: u32,
-    split: f32,
-    left: u32,
-    right: u32,
+    pub axis: u32,
+    pub split: f32,
+    pub left: u32,
+    pub right: u32,
+}
+
+type Node = KdNode;
+
+/// Deepest tree [`KdTreeRef::from_parts`] accepts (a built tree over 2³² points is about 30
+/// deep; the bound keeps the recursive search's stack use small for any input).
+pub const MAX_DEPTH: usize = 96;
+
+/// A kd-tree viewed in borrowed arrays (e.g. in place in a mapped artifact); the same search
+/// as [`KdTree`], which hands one out with [`KdTree::as_ref`].
+#[derive(Clone, Copy, Debug)]
+pub struct KdTreeRef<'a> {
+    dim: usize,
+    points: &'a [f32],
+    ids: &'a [u32],
+    nodes: &'a [KdNode],
 }
 
 /// A kd-tree; see the module docs.
@@ -146,6 +169,23 @@ impl KdTree {
         self.dim
     }
 
+    /// The flat arrays of the tree: dimension, points in tree order (`dim` values each), the
+    /// original index of each point in tree order, and the nodes. [`KdTreeRef::from_parts`]
+    /// views them again.
+    pub fn parts(&self) -> (usize, &[f32], &[u32], &[KdNode]) {
+        (self.dim, &self.points, &self.ids, &self.nodes)
+    }
+
+    /// A borrowed view with the same search.
+    pub fn as_ref(&self) -> KdTreeRef<'_> {
+        KdTreeRef {
+            dim: self.dim,
+            points: &self.points,
+            ids: &self.ids,
+            nodes: &self.nodes,
+        }
+    }
+
     /// The `k` nearest points to `query` among those whose index passes `filter`, as
     /// `(index, squared distance)` by increasing distance, ties by increasing index. Fewer than
     /// `k` if fewer points pass.
@@ -155,10 +195,112 @@ impl KdTree {
         k: usize,
         filter: impl Fn(u32) -> bool,
     ) -> Vec<(u32, f32)> {
-        self.nearest_approx(query, k, 0.0, filter)
+        self.as_ref().nearest_approx(query, k, 0.0, filter)
     }
 
-    /// As [`Self::nearest`], but a subtree is skipped once every point in it is farther than
+    /// See [`KdTreeRef::nearest_approx`].
+    pub fn nearest_approx(
+        &self,
+        query: &[f32],
+        k: usize,
+        eps: f32,
+        filter: impl Fn(u32) -> bool,
+    ) -> Vec<(u32, f32)> {
+        self.as_ref().nearest_approx(query, k, eps, filter)
+    }
+}
+
+impl<'a> KdTreeRef<'a> {
+    /// Views arrays exported by [`KdTree::parts`], checking everything a search relies on:
+    /// lengths agree, nodes are in pre-order with children after their parent, ranges nest
+    /// inside the point array, split axes are below `dim`, the tree is at most [`MAX_DEPTH`]
+    /// deep, and every id is below `id_bound`. Damaged arrays give an error, never a panic
+    /// or an endless search later.
+    pub fn from_parts(
+        dim: usize,
+        points: &'a [f32],
+        ids: &'a [u32],
+        nodes: &'a [KdNode],
+        id_bound: u32,
+    ) -> Result<KdTreeRef<'a>, String> {
+        if dim == 0 {
+            return Err("kd-tree: dimension 0".into());
+        }
+        if points.len() != ids.len() * dim {
+            return Err(format!(
+                "kd-tree: {} point values for {} ids of dimension {dim}",
+                points.len(),
+                ids.len()
+            ));
+        }
+        if let Some(i) = ids.iter().position(|&i| i >= id_bound) {
+            return Err(format!(
+                "kd-tree: id {} at {i} is not below {id_bound}",
+                ids[i]
+            ));
+        }
+        if ids.is_empty() != nodes.is_empty() {
+            return Err("kd-tree: nodes without points or points without nodes".into());
+        }
+        if !nodes.is_empty() {
+            let n = ids.len() as u32;
+            let root = nodes[0];
+            if root.start != 0 || root.end != n {
+                return Err("kd-tree: the root does not cover every point".into());
+            }
+            // Walk from the root, checking each reachable node once (pre-order indices only
+            // grow, so a node is reached through one parent at most if indices are increasing).
+            let mut stack = vec![(0u32, 1usize)];
+            let mut seen = 0usize;
+            while let Some((i, depth)) = stack.pop() {
+                seen += 1;
+                if depth > MAX_DEPTH || seen > nodes.len() {
+                    return Err("kd-tree: too deep or cyclic".into());
+                }
+                let nd = nodes[i as usize];
+                if nd.start > nd.end || nd.end > n {
+                    return Err(format!("kd-tree: node {i} has a bad range"));
+                }
+                if nd.axis == u32::MAX {
+                    continue;
+                }
+                if nd.axis as usize >= dim || !nd.split.is_finite() {
+                    return Err(format!("kd-tree: node {i} has a bad split"));
+                }
+                for c in [nd.left, nd.right] {
+                    if c <= i || c as usize >= nodes.len() {
+                        return Err(format!("kd-tree: node {i} has a bad child {c}"));
+                    }
+                    let cn = nodes[c as usize];
+                    if cn.start < nd.start || cn.end > nd.end {
+                        return Err(format!("kd-tree: node {c} is not inside its parent"));
+                    }
+                    stack.push((c, depth + 1));
+                }
+            }
+        }
+        Ok(KdTreeRef {
+            dim,
+            points,
+            ids,
+            nodes,
+        })
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// As [`KdTree::nearest`], but a subtree is skipped once every point in it is farther than
     /// `1 + eps` times the current k-th distance, so the i-th result is within `1 + eps` of the
     /// true i-th nearest distance (Arya & Mount's approximate search). Still deterministic.
     pub fn nearest_approx(
@@ -182,6 +324,30 @@ impl KdTree {
         let mut off = vec![0.0f32; self.dim];
         self.search(0, query, 0.0, &mut off, scale, &filter, &mut best);
         best.items
+    }
+
+    /// The single nearest point (approximate as in [`Self::nearest_approx`], no filter), as
+    /// `(index, squared distance)`; `None` for an empty tree. `scratch` is reused between
+    /// calls to avoid allocating.
+    pub fn nearest1_approx(
+        &self,
+        query: &[f32],
+        eps: f32,
+        scratch: &mut Vec<f32>,
+    ) -> Option<(u32, f32)> {
+        assert_eq!(query.len(), self.dim, "query dimension");
+        if self.nodes.is_empty() {
+            return None;
+        }
+        let scale = (1.0 + eps.max(0.0)).powi(2) * (1.0 - 1e-5);
+        scratch.clear();
+        scratch.resize(self.dim, 0.0);
+        let mut best = Best {
+            k: 1,
+            items: Vec::with_capacity(2),
+        };
+        self.search(0, query, 0.0, scratch, scale, &|_| true, &mut best);
+        best.items.first().copied()
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -367,5 +533,45 @@ mod tests {
         let tree = KdTree::build(&points, 3);
         let got = tree.nearest(&[1.0, 1.0, 1.0], 3, |i| i >= 50);
         assert_eq!(got, vec![(50, 0.0), (51, 0.0), (52, 0.0)]);
+    }
+
+    #[test]
+    fn exported_parts_search_like_the_tree_and_damage_is_an_error() {
+        let dim = 3;
+        let points: Vec<f32> = (0..300 * dim)
+            .map(|i| ((i as u64 * 2654435761) % 1000) as f32 / 100.0)
+            .collect();
+        let tree = KdTree::build(&points, dim);
+        let (d, pts, ids, nodes) = tree.parts();
+        // Through bytes, as an artifact would store them.
+        let pts_b: Vec<f32> = bytemuck::cast_slice::<u8, f32>(bytemuck::cast_slice(pts)).to_vec();
+        let view = KdTreeRef::from_parts(d, &pts_b, ids, nodes, 300).unwrap();
+        let mut scratch = Vec::new();
+        for t in 0..40 {
+            let q = [t as f32 * 0.25, 5.0 - t as f32 * 0.1, (t % 7) as f32];
+            assert_eq!(
+                view.nearest_approx(&q, 4, 0.0, |_| true),
+                tree.nearest(&q, 4, |_| true)
+            );
+            let one = view.nearest1_approx(&q, 0.0, &mut scratch);
+            assert_eq!(one, tree.nearest(&q, 1, |_| true).first().copied());
+        }
+        assert!(KdTreeRef::from_parts(d, pts, ids, nodes, 299).is_err());
+        assert!(KdTreeRef::from_parts(d, &pts[1..], ids, nodes, 300).is_err());
+        let mut bad = nodes.to_vec();
+        let inner = bad.iter().position(|n| n.axis != u32::MAX).unwrap();
+        bad[inner].left = inner as u32; // a cycle
+        assert!(KdTreeRef::from_parts(d, pts, ids, &bad, 300).is_err());
+        let mut bad = nodes.to_vec();
+        bad[inner].axis = 7;
+        assert!(KdTreeRef::from_parts(d, pts, ids, &bad, 300).is_err());
+        let mut bad = nodes.to_vec();
+        let last = bad.len() - 1;
+        bad[last].end = 301;
+        assert!(KdTreeRef::from_parts(d, pts, ids, &bad, 300).is_err());
+        let empty = KdTree::build(&[], 2);
+        let (d, p, i, n) = empty.parts();
+        let e = KdTreeRef::from_parts(d, p, i, n, 0).unwrap();
+        assert_eq!(e.nearest1_approx(&[0.0, 0.0], 0.0, &mut scratch), None);
     }
 }

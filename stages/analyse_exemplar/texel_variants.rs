@@ -1,1 +1,1368 @@
-//! (to be written)
+//! Oriented and scaled versions of a geometric-texture sample, prepared for synthesis.
+//!
+//! Implements the preprocessing of Y.-K. Lai, S.-M. Hu, D. X. Gu and R. R. Martin, "Geometric
+//! Texture Synthesis and Transfer via Geometry Images" (SPM 2005): §4.3, "a set of 8 equally
+//! spaced orientations and 3 levels of scaling … built in advance … for each orientation and
+//! scaling, we also build in advance an approximate nearest neighbor searching structure", and
+//! the sample side of §4.2.1 (a Gaussian pyramid of the sample, a causal Γ template at each
+//! level plus the full neighbourhood one level coarser).
+//!
+//! For orientation `k` (angle `θ = k · 360° / orientations`) and scale `s` (`T1` the largest;
+//! the middle one is the sample's own size and neighbours differ by a factor 2, so that
+//! `level = log2 R + (scales + 1) / 2` of §4.3 picks them) a variant holds:
+//! - the resampled sample: rotated by `θ` about its centre (texel coordinates `x` right along
+//!   columns, `y` along rows; the content at offset `u` from the centre moves to `R(θ) u`) and
+//!   scaled, sampled bilinearly and cropped to the largest axis-aligned square inside the
+//!   rotated sample, so no texel is invented. The `(dx, dy)` channels, vectors in the sample's
+//!   tangent plane, are rotated by `R(θ)` as well, so a variant's texels are expressed in its
+//!   own image axes. Scaling down samples the sample's Gaussian pyramid (prefiltered) rather
+//!   than skipping texels;
+//! - its Gaussian pyramid ([`crate::image::pyramid::downsample`]: binomial blur, every second
+//!   texel; a side `w` gives `⌈w/2⌉`), `levels` levels;
+//! - per level, two feature sets, each with its own PCA basis and kd-tree: the causal Γ
+//!   template of side `template` (the rows above the centre and the texels left of it) used by
+//!   the main scanline synthesis, and the full `boundary_template`² window used by boundary
+//!   resynthesis (§4.2.2). Both add the full neighbourhood of side [`coarse_window`] at the
+//!   next coarser level, centred on texel `(x / 2, y / 2)` (integer division, as in Wei &
+//!   Levoy 2000), when there is a coarser level.
+//!
+//! Choices the paper leaves open:
+//! - The boundary template is analysed here, with the rest of the sample (its features and
+//!   trees are part of the cached artifact), rather than per synthesis run: building the 24 × 3
+//!   extra PCA bases and trees takes longer than a whole synthesis. Its size is therefore a parameter
+//!   of this stage, not of synthesis.
+//! - The coarser level's taps are multiplied by `coarse_weight` (default 0.3, see the field):
+//!   with equal weights the finer levels copied the oversized blobs that a 64² sample's tiny
+//!   coarse levels produce.
+//! - Only texels whose whole template lies inside the level are candidates (no padding, so no
+//!   invented neighbourhoods). [`check_sample_size`] rejects samples that leave a level of some
+//!   variant without candidates and names the size needed; [`build_texel_variants`] warns when
+//!   one keeps fewer than [`FEW_CANDIDATES`] (a 64² sample does, at the third level of its
+//!   scaled-down variants; 127² is enough for the defaults).
+//! - Feature vectors weight geometric channels (dx, dy, dn) equally and colour channels (r, g, b)
+//!   by `color_weight · σ_geometry / σ_colour` (root-mean-square standard deviations over the
+//!   sample), so colour and geometry count alike whatever their units. The weights are stored
+//!   in the metadata so synthesis builds identical vectors.
+//! - PCA keeps `pca_dims` components (default 16), or with 0 the fewest explaining 99.9% of
+//!   the variance (8 to 24), each set its own basis, fitted to at most [`PCA_FIT_SAMPLES`] of
+//!   its candidates (a regular subsample). One basis shared by all orientations was tried (the
+//!   eigendecompositions are 90% of the analysis time for colour samples): on vertical stripes
+//!   the unrotated variant then lost the directions that tell its neighbourhoods apart and the
+//!   synthesis collapsed into one flat value.
+//!
+//! The result is an owned [`TexelVariants`] (flat arrays plus small [`VariantsMeta`]), which
+//! [`TexelVariants::arrays`] exports and [`TexelVariantsRef::from_arrays`] views again in place
+//! (e.g. in a memory-mapped artifact), checking every length and index. Building is parallel
+//! and gives identical bytes for any number of threads.
+
+use crate::geom::geometry_image::TexelImage;
+use crate::image::knn::{KdNode, KdTree, KdTreeRef};
+use crate::image::pca::{Pca, PcaParams};
+use crate::image::{Image, pyramid};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Parameters of the variant set.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TexelVariantParams {
+    /// Number of equally spaced orientations, 1..=64. Default: 8 (§4.3).
+    pub orientations: u32,
+    /// Number of scales, odd, 1..=5: the middle one is the sample's size, each step a factor 2.
+    /// Default: 3 (§4.3: T1 scaled up, T2 original, T3 scaled down).
+    pub scales: u32,
+    /// Gaussian pyramid levels, 1..=6. Default: 3 (§5: "a three-level Gaussian pyramid").
+    pub levels: u32,
+    /// Side of the causal Γ template of the main synthesis, odd, 3..=15. Default: 5.
+    pub template: u32,
+    /// Side of the full template of boundary resynthesis (§4.2.2), odd, 3..=15. Default: 5.
+    pub boundary_template: u32,
+    /// PCA components kept per feature set, 0..=64; 0 = automatic (the fewest explaining 99.9%
+    /// of the variance, 8 to 24). Default: 16 (on the bumps of the tests, 4 components — what
+    /// 95% of the variance asks for — blurred the result into blobs; 8 was clearly worse than
+    /// 16, 24 no better).
+    pub pca_dims: u32,
+    /// Factor on the coarser level's taps, 0..=4 (its squared distances count `coarse_weight²`
+    /// each). Default: 0.3. With 1, a 64² sample's coarse levels (16² texels at the third) are
+    /// too small to synthesize faithfully and the finer levels copied their oversized blobs:
+    /// on the tests' bumps the autocorrelation error was 0.30 at 1, 0.21 at 0.5 and 0.12 at 0.3.
+    pub coarse_weight: f32,
+    /// Weight of the colour channels (r, g, b) relative to the geometric ones after both are
+    /// normalized by their spread, 0..=100. Ignored for 3-channel samples. Default: 1.
+    pub color_weight: f32,
+}
+
+impl Default for TexelVariantParams {
+    fn default() -> Self {
+        TexelVariantParams {
+            orientations: 8,
+            scales: 3,
+            levels: 3,
+            template: 5,
+            boundary_template: 5,
+            pca_dims: 16,
+            coarse_weight: 0.3,
+            color_weight: 1.0,
+        }
+    }
+}
+
+fn in_range<T: PartialOrd + std::fmt::Display>(
+    name: &str,
+    v: T,
+    lo: T,
+    hi: T,
+) -> Result<(), String> {
+    if v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(format!(
+            "texel variants: {name} must be in {lo}..={hi}, got {v}"
+        ))
+    }
+}
+
+impl TexelVariantParams {
+    /// Checks every field; the error names the field, its range and the value.
+    pub fn validate(&self) -> Result<(), String> {
+        in_range("orientations", self.orientations, 1, 64)?;
+        in_range("scales", self.scales, 1, 5)?;
+        if self.scales.is_multiple_of(2) {
+            return Err(format!(
+                "texel variants: scales must be odd (1, 3 or 5), got {}",
+                self.scales
+            ));
+        }
+        in_range("levels", self.levels, 1, 6)?;
+        for (name, v) in [
+            ("template", self.template),
+            ("boundary_template", self.boundary_template),
+        ] {
+            in_range(name, v, 3, 15)?;
+            if v.is_multiple_of(2) {
+                return Err(format!(
+                    "texel variants: {name} must be odd (3..=15), got {v}"
+                ));
+            }
+        }
+        in_range("pca_dims", self.pca_dims, 0, 64)?;
+        if !self.coarse_weight.is_finite() {
+            return Err(format!(
+                "texel variants: coarse_weight must be in 0..=4, got {}",
+                self.coarse_weight
+            ));
+        }
+        in_range("coarse_weight", self.coarse_weight, 0.0, 4.0)?;
+        if !self.color_weight.is_finite() {
+            return Err(format!(
+                "texel variants: color_weight must be in 0..=100, got {}",
+                self.color_weight
+            ));
+        }
+        in_range("color_weight", self.color_weight, 0.0, 100.0)?;
+        Ok(())
+    }
+
+    /// Number of variants (`orientations × scales`).
+    pub fn variant_count(&self) -> usize {
+        (self.orientations * self.scales) as usize
+    }
+
+    /// Index of the scale with the sample's own size (0-based; `T2` of the paper is 1).
+    pub fn middle_scale(&self) -> usize {
+        (self.scales as usize - 1) / 2
+    }
+}
+
+/// Which template a feature set describes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Template {
+    /// The causal Γ half window of the scanline synthesis (§4.2.1).
+    Causal,
+    /// The full window of boundary resynthesis (§4.2.2).
+    Full,
+}
+
+/// Side of the full coarser-level neighbourhood added to a template of side `side`:
+/// `side − 2`, at least 3.
+pub fn coarse_window(side: u32) -> u32 {
+    side.saturating_sub(2).max(3)
+}
+
+/// Offsets `(dx, dy)` of a template's taps at its own level, in feature order (row by row):
+/// for [`Template::Causal`] the `side / 2` rows above the centre and the texels left of it on
+/// its row, for [`Template::Full`] the whole window.
+pub fn template_taps(kind: Template, side: u32) -> Vec<(i32, i32)> {
+    let r = (side / 2) as i32;
+    let mut taps = Vec::new();
+    for dy in -r..=r {
+        for dx in -r..=r {
+            if kind == Template::Causal && (dy > 0 || (dy == 0 && dx >= 0)) {
+                continue;
+            }
+            taps.push((dx, dy));
+        }
+    }
+    taps
+}
+
+/// Offsets of the coarser-level taps (the full window of [`coarse_window`]), in feature order.
+pub fn coarse_taps(side: u32) -> Vec<(i32, i32)> {
+    template_taps(Template::Full, coarse_window(side))
+}
+
+/// Feature length of a template with `channels` values per tap.
+pub fn feature_dim(kind: Template, side: u32, with_coarse: bool, channels: u32) -> usize {
+    let mut taps = template_taps(kind, side).len();
+    if with_coarse {
+        taps += coarse_taps(side).len();
+    }
+    taps * channels as usize
+}
+
+/// Size of one level of a variant pyramid.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LevelMeta {
+    pub width: u32,
+    pub height: u32,
+    /// Offset into the `texels` array, in f32 values.
+    pub texel_offset: u64,
+}
+
+/// One feature set (a template at one level of one variant): where its arrays lie.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SetMeta {
+    /// Raw feature length and PCA components kept.
+    pub dim_in: u32,
+    pub dims: u32,
+    /// Candidate texels; their level-texel indices are `centres[centre_offset..][..count]`
+    /// and the tree's ids `tree_ids[centre_offset..][..count]`.
+    pub count: u32,
+    pub centre_offset: u64,
+    /// Offsets of the PCA mean (`dim_in` values) and basis (`dims × dim_in`).
+    pub mean_offset: u64,
+    pub basis_offset: u64,
+    /// Offset of the tree points (`count × dims` values).
+    pub point_offset: u64,
+    pub node_offset: u64,
+    pub node_count: u64,
+}
+
+/// The small, serializable part of [`TexelVariants`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VariantsMeta {
+    pub params: TexelVariantParams,
+    pub channels: u32,
+    /// Size of the sample the variants were made from.
+    pub sample_width: u32,
+    pub sample_height: u32,
+    /// Per channel, the factor applied before features are compared.
+    pub channel_weights: Vec<f32>,
+    /// Per (variant, level), variant-major: `levels[v * levels + l]`. Variant `v` has scale
+    /// `v / orientations` and orientation `v % orientations`.
+    pub levels: Vec<LevelMeta>,
+    /// Per (variant, level, template), `sets[(v * levels + l) * 2 + t]`, `t` 0 for the causal
+    /// and 1 for the full template.
+    pub sets: Vec<SetMeta>,
+}
+
+/// The variant set, owned: flat arrays described by [`VariantsMeta`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelVariants {
+    pub meta: VariantsMeta,
+    pub texels: Vec<f32>,
+    pub centres: Vec<u32>,
+    pub pca_mean: Vec<f32>,
+    pub pca_basis: Vec<f32>,
+    pub tree_points: Vec<f32>,
+    pub tree_ids: Vec<u32>,
+    pub tree_nodes: Vec<KdNode>,
+}
+
+/// Names of the arrays of [`TexelVariants::arrays`], in order.
+pub const ARRAY_NAMES: [&str; 7] = [
+    "texels",
+    "centres",
+    "pca_mean",
+    "pca_basis",
+    "tree_points",
+    "tree_ids",
+    "tree_nodes",
+];
+
+/// One level of one variant, borrowed: `width × height` texels of `channels` values.
+#[derive(Clone, Copy, Debug)]
+pub struct LevelRef<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub texels: &'a [f32],
+}
+
+/// One feature set, borrowed.
+#[derive(Clone, Copy, Debug)]
+pub struct SetRef<'a> {
+    pub dim_in: usize,
+    pub dims: usize,
+    /// Level-texel index (`y * width + x`) of each candidate.
+    pub centres: &'a [u32],
+    pub mean: &'a [f32],
+    pub basis: &'a [f32],
+    /// Over the PCA-reduced features; ids index `centres`.
+    pub tree: KdTreeRef<'a>,
+}
+
+impl SetRef<'_> {
+    /// PCA coordinates of a raw feature vector (as [`Pca::project`]).
+    #[inline]
+    pub fn project(&self, v: &[f32], out: &mut [f32]) {
+        debug_assert_eq!(v.len(), self.dim_in);
+        for (o, b) in out.iter_mut().zip(self.basis.chunks_exact(self.dim_in)) {
+            let mut acc = 0.0f32;
+            for ((&x, &m), &e) in v.iter().zip(self.mean).zip(b) {
+                acc += (x - m) * e;
+            }
+            *o = acc;
+        }
+    }
+}
+
+/// The variant set, borrowed (from a [`TexelVariants`] or a mapped artifact) and checked.
+#[derive(Clone, Debug)]
+pub struct TexelVariantsRef<'a> {
+    pub meta: VariantsMeta,
+    levels: Vec<LevelRef<'a>>,
+    sets: Vec<SetRef<'a>>,
+}
+
+impl<'a> TexelVariantsRef<'a> {
+    pub fn params(&self) -> &TexelVariantParams {
+        &self.meta.params
+    }
+
+    pub fn channels(&self) -> usize {
+        self.meta.channels as usize
+    }
+
+    /// Pyramid levels of every variant.
+    pub fn levels(&self) -> usize {
+        self.meta.params.levels as usize
+    }
+
+    pub fn variant_count(&self) -> usize {
+        self.meta.params.variant_count()
+    }
+
+    /// Variant index of scale `scale` (0 = most enlarged) and orientation `orientation`.
+    #[inline]
+    pub fn variant(&self, scale: usize, orientation: usize) -> usize {
+        scale * self.meta.params.orientations as usize + orientation
+    }
+
+    #[inline]
+    pub fn level(&self, variant: usize, level: usize) -> LevelRef<'a> {
+        self.levels[variant * self.levels() + level]
+    }
+
+    #[inline]
+    pub fn set(&self, variant: usize, level: usize, kind: Template) -> &SetRef<'a> {
+        let t = match kind {
+            Template::Causal => 0,
+            Template::Full => 1,
+        };
+        &self.sets[(variant * self.levels() + level) * 2 + t]
+    }
+
+    /// Views arrays exported by [`TexelVariants::arrays`]. `get` returns an array's bytes by
+    /// name (`None` if absent); they must be aligned for their element type (artifact arrays
+    /// are). Every size, offset and index is checked against the metadata, so damaged input is
+    /// an error, never a panic or an out-of-bounds read during synthesis.
+    pub fn from_arrays(
+        meta: VariantsMeta,
+        get: impl Fn(&str) -> Option<&'a [u8]>,
+    ) -> Result<TexelVariantsRef<'a>, String> {
+        fn arr<'b, T: bytemuck::Pod>(
+            get: &impl Fn(&str) -> Option<&'b [u8]>,
+            name: &str,
+        ) -> Result<&'b [T], String> {
+            let raw = get(name).ok_or_else(|| format!("texel variants: no array {name:?}"))?;
+            bytemuck::try_cast_slice(raw).map_err(|e| {
+                format!(
+                    "texel variants: array {name:?} ({} bytes) is not a {}-byte aligned array: {e}",
+                    raw.len(),
+                    std::mem::size_of::<T>()
+                )
+            })
+        }
+        fn sub<'b, T>(a: &'b [T], off: u64, len: u64, what: &str) -> Result<&'b [T], String> {
+            let end = off.checked_add(len);
+            match end {
+                Some(e) if e <= a.len() as u64 => Ok(&a[off as usize..e as usize]),
+                _ => Err(format!(
+                    "texel variants: {what} ({len} values at {off}) lies outside its array ({})",
+                    a.len()
+                )),
+            }
+        }
+        meta.params.validate()?;
+        let c = meta.channels;
+        if c != 3 && c != 6 {
+            return Err(format!("texel variants: {c} channels, expected 3 or 6"));
+        }
+        if meta.channel_weights.len() != c as usize
+            || meta.channel_weights.iter().any(|w| !w.is_finite())
+        {
+            return Err("texel variants: bad channel weights".into());
+        }
+        let nv = meta.params.variant_count();
+        let nl = meta.params.levels as usize;
+        if meta.levels.len() != nv * nl || meta.sets.len() != nv * nl * 2 {
+            return Err(format!(
+                "texel variants: metadata lists {} levels and {} feature sets, expected {} and {}",
+                meta.levels.len(),
+                meta.sets.len(),
+                nv * nl,
+                nv * nl * 2
+            ));
+        }
+        let texels: &[f32] = arr(&get, "texels")?;
+        let centres: &[u32] = arr(&get, "centres")?;
+        let pca_mean: &[f32] = arr(&get, "pca_mean")?;
+        let pca_basis: &[f32] = arr(&get, "pca_basis")?;
+        let tree_points: &[f32] = arr(&get, "tree_points")?;
+        let tree_ids: &[u32] = arr(&get, "tree_ids")?;
+        let tree_nodes: &[KdNode] = arr(&get, "tree_nodes")?;
+        // The layout is the canonical one (arrays concatenated in order, nothing between or
+        // after), so a metadata entry that disagrees with its neighbours is caught.
+        let layout_err =
+            |what: &str| format!("texel variants: {what} is not where the layout puts it");
+        let mut next_texel = 0u64;
+        let mut levels = Vec::with_capacity(meta.levels.len());
+        for (i, lm) in meta.levels.iter().enumerate() {
+            let n = lm.width as u64 * lm.height as u64 * c as u64;
+            if lm.texel_offset != next_texel {
+                return Err(layout_err(&format!("level {i}")));
+            }
+            next_texel += n;
+            let t = sub(texels, lm.texel_offset, n, &format!("level {i}"))?;
+            levels.push(LevelRef {
+                width: lm.width,
+                height: lm.height,
+                texels: t,
+            });
+        }
+        if next_texel != texels.len() as u64 {
+            return Err(layout_err("the end of the texels"));
+        }
+        let mut next = [0u64; 5]; // centres/ids, mean, basis, points, nodes
+        let mut sets = Vec::with_capacity(meta.sets.len());
+        for (i, sm) in meta.sets.iter().enumerate() {
+            let vl = i / 2;
+            let kind = if i % 2 == 0 {
+                Template::Causal
+            } else {
+                Template::Full
+            };
+            let side = match kind {
+                Template::Causal => meta.params.template,
+                Template::Full => meta.params.boundary_template,
+            };
+            let with_coarse = vl % nl + 1 < nl;
+            let want = feature_dim(kind, side, with_coarse, c);
+            let what = format!("feature set {i}");
+            if sm.dim_in as usize != want || sm.dims == 0 || sm.dims > sm.dim_in || sm.count == 0 {
+                return Err(format!(
+                    "texel variants: {what} has dimensions {}→{} and {} candidates (raw length {want} expected)",
+                    sm.dim_in, sm.dims, sm.count
+                ));
+            }
+            let offsets = [
+                sm.centre_offset,
+                sm.mean_offset,
+                sm.basis_offset,
+                sm.point_offset,
+                sm.node_offset,
+            ];
+            if offsets != next {
+                return Err(layout_err(&what));
+            }
+            next[0] += sm.count as u64;
+            next[1] += sm.dim_in as u64;
+            next[2] += sm.dims as u64 * sm.dim_in as u64;
+            next[3] += sm.count as u64 * sm.dims as u64;
+            next[4] += sm.node_count;
+            let lv = levels[vl];
+            let cs = sub(centres, sm.centre_offset, sm.count as u64, &what)?;
+            let texel_count = lv.width * lv.height;
+            if cs.iter().any(|&x| x >= texel_count) {
+                return Err(format!(
+                    "texel variants: {what} has a candidate outside its level"
+                ));
+            }
+            let ids = sub(tree_ids, sm.centre_offset, sm.count as u64, &what)?;
+            let points = sub(
+                tree_points,
+                sm.point_offset,
+                sm.count as u64 * sm.dims as u64,
+                &what,
+            )?;
+            let nodes = sub(tree_nodes, sm.node_offset, sm.node_count, &what)?;
+            let tree = KdTreeRef::from_parts(sm.dims as usize, points, ids, nodes, sm.count)
+                .map_err(|e| format!("texel variants: {what}: {e}"))?;
+            sets.push(SetRef {
+                dim_in: sm.dim_in as usize,
+                dims: sm.dims as usize,
+                centres: cs,
+                mean: sub(pca_mean, sm.mean_offset, sm.dim_in as u64, &what)?,
+                basis: sub(
+                    pca_basis,
+                    sm.basis_offset,
+                    sm.dims as u64 * sm.dim_in as u64,
+                    &what,
+                )?,
+                tree,
+            });
+        }
+        let lens = [
+            centres.len(),
+            pca_mean.len(),
+            pca_basis.len(),
+            tree_points.len(),
+            tree_nodes.len(),
+        ];
+        if next.iter().zip(lens).any(|(&a, b)| a != b as u64) || tree_ids.len() != centres.len() {
+            return Err(layout_err("the end of the feature arrays"));
+        }
+        Ok(TexelVariantsRef { meta, levels, sets })
+    }
+}
+
+impl TexelVariants {
+    /// The flat arrays, named as in [`ARRAY_NAMES`], as little-endian bytes.
+    pub fn arrays(&self) -> Vec<(&'static str, &[u8])> {
+        vec![
+            ("texels", bytemuck::cast_slice(&self.texels)),
+            ("centres", bytemuck::cast_slice(&self.centres)),
+            ("pca_mean", bytemuck::cast_slice(&self.pca_mean)),
+            ("pca_basis", bytemuck::cast_slice(&self.pca_basis)),
+            ("tree_points", bytemuck::cast_slice(&self.tree_points)),
+            ("tree_ids", bytemuck::cast_slice(&self.tree_ids)),
+            ("tree_nodes", bytemuck::cast_slice(&self.tree_nodes)),
+        ]
+    }
+
+    /// A checked borrowed view.
+    pub fn as_ref(&self) -> TexelVariantsRef<'_> {
+        let arrays = self.arrays();
+        TexelVariantsRef::from_arrays(self.meta.clone(), |name| {
+            arrays.iter().find(|(n, _)| *n == name).map(|(_, b)| *b)
+        })
+        .expect("freshly built texel variants are consistent")
+    }
+}
+
+/// `cos θ` and `sin θ` of orientation `k` of `count`, exact at multiples of 90°.
+pub fn orientation_cos_sin(k: u32, count: u32) -> (f64, f64) {
+    let theta = std::f64::consts::TAU * k as f64 / count as f64;
+    let snap = |v: f64| {
+        if v.abs() < 1e-12 {
+            0.0
+        } else if (v.abs() - 1.0).abs() < 1e-12 {
+            v.signum()
+        } else {
+            v
+        }
+    };
+    (snap(theta.cos()), snap(theta.sin()))
+}
+
+/// Rotates `(dx, dy)` by the angle with cosine `c` and sine `s` (`x' = c x − s y`).
+#[inline]
+fn rotate(c: f64, s: f64, dx: f32, dy: f32) -> (f32, f32) {
+    let (dx, dy) = (dx as f64, dy as f64);
+    ((c * dx - s * dy) as f32, (s * dx + c * dy) as f32)
+}
+
+/// How a variant is resampled: from which level of the sample's pyramid, at what
+/// magnification relative to it, and the side of the resulting square.
+#[derive(Clone, Copy, Debug)]
+struct Resampling {
+    source_level: usize,
+    magnification: f64,
+    side: u32,
+}
+
+fn resampling(
+    sample_w: u32,
+    sample_h: u32,
+    params: &TexelVariantParams,
+    scale: usize,
+    orientation: u32,
+) -> Resampling {
+    // Scale factor 2^(middle − scale): 2 for T1, 1 for T2, 1/2 for T3.
+    let e = params.middle_scale() as i32 - scale as i32;
+    let (source_level, magnification) = if e >= 0 {
+        (0usize, (1u32 << e) as f64)
+    } else {
+        ((-e) as usize, 1.0)
+    };
+    let (mut w, mut h) = (sample_w, sample_h);
+    for _ in 0..source_level {
+        w = w.div_ceil(2);
+        h = h.div_ceil(2);
+    }
+    let (c, s) = orientation_cos_sin(orientation, params.orientations);
+    let extent = (w.min(h).max(1) - 1) as f64;
+    let side = (magnification * extent / (c.abs() + s.abs()) + 1e-6).floor() as u32 + 1;
+    Resampling {
+        source_level,
+        magnification,
+        side,
+    }
+}
+
+/// Sizes of the pyramid levels of a square of side `side`.
+fn level_sides(side: u32, levels: u32) -> Vec<u32> {
+    let mut out = vec![side];
+    for _ in 1..levels {
+        let last = *out.last().unwrap();
+        out.push(last.div_ceil(2));
+    }
+    out
+}
+
+/// Candidate centres of a template on a `w × h` level (`coarse` the size of the next coarser
+/// level, if any), row-major.
+fn candidates(kind: Template, side: u32, w: u32, h: u32, coarse: Option<(u32, u32)>) -> Vec<u32> {
+    let r = side / 2;
+    let y_hi = match kind {
+        Template::Causal => h as i64 - 1,
+        Template::Full => h as i64 - 1 - r as i64,
+    };
+    let x_hi = w as i64 - 1 - r as i64;
+    let rc = coarse_window(side) / 2;
+    let mut out = Vec::new();
+    for y in r as i64..=y_hi {
+        for x in r as i64..=x_hi {
+            if let Some((cw, ch)) = coarse {
+                let (cx, cy) = (x / 2, y / 2);
+                if cx < rc as i64
+                    || cy < rc as i64
+                    || cx > cw as i64 - 1 - rc as i64
+                    || cy > ch as i64 - 1 - rc as i64
+                {
+                    continue;
+                }
+            }
+            out.push((y * w as i64 + x) as u32);
+        }
+    }
+    out
+}
+
+/// Candidates per feature set below which [`build_texel_variants`] warns that the variant is
+/// too small to synthesize well from.
+pub const FEW_CANDIDATES: usize = 64;
+
+/// The first (scale, orientation, level, level side, candidates) of a `w × h` sample's
+/// variants with fewer than `min` candidates for one of the templates.
+fn shortfall(
+    w: u32,
+    h: u32,
+    p: &TexelVariantParams,
+    min: usize,
+) -> Option<(usize, u32, usize, u32, usize)> {
+    for scale in 0..p.scales as usize {
+        for k in 0..p.orientations {
+            let rs = resampling(w, h, p, scale, k);
+            let sides = level_sides(rs.side, p.levels);
+            for l in 0..sides.len() {
+                let coarse = sides.get(l + 1).map(|&s| (s, s));
+                for (kind, t) in [
+                    (Template::Causal, p.template),
+                    (Template::Full, p.boundary_template),
+                ] {
+                    let count = candidates(kind, t, sides[l], sides[l], coarse).len();
+                    if count < min {
+                        return Some((scale, k, l, sides[l], count));
+                    }
+                }
+            }
+        }
+    }
+    None
+}
+
+/// The smallest square sample side from `start` up whose variants all have `min` candidates.
+fn side_needed(p: &TexelVariantParams, min: usize, start: u32) -> u32 {
+    let mut need = start.max(1);
+    while shortfall(need, need, p, min).is_some() && need < 1 << 16 {
+        need += 1;
+    }
+    need
+}
+
+/// Checks that `width × height` is large enough: every level of every variant must keep at
+/// least one candidate for both templates. The error names the smallest square sample that
+/// would do.
+pub fn check_sample_size(
+    width: u32,
+    height: u32,
+    params: &TexelVariantParams,
+) -> Result<(), String> {
+    params.validate()?;
+    let Some((scale, k, l, side, _)) = shortfall(width, height, params, 1) else {
+        return Ok(());
+    };
+    let need = side_needed(params, 1, width.max(height));
+    Err(format!(
+        "texel variants: the sample is {width}×{height} texels, too small: at scale {} of {} and \
+         orientation {}° its cropped pyramid level {l} has only {side}×{side} texels, too few \
+         for the {}×{} template and the {}×{} boundary template (with the coarser level's \
+         neighbourhood above the coarsest level); with these parameters the sample must be at \
+         least {need}×{need}",
+        scale + 1,
+        params.scales,
+        k as f64 * 360.0 / params.orientations as f64,
+        params.template,
+        params.template,
+        params.boundary_template,
+        params.boundary_template,
+    ))
+}
+
+/// Packs a texel image's channels into RGBA images (3 channels each, alpha 1), so the image
+/// pyramid code can filter them.
+fn to_images(t: &TexelImage) -> Vec<Image> {
+    let c = t.channels as usize;
+    (0..c.div_ceil(3))
+        .map(|g| {
+            let pixels = t
+                .data
+                .chunks_exact(c)
+                .map(|px| {
+                    let mut p = [0.0, 0.0, 0.0, 1.0];
+                    for k in 0..3 {
+                        if let Some(&v) = px.get(g * 3 + k) {
+                            p[k] = v;
+                        }
+                    }
+                    p
+                })
+                .collect();
+            Image {
+                width: t.width,
+                height: t.height,
+                pixels,
+            }
+        })
+        .collect()
+}
+
+fn from_images(imgs: &[Image], channels: u32) -> TexelImage {
+    let (w, h) = (imgs[0].width, imgs[0].height);
+    let c = channels as usize;
+    let mut out = TexelImage::new(w, h, channels);
+    for (i, px) in out.data.chunks_exact_mut(c).enumerate() {
+        for (k, v) in px.iter_mut().enumerate() {
+            *v = imgs[k / 3].pixels[i][k % 3];
+        }
+    }
+    out
+}
+
+/// One Gaussian pyramid step of a texel image: the binomial blur and decimation of
+/// [`pyramid::downsample`] on every channel (`w × h` gives `⌈w/2⌉ × ⌈h/2⌉`; texel `i` of the
+/// result sits at `2 i`).
+pub fn downsample_texels(t: &TexelImage) -> TexelImage {
+    let imgs: Vec<Image> = to_images(t)
+        .iter()
+        .map(|i| pyramid::downsample(i.view()))
+        .collect();
+    from_images(&imgs, t.channels)
+}
+
+/// The Gaussian pyramid of a texel image, `levels` levels (level 0 is the input), however small
+/// they get.
+pub fn texel_pyramid(t: &TexelImage, levels: usize) -> Vec<TexelImage> {
+    let mut out = vec![t.clone()];
+    while out.len() < levels {
+        let next = downsample_texels(out.last().unwrap());
+        out.push(next);
+    }
+    out
+}
+
+/// Bilinear sample of a texel image at a continuous address (integers = texel centres),
+/// coordinates clamped to the image.
+fn bilinear(t: &TexelImage, x: f64, y: f64, out: &mut [f32]) {
+    let x = x.clamp(0.0, (t.width - 1) as f64);
+    let y = y.clamp(0.0, (t.height - 1) as f64);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+    let (x0, y0) = (x0 as u32, y0 as u32);
+    let x1 = (x0 + 1).min(t.width - 1);
+    let y1 = (y0 + 1).min(t.height - 1);
+    let (a, b, c, d) = (
+        t.texel(x0, y0),
+        t.texel(x1, y0),
+        t.texel(x0, y1),
+        t.texel(x1, y1),
+    );
+    for k in 0..out.len() {
+        let top = a[k] + (b[k] - a[k]) * fx;
+        let bot = c[k] + (d[k] - c[k]) * fx;
+        out[k] = top + (bot - top) * fy;
+    }
+}
+
+/// The rotated, scaled and cropped sample of one variant (level 0), see the module docs.
+/// `sources` is the sample's pyramid (as many levels as the smallest scale needs).
+pub fn resample_variant(
+    sources: &[TexelImage],
+    params: &TexelVariantParams,
+    scale: usize,
+    orientation: u32,
+) -> TexelImage {
+    let s0 = &sources[0];
+    let rs = resampling(s0.width, s0.height, params, scale, orientation);
+    let src = &sources[rs.source_level];
+    let (cos, sin) = orientation_cos_sin(orientation, params.orientations);
+    let c = src.channels as usize;
+    let side = rs.side;
+    let mut out = TexelImage::new(side, side, src.channels);
+    let half_v = (side as f64 - 1.0) / 2.0;
+    let (cx, cy) = (
+        (src.width as f64 - 1.0) / 2.0,
+        (src.height as f64 - 1.0) / 2.0,
+    );
+    let m = rs.magnification;
+    out.data
+        .par_chunks_mut(side as usize * c)
+        .enumerate()
+        .for_each(|(py, row)| {
+            for (px, o) in row.chunks_exact_mut(c).enumerate() {
+                let (ux, uy) = (px as f64 - half_v, py as f64 - half_v);
+                // Source point: R(−θ) u / m about the source centre.
+                let sx = cx + (cos * ux + sin * uy) / m;
+                let sy = cy + (-sin * ux + cos * uy) / m;
+                bilinear(src, sx, sy, o);
+                let (dx, dy) = rotate(cos, sin, o[0], o[1]);
+                o[0] = dx;
+                o[1] = dy;
+            }
+        });
+    out
+}
+
+/// Writes the raw feature vector of the template `kind` (side `side`) centred on `(x, y)` of
+/// `level`, with `coarser` the next level if any. The template must lie inside (a candidate).
+#[allow(clippy::too_many_arguments)]
+fn write_feature(
+    level: &TexelImage,
+    coarser: Option<&TexelImage>,
+    taps: &[(i32, i32)],
+    ctaps: &[(i32, i32)],
+    weights: &[f32],
+    coarse_weight: f32,
+    x: u32,
+    y: u32,
+    out: &mut [f32],
+) {
+    let c = level.channels as usize;
+    let mut o = 0;
+    for &(dx, dy) in taps {
+        let t = level.texel((x as i32 + dx) as u32, (y as i32 + dy) as u32);
+        for k in 0..c {
+            out[o + k] = t[k] * weights[k];
+        }
+        o += c;
+    }
+    if let Some(cl) = coarser {
+        let (cx, cy) = ((x / 2) as i32, (y / 2) as i32);
+        for &(dx, dy) in ctaps {
+            let t = cl.texel((cx + dx) as u32, (cy + dy) as u32);
+            for k in 0..c {
+                out[o + k] = t[k] * weights[k] * coarse_weight;
+            }
+            o += c;
+        }
+    }
+    debug_assert_eq!(o, out.len());
+}
+
+/// Channel weights of the feature vectors (see the module docs).
+fn channel_weights(sample: &TexelImage, color_weight: f32) -> Vec<f32> {
+    let c = sample.channels as usize;
+    let n = (sample.width * sample.height) as f64;
+    let mut var = vec![0.0f64; c];
+    for k in 0..c {
+        let mean: f64 = sample
+            .data
+            .iter()
+            .skip(k)
+            .step_by(c)
+            .map(|&v| v as f64)
+            .sum::<f64>()
+            / n;
+        var[k] = sample
+            .data
+            .iter()
+            .skip(k)
+            .step_by(c)
+            .map(|&v| (v as f64 - mean).powi(2))
+            .sum::<f64>()
+            / n;
+    }
+    let mut w = vec![1.0f32; c];
+    if c == 6 {
+        let geo = (var[..3].iter().sum::<f64>() / 3.0).sqrt();
+        let col = (var[3..].iter().sum::<f64>() / 3.0).sqrt();
+        let f = if geo > 0.0 && col > 0.0 {
+            geo / col
+        } else {
+            1.0
+        };
+        for v in &mut w[3..] {
+            *v = (f * color_weight as f64) as f32;
+        }
+    }
+    w
+}
+
+/// Candidates a PCA basis is fitted to at most (a regular subsample of the rest).
+pub const PCA_FIT_SAMPLES: usize = 4096;
+
+/// Raw feature vectors of template `kind` (side `side`) at level `l` of `pyr`, for `centres`.
+fn features(
+    pyr: &[TexelImage],
+    l: usize,
+    kind: Template,
+    side: u32,
+    weights: &[f32],
+    coarse_weight: f32,
+    centres: &[u32],
+) -> Vec<f32> {
+    let level = &pyr[l];
+    let coarser = pyr.get(l + 1);
+    let taps = template_taps(kind, side);
+    let ctaps = coarse_taps(side);
+    let dim_in = feature_dim(kind, side, coarser.is_some(), level.channels);
+    let mut raw = vec![0.0f32; centres.len() * dim_in];
+    raw.par_chunks_mut(dim_in)
+        .zip(centres.par_iter())
+        .for_each(|(out, &ci)| {
+            let (x, y) = (ci % level.width, ci / level.width);
+            write_feature(
+                level,
+                coarser,
+                &taps,
+                &ctaps,
+                weights,
+                coarse_weight,
+                x,
+                y,
+                out,
+            );
+        });
+    raw
+}
+
+/// Builds the variant set of `sample` (3 channels dx, dy, dn, or 6 with r, g, b). `progress`
+/// gets the fraction done, from 0 to 1, from the calling thread.
+pub fn build_texel_variants(
+    sample: &TexelImage,
+    params: &TexelVariantParams,
+    progress: &dyn Fn(f32),
+) -> Result<TexelVariants, String> {
+    params.validate()?;
+    let c = sample.channels;
+    if c != 3 && c != 6 {
+        return Err(format!(
+            "texel variants: the sample has {c} channels, expected 3 (dx, dy, dn) or 6 (dx, dy, dn, r, g, b)"
+        ));
+    }
+    if sample.data.len() != (sample.width * sample.height * c) as usize {
+        return Err(format!(
+            "texel variants: a {}×{} sample with {c} channels needs {} values, got {}",
+            sample.width,
+            sample.height,
+            sample.width * sample.height * c,
+            sample.data.len()
+        ));
+    }
+    if let Some(i) = sample.data.iter().position(|v| !v.is_finite()) {
+        let t = i as u32 / c;
+        return Err(format!(
+            "texel variants: sample texel ({}, {}) channel {} is not a finite number",
+            t % sample.width,
+            t / sample.width,
+            i as u32 % c
+        ));
+    }
+    check_sample_size(sample.width, sample.height, params)?;
+    if let Some((scale, k, l, side, count)) =
+        shortfall(sample.width, sample.height, params, FEW_CANDIDATES)
+    {
+        tracing::warn!(
+            target: "texsyn::texel_variants",
+            "the {}×{} sample leaves only {count} candidates ({side}×{side} texels) at pyramid \
+             level {l} of scale {} and orientation {}°: synthesis there will repeat a few \
+             texels; a sample of {n}×{n} would give every level {FEW_CANDIDATES}",
+            sample.width,
+            sample.height,
+            scale + 1,
+            k as f64 * 360.0 / params.orientations as f64,
+            n = side_needed(params, FEW_CANDIDATES, sample.width.max(sample.height)),
+        );
+    }
+    progress(0.0);
+    let weights = channel_weights(sample, params.color_weight);
+    let sources = texel_pyramid(sample, params.middle_scale() + 1);
+    let nl = params.levels as usize;
+    let k_count = params.orientations;
+    let jobs: Vec<(usize, u32)> = (0..params.scales as usize)
+        .flat_map(|s| (0..k_count).map(move |k| (s, k)))
+        .collect();
+    let nv = jobs.len();
+    let pyramids: Vec<Vec<TexelImage>> = jobs
+        .par_iter()
+        .map(|&(s, k)| texel_pyramid(&resample_variant(&sources, params, s, k), nl))
+        .collect();
+    let kinds = [
+        (Template::Causal, params.template),
+        (Template::Full, params.boundary_template),
+    ];
+    // Sets in (variant, level, template) order.
+    let set_of = |v: usize, l: usize, t: usize| (v * nl + l) * 2 + t;
+    let centres: Vec<Vec<u32>> = (0..nv * nl * 2)
+        .into_par_iter()
+        .map(|idx| {
+            let (v, l, t) = (idx / (2 * nl), idx / 2 % nl, idx % 2);
+            let (kind, side) = kinds[t];
+            let (level, coarser) = (&pyramids[v][l], pyramids[v].get(l + 1));
+            candidates(
+                kind,
+                side,
+                level.width,
+                level.height,
+                coarser.map(|c| (c.width, c.height)),
+            )
+        })
+        .collect();
+    // A PCA basis per set, fitted to a regular subsample of at most PCA_FIT_SAMPLES of its
+    // candidates.
+    let bases: Vec<Pca> = (0..nv * nl * 2)
+        .into_par_iter()
+        .map(|idx| {
+            let (v, l, t) = (idx / (2 * nl), idx / 2 % nl, idx % 2);
+            let (kind, side) = kinds[t];
+            let stride = centres[idx].len().div_ceil(PCA_FIT_SAMPLES).max(1);
+            let chosen: Vec<u32> = centres[idx].iter().step_by(stride).copied().collect();
+            let fit = features(
+                &pyramids[v],
+                l,
+                kind,
+                side,
+                &weights,
+                params.coarse_weight,
+                &chosen,
+            );
+            Pca::fit(
+                &fit,
+                feature_dim(kind, side, l + 1 < nl, c),
+                &PcaParams {
+                    components: params.pca_dims,
+                    variance: 0.999,
+                    min_auto: 8,
+                    max_auto: 24,
+                },
+            )
+        })
+        .collect();
+    let basis_of = |v: usize, l: usize, t: usize| &bases[set_of(v, l, t)];
+    let trees: Vec<KdTree> = (0..nv * nl * 2)
+        .into_par_iter()
+        .map(|idx| {
+            let (v, l, t) = (idx / (2 * nl), idx / 2 % nl, idx % 2);
+            let (kind, side) = kinds[t];
+            let raw = features(
+                &pyramids[v],
+                l,
+                kind,
+                side,
+                &weights,
+                params.coarse_weight,
+                &centres[idx],
+            );
+            let pca = basis_of(v, l, t);
+            KdTree::build(&pca.project_all(&raw), pca.components())
+        })
+        .collect();
+
+    // Concatenate in (variant, level, template) order.
+    let mut out = TexelVariants {
+        meta: VariantsMeta {
+            params: params.clone(),
+            channels: c,
+            sample_width: sample.width,
+            sample_height: sample.height,
+            channel_weights: weights,
+            levels: Vec::new(),
+            sets: Vec::new(),
+        },
+        texels: Vec::new(),
+        centres: Vec::new(),
+        pca_mean: Vec::new(),
+        pca_basis: Vec::new(),
+        tree_points: Vec::new(),
+        tree_ids: Vec::new(),
+        tree_nodes: Vec::new(),
+    };
+    for (v, pyr) in pyramids.iter().enumerate() {
+        for img in pyr {
+            out.meta.levels.push(LevelMeta {
+                width: img.width,
+                height: img.height,
+                texel_offset: out.texels.len() as u64,
+            });
+            out.texels.extend_from_slice(&img.data);
+        }
+        for l in 0..nl {
+            for t in 0..2 {
+                let idx = set_of(v, l, t);
+                let pca = basis_of(v, l, t);
+                let (dim, points, ids, nodes) = trees[idx].parts();
+                debug_assert_eq!(dim, pca.components());
+                out.meta.sets.push(SetMeta {
+                    dim_in: pca.dim as u32,
+                    dims: dim as u32,
+                    count: centres[idx].len() as u32,
+                    centre_offset: out.centres.len() as u64,
+                    mean_offset: out.pca_mean.len() as u64,
+                    basis_offset: out.pca_basis.len() as u64,
+                    point_offset: out.tree_points.len() as u64,
+                    node_offset: out.tree_nodes.len() as u64,
+                    node_count: nodes.len() as u64,
+                });
+                out.centres.extend_from_slice(&centres[idx]);
+                out.pca_mean.extend_from_slice(&pca.mean);
+                out.pca_basis.extend_from_slice(&pca.basis);
+                out.tree_points.extend_from_slice(points);
+                out.tree_ids.extend_from_slice(ids);
+                out.tree_nodes.extend_from_slice(nodes);
+            }
+        }
+    }
+    progress(1.0);
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stripes(w: u32, h: u32, period: f32) -> TexelImage {
+        let mut t = TexelImage::new(w, h, 3);
+        for y in 0..h {
+            for x in 0..w {
+                let p = t.texel_mut(x, y);
+                p[0] = 1.0;
+                p[1] = 0.25;
+                p[2] = (std::f32::consts::TAU * x as f32 / period).sin();
+            }
+        }
+        t
+    }
+
+    #[test]
+    fn params_validate_names_the_field() {
+        assert!(TexelVariantParams::default().validate().is_ok());
+        let e = TexelVariantParams {
+            template: 4,
+            ..Default::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.contains("template") && e.contains("odd"), "{e}");
+        let e = TexelVariantParams {
+            scales: 2,
+            ..Default::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.contains("scales"), "{e}");
+        let e = TexelVariantParams {
+            color_weight: f32::NAN,
+            ..Default::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.contains("color_weight"), "{e}");
+        let e: Result<TexelVariantParams, _> = toml::from_str("orientation = 8");
+        assert!(e.is_err(), "unknown fields are refused");
+    }
+
+    #[test]
+    fn causal_template_reads_only_earlier_texels() {
+        let taps = template_taps(Template::Causal, 5);
+        assert_eq!(taps.len(), 12);
+        assert!(taps.iter().all(|&(dx, dy)| dy < 0 || (dy == 0 && dx < 0)));
+        assert_eq!(template_taps(Template::Full, 5).len(), 25);
+        assert_eq!(coarse_taps(5).len(), 9);
+        assert_eq!(feature_dim(Template::Causal, 5, true, 3), 63);
+    }
+
+    #[test]
+    fn variant_sizes_crop_inside_the_rotated_sample() {
+        let p = TexelVariantParams::default();
+        // 0°: the whole sample (scaled); 45°: side / √2.
+        assert_eq!(resampling(64, 64, &p, 1, 0).side, 64);
+        assert_eq!(resampling(64, 64, &p, 0, 0).side, 127);
+        assert_eq!(resampling(64, 64, &p, 2, 0).side, 32);
+        assert_eq!(resampling(64, 64, &p, 1, 2).side, 64); // 90°
+        assert_eq!(
+            resampling(64, 64, &p, 1, 1).side,
+            (63.0 / 2f64.sqrt()) as u32 + 1
+        );
+    }
+
+    #[test]
+    fn identity_variant_is_the_sample_and_quarter_turn_rotates_pattern_and_vectors() {
+        let sample = stripes(24, 24, 6.0);
+        let p = TexelVariantParams {
+            orientations: 4,
+            scales: 1,
+            levels: 1,
+            ..Default::default()
+        };
+        let src = texel_pyramid(&sample, 1);
+        let v0 = resample_variant(&src, &p, 0, 0);
+        assert_eq!(v0, sample);
+        let v1 = resample_variant(&src, &p, 0, 1); // 90°
+        assert_eq!((v1.width, v1.height), (24, 24));
+        for y in 0..24 {
+            for x in 0..24 {
+                let t = v1.texel(x, y);
+                // (1, 0.25) rotated by 90°: (−0.25, 1).
+                assert!((t[0] + 0.25).abs() < 1e-6 && (t[1] - 1.0).abs() < 1e-6);
+                // Content at offset u moves to R(90°) u = (−u_y, u_x): the variant at (x, y)
+                // shows the sample at u = (y − c, c − x), so dn varies with y only.
+                let c = 11.5;
+                let ux = y as f32 - c;
+                let want = sample.texel((ux + c) as u32, 0)[2];
+                assert!((t[2] - want).abs() < 1e-5, "({x}, {y}) {} {want}", t[2]);
+            }
+        }
+    }
+
+    #[test]
+    fn too_small_sample_names_the_size_needed() {
+        let p = TexelVariantParams::default();
+        let e = build_texel_variants(&stripes(20, 20, 6.0), &p, &|_| {}).unwrap_err();
+        assert!(e.contains("20×20") && e.contains("at least"), "{e}");
+        let need: u32 = e
+            .rsplit("at least ")
+            .next()
+            .unwrap()
+            .split('×')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(check_sample_size(need, need, &p).is_ok());
+        assert!(check_sample_size(need - 1, need - 1, &p).is_err());
+    }
+
+    #[test]
+    fn small_variants_are_found_for_the_warning() {
+        let p = TexelVariantParams::default();
+        // 64²: the scaled-down unrotated variant is 32² texels, 8² at level 2: the causal
+        // template has 4 × 6 candidates there.
+        let (scale, k, l, side, count) = shortfall(64, 64, &p, FEW_CANDIDATES).unwrap();
+        assert_eq!((scale, k, l, side, count), (2, 0, 2, 8, 24));
+        assert!(shortfall(64, 64, &p, 1).is_none());
+        let n = side_needed(&p, FEW_CANDIDATES, 64);
+        assert!(shortfall(n, n, &p, FEW_CANDIDATES).is_none());
+        assert!(shortfall(n - 1, n - 1, &p, FEW_CANDIDATES).is_some());
+        println!("a sample of {n}² gives every level {FEW_CANDIDATES} candidates");
+    }
+
+    #[test]
+    fn arrays_round_trip_through_an_artifact_and_damage_is_an_error() {
+        use crate::artifact::{Artifact, ArtifactWriter, Kind};
+        let p = TexelVariantParams {
+            orientations: 2,
+            ..Default::default()
+        };
+        let v = build_texel_variants(&stripes(40, 40, 7.0), &p, &|_| {}).unwrap();
+        let mut w = ArtifactWriter::new(Kind::Image, &v.meta);
+        for (name, bytes) in v.arrays() {
+            w = w.array_bytes(name, bytes.to_vec());
+        }
+        let art = Artifact::from_bytes(w.finish()).unwrap();
+        let meta: VariantsMeta = art.meta().unwrap();
+        let r = TexelVariantsRef::from_arrays(meta.clone(), |n| art.raw_array(n).ok()).unwrap();
+        let owned = v.as_ref();
+        assert_eq!(r.meta, v.meta);
+        for var in 0..r.variant_count() {
+            for l in 0..r.levels() {
+                assert_eq!(r.level(var, l).texels, owned.level(var, l).texels);
+                for kind in [Template::Causal, Template::Full] {
+                    let (a, b) = (r.set(var, l, kind), owned.set(var, l, kind));
+                    assert_eq!(a.centres, b.centres);
+                    assert_eq!(a.basis, b.basis);
+                    let q = vec![0.1f32; a.dims];
+                    let mut s = Vec::new();
+                    assert_eq!(
+                        a.tree.nearest1_approx(&q, 0.0, &mut s),
+                        b.tree.nearest1_approx(&q, 0.0, &mut s)
+                    );
+                }
+            }
+        }
+        // A missing array, a short array and inconsistent metadata are errors.
+        assert!(
+            TexelVariantsRef::from_arrays(meta.clone(), |n| {
+                (n != "centres").then(|| art.raw_array(n).ok()).flatten()
+            })
+            .is_err()
+        );
+        assert!(
+            TexelVariantsRef::from_arrays(meta.clone(), |n| {
+                let a = art.raw_array(n).ok()?;
+                Some(if n == "tree_points" {
+                    &a[..a.len() - 4]
+                } else {
+                    a
+                })
+            })
+            .is_err()
+        );
+        let mut bad = meta.clone();
+        bad.sets[3].dims += 1;
+        assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
+        let mut bad = meta;
+        bad.levels.pop();
+        assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
+    }
+
+    #[test]
+    fn build_is_thread_count_independent() {
+        let p = TexelVariantParams {
+            orientations: 3,
+            ..Default::default()
+        };
+        let s = stripes(50, 46, 5.0);
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| build_texel_variants(&s, &p, &|_| {}).unwrap());
+        let two = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap()
+            .install(|| build_texel_variants(&s, &p, &|_| {}).unwrap());
+        assert_eq!(one, two);
+    }
+}

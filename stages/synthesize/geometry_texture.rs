@@ -1,1 +1,1162 @@
-//! (to be written)
+//! Geometric texture synthesis over a geometry image, consistent across its cuts.
+//!
+//! Implements Y.-K. Lai, S.-M. Hu, D. X. Gu and R. R. Martin, "Geometric Texture Synthesis and
+//! Transfer via Geometry Images" (SPM 2005): §4.2.1 (initial synthesis), §4.2.2 (boundary
+//! resynthesis) and the synthesis side of §4.3 (discretized orientation and scaling). The
+//! oriented and scaled sample set, its pyramids, features and kd-trees come from
+//! [`crate::stages::analyse_exemplar::texel_variants`].
+//!
+//! A geometry image of side `n = 2^k + 1` has `(n − 1) / 2^l + 1` samples per side at pyramid
+//! level `l`; sample `i` of level `l` is sample `i · 2^l` of level 0, and its field values are
+//! that sample's. Coarse to fine, each level is
+//! 1. started: the coarsest level with texels drawn at random from the sample (the variant each
+//!    texel would be matched in, so the start has the sample's statistics), each finer level
+//!    with the finished coarser level, interpolated;
+//! 2. synthesized in scanline order with the causal Γ template, plus the full neighbourhood one
+//!    level coarser above the coarsest level. Each texel is matched in one variant (§4.3): of
+//!    the two discretized orientations next to the field angle, each with probability by
+//!    closeness, and of the two scales next to `level = log2 R + 2` (clamped to the range of
+//!    scales), `T_s` with probability `s + 1 − level`. The nearest candidate in that variant
+//!    (PCA-reduced features, kd-tree search within `1 + search_eps`) gives the texel: the
+//!    variant's texel, whose `(dx, dy)` the analysis already turned into the variant's axes,
+//!    which are the grid's;
+//! 3. resynthesized near the cuts (§4.2.2), `boundary_passes` times: texels within
+//!    `boundary_strip` texels of a side sample that has a mate, in scanline order, with the full
+//!    template, which reads both sides of the cut (below). After each pass (and after step 2)
+//!    each mate group takes the value of one member, chosen by a counter-based hash, so mated
+//!    texels end bit-identical.
+//!
+//! Reading across a cut: the square's sides are taken in perimeter order (top `i = 0` with
+//! `j` increasing, right, bottom, left), each with a tangent `t` along that order and an
+//! inward normal `m`. A tap `b` texels outside side sample `p` is read at `q + b · m_q`, where
+//! `q` is a mate of `p` whose side runs the opposite way along the cut: the pairing `(p, side)`
+//! ↔ `(q, side)` is accepted when the border neighbours agree (`p ± t_p` is mated with
+//! `q ∓ t_q`), which also tells which side of a corner sample is meant. The value is turned by
+//! the quarter turn between the two sides' grid axes.
+//!
+//! Frames: while synthesizing, every texel's `(dx, dy)` are in its own side's grid axes
+//! (`x` = column `j`, `y` = row `i`, as the local frames of
+//! [`crate::geom::geometry_image::local_frames`] are away from the cuts). Those frames give a
+//! mated sample its group representative's frame, so in the output every member of a mate group
+//! holds the representative-frame value, turned by the quarter turn between the member's and
+//! the representative's sides; all members' output texels are bit-identical.
+//!
+//! Heuristics (the paper: "for other problem cases, e.g. texels in the corner of geometry images,
+//! or where two cuts meet, we use a heuristic approach"):
+//! - A tap outside the square across a corner (outside in both `i` and `j`) is first mirrored
+//!   back along the axis it overshoots less (rows on ties), then read across the other side.
+//! - A tap across a side sample without a mate, or whose pairing cannot be confirmed, is
+//!   mirrored into the square. A tap mapped across a cut that falls outside the square again is
+//!   mirrored.
+//! - A mate whose pairing with its group representative cannot be confirmed directly (e.g. the
+//!   third member where cuts meet) is taken to share the representative's axes.
+//! - Mate groups at a coarse level are those of the level-0 samples `(i · 2^l, j · 2^l)`
+//!   restricted to that lattice (the parameterization puts cut nodes on the coarsest grid).
+//!
+//! Departures and choices the paper leaves open:
+//! - The boundary template's size is a parameter of the variant set
+//!   (`TexelVariantParams::boundary_template`), whose analysis builds its features and trees,
+//!   not of this stage.
+//! - The scanline pass reads taps outside the square (across cuts, or mirrored) from the level's
+//!   starting values, not from texels synthesized in this pass. The paper "ignores the
+//!   boundary" there; reading the synthesized texels instead (mirrored) fed each border
+//!   texel's choice back into its neighbours' templates and grew repeating diagonal streaks from
+//!   the left border on the test bumps. Starting finer levels from the coarser result (rather
+//!   than from the pyramid of the random start, whose blurred noise has almost no contrast)
+//!   gives those taps a sensible prediction, across cuts too.
+//! - Scanline order is kept exactly, but texels on one anti-diagonal wave (`j + (r + 1) i`
+//!   constant, `r` the template radius) do not depend on one another, so each wave is computed
+//!   in parallel: the result is the sequential one (a unit test compares them), for any number
+//!   of threads. Boundary passes are sequential.
+//! - The random number that picks the scale is shared by the texels of a cell of a jittered
+//!   grid of template spacing (each texel takes the cell whose jittered centre is nearest); the
+//!   probabilities per texel are the paper's. Drawn per texel, neighbouring texels matched at
+//!   different scales and the texture turned into grain where `R` falls between two scales.
+//!   Orientations are still drawn per texel: per cell, stripes broke into straight pieces at the
+//!   cell borders.
+use crate::geom::geometry_image::{GeometryImage, TexelImage};
+use crate::random::{counter_hash, counter_unit};
+use crate::stages::analyse_exemplar::texel_variants::{
+    Template, TexelVariantsRef, coarse_taps, template_taps,
+};
+use glam::Vec2;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// The per-sample controls of synthesis (§4.3), one entry per geometry-image sample
+/// (`i * n + j`).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct ParamField {
+    /// Desired texture "up" direction in grid coordinates (`x` = column `j`, `y` = row `i`),
+    /// unit length. The sample's up is its own `+y` axis (its rows, the direction of `dy`), so
+    /// `(0, 1)` everywhere reproduces the sample unrotated. A zero vector counts as `(0, 1)`.
+    pub dir: Vec<Vec2>,
+    /// Relative scaling `R(v0)` (§4.3, including any global density offset), > 0. `R = 1` uses
+    /// the sample's own size, `R = 2` (grid points twice as far apart on the surface as on
+    /// average) the sample scaled down by 2, `R = 0.5` scaled up by 2.
+    pub rel_scale: Vec<f32>,
+}
+
+/// Parameters of the synthesis.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GeometrySynthParams {
+    /// Seed of every random choice (start texels, variant choices, mate propagation).
+    /// Default: 0.
+    pub seed: u64,
+    /// Boundary resynthesis passes per level, 0..=16 (§4.2.2: "can be repeatedly performed
+    /// several times"). Default: 2.
+    pub boundary_passes: u32,
+    /// Width in texels (of each level) of the strip along mated sides that boundary
+    /// resynthesis redoes, 1..=64. Default: 4.
+    pub boundary_strip: u32,
+    /// Approximate nearest-neighbour factor, 0..=10: a match may be up to `1 + search_eps`
+    /// times farther than the best one; 0 = exact. Default: 0.25 (on the tests' bumps, 0.5 and
+    /// 1 left flat triangular plateaus that exact search does not; 0.25 looked like exact
+    /// search, and at 257² exact search costs about 0.25 s on 2 cores anyway).
+    pub search_eps: f32,
+}
+
+impl Default for GeometrySynthParams {
+    fn default() -> Self {
+        GeometrySynthParams {
+            seed: 0,
+            boundary_passes: 2,
+            boundary_strip: 4,
+            search_eps: 0.25,
+        }
+    }
+}
+
+impl GeometrySynthParams {
+    /// Checks every field; the error names the field, its range and the value.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.boundary_passes > 16 {
+            return Err(format!(
+                "geometry texture: boundary_passes must be in 0..=16, got {}",
+                self.boundary_passes
+            ));
+        }
+        if !(1..=64).contains(&self.boundary_strip) {
+            return Err(format!(
+                "geometry texture: boundary_strip must be in 1..=64, got {}",
+                self.boundary_strip
+            ));
+        }
+        if !(self.search_eps.is_finite() && (0.0..=10.0).contains(&self.search_eps)) {
+            return Err(format!(
+                "geometry texture: search_eps must be in 0..=10, got {}",
+                self.search_eps
+            ));
+        }
+        Ok(())
+    }
+}
+
+const STREAM_INIT: u64 = 0x6774_0001;
+const STREAM_ORIENT: u64 = 0x6774_0002;
+const STREAM_SCALE: u64 = 0x6774_0003;
+const STREAM_MATE: u64 = 0x6774_0004;
+const STREAM_BLOCK: u64 = 0x6774_0005;
+
+/// Most channels a texel has.
+const MAX_CHANNELS: usize = 6;
+
+/// Pass number of the choices made for the starting values.
+const INIT_PASS: u32 = 0xFFFF;
+
+/// Counter of a random choice at `texel` of `level` in pass `pass` (0 the scanline pass).
+#[inline]
+fn choice_index(level: usize, pass: u32, texel: usize) -> u64 {
+    ((level as u64) << 56) | ((pass as u64) << 40) | texel as u64
+}
+
+/// Quarter turns of the tangent of each side (top, right, bottom, left) in `(x, y)` axes.
+const SIDE_TOP: u8 = 0;
+const SIDE_RIGHT: u8 = 1;
+const SIDE_BOTTOM: u8 = 2;
+const SIDE_LEFT: u8 = 3;
+
+/// `(di, dj)` of the tangent and of the inward normal of each side.
+const TANGENT: [(i64, i64); 4] = [(0, 1), (1, 0), (0, -1), (-1, 0)];
+const NORMAL: [(i64, i64); 4] = [(1, 0), (0, -1), (-1, 0), (0, 1)];
+
+/// Turns `(dx, dy)` by `r` quarter turns (`(x, y) → (−y, x)` each). Exact.
+#[inline]
+fn quarter_turn(r: u8, v: &mut [f32]) {
+    let (x, y) = (v[0], v[1]);
+    let (nx, ny) = match r & 3 {
+        0 => (x, y),
+        1 => (-y, x),
+        2 => (-x, -y),
+        _ => (y, -x),
+    };
+    v[0] = nx;
+    v[1] = ny;
+}
+
+/// Mirrors an index into `[0, n)` about the edge samples.
+#[inline]
+fn mirror(i: i64, n: i64) -> i64 {
+    if n <= 1 {
+        return 0;
+    }
+    let period = 2 * (n - 1);
+    let m = i.rem_euclid(period);
+    if m < n { m } else { period - m }
+}
+
+/// One level's grid: size, mate groups and how to read across its cuts.
+struct LevelGrid {
+    n: usize,
+    rep: Vec<u32>,
+    /// Mate groups with more than one member, members by increasing index.
+    groups: Vec<Vec<u32>>,
+    /// Per sample, quarter turns from its grid axes to its representative's.
+    to_rep: Vec<u8>,
+    /// Per `(side, position along the side as i or j)`, the sample and side across the cut.
+    across: Vec<Option<(u32, u8)>>,
+    /// Texels of the boundary strip in scanline order.
+    strip: Vec<u32>,
+}
+
+impl LevelGrid {
+    fn sides_of(&self, i: i64, j: i64) -> impl Iterator<Item = u8> {
+        let last = self.n as i64 - 1;
+        [
+            (SIDE_TOP, i == 0),
+            (SIDE_RIGHT, j == last),
+            (SIDE_BOTTOM, i == last),
+            (SIDE_LEFT, j == 0),
+        ]
+        .into_iter()
+        .filter(|s| s.1)
+        .map(|s| s.0)
+    }
+
+    #[inline]
+    fn inside(&self, i: i64, j: i64) -> bool {
+        let n = self.n as i64;
+        (0..n).contains(&i) && (0..n).contains(&j)
+    }
+
+    #[inline]
+    fn idx(&self, i: i64, j: i64) -> usize {
+        i as usize * self.n + j as usize
+    }
+
+    fn coords(&self, k: u32) -> (i64, i64) {
+        ((k as usize / self.n) as i64, (k as usize % self.n) as i64)
+    }
+
+    /// Whether side `sp` at `p` and side `sq` at `q` are the two sides of one cut, running in
+    /// opposite directions: the border neighbours of `p` and `q` are mated.
+    fn paired(&self, p: u32, sp: u8, q: u32, sq: u8) -> bool {
+        let (pi, pj) = self.coords(p);
+        let (qi, qj) = self.coords(q);
+        let (tp, tq) = (TANGENT[sp as usize], TANGENT[sq as usize]);
+        for d in [1i64, -1] {
+            let a = (pi + d * tp.0, pj + d * tp.1);
+            let b = (qi - d * tq.0, qj - d * tq.1);
+            if self.inside(a.0, a.1)
+                && self.inside(b.0, b.1)
+                && self.rep[self.idx(a.0, a.1)] == self.rep[self.idx(b.0, b.1)]
+            {
+                return true;
+            }
+        }
+        false
+    }
+
+    fn build(n: usize, rep: Vec<u32>, strip_width: u32) -> LevelGrid {
+        let mut members: Vec<Vec<u32>> = vec![Vec::new(); n * n];
+        for (k, &r) in rep.iter().enumerate() {
+            if r as usize != k {
+                if members[r as usize].is_empty() {
+                    members[r as usize].push(r);
+                }
+                members[r as usize].push(k as u32);
+            }
+        }
+        let groups: Vec<Vec<u32>> = members.into_iter().filter(|g| g.len() > 1).collect();
+        let mut g = LevelGrid {
+            n,
+            rep,
+            groups,
+            to_rep: vec![0; n * n],
+            across: vec![None; 4 * n],
+            strip: Vec::new(),
+        };
+        let mut group_of: Vec<u32> = vec![u32::MAX; n * n];
+        for (gi, grp) in g.groups.iter().enumerate() {
+            for &m in grp {
+                group_of[m as usize] = gi as u32;
+            }
+        }
+        // Turns to the representative.
+        let mut to_rep = vec![0u8; n * n];
+        for grp in &g.groups {
+            let r = grp[0];
+            let (ri, rj) = g.coords(r);
+            for &p in &grp[1..] {
+                let (pi, pj) = g.coords(p);
+                'found: for sp in g.sides_of(pi, pj) {
+                    for sr in g.sides_of(ri, rj) {
+                        if g.paired(p, sp, r, sr) {
+                            to_rep[p as usize] = (sr + 6 - sp) % 4;
+                            break 'found;
+                        }
+                    }
+                }
+            }
+        }
+        g.to_rep = to_rep;
+        // Across each side sample.
+        let last = n as i64 - 1;
+        let mut across = vec![None; 4 * n];
+        for side in 0..4u8 {
+            for pos in 0..n as i64 {
+                let (pi, pj) = match side {
+                    SIDE_TOP => (0, pos),
+                    SIDE_RIGHT => (pos, last),
+                    SIDE_BOTTOM => (last, pos),
+                    _ => (pos, 0),
+                };
+                let p = g.idx(pi, pj) as u32;
+                let gi = group_of[p as usize];
+                if gi == u32::MAX {
+                    continue;
+                }
+                'found: for &q in &g.groups[gi as usize] {
+                    if q == p {
+                        continue;
+                    }
+                    let (qi, qj) = g.coords(q);
+                    for sq in g.sides_of(qi, qj) {
+                        if g.paired(p, side, q, sq) {
+                            across[side as usize * n + pos as usize] = Some((q, sq));
+                            break 'found;
+                        }
+                    }
+                }
+            }
+        }
+        g.across = across;
+        // The strip: texels near a side sample that has a partner across the cut.
+        let w = strip_width as i64;
+        for i in 0..n as i64 {
+            for j in 0..n as i64 {
+                let near = [
+                    (SIDE_TOP, i, j),
+                    (SIDE_RIGHT, last - j, i),
+                    (SIDE_BOTTOM, last - i, j),
+                    (SIDE_LEFT, j, i),
+                ]
+                .iter()
+                .any(|&(s, d, pos)| d < w && g.across[s as usize * n + pos as usize].is_some());
+                if near {
+                    g.strip.push(g.idx(i, j) as u32);
+                }
+            }
+        }
+        g
+    }
+
+    /// Where tap `(i, j)` is read, by how many quarter turns its `(dx, dy)` turn into the
+    /// reader's axes, and whether the tap lies outside the square.
+    #[inline]
+    fn locate(&self, i: i64, j: i64) -> (usize, u8, bool) {
+        let n = self.n as i64;
+        if self.inside(i, j) {
+            return (self.idx(i, j), 0, false);
+        }
+        let over = |v: i64| {
+            if v < 0 {
+                -v
+            } else if v >= n {
+                v - (n - 1)
+            } else {
+                0
+            }
+        };
+        let (mut i, mut j) = (i, j);
+        let (oi, oj) = (over(i), over(j));
+        if oi > 0 && oj > 0 {
+            if oi <= oj {
+                i = mirror(i, n);
+            } else {
+                j = mirror(j, n);
+            }
+        }
+        let (side, pos, b) = if i < 0 {
+            (SIDE_TOP, j, -i)
+        } else if j >= n {
+            (SIDE_RIGHT, i, j - (n - 1))
+        } else if i >= n {
+            (SIDE_BOTTOM, j, i - (n - 1))
+        } else {
+            (SIDE_LEFT, i, -j)
+        };
+        match self.across[side as usize * self.n + pos as usize] {
+            None => (self.idx(mirror(i, n), mirror(j, n)), 0, true),
+            Some((q, sq)) => {
+                let (qi, qj) = self.coords(q);
+                let m = NORMAL[sq as usize];
+                let (ti, tj) = (mirror(qi + b * m.0, n), mirror(qj + b * m.1, n));
+                (self.idx(ti, tj), (side + 6 - sq) % 4, true)
+            }
+        }
+    }
+}
+
+/// One level's working state: texels (own grid axes) and the per-texel variant controls.
+struct Level {
+    grid: LevelGrid,
+    data: Vec<f32>,
+    /// The level's values before its scanline pass, which reads taps outside the square here.
+    init: Vec<f32>,
+    /// Fractional orientation index in `[0, orientations)`.
+    orient: Vec<f32>,
+    /// Fractional scale index in `[0, scales − 1]` (0 = most enlarged).
+    scale: Vec<f32>,
+}
+
+/// Everything a texel's match needs, shared by the passes.
+struct Ctx<'a, 'v> {
+    variants: &'a TexelVariantsRef<'v>,
+    channels: usize,
+    weights: &'a [f32],
+    coarse_weight: f32,
+    seed: u64,
+    eps: f32,
+    orientations: usize,
+    scales: usize,
+    /// Side of the blocks of texels that share their random variant choice.
+    block: usize,
+}
+
+/// Scratch buffers of one matcher.
+#[derive(Default)]
+struct Scratch {
+    raw: Vec<f32>,
+    reduced: Vec<f32>,
+    search: Vec<f32>,
+}
+
+impl Ctx<'_, '_> {
+    /// Variant for texel `t` of `level` in `pass` (§4.3).
+    #[inline]
+    fn choose(&self, lv: &Level, level: usize, pass: u32, t: usize) -> usize {
+        // Orientation: one random number per texel. Scale: one per cell of a jittered grid of
+        // spacing `block` (each texel takes the cell whose jittered centre is nearest), so
+        // neighbouring texels mostly match at the same scale.
+        let n = lv.grid.n as i64;
+        let b = self.block.max(1) as i64;
+        let (i, j) = (t as i64 / n, t as i64 % n);
+        let (ci, cj) = (i.div_euclid(b), j.div_euclid(b));
+        let cells = n / b + 3;
+        let mut best = (i64::MAX, 0u64);
+        for di in -1..=1 {
+            for dj in -1..=1 {
+                let (gi, gj) = (ci + di, cj + dj);
+                let cell = ((gi + 1) * cells + gj + 1) as u64;
+                let h = counter_hash(
+                    self.seed,
+                    STREAM_BLOCK,
+                    choice_index(level, pass, cell as usize),
+                );
+                let pi = gi * b + (h % b as u64) as i64;
+                let pj = gj * b + ((h >> 32) % b as u64) as i64;
+                let d = (pi - i).pow(2) + (pj - j).pow(2);
+                if d < best.0 {
+                    best = (d, cell);
+                }
+            }
+        }
+        let key = choice_index(level, pass, best.1 as usize);
+        let f = lv.orient[t];
+        let k0 = f.floor();
+        let u = counter_unit(self.seed, STREAM_ORIENT, choice_index(level, pass, t));
+        let k = (if u < 1.0 - (f - k0) {
+            k0 as usize
+        } else {
+            k0 as usize + 1
+        }) % self.orientations;
+        let s = lv.scale[t];
+        let s0 = s.floor();
+        let u = counter_unit(self.seed, STREAM_SCALE, key);
+        let sc = if u < 1.0 - (s - s0) {
+            s0 as usize
+        } else {
+            (s0 as usize + 1).min(self.scales - 1)
+        };
+        self.variants.variant(sc, k)
+    }
+
+    /// The raw feature vector of texel `(i, j)` of `levels[l]` (taps `taps`, and `ctaps` one
+    /// level coarser if there is one), as the variants' features are built, into `raw`.
+    #[allow(clippy::too_many_arguments)]
+    fn gather(
+        &self,
+        levels: &[Level],
+        l: usize,
+        taps: &[(i32, i32)],
+        ctaps: &[(i32, i32)],
+        i: i64,
+        j: i64,
+        outside_from_init: bool,
+        raw: &mut Vec<f32>,
+    ) {
+        let c = self.channels;
+        raw.clear();
+        let push = |data: &[f32], k: usize, r: u8, raw: &mut Vec<f32>| {
+            let mut px = [0.0f32; MAX_CHANNELS];
+            px[..c].copy_from_slice(&data[k * c..(k + 1) * c]);
+            if r != 0 {
+                quarter_turn(r, &mut px);
+            }
+            for ch in 0..c {
+                raw.push(px[ch] * self.weights[ch]);
+            }
+        };
+        let lv = &levels[l];
+        for &(dx, dy) in taps {
+            let (k, r, outside) = lv.grid.locate(i + dy as i64, j + dx as i64);
+            let src = if outside && outside_from_init {
+                &lv.init
+            } else {
+                &lv.data
+            };
+            push(src, k, r, raw);
+        }
+        if let Some(cl) = levels.get(l + 1) {
+            // The coarser level is finished: read it as it is, across cuts too.
+            let (ci, cj) = (i >> 1, j >> 1);
+            let start = raw.len();
+            for &(dx, dy) in ctaps {
+                let (k, r, _) = cl.grid.locate(ci + dy as i64, cj + dx as i64);
+                push(&cl.data, k, r, raw);
+            }
+            for v in &mut raw[start..] {
+                *v *= self.coarse_weight;
+            }
+        }
+    }
+
+    /// The synthesized value of texel `(i, j)` of `levels[l]` with template `kind`, written to
+    /// `out` (in the texel's grid axes).
+    #[allow(clippy::too_many_arguments)]
+    fn synthesize_texel(
+        &self,
+        levels: &[Level],
+        l: usize,
+        pass: u32,
+        kind: Template,
+        taps: &[(i32, i32)],
+        ctaps: &[(i32, i32)],
+        i: i64,
+        j: i64,
+        scratch: &mut Scratch,
+        out: &mut [f32],
+    ) {
+        let c = self.channels;
+        let lv = &levels[l];
+        let t = lv.grid.idx(i, j);
+        let v = self.choose(lv, l, pass, t);
+        let set = self.variants.set(v, l, kind);
+        // The scanline pass reads outside taps from the level's starting values, so no texel
+        // depends on one synthesized later (and the wavefront order stays exact); boundary
+        // resynthesis reads the current values across the cuts.
+        let from_init = kind == Template::Causal;
+        self.gather(levels, l, taps, ctaps, i, j, from_init, &mut scratch.raw);
+        debug_assert_eq!(scratch.raw.len(), set.dim_in);
+        scratch.reduced.resize(set.dims, 0.0);
+        set.project(&scratch.raw, &mut scratch.reduced);
+        let (id, _) = set
+            .tree
+            .nearest1_approx(&scratch.reduced, self.eps, &mut scratch.search)
+            .expect("feature sets are never empty");
+        let level_img = self.variants.level(v, l);
+        let k = set.centres[id as usize] as usize;
+        out[..c].copy_from_slice(&level_img.texels[k * c..(k + 1) * c]);
+    }
+}
+
+/// Gives every mate group of `lv` one member's value (chosen by hash), turned into each
+/// member's axes.
+fn unify_mates(lv: &mut Level, c: usize, seed: u64, level: usize, pass: u32) {
+    for g in &lv.grid.groups {
+        let pick = counter_hash(seed, STREAM_MATE, choice_index(level, pass, g[0] as usize))
+            % g.len() as u64;
+        let m = g[pick as usize] as usize;
+        let mut v = [0.0f32; MAX_CHANNELS];
+        v[..c].copy_from_slice(&lv.data[m * c..(m + 1) * c]);
+        let rm = lv.grid.to_rep[m];
+        for &q in g {
+            let q = q as usize;
+            let mut w = v;
+            // Into the representative's axes, then into q's.
+            quarter_turn((rm + 4 - lv.grid.to_rep[q]) % 4, &mut w);
+            lv.data[q * c..(q + 1) * c].copy_from_slice(&w[..c]);
+        }
+    }
+}
+
+/// Bilinear interpolation of the coarser level `coarse` onto a grid of side `nf` (sample `i` of
+/// `coarse` is sample `2 i` of the result).
+fn upsample(coarse: &Level, nf: usize, c: usize) -> Vec<f32> {
+    let nc = coarse.grid.n;
+    debug_assert_eq!((nc - 1) * 2 + 1, nf);
+    let mut fine = vec![0.0f32; nf * nf * c];
+    fine.par_chunks_mut(nf * c)
+        .enumerate()
+        .for_each(|(i, row)| {
+            let (i0, i1) = (i / 2, i.div_ceil(2));
+            for (j, out) in row.chunks_exact_mut(c).enumerate() {
+                let (j0, j1) = (j / 2, j.div_ceil(2));
+                for ch in 0..c {
+                    let at = |a: usize, b: usize| coarse.data[(a * nc + b) * c + ch];
+                    out[ch] = 0.25 * (at(i0, j0) + at(i0, j1) + at(i1, j0) + at(i1, j1));
+                }
+            }
+        });
+    fine
+}
+
+fn check_inputs(gi: &GeometryImage, field: &ParamField, levels: usize) -> Result<(), String> {
+    let n = gi.n as usize;
+    let nn = n * n;
+    let step = 1usize << (levels - 1);
+    if n < 3 || !(n - 1).is_multiple_of(step) || (n - 1) / step < 2 {
+        return Err(format!(
+            "geometry texture: a geometry image of side {n} cannot have {levels} pyramid levels: \
+             the side must be 2^{} · k + 1 with k ≥ 2 (e.g. {}, {} or {})",
+            levels - 1,
+            2 * step + 1,
+            4 * step + 1,
+            8 * step + 1
+        ));
+    }
+    if gi.mate_rep.len() != nn {
+        return Err(format!(
+            "geometry texture: the geometry image has {} mate entries for {n}×{n} samples",
+            gi.mate_rep.len()
+        ));
+    }
+    for (k, &r) in gi.mate_rep.iter().enumerate() {
+        if r as usize >= nn || gi.mate_rep[r as usize] != r {
+            return Err(format!(
+                "geometry texture: sample {k}'s mate representative {r} is not a representative"
+            ));
+        }
+    }
+    if field.dir.len() != nn || field.rel_scale.len() != nn {
+        return Err(format!(
+            "geometry texture: the field has {} directions and {} scales for {nn} samples",
+            field.dir.len(),
+            field.rel_scale.len()
+        ));
+    }
+    if let Some(k) = field.dir.iter().position(|d| !d.is_finite()) {
+        return Err(format!(
+            "geometry texture: field direction at sample ({}, {}) is not finite: {}",
+            k / n,
+            k % n,
+            field.dir[k]
+        ));
+    }
+    if let Some(k) = field
+        .rel_scale
+        .iter()
+        .position(|r| !(r.is_finite() && *r > 0.0))
+    {
+        return Err(format!(
+            "geometry texture: relative scale at sample ({}, {}) must be a positive number, got {}",
+            k / n,
+            k % n,
+            field.rel_scale[k]
+        ));
+    }
+    Ok(())
+}
+
+/// `(cos θ, sin θ)` of the rotation taking the sample's up `(0, 1)` to `dir`.
+#[inline]
+fn dir_rotation(dir: Vec2) -> (f32, f32) {
+    let d = dir.normalize_or_zero();
+    if d == Vec2::ZERO {
+        (1.0, 0.0)
+    } else {
+        (d.y, -d.x)
+    }
+}
+
+/// Synthesizes a texel image over `gi` (see the module docs). The result has `gi.n × gi.n`
+/// texels with the variants' channels; `(dx, dy, dn)` are in the local frames of
+/// [`crate::geom::geometry_image::local_frames`]. `progress` gets the fraction done, 0 to 1,
+/// from the calling thread.
+pub fn synthesize_geometry_texture(
+    gi: &GeometryImage,
+    field: &ParamField,
+    variants: &TexelVariantsRef<'_>,
+    p: &GeometrySynthParams,
+    progress: &dyn Fn(f32),
+) -> Result<TexelImage, String> {
+    synthesize_impl(gi, field, variants, p, progress, true)
+}
+
+/// [`synthesize_geometry_texture`]; `wavefront` false runs the scanline pass texel by texel
+/// (the reference the wavefront order must reproduce).
+fn synthesize_impl(
+    gi: &GeometryImage,
+    field: &ParamField,
+    variants: &TexelVariantsRef<'_>,
+    p: &GeometrySynthParams,
+    progress: &dyn Fn(f32),
+    wavefront: bool,
+) -> Result<TexelImage, String> {
+    p.validate()?;
+    let vp = variants.params().clone();
+    let nl = vp.levels as usize;
+    check_inputs(gi, field, nl)?;
+    progress(0.0);
+    let n0 = gi.n as usize;
+    let c = variants.channels();
+    let kk = vp.orientations as usize;
+    let ss = vp.scales as usize;
+    let mid = vp.middle_scale();
+
+    // Per-sample controls at level 0.
+    let tau = std::f64::consts::TAU;
+    let orient0: Vec<f32> = field
+        .dir
+        .iter()
+        .map(|&d| {
+            let (cos, sin) = dir_rotation(d);
+            let theta = (sin as f64).atan2(cos as f64);
+            let f = (theta / (tau / kk as f64)).rem_euclid(kk as f64);
+            if f >= kk as f64 { 0.0 } else { f as f32 }
+        })
+        .collect();
+    let scale0: Vec<f32> = field
+        .rel_scale
+        .iter()
+        .map(|&r| (r.log2() + mid as f32).clamp(0.0, (ss - 1) as f32))
+        .collect();
+
+    // Level grids: mates from the level-0 samples on each level's lattice.
+    let mut levels: Vec<Level> = Vec::with_capacity(nl);
+    for l in 0..nl {
+        let n = (n0 - 1) / (1 << l) + 1;
+        let fine = |i: usize, j: usize| (i << l) * n0 + (j << l);
+        let mut first: Vec<u32> = vec![u32::MAX; n0 * n0];
+        let mut rep = vec![0u32; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                let k = i * n + j;
+                let key = gi.mate_rep[fine(i, j)] as usize;
+                if first[key] == u32::MAX {
+                    first[key] = k as u32;
+                }
+                rep[k] = first[key];
+            }
+        }
+        let mut orient = vec![0.0f32; n * n];
+        let mut scale = vec![0.0f32; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                orient[i * n + j] = orient0[fine(i, j)];
+                scale[i * n + j] = scale0[fine(i, j)];
+            }
+        }
+        levels.push(Level {
+            grid: LevelGrid::build(n, rep, p.boundary_strip),
+            data: Vec::new(),
+            init: Vec::new(),
+            orient,
+            scale,
+        });
+    }
+
+    let ctx = Ctx {
+        variants,
+        channels: c,
+        weights: &variants.meta.channel_weights,
+        coarse_weight: vp.coarse_weight,
+        seed: p.seed,
+        eps: p.search_eps,
+        orientations: kk,
+        scales: ss,
+        block: vp.template as usize,
+    };
+    let causal_taps = template_taps(Template::Causal, vp.template);
+    let causal_ctaps = coarse_taps(vp.template);
+    let full_taps = template_taps(Template::Full, vp.boundary_template);
+    let full_ctaps = coarse_taps(vp.boundary_template);
+
+    // Work units for progress: texels per level, times (1 + a share for the boundary).
+    let total: f64 = levels
+        .iter()
+        .map(|lv| (lv.grid.n * lv.grid.n) as f64)
+        .sum::<f64>()
+        + levels
+            .iter()
+            .map(|lv| lv.grid.strip.len() as f64 * p.boundary_passes as f64)
+            .sum::<f64>();
+    let mut done = 0.0f64;
+
+    for l in (0..nl).rev() {
+        let n = levels[l].grid.n as i64;
+        // 1. Starting values: at the coarsest level texels drawn at random from the variant
+        // each texel would be matched in (the sample's statistics at that level and scale),
+        // above it the coarser result, interpolated.
+        let init = if l + 1 == nl {
+            let lv = &levels[l];
+            let mut init = vec![0.0f32; lv.grid.n * lv.grid.n * c];
+            init.par_chunks_mut(c).enumerate().for_each(|(t, out)| {
+                let v = ctx.choose(lv, l, INIT_PASS, t);
+                let img = variants.level(v, l);
+                let count = (img.width * img.height) as u64;
+                let key = choice_index(l, INIT_PASS, t);
+                let k = (counter_hash(p.seed, STREAM_INIT, key) % count) as usize;
+                out.copy_from_slice(&img.texels[k * c..(k + 1) * c]);
+            });
+            init
+        } else {
+            upsample(&levels[l + 1], levels[l].grid.n, c)
+        };
+        levels[l].data = init.clone();
+        levels[l].init = init;
+        // 2. Scanline synthesis, one anti-diagonal wave at a time (or in plain scanline order).
+        let f = if wavefront {
+            (vp.template / 2) as i64 + 1
+        } else {
+            n
+        };
+        let last_wave = (n - 1) + f * (n - 1);
+        let mut results: Vec<[f32; MAX_CHANNELS]> = Vec::new();
+        for w in 0..=last_wave {
+            let i_lo = if w > n - 1 {
+                (w - (n - 1) + f - 1) / f
+            } else {
+                0
+            };
+            let i_hi = (w / f).min(n - 1);
+            if i_lo > i_hi {
+                continue;
+            }
+            let compute = |scratch: &mut Scratch, i: i64| {
+                let mut out = [0.0f32; MAX_CHANNELS];
+                ctx.synthesize_texel(
+                    &levels,
+                    l,
+                    0,
+                    Template::Causal,
+                    &causal_taps,
+                    &causal_ctaps,
+                    i,
+                    w - f * i,
+                    scratch,
+                    &mut out,
+                );
+                out
+            };
+            results.clear();
+            if i_hi - i_lo < 8 || !wavefront {
+                let mut scratch = Scratch::default();
+                results.extend((i_lo..=i_hi).map(|i| compute(&mut scratch, i)));
+            } else {
+                (i_lo as usize..i_hi as usize + 1)
+                    .into_par_iter()
+                    .map_init(Scratch::default, |s, i| compute(s, i as i64))
+                    .collect_into_vec(&mut results);
+            }
+            let lv = &mut levels[l];
+            for (i, px) in (i_lo..=i_hi).zip(&results) {
+                let t = lv.grid.idx(i, w - f * i);
+                lv.data[t * c..(t + 1) * c].copy_from_slice(&px[..c]);
+            }
+        }
+        unify_mates(&mut levels[l], c, p.seed, l, 0);
+        done += (n * n) as f64;
+        progress((done / total) as f32);
+
+        // 3. Boundary resynthesis.
+        let mut scratch = Scratch::default();
+        for pass in 1..=p.boundary_passes {
+            let strip = std::mem::take(&mut levels[l].grid.strip);
+            for &t in &strip {
+                let (i, j) = levels[l].grid.coords(t);
+                let mut out = [0.0f32; MAX_CHANNELS];
+                ctx.synthesize_texel(
+                    &levels,
+                    l,
+                    pass,
+                    Template::Full,
+                    &full_taps,
+                    &full_ctaps,
+                    i,
+                    j,
+                    &mut scratch,
+                    &mut out,
+                );
+                let t = t as usize;
+                levels[l].data[t * c..(t + 1) * c].copy_from_slice(&out[..c]);
+            }
+            done += strip.len() as f64;
+            levels[l].grid.strip = strip;
+            unify_mates(&mut levels[l], c, p.seed, l, pass);
+            progress((done / total) as f32);
+        }
+    }
+
+    // Output: mated samples in their representative's axes.
+    let lv = levels.swap_remove(0);
+    let mut out = TexelImage {
+        width: gi.n,
+        height: gi.n,
+        channels: c as u32,
+        data: lv.data,
+    };
+    for g in &lv.grid.groups {
+        for &q in g {
+            let q = q as usize;
+            quarter_turn(lv.grid.to_rep[q], &mut out.data[q * c..q * c + 2]);
+        }
+    }
+    progress(1.0);
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid_with(n: usize, pairs: &[(usize, usize)]) -> LevelGrid {
+        let mut rep: Vec<u32> = (0..(n * n) as u32).collect();
+        for &(a, b) in pairs {
+            let (lo, hi) = (a.min(b), a.max(b));
+            rep[hi] = rep[lo];
+        }
+        LevelGrid::build(n, rep, 2)
+    }
+
+    #[test]
+    fn quarter_turns_compose_and_are_exact() {
+        let mut v = [0.3f32, -1.7];
+        for _ in 0..4 {
+            quarter_turn(1, &mut v);
+        }
+        assert_eq!(v, [0.3, -1.7]);
+        let mut a = [0.3f32, -1.7];
+        quarter_turn(1, &mut a);
+        assert_eq!(a, [1.7, 0.3]);
+        quarter_turn(3, &mut a);
+        assert_eq!(a, [0.3, -1.7]);
+    }
+
+    #[test]
+    fn cylinder_cut_reads_the_other_side_without_turning() {
+        // Column 0 mated with column n−1, row by row.
+        let n = 9;
+        let pairs: Vec<_> = (0..n).map(|i| (i * n, i * n + n - 1)).collect();
+        let g = grid_with(n, &pairs);
+        // Two texels left of (4, 0) is column n−3 of row 4.
+        assert_eq!(g.locate(4, -2), (4 * n + n - 3, 0, true));
+        // One right of (3, n−1) is column 1.
+        assert_eq!(g.locate(3, n as i64), (3 * n + 1, 0, true));
+        assert_eq!(g.locate(3, 5), (3 * n + 5, 0, false));
+        // The top is a true boundary: mirrored.
+        assert_eq!(g.locate(-1, 4), (n + 4, 0, true));
+        // Beyond a corner: mirrored along the smaller overshoot (rows), then across the cut.
+        assert_eq!(g.locate(-1, -2), (n + n - 3, 0, true));
+        assert!(g.to_rep.iter().all(|&r| r == 0));
+        // The strip holds the columns near both sides, not the top-only texels.
+        assert!(g.strip.contains(&(5 * n as u32 + 1)));
+        assert!(g.strip.contains(&(5 * n as u32 + n as u32 - 2)));
+        assert!(!g.strip.contains(&4));
+    }
+
+    #[test]
+    fn folded_cut_between_top_and_left_turns_vectors_a_quarter() {
+        // The top side (0, j) glued to the left side (j, 0): a cut folded at the corner.
+        // Perimeter: top runs j up, left runs i down, so they run opposite along the cut.
+        let n = 9;
+        let pairs: Vec<_> = (1..n).map(|j| (j, j * n)).collect();
+        let g = grid_with(n, &pairs);
+        // One above (0, 3) is one right of (3, 0), i.e. (3, 1).
+        let (k, r, _) = g.locate(-1, 3);
+        assert_eq!(k, 3 * n + 1);
+        // Moving +j along the top is moving +i down the left side: grid x maps to y.
+        // A vector stored at (3, 1) in its axes, turned by r into the reader's axes.
+        let mut v = [0.0f32, 1.0]; // +y at the left side = +x at the top
+        quarter_turn(r, &mut v);
+        assert_eq!(v, [1.0, 0.0]);
+        // Left side members turn into their representative's (top) axes the inverse way.
+        let (k2, r2, _) = g.locate(3, -1);
+        assert_eq!(k2, n + 3);
+        assert_eq!((r + r2) % 4, 0);
+        // and a left member's value turns into the top's axes like a value read from there.
+        assert_eq!(g.to_rep[3 * n], r);
+    }
+
+    #[test]
+    fn params_validate_names_the_field() {
+        assert!(GeometrySynthParams::default().validate().is_ok());
+        for (p, name) in [
+            (
+                GeometrySynthParams {
+                    boundary_strip: 0,
+                    ..Default::default()
+                },
+                "boundary_strip",
+            ),
+            (
+                GeometrySynthParams {
+                    search_eps: -1.0,
+                    ..Default::default()
+                },
+                "search_eps",
+            ),
+            (
+                GeometrySynthParams {
+                    boundary_passes: 17,
+                    ..Default::default()
+                },
+                "boundary_passes",
+            ),
+        ] {
+            let e = p.validate().unwrap_err();
+            assert!(e.contains(name), "{e}");
+        }
+        let e: Result<GeometrySynthParams, _> = toml::from_str("boundary_pass = 2");
+        assert!(e.is_err());
+    }
+
+    #[test]
+    fn wavefront_order_reproduces_the_scanline_order() {
+        use crate::stages::analyse_exemplar::texel_variants::{
+            TexelVariantParams, build_texel_variants,
+        };
+        use glam::Vec3;
+        let mut sample = TexelImage::new(40, 40, 3);
+        for y in 0..40u32 {
+            for x in 0..40u32 {
+                let h = counter_unit(9, 0, (y * 40 + x) as u64);
+                let t = sample.texel_mut(x, y);
+                t[0] = (x as f32 * 0.7).sin() * 0.2;
+                t[1] = h - 0.5;
+                t[2] = (x as f32 * 0.9 + y as f32 * 0.3).sin() + 0.3 * h;
+            }
+        }
+        let vp = TexelVariantParams {
+            orientations: 4,
+            ..Default::default()
+        };
+        let n = 33u32;
+        let nn = (n * n) as usize;
+        let mut mate_rep: Vec<u32> = (0..nn as u32).collect();
+        for i in 0..n {
+            mate_rep[(i * n + n - 1) as usize] = i * n;
+        }
+        let gi = GeometryImage {
+            n,
+            positions: vec![Vec3::ZERO; nn],
+            normals: vec![Vec3::Z; nn],
+            mate_rep,
+        };
+        let field = ParamField {
+            dir: (0..nn)
+                .map(|k| Vec2::from_angle(k as f32 * 0.01).rotate(Vec2::Y))
+                .collect(),
+            rel_scale: (0..nn).map(|k| 0.6 + (k % 7) as f32 * 0.25).collect(),
+        };
+        for template in [3u32, 5] {
+            let p = GeometrySynthParams::default();
+            // The causal template radius decides the waves.
+            let owned = build_texel_variants(
+                &sample,
+                &TexelVariantParams {
+                    template,
+                    ..vp.clone()
+                },
+                &|_| {},
+            )
+            .unwrap();
+            let vr = owned.as_ref();
+            let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
+            let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
+            let bits = |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a), bits(&b), "template {template}");
+        }
+    }
+
+    #[test]
+    fn destination_features_equal_the_sample_features_where_the_images_agree() {
+        use crate::stages::analyse_exemplar::texel_variants::{
+            TexelVariantParams, build_texel_variants,
+        };
+        // A 33×33 sample is itself a valid 2-level destination: the pyramids coincide, so each
+        // candidate's gathered feature must be found at distance 0, at itself.
+        let n = 33usize;
+        let mut sample = TexelImage::new(n as u32, n as u32, 3);
+        for (k, v) in sample.data.iter_mut().enumerate() {
+            *v = counter_unit(3, 0, k as u64);
+        }
+        for template in [3u32, 5, 7] {
+            let vp = TexelVariantParams {
+                orientations: 1,
+                scales: 1,
+                levels: 2,
+                template,
+                boundary_template: template,
+                ..Default::default()
+            };
+            let owned = build_texel_variants(&sample, &vp, &|_| {}).unwrap();
+            let vr = owned.as_ref();
+            let levels: Vec<Level> = (0..2)
+                .map(|l| {
+                    let lev = vr.level(0, l);
+                    let m = lev.width as usize;
+                    Level {
+                        grid: LevelGrid::build(m, (0..(m * m) as u32).collect(), 2),
+                        data: lev.texels.to_vec(),
+                        init: lev.texels.to_vec(),
+                        orient: vec![0.0; m * m],
+                        scale: vec![0.0; m * m],
+                    }
+                })
+                .collect();
+            let ctx = Ctx {
+                variants: &vr,
+                channels: 3,
+                weights: &vr.meta.channel_weights,
+                coarse_weight: vr.params().coarse_weight,
+                seed: 0,
+                eps: 0.0,
+                orientations: 1,
+                scales: 1,
+                block: 5,
+            };
+            for kind in [Template::Causal, Template::Full] {
+                let taps = template_taps(kind, template);
+                let ctaps = coarse_taps(template);
+                for l in 0..2 {
+                    let set = vr.set(0, l, kind);
+                    let m = levels[l].grid.n;
+                    let mut raw = Vec::new();
+                    let mut red = vec![0.0; set.dims];
+                    let mut scratch = Vec::new();
+                    for (id, &centre) in set.centres.iter().enumerate() {
+                        let (i, j) = ((centre as usize / m) as i64, (centre as usize % m) as i64);
+                        ctx.gather(&levels, l, &taps, &ctaps, i, j, true, &mut raw);
+                        set.project(&raw, &mut red);
+                        let (got, d) = set.tree.nearest1_approx(&red, 0.0, &mut scratch).unwrap();
+                        assert_eq!(d, 0.0, "template {template} {kind:?} level {l} ({i}, {j})");
+                        assert_eq!(got as usize, id);
+                    }
+                }
+            }
+        }
+    }
+}
