@@ -1,5 +1,6 @@
 //! Methods: each expands its config section into a DAG of pipeline nodes (DESIGN.md, "A run").
 
+pub mod geometry_images;
 pub mod jump_maps;
 pub mod synth2d;
 
@@ -9,7 +10,7 @@ use crate::pipeline::{Dag, InputRef, Node, NodeError, Stage};
 use std::path::{Path, PathBuf};
 
 /// The methods a config may name.
-pub const METHODS: &[&str] = &["jump_maps", "synth2d"];
+pub const METHODS: &[&str] = &["jump_maps", "synth2d", "geometry_images"];
 
 #[derive(Debug, thiserror::Error)]
 pub enum MethodError {
@@ -37,6 +38,7 @@ pub fn plan(config: &Config) -> Result<Plan, MethodError> {
     let dag = match method {
         "jump_maps" => jump_maps::build(config)?,
         "synth2d" => synth2d::build(config)?,
+        "geometry_images" => geometry_images::build(config)?,
         other => {
             return Err(MethodError::UnknownMethod {
                 path: config.path.clone(),

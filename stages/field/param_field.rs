@@ -12,7 +12,7 @@
 //!   cut see the same 3D direction (each in its own grid frame). Without key vectors the
 //!   texture follows the parameterization (direction (0, 1) everywhere: no rotation).
 //! - Scaling: S(v₀), the mean distance to the 4-connected neighbours, and R = S / S̄ with S̄
-//!   the mean over the image. The global density offset of §5 (Fig. 8) multiplies R by
+//!   the median over the image (the paper says mean; see [`reference_spacing`]). The global density offset of §5 (Fig. 8) multiplies R by
 //!   2^offset: positive offsets pick smaller sample variants, so the texture gets denser.
 
 use crate::geom::geometry_image::GeometryImage;
@@ -53,11 +53,17 @@ impl ParamFieldParams {
     }
 }
 
-/// Per sample: the texture's up direction in grid coordinates (x along columns j, y along
-/// rows i), unit length, and the relative scaling R (density offset included).
-#[derive(Clone, Debug, PartialEq)]
+/// The per-sample controls of synthesis (§4.3), one entry per geometry-image sample
+/// (`i * n + j`).
+#[derive(Clone, Debug, PartialEq, Default)]
 pub struct ParamField {
+    /// Desired texture "up" direction in grid coordinates (`x` = column `j`, `y` = row `i`),
+    /// unit length. The sample's up is its own `+y` axis (its rows, the direction of `dy`), so
+    /// `(0, 1)` everywhere reproduces the sample unrotated. A zero vector counts as `(0, 1)`.
     pub dir: Vec<Vec2>,
+    /// Relative scaling `R(v0)` (§4.3, including any global density offset), > 0. `R = 1` uses
+    /// the sample's own size, `R = 2` (grid points twice as far apart on the surface as on
+    /// average) the sample scaled down by 2, `R = 0.5` scaled up by 2.
     pub rel_scale: Vec<f32>,
 }
 
@@ -87,6 +93,23 @@ pub fn param_field(gi: &GeometryImage, p: &ParamFieldParams) -> Result<ParamFiel
         })
         .collect();
     Ok(ParamField { dir, rel_scale })
+}
+
+/// S̄: the median of S(v₀) over the samples. The paper takes the mean; a geometry image's
+/// spacing varies a lot (protrusions are sampled sparsely), and the few sparse samples pull the
+/// mean up until R < 1 over most of the surface, which makes the texture coarse everywhere. The
+/// median puts R = 1 where most of the surface is.
+pub fn reference_spacing(spacing: &[f32]) -> f32 {
+    let mut s: Vec<f32> = spacing
+        .iter()
+        .copied()
+        .filter(|v| *v > 0.0 && v.is_finite())
+        .collect();
+    if s.is_empty() {
+        return 0.0;
+    }
+    s.sort_by(|a, b| a.total_cmp(b));
+    s[s.len() / 2]
 }
 
 /// S(v₀): mean distance to the existing 4-connected grid neighbours.

@@ -12,7 +12,8 @@
 //! triangles that merging collapses (they sit where a cut folds back on itself, at its ends).
 //!
 //! Texel amplitudes are in units of the sample's texel spacing (see the extraction stage);
-//! they are scaled here by the input's mean sample spacing S̄ times `amplitude`, so the relief
+//! they are scaled here by the input's typical sample spacing S̄ (the median, as for R) times
+//! `amplitude`, so the relief
 //! keeps its proportions to the texture's features on the new surface. The paper transfers
 //! between models of similar scale and leaves this implicit.
 
@@ -60,14 +61,20 @@ pub struct Displaced {
     pub held_back: usize,
 }
 
-/// Both triangles of every grid cell, (i, j) → i·n + j, counter-clockwise in (j, i).
+/// The triangles of both diagonal splits of every grid cell, (i, j) → i·n + j,
+/// counter-clockwise in (j, i): whichever diagonal [`grid_mesh`] picks, its triangles were
+/// checked.
 fn grid_triangles(n: usize) -> Vec<[usize; 3]> {
-    let mut out = Vec::with_capacity(2 * (n - 1) * (n - 1));
+    let mut out = Vec::with_capacity(4 * (n - 1) * (n - 1));
     for i in 0..n - 1 {
         for j in 0..n - 1 {
-            let a = i * n + j;
-            out.push([a, a + 1, a + n + 1]);
-            out.push([a, a + n + 1, a + n]);
+            let (a, b, c, d) = (
+                i * n + j,
+                i * n + j + 1,
+                (i + 1) * n + j,
+                (i + 1) * n + j + 1,
+            );
+            out.extend([[a, b, d], [a, d, c], [a, b, c], [b, d, c]]);
         }
     }
     out
@@ -112,7 +119,7 @@ pub fn displace(
     let mut positions = gi.positions.clone();
     for step in 1..=p.steps {
         let t = step as f32 / p.steps as f32;
-        let trial: Vec<Vec3> = (0..n * n)
+        let mut trial: Vec<Vec3> = (0..n * n)
             .map(|k| {
                 if frozen[k] {
                     positions[k]
@@ -121,29 +128,42 @@ pub fn displace(
                 }
             })
             .collect();
-        let flips: Vec<bool> = cells
-            .par_iter()
-            .zip(&base)
-            .map(|(t, b)| {
-                *b != Vec3::ZERO && face_normal(&trial, t).normalize_or_zero().dot(*b) < cos_limit
-            })
-            .collect();
-        let mut flipped = vec![false; n * n];
-        for (t, &f) in cells.iter().zip(&flips) {
-            if f {
-                for &k in t {
-                    // Freeze the whole mate group together.
-                    flipped[gi.mate_rep[k] as usize] = true;
+        // Unwinding a sample changes the triangles around it too, so check again until no
+        // triangle is flipped (the frozen set only grows, so this ends).
+        loop {
+            let flips: Vec<bool> = cells
+                .par_iter()
+                .zip(&base)
+                .map(|(t, b)| {
+                    *b != Vec3::ZERO
+                        && face_normal(&trial, t).normalize_or_zero().dot(*b) < cos_limit
+                })
+                .collect();
+            let mut newly = false;
+            for (cell, &f) in cells.iter().zip(&flips) {
+                if !f {
+                    continue;
                 }
+                for &k in cell {
+                    // The whole mate group unwinds together.
+                    let r = gi.mate_rep[k] as usize;
+                    if !frozen[r] {
+                        newly = true;
+                        for m in 0..n * n {
+                            if gi.mate_rep[m] as usize == r {
+                                frozen[m] = true;
+                                trial[m] = positions[m];
+                            }
+                        }
+                    }
+                }
+            }
+            if !newly {
+                break;
             }
         }
         for k in 0..n * n {
-            if frozen[k] {
-                continue;
-            }
-            if flipped[gi.mate_rep[k] as usize] {
-                frozen[k] = true;
-            } else {
+            if !frozen[k] {
                 positions[k] = trial[k];
                 reached[k] = step;
             }

@@ -83,19 +83,8 @@ use glam::Vec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// The per-sample controls of synthesis (§4.3), one entry per geometry-image sample
-/// (`i * n + j`).
-#[derive(Clone, Debug, PartialEq, Default)]
-pub struct ParamField {
-    /// Desired texture "up" direction in grid coordinates (`x` = column `j`, `y` = row `i`),
-    /// unit length. The sample's up is its own `+y` axis (its rows, the direction of `dy`), so
-    /// `(0, 1)` everywhere reproduces the sample unrotated. A zero vector counts as `(0, 1)`.
-    pub dir: Vec<Vec2>,
-    /// Relative scaling `R(v0)` (§4.3, including any global density offset), > 0. `R = 1` uses
-    /// the sample's own size, `R = 2` (grid points twice as far apart on the surface as on
-    /// average) the sample scaled down by 2, `R = 0.5` scaled up by 2.
-    pub rel_scale: Vec<f32>,
-}
+/// The per-sample controls of synthesis (§4.3), computed by the field stage.
+pub use crate::stages::field::param_field::ParamField;
 
 /// Parameters of the synthesis.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

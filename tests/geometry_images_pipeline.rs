@@ -1,0 +1,218 @@
+//! The geometry-image method end to end: mated texels stay identical through synthesis, the
+//! output of a closed input is closed and manifold with no flipped face, results do not depend
+//! on the thread count, a density change reruns only what depends on it, and bad inputs are
+//! named.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use texsyn::artifact::geometry_images::{read_geometry_image, read_texels};
+use texsyn::cache::Cache;
+use texsyn::config::Config;
+use texsyn::pipeline::{self, NodeStatus, RunOptions, RunResult};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Small and quick: a 65² geometry image, 4 orientations, tiny previews.
+const SMALL: &[&str] = &[
+    "parameterize.size=65",
+    "analyse_exemplar.orientations=4",
+    "analyse_exemplar.scales=3",
+    "field.density_offset=0.0",
+    "reconstruct.preview_size=32",
+];
+
+fn run(config: &str, sets: &[&str], cache: &std::path::Path) -> Result<RunResult, String> {
+    let mut all: Vec<String> = SMALL.iter().map(|s| s.to_string()).collect();
+    all.extend(sets.iter().map(|s| s.to_string()));
+    let cfg =
+        Config::load(&repo().join("configs").join(config), &all).map_err(|e| e.to_string())?;
+    let plan = texsyn::methods::plan(&cfg).map_err(|e| e.to_string())?;
+    let cache = Cache::open(cache).unwrap();
+    pipeline::run(&plan.dag, &cache, RunOptions::default()).map_err(|e| e.to_string())
+}
+
+fn err(r: Result<RunResult, String>) -> String {
+    match r {
+        Ok(_) => panic!("expected an error"),
+        Err(e) => e,
+    }
+}
+
+fn artifact<'a>(r: &'a RunResult, node: &str) -> &'a texsyn::artifact::Artifact {
+    let i = r.reports.iter().position(|n| n.node == node).unwrap();
+    &r.artifacts[i]
+}
+
+fn ran(r: &RunResult) -> Vec<&str> {
+    r.reports
+        .iter()
+        .filter(|n| n.status == NodeStatus::Ran)
+        .map(|n| n.node.as_str())
+        .collect()
+}
+
+/// Reads a binary little-endian PLY written by texsyn: positions and triangles.
+fn read_ply(bytes: &[u8]) -> texsyn::geom::Mesh {
+    texsyn::geom::io::read_mesh_bytes(std::path::Path::new("relief.ply"), bytes).unwrap()
+}
+
+#[test]
+fn a_genus_one_input_gives_a_closed_manifold_relief_with_mates_identical_and_no_flips() {
+    let cache = tempfile::tempdir().unwrap();
+    // The knot has genus 1: its cut opens a handle, so the square's sides are mated in pairs.
+    let r = run(
+        "relief_cow.toml",
+        &["inputs.mesh=assets/knot.off", "analyse_exemplar.scales=3"],
+        cache.path(),
+    )
+    .unwrap();
+    let gi = read_geometry_image(artifact(&r, "parameterize")).unwrap();
+    let texels = read_texels(artifact(&r, "synthesize")).unwrap();
+    let groups = gi.mate_groups();
+    assert!(!groups.is_empty());
+    let n = gi.n;
+    for g in &groups {
+        let first = texels.texel(g[0] % n, g[0] / n).to_vec();
+        for &k in g {
+            assert_eq!(texels.texel(k % n, k / n), &first[..], "mate group {g:?}");
+            assert_eq!(gi.positions[k as usize], gi.positions[g[0] as usize]);
+        }
+    }
+    // The exported mesh: every edge has exactly two faces (closed, manifold), consistently
+    // oriented (each directed edge once).
+    let out = tempfile::tempdir().unwrap();
+    let i = r
+        .reports
+        .iter()
+        .position(|n| n.node == "reconstruct")
+        .unwrap();
+    pipeline::outputs::materialize(&r.artifacts[i], out.path()).unwrap();
+    let mesh = read_ply(&std::fs::read(out.path().join("relief.ply")).unwrap());
+    let mut undirected: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
+    for t in &mesh.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *undirected.entry((a.min(b), a.max(b))).or_default() += 1;
+            *directed.entry((a, b)).or_default() += 1;
+        }
+    }
+    let open = undirected.values().filter(|&&c| c != 2).count();
+    assert_eq!(open, 0, "{open} edges without exactly two faces");
+    assert!(
+        directed.values().all(|&c| c == 1),
+        "inconsistent orientation"
+    );
+    let he = texsyn::geom::half_edge::HalfEdgeMesh::new(&mesh).expect("manifold");
+    assert_eq!(he.components().len(), 1);
+    assert_eq!(
+        he.components()[0].genus,
+        1,
+        "the relief keeps the knot's genus"
+    );
+
+    // No face turned by more than the flip threshold against the same triangle on the
+    // undisplaced surface (vertices are numbered by mate group either way).
+    let undisplaced = texsyn::stages::reconstruct::displacement::grid_mesh(&gi, &gi.positions).0;
+    assert_eq!(undisplaced.positions.len(), mesh.positions.len());
+    let cos_limit = 150f32.to_radians().cos();
+    let normal = |p: &[glam::Vec3], t: &[u32; 3]| {
+        (p[t[1] as usize] - p[t[0] as usize])
+            .cross(p[t[2] as usize] - p[t[0] as usize])
+            .normalize_or_zero()
+    };
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        let n0 = normal(&undisplaced.positions, t);
+        let n1 = normal(&mesh.positions, t);
+        if n0 != glam::Vec3::ZERO {
+            assert!(
+                n0.dot(n1) >= cos_limit - 1e-4,
+                "face {f} {t:?} flipped: {n0} {n1} {:?} {:?}",
+                t.map(|v| undisplaced.positions[v as usize]),
+                t.map(|v| mesh.positions[v as usize])
+            );
+        }
+    }
+}
+
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    let hashes: Vec<Vec<String>> = [1, 2]
+        .iter()
+        .map(|&t| {
+            let cache = tempfile::tempdir().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .unwrap();
+            let r = pool
+                .install(|| run("relief_cow.toml", &[], cache.path()))
+                .unwrap();
+            r.reports
+                .iter()
+                .map(|n| format!("{} {}", n.node, n.content_hash))
+                .collect()
+        })
+        .collect();
+    assert_eq!(hashes[0], hashes[1]);
+}
+
+#[test]
+fn a_new_density_reruns_neither_parameterization_nor_extraction_nor_analysis() {
+    let cache = tempfile::tempdir().unwrap();
+    run("relief_cow.toml", &[], cache.path()).unwrap();
+    let r = run(
+        "relief_cow.toml",
+        &["field.density_offset=0.5"],
+        cache.path(),
+    )
+    .unwrap();
+    assert_eq!(ran(&r), vec!["field", "synthesize", "reconstruct"]);
+}
+
+#[test]
+fn bad_inputs_are_named() {
+    let cache = tempfile::tempdir().unwrap();
+    // A colour image is not a height field.
+    let e = err(run(
+        "relief_cow.toml",
+        &["inputs.sample=assets/wood1.png"],
+        cache.path(),
+    ));
+    assert!(e.contains("wood1.png") && e.contains("not grey"), "{e}");
+    // A sample region that misses the sample mesh.
+    let e = err(run(
+        "dragon_knot.toml",
+        &["extract.region={ shape = \"sphere\", center = [0.0, 0.0, 0.0], radius = 1.0 }"],
+        cache.path(),
+    ));
+    assert!(e.contains("holds no triangles"), "{e}");
+    // A non-manifold input (pig.stl has a vertex where two fans meet).
+    let e = err(run(
+        "relief_cow.toml",
+        &["inputs.mesh=../tests/data/meshes/pig.stl"],
+        cache.path(),
+    ));
+    assert!(e.contains("non-manifold") && e.contains("vertex"), "{e}");
+    // A sample too small for the template.
+    let dir = tempfile::tempdir().unwrap();
+    let tiny = dir.path().join("tiny.png");
+    image::GrayImage::from_fn(6, 6, |x, y| image::Luma([((x * 40 + y * 7) % 255) as u8]))
+        .save(&tiny)
+        .unwrap();
+    let e = err(run(
+        "relief_cow.toml",
+        &[&format!("inputs.sample={}", tiny.display())],
+        cache.path(),
+    ));
+    assert!(e.contains("too small") || e.contains("at least"), "{e}");
+    // An image sample must be read as a height field.
+    let e = err(run(
+        "relief_cow.toml",
+        &["extract.method=\"planar\""],
+        cache.path(),
+    ));
+    assert!(e.contains("extract.method"), "{e}");
+}
