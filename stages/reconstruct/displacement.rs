@@ -117,6 +117,13 @@ pub fn displace(
     let mut frozen = vec![false; n * n];
     let mut reached = vec![0u32; n * n];
     let mut positions = gi.positions.clone();
+    // Members of each mate group, by representative (most samples are alone).
+    let mut members: std::collections::HashMap<usize, Vec<usize>> = Default::default();
+    for (k, &r) in gi.mate_rep.iter().enumerate() {
+        if r as usize != k {
+            members.entry(r as usize).or_insert_with(|| vec![r as usize]).push(k);
+        }
+    }
     for step in 1..=p.steps {
         let t = step as f32 / p.steps as f32;
         let mut trial: Vec<Vec3> = (0..n * n)
@@ -149,11 +156,10 @@ pub fn displace(
                     let r = gi.mate_rep[k] as usize;
                     if !frozen[r] {
                         newly = true;
-                        for m in 0..n * n {
-                            if gi.mate_rep[m] as usize == r {
-                                frozen[m] = true;
-                                trial[m] = positions[m];
-                            }
+                        let group = members.get(&r).map(|g| g.as_slice()).unwrap_or(std::slice::from_ref(&r));
+                        for &m in group {
+                            frozen[m] = true;
+                            trial[m] = positions[m];
                         }
                     }
                 }
