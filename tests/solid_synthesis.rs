@@ -316,10 +316,12 @@ fn an_overlapping_request_reuses_bricks() {
         fresh.bricks_computed()
     );
     assert!(r2.levels.iter().any(|l| l.bricks_reused > 0));
-    assert_eq!(
-        r2.levels.iter().map(|l| l.bricks_needed).collect::<Vec<_>>(),
-        fresh.levels.iter().map(|l| l.bricks_needed).collect::<Vec<_>>()
-    );
+    // At the finest level both need the same bricks; below, only what the missing ones need.
+    assert_eq!(r2.levels[2].bricks_needed, fresh.levels[2].bricks_needed);
+    for (a, b) in r2.levels.iter().zip(&fresh.levels) {
+        assert!(a.bricks_needed <= b.bricks_needed);
+        assert_eq!(a.bricks_computed + a.bricks_reused, a.bricks_needed);
+    }
     // Asking again computes nothing.
     let r3 = s.synthesize(&second, &store).unwrap();
     assert_eq!(r3.bricks_computed(), 0);
@@ -361,9 +363,25 @@ fn dual_grid_depends_on_fewer_voxels_than_plain_correction() {
     assert!(d[2].voxels * 2 < p[2].voxels, "{} vs {}", d[2].voxels, p[2].voxels);
 }
 
+/// A 48² crop of wood2 as a solid layered across x: xy shows the stripes, zx the transposed
+/// stripes, yz (weight 0) is not matched.
+fn wood_layers() -> &'static (Image, SolidAnalysis) {
+    static S: OnceLock<(Image, SolidAnalysis)> = OnceLock::new();
+    S.get_or_init(|| {
+        let img = crop(&load("wood2.png"), 10, 20, 48, 48);
+        let tr = transpose(&img);
+        let params = CandidateParams {
+            plane_weights: [1.0, 0.0, 1.0],
+            ..small_params()
+        };
+        let a = analyse([img.view(), img.view(), tr.view()], &params).unwrap();
+        (img, a)
+    })
+}
+
 #[test]
 fn a_section_looks_more_like_the_exemplar_than_random_triples() {
-    let (img, a) = small();
+    let (img, a) = wood_layers();
     let vol = cube(32, 3);
     let field = trivial_field(&vol);
     let s = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
@@ -476,7 +494,13 @@ fn look() {
     params.seed = env_or("SEED", 0);
     for l in params.levels.iter_mut().skip(1) {
         l.jitter = env_or("JITTER", 0.0);
+        if std::env::var("TRILINEAR").is_ok() {
+            l.trilinear = true;
+        }
+        l.passes = env_or("PASSES", l.passes);
     }
+    params.levels[0].passes = env_or("PASSES0", params.levels[0].passes);
+    params.coherent_candidates = std::env::var("NO_COHERENT").is_err();
     if env_or("SCHEME", "dual".to_string()) == "plain" {
         params = params.with_scheme(Scheme::Plain);
     }

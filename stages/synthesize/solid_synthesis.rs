@@ -651,6 +651,7 @@ struct Scratch {
     vec: Vec<f32>,
     proj: [Vec<f32>; 3],
     cands: Vec<Triple>,
+    keys: Vec<u128>,
 }
 
 /// The parents' bricks of a level.
@@ -878,6 +879,7 @@ impl<'a> SolidSynthesis<'a> {
                 }
             }
         }
+        out.sort_unstable();
         out
     }
 
@@ -1043,7 +1045,7 @@ impl<'a> SolidSynthesis<'a> {
         let q = self.field.rotation_at(pos);
         let s = self.field.scale_at(pos);
         let u = centre + q.inverse() * (v.as_vec3() - centre) / s;
-        self.slab_triple(part, u.round().as_ivec3())
+        self.slab_triple(part, round_v(u))
     }
 
     /// §4.2, eq. (3): the upsampled triple of voxel `v` of array level `li ≥ 1`.
@@ -1066,7 +1068,7 @@ impl<'a> SolidSynthesis<'a> {
         }
         let (w, hh) = self.wh();
         tp.offset(
-            [d.x.round() as i32, d.y.round() as i32, d.z.round() as i32],
+            round_v(d).into(),
             w,
             hh,
         )
@@ -1173,7 +1175,8 @@ impl<'a> SolidSynthesis<'a> {
         Scratch {
             vec: vec![0.0; self.analysis.dim(li)],
             proj: [vec![0.0; c], vec![0.0; c], vec![0.0; c]],
-            cands: Vec::with_capacity(27 * self.analysis.k()),
+            cands: Vec::with_capacity(27 * (self.analysis.k() + 1)),
+            keys: Vec::with_capacity(27 * (self.analysis.k() + 1)),
         }
     }
 
@@ -1209,7 +1212,7 @@ impl<'a> SolidSynthesis<'a> {
         let trilinear = self.params.levels[li].trilinear;
         let sample = |p: Vec3| -> [f32; 3] {
             if !trilinear {
-                return read(p.round().as_ivec3()).c;
+                return read(round_v(p)).c;
             }
             let f = p.floor();
             let t = p - f;
@@ -1255,35 +1258,23 @@ impl<'a> SolidSynthesis<'a> {
             let (_, basis) = a.pca(li, img);
             let mp = &self.mean_proj[li][img];
             for k in 0..comps {
-                let row = &basis[k * dim..(k + 1) * dim];
-                let mut acc = 0.0f32;
-                for (x, y) in row.iter().zip(&sc.vec[..dim]) {
-                    acc += x * y;
-                }
-                sc.proj[p][k] = acc - mp[k];
+                sc.proj[p][k] = dot(&basis[k * dim..(k + 1) * dim], &sc.vec[..dim]) - mp[k];
             }
             // Candidates S_P(v), reduced form.
             for d2 in -1..=1 {
                 for d1 in -1..=1 {
-                    let wv = (vf + c1 * d1 as f32 + c2 * d2 as f32)
-                        .round()
-                        .as_ivec3()
-                        .clamp(IVec3::ZERO, dmax);
+                    let wv = round_v(vf + c1 * d1 as f32 + c2 * d2 as f32).clamp(IVec3::ZERO, dmax);
                     let tw = read(wv).t;
                     let e = mat.transpose() * ((wv - v).as_vec3() * (h / s));
                     let (e1, e2) = (e[p], e[(p + 1) % 3]);
                     let px = [
-                        wrap((tw.c[p][0] as f32 - e1).round() as i32, w),
-                        wrap((tw.c[p][1] as f32 - e2).round() as i32, hh),
+                        wrap(round_i(tw.c[p][0] as f32 - e1), w),
+                        wrap(round_i(tw.c[p][1] as f32 - e2), hh),
                     ];
                     sc.cands.extend_from_slice(a.candidates(li, p, px));
                     if self.params.coherent_candidates {
                         // The neighbour's whole triple, shifted back (eq. 4).
-                        sc.cands.push(tw.offset(
-                            [-e.x.round() as i32, -e.y.round() as i32, -e.z.round() as i32],
-                            w,
-                            hh,
-                        ));
+                        sc.cands.push(tw.offset((-round_v(e)).into(), w, hh));
                     }
                 }
             }
@@ -1295,22 +1286,21 @@ impl<'a> SolidSynthesis<'a> {
                 sc.cands.iter_mut().for_each(|c| c.c[p] = [0, 0]);
             }
         }
-        sc.cands.sort_unstable();
-        sc.cands.dedup();
-        let mut best = (f32::INFINITY, sc.cands[0]);
-        for cand in &sc.cands {
+        // Sort and deduplicate by a packed key (its order is the triples' order).
+        sc.keys.clear();
+        sc.keys.extend(sc.cands.iter().map(triple_key));
+        sc.keys.sort_unstable();
+        sc.keys.dedup();
+        let mut best = (f32::INFINITY, triple_of_key(sc.keys[0]));
+        for key in &sc.keys {
+            let cand = &triple_of_key(*key);
             let mut e = 0.0f32;
             for p in 0..3 {
                 if weights[p] == 0.0 {
                     continue;
                 }
                 let f = a.feature(li, a.image_of(p), cand.c[p]);
-                let mut d = 0.0f32;
-                for (x, y) in sc.proj[p].iter().zip(f) {
-                    let t = x - y;
-                    d += t * t;
-                }
-                e += weights[p] * d;
+                e += weights[p] * squared_distance(&sc.proj[p], f);
                 if e >= best.0 {
                     break;
                 }
@@ -1319,15 +1309,80 @@ impl<'a> SolidSynthesis<'a> {
                 best = (e, *cand);
             }
         }
+        let comparisons = sc.keys.len() as u32;
         let t = best.1;
         (
             VoxelState {
                 t,
                 c: a.colour(li, &t),
             },
-            sc.cands.len() as u32,
+            comparisons,
         )
     }
+}
+
+/// `⌊x + ½⌋`: nearest integer, halves up (no libm call).
+#[inline]
+fn round_i(x: f32) -> i32 {
+    let t = x + 0.5;
+    let i = t as i32;
+    if (i as f32) > t { i - 1 } else { i }
+}
+
+#[inline]
+fn round_v(v: Vec3) -> IVec3 {
+    IVec3::new(round_i(v.x), round_i(v.y), round_i(v.z))
+}
+
+#[inline]
+fn triple_key(t: &Triple) -> u128 {
+    t.c.iter()
+        .flatten()
+        .fold(0u128, |k, &x| (k << 16) | x as u128)
+}
+
+#[inline]
+fn triple_of_key(k: u128) -> Triple {
+    let x = |i: u32| (k >> (16 * (5 - i))) as u16;
+    Triple::new([x(0), x(1)], [x(2), x(3)], [x(4), x(5)])
+}
+
+/// Dot product with eight partial sums (so it vectorizes), added in a fixed order.
+#[inline]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for i in 0..8 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    let mut tail = 0.0f32;
+    for (x, y) in ra.iter().zip(rb) {
+        tail += x * y;
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
+/// Squared Euclidean distance with four partial sums, added in a fixed order.
+#[inline]
+fn squared_distance(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for i in 0..4 {
+            let t = x[i] - y[i];
+            acc[i] += t * t;
+        }
+    }
+    let mut tail = 0.0f32;
+    for (x, y) in ra.iter().zip(rb) {
+        let t = x - y;
+        tail += t * t;
+    }
+    (acc[0] + acc[2]) + (acc[1] + acc[3]) + tail
 }
 
 /// A 64-bit key of a voxel of a level, for counter-based randomness.
