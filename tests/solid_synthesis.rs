@@ -14,8 +14,7 @@ use texsyn::stages::analyse_exemplar::candidate_triples::{
 };
 use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
 use texsyn::stages::synthesize::solid_synthesis::{
-    Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, Volume,
-    VoxelRequest,
+    Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, Volume, VoxelRequest,
 };
 
 fn data_path(name: &str) -> PathBuf {
@@ -116,8 +115,11 @@ fn nearest_patch_distance(section: &[[f32; 3]], sw: usize, sh: usize, ex: &Image
                     let mut d = 0.0f32;
                     'p: for j in -2..=2i64 {
                         for i in -2..=2i64 {
-                            let s = section[(sy as i64 + j) as usize * sw + (sx as i64 + i) as usize];
-                            let e = ex.pixels[((ey + j).rem_euclid(eh) * ew + (ex_ + i).rem_euclid(ew)) as usize];
+                            let s =
+                                section[(sy as i64 + j) as usize * sw + (sx as i64 + i) as usize];
+                            let e = ex.pixels[((ey + j).rem_euclid(eh) * ew
+                                + (ex_ + i).rem_euclid(ew))
+                                as usize];
                             for c in 0..3 {
                                 let t = s[c] - e[c];
                                 d += t * t;
@@ -146,7 +148,10 @@ fn analysis_arrays_round_trip_in_place() {
         .into_iter()
         .map(|(n, b)| (n, AlignedBytes::from_slice(b)))
         .collect();
-    let views: Vec<(String, &[u8])> = buffers.iter().map(|(n, b)| (n.clone(), b.as_slice())).collect();
+    let views: Vec<(String, &[u8])> = buffers
+        .iter()
+        .map(|(n, b)| (n.clone(), b.as_slice()))
+        .collect();
     let meta_bytes = serde_json::to_vec(&a.meta).unwrap();
     let meta = serde_json::from_slice(&meta_bytes).unwrap();
     let r = SolidAnalysisRef::from_arrays(meta, &views).unwrap();
@@ -157,7 +162,10 @@ fn analysis_arrays_round_trip_in_place() {
     assert_eq!(r.pca_basis, &a.pca_basis[..]);
     // Zero copy: the views point into the buffers.
     let cand = buffers.iter().find(|(n, _)| n == "candidates").unwrap();
-    assert_eq!(r.candidates.as_ptr() as usize, cand.1.as_slice().as_ptr() as usize);
+    assert_eq!(
+        r.candidates.as_ptr() as usize,
+        cand.1.as_slice().as_ptr() as usize
+    );
     // Same answers as the owned analysis.
     let o = a.as_ref();
     for li in 0..3 {
@@ -192,7 +200,12 @@ fn candidate_triples_beat_random_triples_by_crossbar_error() {
                 for x in (0..w as u16).step_by(3) {
                     cand += r.crossbar_error(li, &r.candidates(li, plane, [x, y])[0]) as f64;
                     let k = counter_hash(7, li as u64, n);
-                    let c = |s: u32| [((k >> s) % w as u64) as u16, ((k >> (s + 8)) % h as u64) as u16];
+                    let c = |s: u32| {
+                        [
+                            ((k >> s) % w as u64) as u16,
+                            ((k >> (s + 8)) % h as u64) as u16,
+                        ]
+                    };
                     let mut t = Triple::new(c(0), c(16), c(32));
                     t.c[plane] = [x, y];
                     rand += r.crossbar_error(li, &t) as f64;
@@ -200,7 +213,10 @@ fn candidate_triples_beat_random_triples_by_crossbar_error() {
                 }
             }
         }
-        assert!(cand < 0.3 * rand, "level {li}: candidates {cand}, random {rand}");
+        assert!(
+            cand < 0.3 * rand,
+            "level {li}: candidates {cand}, random {rand}"
+        );
     }
 }
 
@@ -227,7 +243,10 @@ fn exemplars_of_different_sizes_are_an_error_naming_the_sizes() {
         },
     )
     .unwrap_err();
-    assert!(e.to_string().contains("analyse_exemplar.neighbourhood"), "{e}");
+    assert!(
+        e.to_string().contains("analyse_exemplar.neighbourhood"),
+        "{e}"
+    );
 }
 
 fn all_bricks(s: &SolidSynthesis, store: &MemoryBrickStore) -> Vec<(u32, [i32; 3], Brick)> {
@@ -244,7 +263,10 @@ fn all_bricks(s: &SolidSynthesis, store: &MemoryBrickStore) -> Vec<(u32, [i32; 3
 fn voxels_are_the_same_whatever_else_was_requested_and_on_any_thread_count() {
     let (_, a) = small();
     let vol = cube(40, 3);
-    let field = rotated_field(&vol, Quat::from_rotation_z(0.4) * Quat::from_rotation_x(0.3));
+    let field = rotated_field(
+        &vol,
+        Quat::from_rotation_z(0.4) * Quat::from_rotation_x(0.3),
+    );
     let s = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
     let req_a = VoxelRequest::from_box([0, 0, 12], [40, 40, 13]);
     let req_b = VoxelRequest::from_box([20, 5, 10], [30, 25, 30]);
@@ -282,7 +304,10 @@ fn voxels_are_the_same_whatever_else_was_requested_and_on_any_thread_count() {
     let mut shared = 0;
     for store in [&only_a, &only_b, &a_one_thread] {
         for (level, b, brick) in all_bricks(&s, store) {
-            let r = reference.iter().find(|(l, c, _)| *l == level && *c == b).unwrap();
+            let r = reference
+                .iter()
+                .find(|(l, c, _)| *l == level && *c == b)
+                .unwrap();
             assert!(r.2 == brick, "brick {b:?} of level {level} differs");
             shared += 1;
         }
@@ -331,7 +356,12 @@ fn an_overlapping_request_reuses_bricks() {
     let fresh_store = MemoryBrickStore::new();
     s.synthesize(&second, &fresh_store).unwrap();
     for (li, bricks) in needed.iter().enumerate() {
-        assert_eq!(*bricks, fresh_store.bricks(li as u32 + 1), "level {}", li + 1);
+        assert_eq!(
+            *bricks,
+            fresh_store.bricks(li as u32 + 1),
+            "level {}",
+            li + 1
+        );
     }
 }
 
@@ -360,7 +390,12 @@ fn dual_grid_depends_on_fewer_voxels_than_plain_correction() {
         assert!(d[li].bricks.len() <= p[li].bricks.len());
     }
     // The finest level of the dual scheme stays within a few cells of the plane.
-    assert!(d[2].voxels * 2 < p[2].voxels, "{} vs {}", d[2].voxels, p[2].voxels);
+    assert!(
+        d[2].voxels * 2 < p[2].voxels,
+        "{} vs {}",
+        d[2].voxels,
+        p[2].voxels
+    );
 }
 
 /// A 48² crop of wood2 as a solid layered across x: xy shows the stripes, zx the transposed
@@ -410,7 +445,9 @@ fn bricks_round_trip_and_bad_setups_are_errors() {
         level: 2,
         coord: [1, -2, 3],
         size: 2,
-        triples: (0..8).map(|i| Triple::new([i, 1], [2, i], [3, 4])).collect(),
+        triples: (0..8)
+            .map(|i| Triple::new([i, 1], [2, i], [3, 4]))
+            .collect(),
     };
     let arrays = b.arrays();
     let back = Brick::from_arrays(b.meta(), &arrays).unwrap();
@@ -427,7 +464,9 @@ fn bricks_round_trip_and_bad_setups_are_errors() {
     assert!(e.to_string().contains("3 levels"), "{e}");
     let mut p = small_solid_params();
     p.cell = 7;
-    let e = SolidSynthesis::new(a.as_ref(), &field, cube(16, 3), p).err().unwrap();
+    let e = SolidSynthesis::new(a.as_ref(), &field, cube(16, 3), p)
+        .err()
+        .unwrap();
     assert!(e.to_string().contains("synthesize.cell"), "{e}");
 }
 
@@ -438,14 +477,21 @@ fn write_png(path: &str, px: &[[f32; 3]], w: u32, h: u32, zoom: u32) {
     for y in 0..h * zoom {
         for x in 0..w * zoom {
             let c = px[((y / zoom) * w + x / zoom) as usize];
-            img.put_pixel(x, y, image::Rgb(c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)));
+            img.put_pixel(
+                x,
+                y,
+                image::Rgb(c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)),
+            );
         }
     }
     img.save(path).unwrap();
 }
 
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
-    std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
 }
 
 /// Writes sections of synthesized solids to /tmp. Env: EXEMPLAR (file in tests/data/exemplars),
@@ -480,13 +526,21 @@ fn look() {
         let tr = transpose(&img);
         let mut flat = img.clone();
         let n = img.pixels.len() as f32;
-        let mean = img.pixels.iter().fold([0.0f32; 4], |a, p| std::array::from_fn(|c| a[c] + p[c] / n));
+        let mean = img
+            .pixels
+            .iter()
+            .fold([0.0f32; 4], |a, p| std::array::from_fn(|c| a[c] + p[c] / n));
         flat.pixels.iter_mut().for_each(|p| *p = mean);
         analyse([img.view(), flat.view(), tr.view()], &cp).unwrap()
     } else {
         analyse([img.view(); 3], &cp).unwrap()
     };
-    println!("analysis of {name} ({}×{}): {:.2} s", img.width, img.height, t.elapsed().as_secs_f64());
+    println!(
+        "analysis of {name} ({}×{}): {:.2} s",
+        img.width,
+        img.height,
+        t.elapsed().as_secs_f64()
+    );
     let vol = cube(n, levels);
     let q = Quat::from_rotation_z(angle.to_radians());
     let field = rotated_field(&vol, q);
@@ -506,13 +560,26 @@ fn look() {
     }
     let s = SolidSynthesis::new(a.as_ref(), &field, vol, params).unwrap();
     let store = MemoryBrickStore::new();
-    let stem = Path::new(&name).file_stem().unwrap().to_string_lossy().to_string();
+    let stem = Path::new(&name)
+        .file_stem()
+        .unwrap()
+        .to_string_lossy()
+        .to_string();
     let tag = format!("{stem}_{config}_{angle}");
     let c = n as i32 / 2;
     for (axis, req) in [
-        ("z", VoxelRequest::from_box([0, 0, c], [n as i32, n as i32, c + 1])),
-        ("x", VoxelRequest::from_box([c, 0, 0], [c + 1, n as i32, n as i32])),
-        ("y", VoxelRequest::from_box([0, c, 0], [n as i32, c + 1, n as i32])),
+        (
+            "z",
+            VoxelRequest::from_box([0, 0, c], [n as i32, n as i32, c + 1]),
+        ),
+        (
+            "x",
+            VoxelRequest::from_box([c, 0, 0], [c + 1, n as i32, n as i32]),
+        ),
+        (
+            "y",
+            VoxelRequest::from_box([0, c, 0], [n as i32, c + 1, n as i32]),
+        ),
     ] {
         let t = std::time::Instant::now();
         let rep = s.synthesize(&req, &store).unwrap();
@@ -551,7 +618,10 @@ fn look() {
                 }
                 write_png(&format!("/tmp/solid_{tag}_z_plane{p}.png"), &px, n, n, 2);
             }
-            println!("mean |xy - zx| texel difference: {:.4}", spread / (n * n) as f64 / 3.0);
+            println!(
+                "mean |xy - zx| texel difference: {:.4}",
+                spread / (n * n) as f64 / 3.0
+            );
         }
         if axis == "z" && std::env::var("LEVELS_DUMP").is_ok() {
             for level in 1..levels {
@@ -564,8 +634,52 @@ fn look() {
                         px.push(s.colour(level, &t));
                     }
                 }
-                write_png(&format!("/tmp/solid_{tag}_z_level{level}.png"), &px, m as u32, m as u32, 2 << shift);
+                write_png(
+                    &format!("/tmp/solid_{tag}_z_level{level}.png"),
+                    &px,
+                    m as u32,
+                    m as u32,
+                    2 << shift,
+                );
             }
+        }
+    }
+}
+
+/// Table 1/2-style numbers: analysis time of a 128² exemplar and a cross-section through a
+/// 128³ volume, 4 levels, N = 7 then 9, dual-grid vs standard (run with --ignored --nocapture).
+#[test]
+#[ignore]
+fn bench_table() {
+    let name: String = env_or("EXEMPLAR", "marble1.png".to_string());
+    let img = load(&name);
+    let t = std::time::Instant::now();
+    let a = analyse([img.view(); 3], &CandidateParams::default()).unwrap();
+    println!(
+        "analysis {name} {}×{} (L=4, N=7/9, k=4): {:.2} s on {} threads",
+        img.width,
+        img.height,
+        t.elapsed().as_secs_f64(),
+        rayon::current_num_threads()
+    );
+    let n: u32 = env_or("SIZE", 128);
+    let vol = cube(n, 4);
+    let field = trivial_field(&vol);
+    let req = VoxelRequest::from_box([0, 0, n as i32 / 2], [n as i32, n as i32, n as i32 / 2 + 1]);
+    for (label, params) in [
+        ("dual-grid", SolidParams::paper(4)),
+        ("standard", SolidParams::paper(4).with_scheme(Scheme::Plain)),
+    ] {
+        let s = SolidSynthesis::new(a.as_ref(), &field, vol, params).unwrap();
+        let t = std::time::Instant::now();
+        let rep = s.synthesize(&req, &MemoryBrickStore::new()).unwrap();
+        println!("{label}: {:.2} s in all", t.elapsed().as_secs_f64());
+        println!("level | bricks | voxels | corrections | comparisons | seconds");
+        for l in &rep.levels {
+            println!(
+                "{} | {} | {} | {} | {} | {:.2}",
+                l.level, l.bricks_computed, l.voxels, l.corrections, l.comparisons, l.seconds
+            );
         }
     }
 }

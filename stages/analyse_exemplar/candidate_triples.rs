@@ -425,7 +425,10 @@ impl SolidAnalysis {
 
     /// A borrowed view (what synthesis reads).
     pub fn as_ref(&self) -> SolidAnalysisRef<'_> {
-        let layout = self.meta.layout().expect("an analysis we built is consistent");
+        let layout = self
+            .meta
+            .layout()
+            .expect("an analysis we built is consistent");
         SolidAnalysisRef {
             meta: self.meta.clone(),
             layout,
@@ -510,7 +513,9 @@ impl<'a> SolidAnalysisRef<'a> {
             || !r.features.iter().all(finite)
             || !r.stack.iter().flatten().all(finite)
         {
-            return Err(AnalysisError::Corrupt("a stored value is not finite".into()));
+            return Err(AnalysisError::Corrupt(
+                "a stored value is not finite".into(),
+            ));
         }
         Ok(r)
     }
@@ -649,7 +654,9 @@ fn crossbar_error_in(
     weights: [f32; 3],
     t: &Triple,
 ) -> f32 {
-    let at = |img: &[[f32; 3]], x: i32, y: i32| img[wrap(y, h) as usize * w as usize + wrap(x, w) as usize];
+    let at = |img: &[[f32; 3]], x: i32, y: i32| {
+        img[wrap(y, h) as usize * w as usize + wrap(x, w) as usize]
+    };
     let mut total = 0.0f32;
     for a in 0..3 {
         let b = (a + 2) % 3;
@@ -710,7 +717,12 @@ fn blur_dilated(src: &[[f32; 3]], w: usize, h: usize, step: usize) -> Vec<[f32; 
 /// The Gaussian stack of an image, finest (h = 1) first, `levels` levels.
 pub fn gaussian_stack(img: ImageView, levels: usize) -> Vec<Vec<[f32; 3]>> {
     let (w, h) = (img.width as usize, img.height as usize);
-    let mut out = vec![img.pixels.iter().map(|p| [p[0], p[1], p[2]]).collect::<Vec<_>>()];
+    let mut out = vec![
+        img.pixels
+            .iter()
+            .map(|p| [p[0], p[1], p[2]])
+            .collect::<Vec<_>>(),
+    ];
     for s in 1..levels {
         let next = blur_dilated(out.last().expect("one level"), w, h, 1 << (s - 1));
         out.push(next);
@@ -739,14 +751,25 @@ fn neighbourhood_vectors(level: &[[f32; 3]], w: u32, hgt: u32, n: usize, h: i32)
 }
 
 /// H lines (along image x) or V lines (along image y), 3N values each, of every pixel.
-fn crossbar_lines(level: &[[f32; 3]], w: u32, hgt: u32, n: usize, h: i32, vertical: bool) -> Vec<f32> {
+fn crossbar_lines(
+    level: &[[f32; 3]],
+    w: u32,
+    hgt: u32,
+    n: usize,
+    h: i32,
+    vertical: bool,
+) -> Vec<f32> {
     let dim = 3 * n;
     let nh = (n / 2) as i32;
     let mut out = vec![0.0f32; w as usize * hgt as usize * dim];
     out.par_chunks_mut(dim).enumerate().for_each(|(i, v)| {
         let (x, y) = ((i % w as usize) as i32, (i / w as usize) as i32);
         for (o, ii) in (-nh..=nh).enumerate() {
-            let (xx, yy) = if vertical { (x, y + h * ii) } else { (x + h * ii, y) };
+            let (xx, yy) = if vertical {
+                (x, y + h * ii)
+            } else {
+                (x + h * ii, y)
+            };
             let c = level[wrap(yy, hgt) as usize * w as usize + wrap(xx, w) as usize];
             v[3 * o..3 * o + 3].copy_from_slice(&c);
         }
@@ -775,7 +798,10 @@ fn near(a: [u16; 2], b: [u16; 2], w: u32, h: u32) -> bool {
 
 /// Analyses the exemplars of the xy, yz and zx planes (pass the same image several times to
 /// share it; identical images are analysed once). See the module docs.
-pub fn analyse(planes: [ImageView; 3], params: &CandidateParams) -> Result<SolidAnalysis, AnalysisError> {
+pub fn analyse(
+    planes: [ImageView; 3],
+    params: &CandidateParams,
+) -> Result<SolidAnalysis, AnalysisError> {
     params.validate()?;
     let sizes = planes.map(|p| (p.width, p.height));
     if sizes[1] != sizes[0] || sizes[2] != sizes[0] {
@@ -822,7 +848,10 @@ pub fn analyse(planes: [ImageView; 3], params: &CandidateParams) -> Result<Solid
     }
     let ni = images.len();
     let pixels = w as usize * hgt as usize;
-    let stacks: Vec<Vec<Vec<[f32; 3]>>> = images.iter().map(|img| gaussian_stack(*img, levels)).collect();
+    let stacks: Vec<Vec<Vec<[f32; 3]>>> = images
+        .iter()
+        .map(|img| gaussian_stack(*img, levels))
+        .collect();
     // Array level li uses the stack level of spacing 2^(L−1−li).
     let level_img = |li: usize, img: usize| -> &[[f32; 3]] { &stacks[img][levels - 1 - li] };
 
@@ -906,8 +935,18 @@ pub fn analyse(planes: [ImageView; 3], params: &CandidateParams) -> Result<Solid
                     }
                     let line = |v, i| part(v, i, ldim);
                     let pline = |v, i| part(v, i, cd);
-                    let bs = trees[ib].1.nearest_approx(pline(&hp[ip], pix), search, params.search_eps, |_| true);
-                    let as_ = trees[ia].0.nearest_approx(pline(&vp[ip], pix), search, params.search_eps, |_| true);
+                    let bs = trees[ib].1.nearest_approx(
+                        pline(&hp[ip], pix),
+                        search,
+                        params.search_eps,
+                        |_| true,
+                    );
+                    let as_ = trees[ia].0.nearest_approx(
+                        pline(&vp[ip], pix),
+                        search,
+                        params.search_eps,
+                        |_| true,
+                    );
                     let mut combos: Vec<(f32, u32, u32)> = Vec::with_capacity(as_.len() * bs.len());
                     for &(a, _) in &as_ {
                         for &(b, _) in &bs {
@@ -918,7 +957,9 @@ pub fn analyse(planes: [ImageView; 3], params: &CandidateParams) -> Result<Solid
                             combos.push((e, a as u32, b as u32));
                         }
                     }
-                    combos.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
+                    combos.sort_by(|x, y| {
+                        x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2))
+                    });
                     let px = |i: u32| [(i % w) as u16, (i / w) as u16];
                     let mut kept: Vec<Triple> = Vec::with_capacity(k);
                     let mut errs: Vec<f32> = Vec::with_capacity(k);
@@ -1017,7 +1058,8 @@ mod tests {
         for y in 0..h {
             for x in 0..w {
                 let v = if (x / 3) % 2 == 0 { 0.9 } else { 0.1 };
-                img.pixels[(y * w + x) as usize] = [v, 0.5 * v + 0.2 * (y % 5) as f32 / 5.0, 0.3, 1.0];
+                img.pixels[(y * w + x) as usize] =
+                    [v, 0.5 * v + 0.2 * (y % 5) as f32 / 5.0, 0.3, 1.0];
             }
         }
         img
@@ -1041,7 +1083,9 @@ mod tests {
         assert_eq!(b, st[1]);
         // Constant images stay constant.
         let mut c = Image::new(8, 8);
-        c.pixels.iter_mut().for_each(|p| *p = [0.25, 0.5, 0.75, 1.0]);
+        c.pixels
+            .iter_mut()
+            .for_each(|p| *p = [0.25, 0.5, 0.75, 1.0]);
         for l in gaussian_stack(c.view(), 3) {
             for p in l {
                 for (a, b) in p.iter().zip([0.25, 0.5, 0.75]) {

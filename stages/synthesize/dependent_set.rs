@@ -68,7 +68,12 @@ impl NeedGrid {
     #[inline]
     pub fn position(&self, i: usize) -> IVec3 {
         let (nx, ny) = (self.n.x as usize, self.n.y as usize);
-        self.lo + IVec3::new((i % nx) as i32, ((i / nx) % ny) as i32, (i / (nx * ny)) as i32)
+        self.lo
+            + IVec3::new(
+                (i % nx) as i32,
+                ((i / nx) % ny) as i32,
+                (i / (nx * ny)) as i32,
+            )
     }
 
     /// Voxels synthesized (upsampled at least).
@@ -264,7 +269,8 @@ fn dilate_axis(src: &[u8], d: [usize; 3], axis: usize, bounds: &[(usize, usize)]
                     for y in 0..ny {
                         let (a, b) = bounds[y];
                         for x in 0..nx {
-                            o[y * nx + x] = (a <= b && pre[(b + 1) * nx + x] > pre[a * nx + x]) as u8;
+                            o[y * nx + x] =
+                                (a <= b && pre[(b + 1) * nx + x] > pre[a * nx + x]) as u8;
                         }
                     }
                 });
@@ -308,9 +314,7 @@ mod tests {
                 for dy in -r..=r {
                     for dx in -r..=r {
                         let v = w + IVec3::new(dx, dy, dz);
-                        if g.get(v) != 0
-                            && barriers.iter().all(|c| c.cell_of(v) == c.cell_of(w))
-                        {
+                        if g.get(v) != 0 && barriers.iter().all(|c| c.cell_of(v) == c.cell_of(w)) {
                             out[i] = 1;
                             break 'search;
                         }
@@ -332,7 +336,10 @@ mod tests {
         }
         let cells = [Cells { size: 4, offset: 1 }];
         for r in [0, 1, 2] {
-            assert_eq!(dilate(&mask, lo, n, r, &[]), brute_dilate(&mask, lo, n, r, &[]));
+            assert_eq!(
+                dilate(&mask, lo, n, r, &[]),
+                brute_dilate(&mask, lo, n, r, &[])
+            );
             assert_eq!(
                 dilate(&mask, lo, n, r, &cells),
                 brute_dilate(&mask, lo, n, r, &cells)
@@ -344,12 +351,22 @@ mod tests {
     fn plain_dependent_set_grows_by_the_reach_per_step() {
         // One pass without subpasses, reach 2: a single target needs its 5³ cube upsampled.
         let s = Schedule::plain(1, false);
-        let g = dependent_set(&s, IVec3::splat(40), &[(IVec3::splat(20), IVec3::splat(21))], 2);
+        let g = dependent_set(
+            &s,
+            IVec3::splat(40),
+            &[(IVec3::splat(20), IVec3::splat(21))],
+            2,
+        );
         assert_eq!(g.voxels(), 125);
         assert_eq!(g.corrections(), 1);
         // Two passes: the target's cube corrected once, the 9³ cube upsampled.
         let s = Schedule::plain(2, false);
-        let g = dependent_set(&s, IVec3::splat(40), &[(IVec3::splat(20), IVec3::splat(21))], 2);
+        let g = dependent_set(
+            &s,
+            IVec3::splat(40),
+            &[(IVec3::splat(20), IVec3::splat(21))],
+            2,
+        );
         assert_eq!(g.voxels(), 729);
         assert_eq!(g.corrections(), 1 + 125);
     }

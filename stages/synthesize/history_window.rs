@@ -325,7 +325,11 @@ mod tests {
         assert_eq!(hd.read(v, IVec3::new(4, 3, 3)), Read::StageStart);
         // Intersection = min of versions.
         let both = hg.intersect(hd);
-        for w in [IVec3::new(4, 3, 3), IVec3::new(8, 3, 3), IVec3::new(10, 3, 3)] {
+        for w in [
+            IVec3::new(4, 3, 3),
+            IVec3::new(8, 3, 3),
+            IVec3::new(10, 3, 3),
+        ] {
             assert_eq!(
                 both.version(g, v, w),
                 hg.version(g, v, w).min(hd.version(g, v, w))
@@ -338,7 +342,10 @@ mod tests {
     fn impact_distance_is_bounded_by_the_cells() {
         let r = 6;
         assert_eq!(Schedule::plain(2, true).impact_distance(r), 96);
-        assert_eq!(Schedule::dual_grid(2, true, 12).impact_distance(r), 2 * (11 + 6));
+        assert_eq!(
+            Schedule::dual_grid(2, true, 12).impact_distance(r),
+            2 * (11 + 6)
+        );
         assert_eq!(Schedule::plain(1, false).impact_distance(r), 6);
     }
 }

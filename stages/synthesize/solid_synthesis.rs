@@ -33,7 +33,7 @@
 //!   `w = [v + s q_v d]` and its coordinate `T_P(w)` shifted back by `w`'s exemplar offset
 //!   `h_l P(q_v⁻¹ (w − v) / s)` names an exemplar pixel whose `k` candidate triples join the
 //!   set. The candidate with the least plane-weighted squared distance in PCA space wins
-//!   (ties: the smaller triple). A voxel's colour is the plane-weighted mean of its triple's
+//!   (ties: the first visited, planes xy, yz, zx, then `d` row by row). A voxel's colour is the plane-weighted mean of its triple's
 //!   three stack texels at the level (plain average by default).
 //! - **Subpasses and barriers** (§4.3.1, §5.2–5.3): a level's corrections are a [`Schedule`] of
 //!   stages and steps with [`HistoryWindow`]s (`history_window.rs`): plain correction, grid
@@ -250,7 +250,7 @@ impl SolidParams {
         check(
             "synthesize.cell",
             self.cell,
-            (4..=64).contains(&self.cell) && self.cell % 2 == 0,
+            (4..=64).contains(&self.cell) && self.cell.is_multiple_of(2),
             "expected an even number in 4..=64",
         )?;
         check(
@@ -286,8 +286,14 @@ pub enum SolidError {
         value: String,
         expected: String,
     },
-    #[error("the analysis has {analysis} levels, the volume {volume} and the parameters {params}; they must agree")]
-    Levels { analysis: u32, volume: u32, params: u32 },
+    #[error(
+        "the analysis has {analysis} levels, the volume {volume} and the parameters {params}; they must agree"
+    )]
+    Levels {
+        analysis: u32,
+        volume: u32,
+        params: u32,
+    },
     #[error("rotation field: {0}")]
     Field(String),
     #[error("brick {brick:?} of level {level} vanished from the brick store during synthesis")]
@@ -416,7 +422,15 @@ impl VoxelRequest {
                 let b = w.trailing_zeros() as usize;
                 w &= w - 1;
                 let i = wi * 64 + b;
-                Some((self.lo + IVec3::new((i % nx) as i32, ((i / nx) % ny) as i32, (i / (nx * ny)) as i32)).into())
+                Some(
+                    (self.lo
+                        + IVec3::new(
+                            (i % nx) as i32,
+                            ((i / nx) % ny) as i32,
+                            (i / (nx * ny)) as i32,
+                        ))
+                    .into(),
+                )
             })
         })
     }
@@ -497,10 +511,13 @@ pub trait BrickStore {
     fn put(&self, level: u32, brick: [i32; 3], b: Arc<Brick>);
 }
 
+/// Bricks by (level, brick coordinates).
+type BrickMap = HashMap<(u32, [i32; 3]), Arc<Brick>>;
+
 /// A brick store in memory.
 #[derive(Default, Debug)]
 pub struct MemoryBrickStore {
-    map: Mutex<HashMap<(u32, [i32; 3]), Arc<Brick>>>,
+    map: Mutex<BrickMap>,
 }
 
 impl MemoryBrickStore {
@@ -531,10 +548,17 @@ impl MemoryBrickStore {
 
 impl BrickStore for MemoryBrickStore {
     fn get(&self, level: u32, brick: [i32; 3]) -> Option<Arc<Brick>> {
-        self.map.lock().expect("store lock").get(&(level, brick)).cloned()
+        self.map
+            .lock()
+            .expect("store lock")
+            .get(&(level, brick))
+            .cloned()
     }
     fn put(&self, level: u32, brick: [i32; 3], b: Arc<Brick>) {
-        self.map.lock().expect("store lock").insert((level, brick), b);
+        self.map
+            .lock()
+            .expect("store lock")
+            .insert((level, brick), b);
     }
 }
 
@@ -652,6 +676,9 @@ struct Scratch {
     proj: [Vec<f32>; 3],
     cands: Vec<Triple>,
     keys: Vec<u128>,
+    /// Open-addressing set of keys seen in this correction (entries stamped with `stamp`).
+    seen: Vec<(u128, u32)>,
+    stamp: u32,
 }
 
 /// The parents' bricks of a level.
@@ -928,7 +955,10 @@ impl<'a> SolidSynthesis<'a> {
     /// The dependent set of a request at brick granularity, per level (coarsest first),
     /// computed backwards from the request as if the store were empty.
     pub fn bricks_needed(&self, request: &VoxelRequest) -> Vec<Vec<[i32; 3]>> {
-        self.plan(request, None).into_iter().map(|p| p.needed).collect()
+        self.plan(request, None)
+            .into_iter()
+            .map(|p| p.needed)
+            .collect()
     }
 
     /// The dependent set of a request per level (coarsest first), from an empty store: bricks,
@@ -973,9 +1003,10 @@ impl<'a> SolidSynthesis<'a> {
                 };
                 if li > 0 {
                     for b in self.parent_bricks(&plan.need) {
-                        let brick = store
-                            .get(level - 1, b)
-                            .ok_or(SolidError::MissingBrick { level: level - 1, brick: b })?;
+                        let brick = store.get(level - 1, b).ok_or(SolidError::MissingBrick {
+                            level: level - 1,
+                            brick: b,
+                        })?;
                         parents.bricks.insert(b, brick);
                     }
                 }
@@ -1067,11 +1098,7 @@ impl<'a> SolidSynthesis<'a> {
             }
         }
         let (w, hh) = self.wh();
-        tp.offset(
-            round_v(d).into(),
-            w,
-            hh,
-        )
+        tp.offset(round_v(d).into(), w, hh)
     }
 
     /// Runs one level over the dependent set `need`; returns the bricks `out` (in order) and
@@ -1177,6 +1204,8 @@ impl<'a> SolidSynthesis<'a> {
             proj: [vec![0.0; c], vec![0.0; c], vec![0.0; c]],
             cands: Vec::with_capacity(27 * (self.analysis.k() + 1)),
             keys: Vec::with_capacity(27 * (self.analysis.k() + 1)),
+            seen: vec![(0, 0); (54 * (self.analysis.k() + 1)).next_power_of_two()],
+            stamp: 0,
         }
     }
 
@@ -1250,7 +1279,9 @@ impl<'a> SolidSynthesis<'a> {
                 let row = vf + c2 * j as f32;
                 for i in -nh..=nh {
                     let col = sample(row + c1 * i as f32);
-                    sc.vec[o..o + 3].copy_from_slice(&col);
+                    sc.vec[o] = col[0];
+                    sc.vec[o + 1] = col[1];
+                    sc.vec[o + 2] = col[2];
                     o += 3;
                 }
             }
@@ -1286,11 +1317,32 @@ impl<'a> SolidSynthesis<'a> {
                 sc.cands.iter_mut().for_each(|c| c.c[p] = [0, 0]);
             }
         }
-        // Sort and deduplicate by a packed key (its order is the triples' order).
+        // Deduplicate by a packed key (a small hash set), keeping the order of first visits.
         sc.keys.clear();
-        sc.keys.extend(sc.cands.iter().map(triple_key));
-        sc.keys.sort_unstable();
-        sc.keys.dedup();
+        sc.stamp = sc.stamp.wrapping_add(1);
+        if sc.stamp == 0 {
+            sc.seen.iter_mut().for_each(|e| e.1 = 0);
+            sc.stamp = 1;
+        }
+        let mask = sc.seen.len() - 1;
+        for c in &sc.cands {
+            let key = triple_key(c);
+            let mut i = ((key as u64 ^ (key >> 64) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                >> 40) as usize
+                & mask;
+            loop {
+                let e = &mut sc.seen[i];
+                if e.1 != sc.stamp {
+                    *e = (key, sc.stamp);
+                    sc.keys.push(key);
+                    break;
+                }
+                if e.0 == key {
+                    break;
+                }
+                i = (i + 1) & mask;
+            }
+        }
         let mut best = (f32::INFINITY, triple_of_key(sc.keys[0]));
         for key in &sc.keys {
             let cand = &triple_of_key(*key);
