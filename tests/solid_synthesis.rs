@@ -187,6 +187,24 @@ fn analysis_arrays_round_trip_in_place() {
 }
 
 #[test]
+fn analysis_is_identical_on_any_thread_count() {
+    let img = crop(&load("wood2.png"), 0, 0, 40, 40);
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| analyse([img.view(); 3], &small_params()).unwrap())
+    };
+    let (a, b) = (run(1), run(2));
+    assert!(a == b);
+    let bytes = |x: &SolidAnalysis| -> Vec<Vec<u8>> {
+        x.arrays().into_iter().map(|(_, b)| b.to_vec()).collect()
+    };
+    assert_eq!(bytes(&a), bytes(&b));
+}
+
+#[test]
 fn candidate_triples_beat_random_triples_by_crossbar_error() {
     let (img, a) = small();
     let r = a.as_ref();

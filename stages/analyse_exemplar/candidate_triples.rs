@@ -56,6 +56,14 @@
 //! tiles space with slabs stacked along z, each shifted in xy by a counter-based random offset
 //! (see `stages/synthesize/solid_synthesis.rs`).
 //!
+//! # Choosing exemplars
+//!
+//! One image for all three planes suits textures without a direction (marble, granite). A
+//! layered material cannot show the same stripes in all three planes: a solid layered across
+//! x shows the stripes in xy, the transposed stripes in zx and no stripes in yz, so give the
+//! image for xy, its transpose for zx and weight 0 to yz (tests/solid_synthesis.rs does this
+//! with wood2).
+//!
 //! # Departures
 //!
 //! - Distances are squared L2 (the paper uses L1 on RGB): matching runs in PCA space, where
@@ -321,6 +329,9 @@ struct Layout {
 impl AnalysisMeta {
     fn layout(&self) -> Result<Layout, AnalysisError> {
         let bad = |m: &str| Err(AnalysisError::Corrupt(m.to_owned()));
+        if let Err(e) = self.params.validate() {
+            return Err(AnalysisError::Corrupt(format!("metadata parameters: {e}")));
+        }
         let levels = self.params.levels as usize;
         if self.dims.len() != levels || self.components.len() != levels {
             return bad("metadata lists do not match the level count");

@@ -72,6 +72,9 @@
 //!   came from lose their coherence: on wood2, stripes broke up into short pieces.
 //! - On coarse levels the paper integrates the field along the neighbourhood's directions; here
 //!   every level samples with the centre voxel's frame (the paper's fine-level choice).
+//! - Working values live in 8³ chunks allocated only where the dependent set is; the
+//!   dependency bytes themselves are dense over the bounding box of a level's dependent set
+//!   (one byte per voxel), which bounds the request size in practice (a 512³ box is 128 MB).
 //! - The dependency stencil is the cube of radius `r = ⌈N_h √2 s_max⌉` (+1 with trilinear
 //!   sampling), or the exact extent for a constant field; the paper's `D = ⌈N√2⌉`.
 
@@ -482,8 +485,8 @@ impl Brick {
             .chunks_exact(std::mem::size_of::<Triple>())
             .map(bytemuck::pod_read_unaligned)
             .collect();
-        let want = (meta.size as usize).pow(3);
-        if triples.len() != want || meta.size == 0 {
+        let want = (meta.size.min(4096) as usize).pow(3);
+        if triples.len() != want || meta.size == 0 || meta.size > 4096 {
             return Err(SolidError::Brick(format!(
                 "{} triples for a brick of side {}",
                 triples.len(),
