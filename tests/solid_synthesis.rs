@@ -512,8 +512,10 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
-/// Writes sections of synthesized solids to /tmp. Env: EXEMPLAR (file in tests/data/exemplars),
-/// SIZE, LEVELS, CONFIG (same|layers), ANGLE (degrees about z), K, SCHEME (dual|plain).
+/// Writes sections of synthesized solids to /tmp. Env: EXEMPLAR (file in tests/data/exemplars
+/// or a path), SIZE, LEVELS, CONFIG (same|layers|layers3), ANGLE (degrees about z), K,
+/// WEIGHTS (e.g. 1,0,1), SCHEME (dual|plain), PASSES, PASSES0, JITTER, SEED, TRILINEAR,
+/// NO_COHERENT, LEVELS_DUMP.
 #[test]
 #[ignore]
 fn look() {
