@@ -33,8 +33,9 @@
 //!   `w = [v + s q_v d]` and its coordinate `T_P(w)` shifted back by `w`'s exemplar offset
 //!   `h_l P(q_v⁻¹ (w − v) / s)` names an exemplar pixel whose `k` candidate triples join the
 //!   set. The candidate with the least plane-weighted squared distance in PCA space wins
-//!   (ties: the first visited, planes xy, yz, zx, then `d` row by row). A voxel's colour is the plane-weighted mean of its triple's
-//!   three stack texels at the level (plain average by default).
+//!   (ties: the first visited, planes xy, yz, zx, then `d` row by row). A voxel's colour is
+//!   the plane-weighted mean of its triple's three stack texels at the level (the plain
+//!   average by default); planes of weight 0 are neither gathered nor matched.
 //! - **Subpasses and barriers** (§4.3.1, §5.2–5.3): a level's corrections are a [`Schedule`] of
 //!   stages and steps with [`HistoryWindow`]s (`history_window.rs`): plain correction, grid
 //!   correction (barriers at the `M`-cells) or dual-grid correction (`⌈P/2⌉` grid passes then
