@@ -1,1 +1,1448 @@
-//! (to be written)
+//! Deterministic, on-demand solid texture synthesis guided by a rotation field (Zhang, Du,
+//! Lai, Ni & Hu, "Sketch guided solid texturing", §4–§5), on the parallel synthesis scheme of
+//! Lefebvre & Hoppe 2005 with the candidate triples of Dong et al. 2008
+//! (`stages/analyse_exemplar/candidate_triples.rs`).
+//!
+//! # The pyramid
+//!
+//! A [`Volume`] has `L` levels numbered `1..=L` (level `L` finest). Level `l`'s voxel `v`
+//! (integer coordinates, domain `[0, ⌈dims / 2^(L−l)⌉)`) sits at finest voxel `v·2^(L−l)`,
+//! whose centre is `origin + (v·2^(L−l) + ½)·voxel_size` in object space; its parent is
+//! `⌊v/2⌋`. Each voxel holds a coordinate [`Triple`]; one level-`l` voxel step is
+//! `h_l = 2^(L−l)` exemplar pixels (divided by the field's scale). Reads outside the domain
+//! clamp to it (the paper embeds the object in a larger volume for the same reason).
+//!
+//! # Per level (§4)
+//!
+//! - **Initialization** (§4.1, level 1): space is tiled with candidate slabs in the local
+//!   frame: local voxel `u` gets `S((o + h·(u_x, u_y)) mod (W, H)) + h·(0, 0, u_z − kD − ⌊D/2⌋)`
+//!   for the slab `k = ⌊u_z / D⌋` it lies in; `S` are the analysis's slab seeds. A voxel `v`
+//!   with frame `q_v` in the `K × K × K` subpart with centre `c` takes the slab triple at
+//!   `[c + q_v⁻¹ (v − c) / s]` (`T([q_v⁻¹ v])` rotated about each subpart's centre, so
+//!   distortion stays local). The slabs of a subpart share one xy offset `o`, a counter-based
+//!   hash of `(seed, subpart)`: a slab boundary then only restarts the yz and zx coordinates and
+//!   keeps the xy layer. (A random offset per slab made boundaries that correction could not
+//!   repair: on a layered exemplar, every slab kept its own stripe phase.)
+//! - **Upsampling** (§4.2, eq. 3–4): `T(v) = T(v_p) + [q_{v_p}⁻¹ t_v / s]` with
+//!   `t_v = h_l (v mod 2)`, plus optional jitter `h_l·jitter·(u − ½)` per axis (Lefebvre &
+//!   Hoppe's multiresolution jitter, `u` counter-based).
+//! - **Correction** (§4.3): the three `N × N` neighbourhoods `v + s q_v (i, j, 0)` etc., aligned
+//!   with the local frame, are gathered from the level's voxel colours (trilinear or nearest,
+//!   per level), each projected on its plane's PCA basis, and compared with the candidates
+//!   `S(v)` in the reduced form: for plane `P` and `d ∈ {−1, 0, 1}²` in `P`, the voxel
+//!   `w = [v + s q_v d]` and its coordinate `T_P(w)` shifted back by `w`'s exemplar offset
+//!   `h_l P(q_v⁻¹ (w − v) / s)` names an exemplar pixel whose `k` candidate triples join the
+//!   set. The candidate with the least plane-weighted squared distance in PCA space wins
+//!   (ties: the first visited, planes xy, yz, zx, then `d` row by row). A voxel's colour is
+//!   the plane-weighted mean of its triple's three stack texels at the level (the plain
+//!   average by default); planes of weight 0 are neither gathered nor matched.
+//! - **Subpasses and barriers** (§4.3.1, §5.2–5.3): a level's corrections are a [`Schedule`] of
+//!   stages and steps with [`HistoryWindow`]s (`history_window.rs`): plain correction, grid
+//!   correction (barriers at the `M`-cells) or dual-grid correction (`⌈P/2⌉` grid passes then
+//!   `⌊P/2⌋` passes behind the dual lattice, offset `M/2`).
+//!
+//! # On demand, in bricks
+//!
+//! Each level is stored as bricks of `M³` voxels — exactly the dual-grid cells: brick `b`
+//! covers `[bM + ⌊M/2⌋, (b+1)M + ⌊M/2⌋)`. A request (finest voxels) names the finest bricks it
+//! touches; for the missing ones, `dependent_set.rs` works backwards through the level's
+//! schedule to the exact set of voxel versions they depend on, whose upsampling names the
+//! bricks needed one level down, and so on to level 1 ([`SolidSynthesis::bricks_needed`]).
+//! Then each level is computed from the bottom: only the missing bricks' dependent set, from
+//! the parents' bricks in the store.
+//!
+//! Why caching is sound: a brick's triples are the values a synthesis of the whole domain
+//! would give them, because the versions computed for it form a dependency-closed set (every
+//! version read is itself computed, from the same inputs, by the same pure function of the
+//! triples it reads, the analysis, the field and the seed), and all randomness is a
+//! counter-based hash of voxel coordinates. So a brick is a pure function of its coordinates
+//! and the inputs, never of the request or of the thread count (parallel loops only map
+//! disjoint voxels and commit in a fixed order). Aligning bricks with the dual cells is what
+//! makes them cheap: with dual-grid correction a brick depends on its own cell's history and
+//! on the grid-stage result within the reach `r` of it, i.e. on at most the 8 (27 if `r ≥
+//! M/2`) grid cells around it, and through them on a bounded block of parents (`M + r` voxels
+//! across at the level below), independently of the pass count.
+//!
+//! # Departures
+//!
+//! - Matching uses squared L2 in PCA space (the paper: L1 on RGB); see the analysis.
+//! - `S(v)` also holds, for each neighbour `w` it visits, `w`'s whole triple shifted back to `v`
+//!   (`T(w) + [−h q_v⁻¹ (w − v) / s]`, eq. 4), as k-coherence does in 2D (option
+//!   `coherent_candidates`, default on). Without it, every correction replaces all three
+//!   coordinates by those of a listed triple, and the planes other than the one the candidate
+//!   came from lose their coherence: on wood2, stripes broke up into short pieces.
+//! - On coarse levels the paper integrates the field along the neighbourhood's directions; here
+//!   every level samples with the centre voxel's frame (the paper's fine-level choice).
+//! - Working values live in 8³ chunks allocated only where the dependent set is; the
+//!   dependency bytes themselves are dense over the bounding box of a level's dependent set
+//!   (one byte per voxel), which bounds the request size in practice (a 512³ box is 128 MB).
+//! - The dependency stencil is the cube of radius `r = ⌈N_h √2 s_max⌉` (+1 with trilinear
+//!   sampling), or the exact extent for a constant field; the paper's `D = ⌈N√2⌉`.
+
+use super::dependent_set::{NeedGrid, dependent_set};
+use super::history_window::{HistoryWindow, Schedule};
+use crate::random::{counter_hash, counter_unit};
+use crate::stages::analyse_exemplar::candidate_triples::{SolidAnalysisRef, Triple, wrap};
+use crate::stages::field::quaternion_field::RotationField;
+use glam::{IVec3, Mat3, Vec3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeSet, HashMap};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+const STREAM_SLAB: u64 = 0x51AB;
+const STREAM_JITTER: u64 = 0x7177;
+
+/// The solid's grid at its finest level, and the pyramid depth.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Volume {
+    /// Object-space corner of finest voxel (0, 0, 0).
+    pub origin: [f32; 3],
+    /// Side of a finest voxel, in object units.
+    pub voxel_size: f32,
+    /// Finest-level voxels along x, y, z (1..=65536 each).
+    pub dims: [u32; 3],
+    /// Pyramid levels L (must equal the analysis's).
+    pub levels: u32,
+}
+
+impl Volume {
+    /// Finest voxels per voxel of `level`: `2^(L−level)`.
+    pub fn step(&self, level: u32) -> i32 {
+        1 << (self.levels - level)
+    }
+
+    /// The domain `[0, dims)` of `level`.
+    pub fn level_dims(&self, level: u32) -> IVec3 {
+        let s = self.step(level) as u32;
+        IVec3::new(
+            self.dims[0].div_ceil(s) as i32,
+            self.dims[1].div_ceil(s) as i32,
+            self.dims[2].div_ceil(s) as i32,
+        )
+    }
+
+    /// Object-space position of voxel `v` of `level`.
+    pub fn position(&self, level: u32, v: IVec3) -> Vec3 {
+        Vec3::from(self.origin) + ((v * self.step(level)).as_vec3() + 0.5) * self.voxel_size
+    }
+
+    fn validate(&self) -> Result<(), SolidError> {
+        let ok = Vec3::from(self.origin).is_finite()
+            && self.voxel_size.is_finite()
+            && self.voxel_size > 0.0
+            && self.dims.iter().all(|&d| (1..=65536).contains(&d));
+        check(
+            "volume",
+            self,
+            ok,
+            "expected a finite origin, voxel_size > 0 and 1..=65536 voxels per side",
+        )?;
+        check(
+            "volume.levels",
+            self.levels,
+            (1..=8).contains(&self.levels),
+            "expected 1..=8",
+        )
+    }
+}
+
+/// How a level corrects.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scheme {
+    /// No barriers (the standard scheme of Lefebvre & Hoppe and Dong et al.).
+    Plain,
+    /// Every pass behind the `M`-cell barriers.
+    Grid,
+    /// `⌈P/2⌉` grid passes, then `⌊P/2⌋` dual-grid passes (§5.3).
+    DualGrid,
+}
+
+/// Parameters of one level.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LevelParams {
+    /// Correction passes P, 0..=30. Default: 2.
+    pub passes: u32,
+    /// Default: dual-grid.
+    pub scheme: Scheme,
+    /// `s³ = 8` subpasses per pass. Default: true.
+    pub subpasses: bool,
+    /// Trilinear neighbourhood sampling (else nearest voxel). Default: false.
+    pub trilinear: bool,
+    /// Upsampling jitter in units of `h_l`, 0..=4. Default: 0.
+    pub jitter: f32,
+}
+
+impl Default for LevelParams {
+    fn default() -> Self {
+        LevelParams {
+            passes: 2,
+            scheme: Scheme::DualGrid,
+            subpasses: true,
+            trilinear: false,
+            jitter: 0.0,
+        }
+    }
+}
+
+/// Synthesis parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SolidParams {
+    /// Seed of the counter-based randomness (slab offsets, jitter). Default: 0.
+    pub seed: u64,
+    /// Cell side M of grid and dual-grid correction, and brick side; even, 4..=64.
+    /// Default: 12 (§5.3.2: M = 10–15).
+    pub cell: u32,
+    /// Side K of the initialization subparts, in coarsest-level voxels, 1..=4096. Default: 32.
+    pub subpart: u32,
+    /// Also offer, for each neighbour `w` gathered for `S(v)`, its whole triple shifted back
+    /// to `v` (eq. 4), not only the candidates of the shifted pixel (a departure, see the
+    /// module docs). Default: true.
+    pub coherent_candidates: bool,
+    /// Per level, coarsest first; as many as the pyramid has levels. Default:
+    /// [`SolidParams::paper`] with 4 levels.
+    pub levels: Vec<LevelParams>,
+}
+
+impl Default for SolidParams {
+    fn default() -> Self {
+        SolidParams::paper(4)
+    }
+}
+
+impl SolidParams {
+    /// The paper's settings (§6): 4 plain passes on the coarsest level, 2 dual-grid passes
+    /// (one grid, one dual) above, 8 subpasses everywhere; trilinear sampling on the coarser
+    /// half of the levels, nearest above.
+    pub fn paper(levels: u32) -> SolidParams {
+        let levels = (0..levels)
+            .map(|li| LevelParams {
+                passes: if li == 0 { 4 } else { 2 },
+                scheme: if li == 0 {
+                    Scheme::Plain
+                } else {
+                    Scheme::DualGrid
+                },
+                subpasses: true,
+                trilinear: 2 * li < levels,
+                jitter: 0.0,
+            })
+            .collect();
+        SolidParams {
+            seed: 0,
+            cell: 12,
+            subpart: 32,
+            coherent_candidates: true,
+            levels,
+        }
+    }
+
+    /// The same with one scheme on every level above the coarsest (e.g. [`Scheme::Plain`]
+    /// for the standard scheme the paper compares with).
+    pub fn with_scheme(mut self, scheme: Scheme) -> SolidParams {
+        for l in self.levels.iter_mut().skip(1) {
+            l.scheme = scheme;
+        }
+        self
+    }
+
+    fn validate(&self) -> Result<(), SolidError> {
+        check(
+            "synthesize.cell",
+            self.cell,
+            (4..=64).contains(&self.cell) && self.cell.is_multiple_of(2),
+            "expected an even number in 4..=64",
+        )?;
+        check(
+            "synthesize.subpart",
+            self.subpart,
+            (1..=4096).contains(&self.subpart),
+            "expected 1..=4096",
+        )?;
+        for l in &self.levels {
+            check(
+                "synthesize.levels[].passes",
+                l.passes,
+                l.passes <= 30,
+                "expected 0..=30",
+            )?;
+            check(
+                "synthesize.levels[].jitter",
+                l.jitter,
+                l.jitter.is_finite() && (0.0..=4.0).contains(&l.jitter),
+                "expected 0..=4",
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// What went wrong; parameter errors name the parameter.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SolidError {
+    #[error("{name} = {value}: {expected}")]
+    Param {
+        name: String,
+        value: String,
+        expected: String,
+    },
+    #[error(
+        "the analysis has {analysis} levels, the volume {volume} and the parameters {params}; they must agree"
+    )]
+    Levels {
+        analysis: u32,
+        volume: u32,
+        params: u32,
+    },
+    #[error("rotation field: {0}")]
+    Field(String),
+    #[error("brick {brick:?} of level {level} vanished from the brick store during synthesis")]
+    MissingBrick { level: u32, brick: [i32; 3] },
+    #[error("brick: {0}")]
+    Brick(String),
+}
+
+fn check<T: std::fmt::Debug>(
+    name: &str,
+    value: T,
+    ok: bool,
+    expected: &str,
+) -> Result<(), SolidError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(SolidError::Param {
+            name: name.to_owned(),
+            value: format!("{value:?}"),
+            expected: expected.to_owned(),
+        })
+    }
+}
+
+/// A set of finest-level voxels: a box with a bit per voxel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VoxelRequest {
+    lo: IVec3,
+    dims: IVec3,
+    bits: Vec<u64>,
+}
+
+impl VoxelRequest {
+    /// The voxels of `[lo, hi)` for which `f` holds.
+    pub fn from_fn(lo: [i32; 3], hi: [i32; 3], f: impl Fn([i32; 3]) -> bool) -> VoxelRequest {
+        let lo = IVec3::from(lo);
+        let dims = (IVec3::from(hi) - lo).max(IVec3::ZERO);
+        let n = dims.x as usize * dims.y as usize * dims.z as usize;
+        let mut bits = vec![0u64; n.div_ceil(64)];
+        let mut i = 0;
+        for z in 0..dims.z {
+            for y in 0..dims.y {
+                for x in 0..dims.x {
+                    let v = lo + IVec3::new(x, y, z);
+                    if f(v.into()) {
+                        bits[i / 64] |= 1 << (i % 64);
+                    }
+                    i += 1;
+                }
+            }
+        }
+        VoxelRequest { lo, dims, bits }
+    }
+
+    /// Every voxel of `[lo, hi)`.
+    pub fn from_box(lo: [i32; 3], hi: [i32; 3]) -> VoxelRequest {
+        VoxelRequest::from_fn(lo, hi, |_| true)
+    }
+
+    /// These voxels.
+    pub fn from_voxels(voxels: &[[i32; 3]]) -> VoxelRequest {
+        if voxels.is_empty() {
+            return VoxelRequest::from_box([0; 3], [0; 3]);
+        }
+        let lo = voxels.iter().fold(IVec3::MAX, |a, &v| a.min(v.into()));
+        let hi = voxels.iter().fold(IVec3::MIN, |a, &v| a.max(v.into())) + 1;
+        let mut r = VoxelRequest::from_fn(lo.into(), hi.into(), |_| false);
+        for &v in voxels {
+            let i = r.index(v.into());
+            r.bits[i / 64] |= 1 << (i % 64);
+        }
+        r
+    }
+
+    /// The finest voxels of `volume` that a plane (through `point`, with normal `normal`, in
+    /// object space) passes through: a cross-section.
+    pub fn plane(volume: &Volume, point: Vec3, normal: Vec3) -> VoxelRequest {
+        let n = normal.normalize_or(Vec3::Z);
+        let half = 0.5 * volume.voxel_size * (n.x.abs() + n.y.abs() + n.z.abs());
+        let hi = [
+            volume.dims[0] as i32,
+            volume.dims[1] as i32,
+            volume.dims[2] as i32,
+        ];
+        VoxelRequest::from_fn([0; 3], hi, |v| {
+            let c = volume.position(volume.levels, IVec3::from(v));
+            (c - point).dot(n).abs() <= half
+        })
+    }
+
+    #[inline]
+    fn index(&self, v: IVec3) -> usize {
+        let q = v - self.lo;
+        ((q.z as usize * self.dims.y as usize) + q.y as usize) * self.dims.x as usize + q.x as usize
+    }
+
+    pub fn contains(&self, v: [i32; 3]) -> bool {
+        let v = IVec3::from(v);
+        let q = v - self.lo;
+        if !(q.cmpge(IVec3::ZERO).all() && q.cmplt(self.dims).all()) {
+            return false;
+        }
+        let i = self.index(v);
+        self.bits[i / 64] >> (i % 64) & 1 == 1
+    }
+
+    /// Number of voxels.
+    pub fn len(&self) -> usize {
+        self.bits.iter().map(|b| b.count_ones() as usize).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The voxels, z-major then y then x.
+    pub fn voxels(&self) -> impl Iterator<Item = [i32; 3]> + '_ {
+        let (nx, ny) = (self.dims.x as usize, self.dims.y as usize);
+        self.bits.iter().enumerate().flat_map(move |(wi, &word)| {
+            let mut w = word;
+            std::iter::from_fn(move || {
+                if w == 0 {
+                    return None;
+                }
+                let b = w.trailing_zeros() as usize;
+                w &= w - 1;
+                let i = wi * 64 + b;
+                Some(
+                    (self.lo
+                        + IVec3::new(
+                            (i % nx) as i32,
+                            ((i / nx) % ny) as i32,
+                            (i / (nx * ny)) as i32,
+                        ))
+                    .into(),
+                )
+            })
+        })
+    }
+}
+
+/// A brick: the final triples of the `size³` voxels of one dual cell of one level, x fastest.
+/// Voxels outside the level's domain hold `Triple::default()`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Brick {
+    pub level: u32,
+    pub coord: [i32; 3],
+    pub size: u32,
+    pub triples: Vec<Triple>,
+}
+
+/// A brick's metadata (with the `triples` array it is the brick's artifact).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BrickMeta {
+    pub level: u32,
+    pub coord: [i32; 3],
+    pub size: u32,
+}
+
+impl Brick {
+    pub fn meta(&self) -> BrickMeta {
+        BrickMeta {
+            level: self.level,
+            coord: self.coord,
+            size: self.size,
+        }
+    }
+
+    /// The named arrays to store next to [`Brick::meta`].
+    pub fn arrays(&self) -> Vec<(String, &[u8])> {
+        vec![("triples".into(), bytemuck::cast_slice(&self.triples))]
+    }
+
+    /// Reads a stored brick back, checking its length.
+    pub fn from_arrays(meta: BrickMeta, arrays: &[(String, &[u8])]) -> Result<Brick, SolidError> {
+        let raw = arrays
+            .iter()
+            .find(|(n, _)| n == "triples")
+            .ok_or_else(|| SolidError::Brick("no array named \"triples\"".into()))?
+            .1;
+        if raw.len() % std::mem::size_of::<Triple>() != 0 {
+            return Err(SolidError::Brick("triples are not whole".into()));
+        }
+        let triples: Vec<Triple> = raw
+            .chunks_exact(std::mem::size_of::<Triple>())
+            .map(bytemuck::pod_read_unaligned)
+            .collect();
+        let want = (meta.size.min(4096) as usize).pow(3);
+        if triples.len() != want || meta.size == 0 || meta.size > 4096 {
+            return Err(SolidError::Brick(format!(
+                "{} triples for a brick of side {}",
+                triples.len(),
+                meta.size
+            )));
+        }
+        Ok(Brick {
+            level: meta.level,
+            coord: meta.coord,
+            size: meta.size,
+            triples,
+        })
+    }
+
+    #[inline]
+    fn at(&self, local: IVec3) -> Triple {
+        let s = self.size as usize;
+        self.triples[(local.z as usize * s + local.y as usize) * s + local.x as usize]
+    }
+}
+
+/// Where bricks live; the caller owns it (e.g. the artifact cache, one artifact per brick).
+pub trait BrickStore {
+    fn get(&self, level: u32, brick: [i32; 3]) -> Option<Arc<Brick>>;
+    fn put(&self, level: u32, brick: [i32; 3], b: Arc<Brick>);
+}
+
+/// Bricks by (level, brick coordinates).
+type BrickMap = HashMap<(u32, [i32; 3]), Arc<Brick>>;
+
+/// A brick store in memory.
+#[derive(Default, Debug)]
+pub struct MemoryBrickStore {
+    map: Mutex<BrickMap>,
+}
+
+impl MemoryBrickStore {
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Bricks stored.
+    pub fn len(&self) -> usize {
+        self.map.lock().expect("store lock").len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Keys of the stored bricks of a level, sorted.
+    pub fn bricks(&self, level: u32) -> Vec<[i32; 3]> {
+        let mut v: Vec<[i32; 3]> = self
+            .map
+            .lock()
+            .expect("store lock")
+            .keys()
+            .filter(|k| k.0 == level)
+            .map(|k| k.1)
+            .collect();
+        v.sort();
+        v
+    }
+}
+
+impl BrickStore for MemoryBrickStore {
+    fn get(&self, level: u32, brick: [i32; 3]) -> Option<Arc<Brick>> {
+        self.map
+            .lock()
+            .expect("store lock")
+            .get(&(level, brick))
+            .cloned()
+    }
+    fn put(&self, level: u32, brick: [i32; 3], b: Arc<Brick>) {
+        self.map
+            .lock()
+            .expect("store lock")
+            .insert((level, brick), b);
+    }
+}
+
+/// Work per level; `level` from 1 (coarsest).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct LevelReport {
+    pub level: u32,
+    /// Bricks the request depends on at this level.
+    pub bricks_needed: u64,
+    /// Of those, computed by this call.
+    pub bricks_computed: u64,
+    /// Of those, found in the store.
+    pub bricks_reused: u64,
+    /// Voxels synthesized (including those only upsampled).
+    pub voxels: u64,
+    /// Voxel corrections.
+    pub corrections: u64,
+    /// Candidate comparisons.
+    pub comparisons: u64,
+    /// Wall time.
+    pub seconds: f64,
+}
+
+/// What [`SolidSynthesis::synthesize`] did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SynthesisReport {
+    /// Coarsest level first.
+    pub levels: Vec<LevelReport>,
+}
+
+impl SynthesisReport {
+    pub fn bricks_computed(&self) -> u64 {
+        self.levels.iter().map(|l| l.bricks_computed).sum()
+    }
+    pub fn voxels(&self) -> u64 {
+        self.levels.iter().map(|l| l.voxels).sum()
+    }
+}
+
+/// The dependent set of a request at one level (from an empty store).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LevelDependency {
+    pub level: u32,
+    /// Bricks, sorted.
+    pub bricks: Vec<[i32; 3]>,
+    /// Voxels synthesized (including those only upsampled).
+    pub voxels: u64,
+    /// Voxel corrections.
+    pub corrections: u64,
+    /// Upper bound of the level's impact distance, in its voxels.
+    pub impact_distance: i32,
+}
+
+/// A voxel's working value: triple and its colour at the level.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct VoxelState {
+    t: Triple,
+    c: [f32; 3],
+}
+
+const CHUNK_BITS: i32 = 3;
+const CHUNK: i32 = 1 << CHUNK_BITS;
+const CHUNK_VOXELS: usize = (CHUNK * CHUNK * CHUNK) as usize;
+const NO_CHUNK: u32 = u32::MAX;
+
+/// Working values of one level over the needed voxels, in 8³ chunks allocated where needed.
+struct States {
+    lo: IVec3,
+    cn: IVec3,
+    table: Vec<u32>,
+    cur: Vec<VoxelState>,
+    start: Vec<VoxelState>,
+}
+
+impl States {
+    fn new(need: &NeedGrid) -> States {
+        let cn = (need.n + (CHUNK - 1)) / CHUNK;
+        let mut table = vec![NO_CHUNK; (cn.x * cn.y * cn.z).max(0) as usize];
+        let mut count = 0u32;
+        for (i, &x) in need.need.iter().enumerate() {
+            if x > 0 {
+                let c = (need.position(i) - need.lo) >> CHUNK_BITS;
+                let t = &mut table[((c.z * cn.y + c.y) * cn.x + c.x) as usize];
+                if *t == NO_CHUNK {
+                    *t = count;
+                    count += 1;
+                }
+            }
+        }
+        let len = count as usize * CHUNK_VOXELS;
+        States {
+            lo: need.lo,
+            cn,
+            table,
+            cur: vec![VoxelState::default(); len],
+            start: Vec::new(),
+        }
+    }
+
+    #[inline]
+    fn slot(&self, p: IVec3) -> usize {
+        let q = p - self.lo;
+        let c = q >> CHUNK_BITS;
+        let t = self.table[((c.z * self.cn.y + c.y) * self.cn.x + c.x) as usize];
+        debug_assert!(t != NO_CHUNK, "read of a voxel outside the dependent set");
+        let m = q & (CHUNK - 1);
+        t as usize * CHUNK_VOXELS + ((m.z * CHUNK + m.y) * CHUNK + m.x) as usize
+    }
+}
+
+/// Per-thread buffers of a correction.
+struct Scratch {
+    vec: Vec<f32>,
+    proj: [Vec<f32>; 3],
+    cands: Vec<Triple>,
+    keys: Vec<u128>,
+    /// Open-addressing set of keys seen in this correction (entries stamped with `stamp`).
+    seen: Vec<(u128, u32)>,
+    stamp: u32,
+}
+
+/// The parents' bricks of a level.
+struct Parents {
+    m: i32,
+    bricks: HashMap<[i32; 3], Arc<Brick>>,
+}
+
+impl Parents {
+    #[inline]
+    fn get(&self, v: IVec3) -> Triple {
+        let b = brick_of(self.m, v);
+        let local = v - brick_origin(self.m, b);
+        self.bricks[&<[i32; 3]>::from(b)].at(local)
+    }
+}
+
+#[inline]
+fn brick_of(m: i32, v: IVec3) -> IVec3 {
+    (v - IVec3::splat(m / 2)).div_euclid(IVec3::splat(m))
+}
+
+#[inline]
+fn brick_origin(m: i32, b: IVec3) -> IVec3 {
+    b * m + IVec3::splat(m / 2)
+}
+
+/// One planned level: its needed and missing bricks and the dependent set of the missing ones.
+struct LevelPlan {
+    needed: Vec<[i32; 3]>,
+    missing: Vec<[i32; 3]>,
+    need: NeedGrid,
+}
+
+/// A configured synthesis: analysis, field, volume and parameters, validated.
+pub struct SolidSynthesis<'a> {
+    analysis: SolidAnalysisRef<'a>,
+    field: &'a RotationField,
+    volume: Volume,
+    params: SolidParams,
+    schedules: Vec<Schedule>,
+    reach: Vec<i32>,
+    /// `basis · mean` per (level, image), to project without centring.
+    mean_proj: Vec<Vec<Vec<f32>>>,
+}
+
+impl<'a> SolidSynthesis<'a> {
+    pub fn new(
+        analysis: SolidAnalysisRef<'a>,
+        field: &'a RotationField,
+        volume: Volume,
+        params: SolidParams,
+    ) -> Result<Self, SolidError> {
+        volume.validate()?;
+        params.validate()?;
+        if analysis.levels() != volume.levels || params.levels.len() != volume.levels as usize {
+            return Err(SolidError::Levels {
+                analysis: analysis.levels(),
+                volume: volume.levels,
+                params: params.levels.len() as u32,
+            });
+        }
+        let g = field.grid.len();
+        if g == 0 || field.rotations.len() != g || field.scales.len() != g {
+            return Err(SolidError::Field(format!(
+                "{} rotations and {} scales on a grid of {g} nodes",
+                field.rotations.len(),
+                field.scales.len()
+            )));
+        }
+        if let Some(i) = field
+            .scales
+            .iter()
+            .position(|s| !(s.is_finite() && *s >= 0.01 && *s <= 100.0))
+        {
+            return Err(SolidError::Field(format!(
+                "scale {} at node {i} is outside 0.01..=100",
+                field.scales[i]
+            )));
+        }
+        if let Some(i) = field
+            .rotations
+            .iter()
+            .position(|q| !(q.is_finite() && (q.length() - 1.0).abs() < 1e-3))
+        {
+            return Err(SolidError::Field(format!(
+                "rotation at node {i} is not a unit quaternion"
+            )));
+        }
+        let m = params.cell as i32;
+        let schedules: Vec<Schedule> = params
+            .levels
+            .iter()
+            .map(|l| match l.scheme {
+                Scheme::Plain => Schedule::plain(l.passes, l.subpasses),
+                Scheme::Grid => Schedule::grid(l.passes, l.subpasses, m),
+                Scheme::DualGrid => Schedule::dual_grid(l.passes, l.subpasses, m),
+            })
+            .collect();
+        // Per-axis extent of a unit in-plane offset: exact for a constant field, else the
+        // bound √2 · max scale.
+        let constant = field.rotations.iter().all(|q| *q == field.rotations[0])
+            && field.scales.iter().all(|s| *s == field.scales[0]);
+        let per_axis = if constant {
+            let mat = Mat3::from_quat(field.rotations[0]);
+            let mut e = 0.0f32;
+            for p in 0..3 {
+                let (a, b) = (mat.col(p), mat.col((p + 1) % 3));
+                for i in 0..3 {
+                    e = e.max(a[i].abs() + b[i].abs());
+                }
+            }
+            e * field.scales[0]
+        } else {
+            std::f32::consts::SQRT_2 * field.scales.iter().fold(0.0f32, |a, &b| a.max(b))
+        };
+        let reach = params
+            .levels
+            .iter()
+            .enumerate()
+            .map(|(li, l)| {
+                let ext = (analysis.n(li) / 2) as f32 * per_axis + 1e-3;
+                let r = if l.trilinear {
+                    ext.floor() as i32 + 1
+                } else {
+                    ext.ceil() as i32
+                };
+                r.max(1)
+            })
+            .collect();
+        let images = analysis.meta.images as usize;
+        let mean_proj = (0..volume.levels as usize)
+            .map(|li| {
+                (0..images)
+                    .map(|img| {
+                        let (mean, basis) = analysis.pca(li, img);
+                        basis
+                            .chunks_exact(mean.len())
+                            .map(|row| row.iter().zip(mean).map(|(a, b)| a * b).sum())
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        Ok(SolidSynthesis {
+            analysis,
+            field,
+            volume,
+            params,
+            schedules,
+            reach,
+            mean_proj,
+        })
+    }
+
+    pub fn volume(&self) -> &Volume {
+        &self.volume
+    }
+
+    pub fn analysis(&self) -> &SolidAnalysisRef<'a> {
+        &self.analysis
+    }
+
+    /// The dependency stencil radius of each level (coarsest first).
+    pub fn reach(&self) -> &[i32] {
+        &self.reach
+    }
+
+    /// The schedule of each level (coarsest first).
+    pub fn schedules(&self) -> &[Schedule] {
+        &self.schedules
+    }
+
+    fn m(&self) -> i32 {
+        self.params.cell as i32
+    }
+
+    /// Brick holding voxel `v` (any level).
+    pub fn brick_of(&self, v: [i32; 3]) -> [i32; 3] {
+        brick_of(self.m(), IVec3::from(v)).into()
+    }
+
+    /// The voxels `[lo, hi)` of brick `b` (any level).
+    pub fn brick_box(&self, b: [i32; 3]) -> ([i32; 3], [i32; 3]) {
+        let lo = brick_origin(self.m(), IVec3::from(b));
+        (lo.into(), (lo + self.m()).into())
+    }
+
+    /// The finest bricks a request touches (inside the volume), sorted.
+    fn request_bricks(&self, request: &VoxelRequest) -> Vec<[i32; 3]> {
+        let dims = self.volume.level_dims(self.volume.levels);
+        let mut set = BTreeSet::new();
+        for v in request.voxels() {
+            let v = IVec3::from(v);
+            if v.cmpge(IVec3::ZERO).all() && v.cmplt(dims).all() {
+                set.insert(<[i32; 3]>::from(brick_of(self.m(), v)));
+            }
+        }
+        set.into_iter().collect()
+    }
+
+    /// Bricks of the level below holding the parents of the voxels of `need`.
+    fn parent_bricks(&self, need: &NeedGrid) -> Vec<[i32; 3]> {
+        if need.need.is_empty() {
+            return vec![];
+        }
+        let m = self.m();
+        let blo = brick_of(m, need.lo.div_euclid(IVec3::splat(2)));
+        let bhi = brick_of(m, (need.lo + need.n - 1).div_euclid(IVec3::splat(2)));
+        let bn = bhi - blo + 1;
+        let mut mark = vec![false; (bn.x * bn.y * bn.z) as usize];
+        for (i, &x) in need.need.iter().enumerate() {
+            if x > 0 {
+                let b = brick_of(m, need.position(i).div_euclid(IVec3::splat(2))) - blo;
+                mark[((b.z * bn.y + b.y) * bn.x + b.x) as usize] = true;
+            }
+        }
+        let mut out = vec![];
+        for z in 0..bn.z {
+            for y in 0..bn.y {
+                for x in 0..bn.x {
+                    if mark[((z * bn.y + y) * bn.x + x) as usize] {
+                        out.push((blo + IVec3::new(x, y, z)).into());
+                    }
+                }
+            }
+        }
+        out.sort_unstable();
+        out
+    }
+
+    /// Plans a request level by level from the finest: bricks needed, those missing from
+    /// `store` (all of them without a store), and the dependent set of the missing ones.
+    fn plan(&self, request: &VoxelRequest, store: Option<&dyn BrickStore>) -> Vec<LevelPlan> {
+        let levels = self.volume.levels;
+        let mut plans: Vec<LevelPlan> = Vec::with_capacity(levels as usize);
+        let mut needed = self.request_bricks(request);
+        for level in (1..=levels).rev() {
+            let li = (level - 1) as usize;
+            let missing: Vec<[i32; 3]> = needed
+                .iter()
+                .filter(|b| store.is_none_or(|s| s.get(level, **b).is_none()))
+                .copied()
+                .collect();
+            let targets: Vec<(IVec3, IVec3)> = missing
+                .iter()
+                .map(|b| {
+                    let lo = brick_origin(self.m(), IVec3::from(*b));
+                    (lo, lo + self.m())
+                })
+                .collect();
+            let need = dependent_set(
+                &self.schedules[li],
+                self.volume.level_dims(level),
+                &targets,
+                self.reach[li],
+            );
+            let below = if level > 1 {
+                self.parent_bricks(&need)
+            } else {
+                vec![]
+            };
+            plans.push(LevelPlan {
+                needed,
+                missing,
+                need,
+            });
+            needed = below;
+        }
+        plans.reverse();
+        plans
+    }
+
+    /// The dependent set of a request at brick granularity, per level (coarsest first),
+    /// computed backwards from the request as if the store were empty.
+    pub fn bricks_needed(&self, request: &VoxelRequest) -> Vec<Vec<[i32; 3]>> {
+        self.plan(request, None)
+            .into_iter()
+            .map(|p| p.needed)
+            .collect()
+    }
+
+    /// The dependent set of a request per level (coarsest first), from an empty store: bricks,
+    /// voxels synthesized and corrections (what Tables 1–2 of the paper count).
+    pub fn dependent_set(&self, request: &VoxelRequest) -> Vec<LevelDependency> {
+        self.plan(request, None)
+            .into_iter()
+            .enumerate()
+            .map(|(li, p)| LevelDependency {
+                level: li as u32 + 1,
+                voxels: p.need.voxels(),
+                corrections: p.need.corrections(),
+                bricks: p.needed,
+                impact_distance: self.schedules[li].impact_distance(self.reach[li]),
+            })
+            .collect()
+    }
+
+    /// Synthesizes every brick the request depends on that `store` lacks, coarsest level
+    /// first, and puts them in `store`.
+    pub fn synthesize(
+        &self,
+        request: &VoxelRequest,
+        store: &dyn BrickStore,
+    ) -> Result<SynthesisReport, SolidError> {
+        let plans = self.plan(request, Some(store));
+        let mut report = SynthesisReport::default();
+        for (li, plan) in plans.iter().enumerate() {
+            let level = li as u32 + 1;
+            let t0 = Instant::now();
+            let mut lr = LevelReport {
+                level,
+                bricks_needed: plan.needed.len() as u64,
+                bricks_computed: plan.missing.len() as u64,
+                bricks_reused: (plan.needed.len() - plan.missing.len()) as u64,
+                ..Default::default()
+            };
+            if !plan.missing.is_empty() {
+                let mut parents = Parents {
+                    m: self.m(),
+                    bricks: HashMap::new(),
+                };
+                if li > 0 {
+                    for b in self.parent_bricks(&plan.need) {
+                        let brick = store.get(level - 1, b).ok_or(SolidError::MissingBrick {
+                            level: level - 1,
+                            brick: b,
+                        })?;
+                        parents.bricks.insert(b, brick);
+                    }
+                }
+                let (bricks, comparisons) = self.run_level(li, &plan.need, &parents, &plan.missing);
+                for (b, brick) in plan.missing.iter().zip(bricks) {
+                    store.put(level, *b, Arc::new(brick));
+                }
+                lr.voxels = plan.need.voxels();
+                lr.corrections = plan.need.corrections();
+                lr.comparisons = comparisons;
+            }
+            lr.seconds = t0.elapsed().as_secs_f64();
+            report.levels.push(lr);
+        }
+        Ok(report)
+    }
+
+    /// The triple of voxel `v` of `level` (1..=L), if its brick is in the store.
+    pub fn triple_at(&self, store: &dyn BrickStore, level: u32, v: [i32; 3]) -> Option<Triple> {
+        let v = IVec3::from(v);
+        if level == 0 || level > self.volume.levels {
+            return None;
+        }
+        let dims = self.volume.level_dims(level);
+        if !(v.cmpge(IVec3::ZERO).all() && v.cmplt(dims).all()) {
+            return None;
+        }
+        let b = brick_of(self.m(), v);
+        let brick = store.get(level, b.into())?;
+        Some(brick.at(v - brick_origin(self.m(), b)))
+    }
+
+    /// The colour of a triple at `level` (the plane-weighted mean of its three texels).
+    pub fn colour(&self, level: u32, t: &Triple) -> [f32; 3] {
+        self.analysis.colour((level - 1) as usize, t)
+    }
+
+    /// The finest-level colour of voxel `v`, if its brick is in the store.
+    pub fn colour_at(&self, store: &dyn BrickStore, v: [i32; 3]) -> Option<[f32; 3]> {
+        let l = self.volume.levels;
+        self.triple_at(store, l, v).map(|t| self.colour(l, &t))
+    }
+
+    fn wh(&self) -> (u32, u32) {
+        (self.analysis.width(), self.analysis.height())
+    }
+
+    /// §4.1: the slab tiling of subpart `part` at local coordinate `u` (coarsest level).
+    fn slab_triple(&self, part: IVec3, u: IVec3) -> Triple {
+        let (w, h) = self.wh();
+        let d = self.analysis.meta.params.slab_thickness as i32;
+        let sp = self.analysis.spacing(0);
+        let layer = u.z.div_euclid(d);
+        let dz = u.z - layer * d - d / 2;
+        let r = counter_hash(self.params.seed, STREAM_SLAB, voxel_key(0, part));
+        let (ox, oy) = ((r % w as u64) as i32, ((r >> 32) % h as u64) as i32);
+        let px = [wrap(ox + sp * u.x, w), wrap(oy + sp * u.y, h)];
+        self.analysis.slab(px).offset([0, 0, sp * dz], w, h)
+    }
+
+    /// §4.1: the initial triple of coarsest voxel `v`.
+    fn init(&self, v: IVec3) -> Triple {
+        let k = self.params.subpart as i32;
+        let part = v.div_euclid(IVec3::splat(k));
+        let centre = (part * k).as_vec3() + 0.5 * k as f32;
+        let pos = self.volume.position(1, v);
+        let q = self.field.rotation_at(pos);
+        let s = self.field.scale_at(pos);
+        let u = centre + q.inverse() * (v.as_vec3() - centre) / s;
+        self.slab_triple(part, round_v(u))
+    }
+
+    /// §4.2, eq. (3): the upsampled triple of voxel `v` of array level `li ≥ 1`.
+    fn upsample(&self, li: usize, v: IVec3, parents: &Parents) -> Triple {
+        let level = li as u32 + 1;
+        let vp = v.div_euclid(IVec3::splat(2));
+        let tp = parents.get(vp);
+        let pos = self.volume.position(level - 1, vp);
+        let q = self.field.rotation_at(pos);
+        let s = self.field.scale_at(pos);
+        let h = self.analysis.spacing(li) as f32;
+        let mut d = q.inverse() * ((v - vp * 2).as_vec3() * (h / s));
+        let jitter = self.params.levels[li].jitter;
+        if jitter > 0.0 {
+            let key = voxel_key(level, v);
+            for a in 0..3 {
+                let u = counter_unit(self.params.seed, STREAM_JITTER + a as u64, key);
+                d[a] += jitter * h * (u - 0.5);
+            }
+        }
+        let (w, hh) = self.wh();
+        tp.offset(round_v(d).into(), w, hh)
+    }
+
+    /// Runs one level over the dependent set `need`; returns the bricks `out` (in order) and
+    /// the number of candidate comparisons.
+    fn run_level(
+        &self,
+        li: usize,
+        need: &NeedGrid,
+        parents: &Parents,
+        out: &[[i32; 3]],
+    ) -> (Vec<Brick>, u64) {
+        let level = li as u32 + 1;
+        let mut st = States::new(need);
+        let list: Vec<(IVec3, usize, u8)> = need
+            .need
+            .iter()
+            .enumerate()
+            .filter(|(_, x)| **x > 0)
+            .map(|(i, &x)| {
+                let p = need.position(i);
+                (p, st.slot(p), x)
+            })
+            .collect();
+        let base: Vec<Triple> = list
+            .par_iter()
+            .map(|&(v, _, _)| {
+                if li == 0 {
+                    self.init(v)
+                } else {
+                    self.upsample(li, v, parents)
+                }
+            })
+            .collect();
+        for (&(_, slot, _), t) in list.iter().zip(base) {
+            st.cur[slot] = VoxelState {
+                t,
+                c: self.analysis.colour(li, &t),
+            };
+        }
+        let schedule = &self.schedules[li];
+        let mut comparisons = 0u64;
+        let mut stage = usize::MAX;
+        for step in schedule.steps() {
+            let window = &schedule.stages[step.stage].window;
+            if step.stage != stage {
+                stage = step.stage;
+                if !window.barriers.is_empty() {
+                    st.start.clone_from(&st.cur);
+                }
+            }
+            let threshold = 1 + step.version_after() as u8;
+            let active: Vec<(IVec3, usize)> = list
+                .iter()
+                .filter(|(v, _, x)| *x >= threshold && step.active(*v))
+                .map(|&(v, slot, _)| (v, slot))
+                .collect();
+            let results: Vec<(VoxelState, u32)> = active
+                .par_iter()
+                .map_init(
+                    || self.scratch(li),
+                    |sc, &(v, _)| self.correct(li, &st, window, v, sc),
+                )
+                .collect();
+            for (&(_, slot), (s, c)) in active.iter().zip(results) {
+                st.cur[slot] = s;
+                comparisons += c as u64;
+            }
+        }
+        let m = self.m();
+        let dims = self.volume.level_dims(level);
+        let bricks = out
+            .iter()
+            .map(|b| {
+                let lo = brick_origin(m, IVec3::from(*b));
+                let mut triples = Vec::with_capacity((m * m * m) as usize);
+                for z in 0..m {
+                    for y in 0..m {
+                        for x in 0..m {
+                            let v = lo + IVec3::new(x, y, z);
+                            triples.push(if v.cmpge(IVec3::ZERO).all() && v.cmplt(dims).all() {
+                                st.cur[st.slot(v)].t
+                            } else {
+                                Triple::default()
+                            });
+                        }
+                    }
+                }
+                Brick {
+                    level,
+                    coord: *b,
+                    size: m as u32,
+                    triples,
+                }
+            })
+            .collect();
+        (bricks, comparisons)
+    }
+
+    fn scratch(&self, li: usize) -> Scratch {
+        let c = self.analysis.components(li);
+        Scratch {
+            vec: vec![0.0; self.analysis.dim(li)],
+            proj: [vec![0.0; c], vec![0.0; c], vec![0.0; c]],
+            cands: Vec::with_capacity(27 * (self.analysis.k() + 1)),
+            keys: Vec::with_capacity(27 * (self.analysis.k() + 1)),
+            seen: vec![(0, 0); (54 * (self.analysis.k() + 1)).next_power_of_two()],
+            stamp: 0,
+        }
+    }
+
+    /// §4.3: the corrected value of voxel `v` of array level `li`, and the comparisons made.
+    fn correct(
+        &self,
+        li: usize,
+        st: &States,
+        window: &HistoryWindow,
+        v: IVec3,
+        sc: &mut Scratch,
+    ) -> (VoxelState, u32) {
+        let a = &self.analysis;
+        let level = li as u32 + 1;
+        let (w, hh) = self.wh();
+        let weights = a.weights();
+        let dmax = self.volume.level_dims(level) - 1;
+        let pos = self.volume.position(level, v);
+        let q = self.field.rotation_at(pos);
+        let s = self.field.scale_at(pos);
+        let mat = Mat3::from_quat(q);
+        let h = a.spacing(li) as f32;
+        let (clo, chi) = window.latest_box(v);
+        let read = |p: IVec3| -> &VoxelState {
+            let p = p.clamp(IVec3::ZERO, dmax);
+            let slot = st.slot(p);
+            if p.cmpge(clo).all() && p.cmplt(chi).all() {
+                &st.cur[slot]
+            } else {
+                &st.start[slot]
+            }
+        };
+        let trilinear = self.params.levels[li].trilinear;
+        let sample = |p: Vec3| -> [f32; 3] {
+            if !trilinear {
+                return read(round_v(p)).c;
+            }
+            let f = p.floor();
+            let t = p - f;
+            let b = f.as_ivec3();
+            let mut acc = [0.0f32; 3];
+            for corner in 0..8 {
+                let o = IVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+                let wt = (if o.x == 1 { t.x } else { 1.0 - t.x })
+                    * (if o.y == 1 { t.y } else { 1.0 - t.y })
+                    * (if o.z == 1 { t.z } else { 1.0 - t.z });
+                if wt == 0.0 {
+                    continue;
+                }
+                let c = read(b + o).c;
+                for ch in 0..3 {
+                    acc[ch] += wt * c[ch];
+                }
+            }
+            acc
+        };
+        let nh = (a.n(li) / 2) as i32;
+        let vf = v.as_vec3();
+        let comps = a.components(li);
+        let dim = a.dim(li);
+        sc.cands.clear();
+        for p in 0..3 {
+            if weights[p] == 0.0 {
+                continue;
+            }
+            let c1 = mat.col(p) * s;
+            let c2 = mat.col((p + 1) % 3) * s;
+            // Gather, row-major: j along image y (c2), i along image x (c1).
+            let mut o = 0;
+            for j in -nh..=nh {
+                let row = vf + c2 * j as f32;
+                for i in -nh..=nh {
+                    let col = sample(row + c1 * i as f32);
+                    sc.vec[o] = col[0];
+                    sc.vec[o + 1] = col[1];
+                    sc.vec[o + 2] = col[2];
+                    o += 3;
+                }
+            }
+            let img = a.image_of(p);
+            let (_, basis) = a.pca(li, img);
+            let mp = &self.mean_proj[li][img];
+            for k in 0..comps {
+                sc.proj[p][k] = dot(&basis[k * dim..(k + 1) * dim], &sc.vec[..dim]) - mp[k];
+            }
+            // Candidates S_P(v), reduced form.
+            for d2 in -1..=1 {
+                for d1 in -1..=1 {
+                    let wv = round_v(vf + c1 * d1 as f32 + c2 * d2 as f32).clamp(IVec3::ZERO, dmax);
+                    let tw = read(wv).t;
+                    let e = mat.transpose() * ((wv - v).as_vec3() * (h / s));
+                    let (e1, e2) = (e[p], e[(p + 1) % 3]);
+                    let px = [
+                        wrap(round_i(tw.c[p][0] as f32 - e1), w),
+                        wrap(round_i(tw.c[p][1] as f32 - e2), hh),
+                    ];
+                    sc.cands.extend_from_slice(a.candidates(li, p, px));
+                    if self.params.coherent_candidates {
+                        // The neighbour's whole triple, shifted back (eq. 4).
+                        sc.cands.push(tw.offset((-round_v(e)).into(), w, hh));
+                    }
+                }
+            }
+        }
+        // Coordinates in planes of weight 0 are never read: canonical zeros, so candidates
+        // differing only there are compared once.
+        for p in 0..3 {
+            if weights[p] == 0.0 {
+                sc.cands.iter_mut().for_each(|c| c.c[p] = [0, 0]);
+            }
+        }
+        // Deduplicate by a packed key (a small hash set), keeping the order of first visits.
+        sc.keys.clear();
+        sc.stamp = sc.stamp.wrapping_add(1);
+        if sc.stamp == 0 {
+            sc.seen.iter_mut().for_each(|e| e.1 = 0);
+            sc.stamp = 1;
+        }
+        let mask = sc.seen.len() - 1;
+        for c in &sc.cands {
+            let key = triple_key(c);
+            let mut i = ((key as u64 ^ (key >> 64) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                >> 40) as usize
+                & mask;
+            loop {
+                let e = &mut sc.seen[i];
+                if e.1 != sc.stamp {
+                    *e = (key, sc.stamp);
+                    sc.keys.push(key);
+                    break;
+                }
+                if e.0 == key {
+                    break;
+                }
+                i = (i + 1) & mask;
+            }
+        }
+        let mut best = (f32::INFINITY, triple_of_key(sc.keys[0]));
+        for key in &sc.keys {
+            let cand = &triple_of_key(*key);
+            let mut e = 0.0f32;
+            for p in 0..3 {
+                if weights[p] == 0.0 {
+                    continue;
+                }
+                let f = a.feature(li, a.image_of(p), cand.c[p]);
+                e += weights[p] * squared_distance(&sc.proj[p], f);
+                if e >= best.0 {
+                    break;
+                }
+            }
+            if e < best.0 {
+                best = (e, *cand);
+            }
+        }
+        let comparisons = sc.keys.len() as u32;
+        let t = best.1;
+        (
+            VoxelState {
+                t,
+                c: a.colour(li, &t),
+            },
+            comparisons,
+        )
+    }
+}
+
+/// `⌊x + ½⌋`: nearest integer, halves up (no libm call).
+#[inline]
+fn round_i(x: f32) -> i32 {
+    let t = x + 0.5;
+    let i = t as i32;
+    if (i as f32) > t { i - 1 } else { i }
+}
+
+#[inline]
+fn round_v(v: Vec3) -> IVec3 {
+    IVec3::new(round_i(v.x), round_i(v.y), round_i(v.z))
+}
+
+#[inline]
+fn triple_key(t: &Triple) -> u128 {
+    t.c.iter()
+        .flatten()
+        .fold(0u128, |k, &x| (k << 16) | x as u128)
+}
+
+#[inline]
+fn triple_of_key(k: u128) -> Triple {
+    let x = |i: u32| (k >> (16 * (5 - i))) as u16;
+    Triple::new([x(0), x(1)], [x(2), x(3)], [x(4), x(5)])
+}
+
+/// Dot product with eight partial sums (so it vectorizes), added in a fixed order.
+#[inline]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for i in 0..8 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    let mut tail = 0.0f32;
+    for (x, y) in ra.iter().zip(rb) {
+        tail += x * y;
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
+/// Squared Euclidean distance with four partial sums, added in a fixed order.
+#[inline]
+fn squared_distance(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for i in 0..4 {
+            let t = x[i] - y[i];
+            acc[i] += t * t;
+        }
+    }
+    let mut tail = 0.0f32;
+    for (x, y) in ra.iter().zip(rb) {
+        let t = x - y;
+        tail += t * t;
+    }
+    (acc[0] + acc[2]) + (acc[1] + acc[3]) + tail
+}
+
+/// A 64-bit key of a voxel of a level, for counter-based randomness.
+fn voxel_key(level: u32, v: IVec3) -> u64 {
+    let f = |x: i32| (x as i64 as u64) & 0xF_FFFF;
+    ((level as u64) << 60) ^ (f(v.x) << 40) ^ (f(v.y) << 20) ^ f(v.z)
+}

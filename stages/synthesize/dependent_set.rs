@@ -1,0 +1,391 @@
+//! The dependent set of one pyramid level, computed backwards from the voxels whose final
+//! values are wanted (Zhang, Du, Lai, Ni & Hu, "Sketch guided solid texturing", §5: spatial
+//! determinism; Lefebvre & Hoppe 2005, §3.5 and Dong et al. 2008, §6 for the idea).
+//!
+//! A voxel's versions are `0` (upsampled) to the level's correction count (see
+//! `history_window.rs`). If version `c ≥ 1` of `v` is needed, so are its versions below (a
+//! voxel reads itself at its latest version), and every neighbour `w` within the reach `r` of
+//! `v` at the version the step's history window gives. So the needed versions of a voxel are
+//! always a prefix, stored as one byte: 0 = not needed, `1 + c` = versions `0..=c` needed
+//! (and only `1` = just the upsampled value).
+//!
+//! Working from the last step back to the first, the active voxels of a step whose new
+//! version is needed are dilated by the cube of radius `r` (the paper's `D × D × D` history
+//! window, `D = 2r + 1`): restricted to the same barrier cell they ask for the neighbours'
+//! latest versions, otherwise for the stage-start versions. Cubes and axis-aligned cells make
+//! both dilations separable, so each step costs three prefix-sum sweeps over the bounding box
+//! of that step's active voxels.
+//!
+//! The result is exact for the stencil: synthesizing exactly these versions gives every
+//! wanted voxel the value a synthesis of the whole domain would give, whatever else was
+//! requested (spatial determinism).
+
+use super::history_window::{Cells, Schedule, class_of};
+use glam::IVec3;
+use rayon::prelude::*;
+
+/// Needed versions per voxel over a box of a level (see the module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NeedGrid {
+    /// The box `[lo, lo + n)` in level voxels.
+    pub lo: IVec3,
+    pub n: IVec3,
+    /// `0`: not needed; `1 + c`: versions `0..=c` needed.
+    pub need: Vec<u8>,
+}
+
+impl NeedGrid {
+    pub fn empty() -> NeedGrid {
+        NeedGrid {
+            lo: IVec3::ZERO,
+            n: IVec3::ZERO,
+            need: Vec::new(),
+        }
+    }
+
+    #[inline]
+    pub fn index(&self, p: IVec3) -> usize {
+        let q = p - self.lo;
+        ((q.z as usize * self.n.y as usize) + q.y as usize) * self.n.x as usize + q.x as usize
+    }
+
+    #[inline]
+    pub fn contains(&self, p: IVec3) -> bool {
+        let q = p - self.lo;
+        q.cmpge(IVec3::ZERO).all() && q.cmplt(self.n).all()
+    }
+
+    /// The byte of `p` (0 outside the box).
+    #[inline]
+    pub fn get(&self, p: IVec3) -> u8 {
+        if self.contains(p) {
+            self.need[self.index(p)]
+        } else {
+            0
+        }
+    }
+
+    #[inline]
+    pub fn position(&self, i: usize) -> IVec3 {
+        let (nx, ny) = (self.n.x as usize, self.n.y as usize);
+        self.lo
+            + IVec3::new(
+                (i % nx) as i32,
+                ((i / nx) % ny) as i32,
+                (i / (nx * ny)) as i32,
+            )
+    }
+
+    /// Voxels synthesized (upsampled at least).
+    pub fn voxels(&self) -> u64 {
+        self.need.iter().filter(|&&x| x > 0).count() as u64
+    }
+
+    /// Corrections performed.
+    pub fn corrections(&self) -> u64 {
+        self.need.iter().map(|&x| x.saturating_sub(1) as u64).sum()
+    }
+}
+
+/// Works out the needed versions at one level; see the module docs. `domain` is the level's
+/// extent `[0, domain)`, `targets` boxes `[lo, hi)` of voxels whose final version is wanted
+/// (clipped to the domain here), `reach` the stencil radius.
+pub fn dependent_set(
+    schedule: &Schedule,
+    domain: IVec3,
+    targets: &[(IVec3, IVec3)],
+    reach: i32,
+) -> NeedGrid {
+    let targets: Vec<(IVec3, IVec3)> = targets
+        .iter()
+        .map(|&(lo, hi)| (lo.max(IVec3::ZERO), hi.min(domain)))
+        .filter(|(lo, hi)| hi.cmpgt(*lo).all())
+        .collect();
+    if targets.is_empty() {
+        return NeedGrid::empty();
+    }
+    let total = schedule.corrections();
+    assert!(total < 255, "at most 254 corrections per level");
+    let tlo = targets.iter().fold(IVec3::MAX, |a, t| a.min(t.0));
+    let thi = targets.iter().fold(IVec3::MIN, |a, t| a.max(t.1));
+    let grow = IVec3::splat(schedule.impact_distance(reach));
+    let lo = (tlo - grow).max(IVec3::ZERO);
+    let hi = (thi + grow).min(domain);
+    let n = hi - lo;
+    let mut grid = NeedGrid {
+        lo,
+        n,
+        need: vec![0u8; n.x as usize * n.y as usize * n.z as usize],
+    };
+    for &(a, b) in &targets {
+        for z in a.z..b.z {
+            for y in a.y..b.y {
+                let i = grid.index(IVec3::new(a.x, y, z));
+                grid.need[i..i + (b.x - a.x) as usize].fill(1 + total as u8);
+            }
+        }
+    }
+    let stages = &schedule.stages;
+    for step in schedule.steps().iter().rev() {
+        let threshold = 1 + step.version_after() as u8;
+        // Active voxels whose new version is needed, and their bounding box.
+        let (mut alo, mut ahi) = (IVec3::MAX, IVec3::MIN);
+        for (i, &x) in grid.need.iter().enumerate() {
+            if x >= threshold {
+                let p = grid.position(i);
+                if step.active(p) {
+                    alo = alo.min(p);
+                    ahi = ahi.max(p);
+                }
+            }
+        }
+        if alo.x > ahi.x {
+            continue;
+        }
+        let rlo = (alo - IVec3::splat(reach)).max(grid.lo);
+        let rhi = (ahi + IVec3::splat(reach + 1)).min(grid.lo + grid.n);
+        let rn = rhi - rlo;
+        let len = rn.x as usize * rn.y as usize * rn.z as usize;
+        let mut mask = vec![0u8; len];
+        mask.par_chunks_mut(rn.x as usize)
+            .enumerate()
+            .for_each(|(row, out)| {
+                let y = rlo.y + (row % rn.y as usize) as i32;
+                let z = rlo.z + (row / rn.y as usize) as i32;
+                let start = grid.index(IVec3::new(rlo.x, y, z));
+                for (x, o) in out.iter_mut().enumerate() {
+                    let p = IVec3::new(rlo.x + x as i32, y, z);
+                    *o = (grid.need[start + x] >= threshold && step.active(p)) as u8;
+                }
+            });
+        let barriers = &stages[step.stage].window.barriers;
+        let all = dilate(&mask, rlo, rn, reach, &[]);
+        let same_cell = if barriers.is_empty() {
+            None
+        } else {
+            Some(dilate(&mask, rlo, rn, reach, barriers))
+        };
+        let latest: [u8; 8] = std::array::from_fn(|c| 1 + step.latest_for_class(c as u8) as u8);
+        let start = 1 + step.stage_start as u8;
+        let (gn, glo) = (grid.n, grid.lo);
+        // Rows of the region are disjoint rows of the grid: update them in parallel.
+        let mut rows: Vec<(usize, &mut [u8])> = Vec::new();
+        {
+            let mut rest: &mut [u8] = &mut grid.need;
+            let mut consumed = 0usize;
+            for z in 0..rn.z {
+                for y in 0..rn.y {
+                    let q = IVec3::new(rlo.x, rlo.y + y, rlo.z + z) - glo;
+                    let at = ((q.z as usize * gn.y as usize) + q.y as usize) * gn.x as usize
+                        + q.x as usize;
+                    let (_, tail) = rest.split_at_mut(at - consumed);
+                    let (row, tail) = tail.split_at_mut(rn.x as usize);
+                    rows.push(((z as usize * rn.y as usize + y as usize), row));
+                    rest = tail;
+                    consumed = at + rn.x as usize;
+                }
+            }
+        }
+        rows.into_par_iter().for_each(|(r, row)| {
+            let y = rlo.y + (r % rn.y as usize) as i32;
+            let z = rlo.z + (r / rn.y as usize) as i32;
+            let base = r * rn.x as usize;
+            for (x, need) in row.iter_mut().enumerate() {
+                if all[base + x] == 0 {
+                    continue;
+                }
+                let in_cell = same_cell.as_ref().is_none_or(|m| m[base + x] != 0);
+                let v = if in_cell {
+                    latest[class_of(IVec3::new(rlo.x + x as i32, y, z)) as usize]
+                } else {
+                    start
+                };
+                if v > *need {
+                    *need = v;
+                }
+            }
+        });
+    }
+    grid
+}
+
+/// Dilation of a 0/1 mask over the box `[lo, lo + n)` by the cube of radius `r`; with
+/// barriers, only within the cell (of every lattice) of each source voxel.
+pub fn dilate(mask: &[u8], lo: IVec3, n: IVec3, r: i32, barriers: &[Cells]) -> Vec<u8> {
+    let dims = [n.x as usize, n.y as usize, n.z as usize];
+    let mut cur = mask.to_vec();
+    for axis in 0..3 {
+        let origin = lo[axis];
+        let len = dims[axis];
+        // Window [a, b] (inclusive, local) per position along the axis.
+        let bounds: Vec<(usize, usize)> = (0..len as i32)
+            .map(|i| {
+                let g = origin + i;
+                let (mut a, mut b) = (g - r, g + r);
+                for c in barriers {
+                    let s = c.start(g);
+                    a = a.max(s);
+                    b = b.min(s + c.size - 1);
+                }
+                let a = (a - origin).max(0) as usize;
+                let b = ((b - origin).min(len as i32 - 1)).max(0) as usize;
+                (a, b)
+            })
+            .collect();
+        cur = dilate_axis(&cur, dims, axis, &bounds);
+    }
+    cur
+}
+
+fn dilate_axis(src: &[u8], d: [usize; 3], axis: usize, bounds: &[(usize, usize)]) -> Vec<u8> {
+    let [nx, ny, nz] = d;
+    let mut out = vec![0u8; src.len()];
+    match axis {
+        0 => {
+            out.par_chunks_mut(nx)
+                .zip(src.par_chunks(nx))
+                .for_each(|(o, s)| {
+                    let mut pre = vec![0u32; nx + 1];
+                    for i in 0..nx {
+                        pre[i + 1] = pre[i] + s[i] as u32;
+                    }
+                    for (i, x) in o.iter_mut().enumerate() {
+                        let (a, b) = bounds[i];
+                        *x = (a <= b && pre[b + 1] > pre[a]) as u8;
+                    }
+                });
+        }
+        1 => {
+            let slab = nx * ny;
+            out.par_chunks_mut(slab)
+                .zip(src.par_chunks(slab))
+                .for_each(|(o, s)| {
+                    let mut pre = vec![0u32; (ny + 1) * nx];
+                    for y in 0..ny {
+                        for x in 0..nx {
+                            pre[(y + 1) * nx + x] = pre[y * nx + x] + s[y * nx + x] as u32;
+                        }
+                    }
+                    for y in 0..ny {
+                        let (a, b) = bounds[y];
+                        for x in 0..nx {
+                            o[y * nx + x] =
+                                (a <= b && pre[(b + 1) * nx + x] > pre[a * nx + x]) as u8;
+                        }
+                    }
+                });
+        }
+        _ => {
+            let slab = nx * ny;
+            let mut pre = vec![0u32; (nz + 1) * slab];
+            for z in 0..nz {
+                let (done, rest) = pre.split_at_mut((z + 1) * slab);
+                let prev = &done[z * slab..];
+                let next = &mut rest[..slab];
+                for i in 0..slab {
+                    next[i] = prev[i] + src[z * slab + i] as u32;
+                }
+            }
+            out.par_chunks_mut(slab).enumerate().for_each(|(z, o)| {
+                let (a, b) = bounds[z];
+                for i in 0..slab {
+                    o[i] = (a <= b && pre[(b + 1) * slab + i] > pre[a * slab + i]) as u8;
+                }
+            });
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn brute_dilate(mask: &[u8], lo: IVec3, n: IVec3, r: i32, barriers: &[Cells]) -> Vec<u8> {
+        let g = NeedGrid {
+            lo,
+            n,
+            need: mask.to_vec(),
+        };
+        let mut out = vec![0u8; mask.len()];
+        for i in 0..mask.len() {
+            let w = g.position(i);
+            'search: for dz in -r..=r {
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        let v = w + IVec3::new(dx, dy, dz);
+                        if g.get(v) != 0 && barriers.iter().all(|c| c.cell_of(v) == c.cell_of(w)) {
+                            out[i] = 1;
+                            break 'search;
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn separable_dilation_matches_brute_force() {
+        let lo = IVec3::new(-3, 2, 5);
+        let n = IVec3::new(13, 9, 11);
+        let len = (n.x * n.y * n.z) as usize;
+        let mut mask = vec![0u8; len];
+        for i in (0..len).step_by(97) {
+            mask[i] = 1;
+        }
+        let cells = [Cells { size: 4, offset: 1 }];
+        for r in [0, 1, 2] {
+            assert_eq!(
+                dilate(&mask, lo, n, r, &[]),
+                brute_dilate(&mask, lo, n, r, &[])
+            );
+            assert_eq!(
+                dilate(&mask, lo, n, r, &cells),
+                brute_dilate(&mask, lo, n, r, &cells)
+            );
+        }
+    }
+
+    #[test]
+    fn plain_dependent_set_grows_by_the_reach_per_step() {
+        // One pass without subpasses, reach 2: a single target needs its 5³ cube upsampled.
+        let s = Schedule::plain(1, false);
+        let g = dependent_set(
+            &s,
+            IVec3::splat(40),
+            &[(IVec3::splat(20), IVec3::splat(21))],
+            2,
+        );
+        assert_eq!(g.voxels(), 125);
+        assert_eq!(g.corrections(), 1);
+        // Two passes: the target's cube corrected once, the 9³ cube upsampled.
+        let s = Schedule::plain(2, false);
+        let g = dependent_set(
+            &s,
+            IVec3::splat(40),
+            &[(IVec3::splat(20), IVec3::splat(21))],
+            2,
+        );
+        assert_eq!(g.voxels(), 729);
+        assert_eq!(g.corrections(), 1 + 125);
+    }
+
+    #[test]
+    fn barriers_stop_the_growth() {
+        let target = [(IVec3::splat(20), IVec3::splat(21))];
+        let plain = dependent_set(&Schedule::plain(4, true), IVec3::splat(64), &target, 3);
+        let grid = dependent_set(&Schedule::grid(4, true, 8), IVec3::splat(64), &target, 3);
+        assert!(grid.voxels() < plain.voxels());
+        // The grid cell of 20 is 16..24; its 3-neighbourhood 13..27 bounds everything.
+        for i in 0..grid.need.len() {
+            if grid.need[i] > 0 {
+                let p = grid.position(i);
+                assert!(p.cmpge(IVec3::splat(13)).all() && p.cmplt(IVec3::splat(27)).all());
+                if grid.need[i] > 1 {
+                    assert!(p.cmpge(IVec3::splat(16)).all() && p.cmplt(IVec3::splat(24)).all());
+                }
+            }
+        }
+    }
+}

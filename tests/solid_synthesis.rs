@@ -1,0 +1,705 @@
+//! Solid synthesis on real exemplars: candidate triples and slabs
+//! (stages/analyse_exemplar/candidate_triples.rs), history windows, dependent sets and the
+//! on-demand brick synthesis (stages/synthesize/solid_synthesis.rs).
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use glam::{Quat, Vec3};
+use texsyn::artifact::AlignedBytes;
+use texsyn::image::{Image, decode_image};
+use texsyn::random::counter_hash;
+use texsyn::stages::analyse_exemplar::candidate_triples::{
+    AnalysisError, CandidateParams, SolidAnalysis, SolidAnalysisRef, Triple, analyse,
+};
+use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
+use texsyn::stages::synthesize::solid_synthesis::{
+    Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, Volume, VoxelRequest,
+};
+
+fn data_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/exemplars")
+        .join(name)
+}
+
+fn load(name: &str) -> Image {
+    let path = data_path(name);
+    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    decode_image(&path, &bytes).unwrap()
+}
+
+fn crop(img: &Image, x0: u32, y0: u32, w: u32, h: u32) -> Image {
+    let mut out = Image::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            out.pixels[(y * w + x) as usize] = img.pixels[((y0 + y) * img.width + x0 + x) as usize];
+        }
+    }
+    out
+}
+
+fn transpose(img: &Image) -> Image {
+    let mut out = Image::new(img.height, img.width);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            out.pixels[(x * img.height + y) as usize] = img.pixels[(y * img.width + x) as usize];
+        }
+    }
+    out
+}
+
+/// A small, fast setup: a 48² crop of marble1, 3 levels, N = 5 then 7.
+fn small_params() -> CandidateParams {
+    CandidateParams {
+        levels: 3,
+        neighbourhood_coarsest: 5,
+        neighbourhood: 7,
+        ..Default::default()
+    }
+}
+
+fn small() -> &'static (Image, SolidAnalysis) {
+    static S: OnceLock<(Image, SolidAnalysis)> = OnceLock::new();
+    S.get_or_init(|| {
+        let img = crop(&load("marble1.png"), 20, 30, 48, 48);
+        let a = analyse([img.view(); 3], &small_params()).unwrap();
+        (img, a)
+    })
+}
+
+fn trivial_field(volume: &Volume) -> RotationField {
+    let hi = Vec3::from(volume.origin)
+        + Vec3::new(
+            volume.dims[0] as f32,
+            volume.dims[1] as f32,
+            volume.dims[2] as f32,
+        ) * volume.voxel_size;
+    RotationField::trivial(FieldGrid::covering(volume.origin.into(), hi, 8))
+}
+
+fn rotated_field(volume: &Volume, q: Quat) -> RotationField {
+    let mut f = trivial_field(volume);
+    f.rotations.iter_mut().for_each(|r| *r = q);
+    f
+}
+
+fn cube(n: u32, levels: u32) -> Volume {
+    Volume {
+        origin: [0.0; 3],
+        voxel_size: 1.0,
+        dims: [n; 3],
+        levels,
+    }
+}
+
+fn small_solid_params() -> SolidParams {
+    let mut p = SolidParams::paper(3);
+    p.cell = 8;
+    p.subpart = 16;
+    p.levels[0].passes = 2;
+    p
+}
+
+/// Mean over the section's 5×5 patches of the squared distance to the nearest 5×5 exemplar
+/// patch (toroidal exemplar), per pixel and channel.
+fn nearest_patch_distance(section: &[[f32; 3]], sw: usize, sh: usize, ex: &Image) -> f32 {
+    let (ew, eh) = (ex.width as i64, ex.height as i64);
+    let mut total = 0.0f64;
+    let mut count = 0;
+    for sy in 2..sh - 2 {
+        for sx in 2..sw - 2 {
+            let mut best = f32::INFINITY;
+            for ey in 0..eh {
+                for ex_ in 0..ew {
+                    let mut d = 0.0f32;
+                    'p: for j in -2..=2i64 {
+                        for i in -2..=2i64 {
+                            let s =
+                                section[(sy as i64 + j) as usize * sw + (sx as i64 + i) as usize];
+                            let e = ex.pixels[((ey + j).rem_euclid(eh) * ew
+                                + (ex_ + i).rem_euclid(ew))
+                                as usize];
+                            for c in 0..3 {
+                                let t = s[c] - e[c];
+                                d += t * t;
+                            }
+                            if d >= best {
+                                break 'p;
+                            }
+                        }
+                    }
+                    best = best.min(d);
+                }
+            }
+            total += best as f64;
+            count += 1;
+        }
+    }
+    (total / count as f64 / 75.0) as f32
+}
+
+#[test]
+fn analysis_arrays_round_trip_in_place() {
+    let (_, a) = small();
+    // Store each array in its own 64-byte-aligned buffer, as a mapped artifact would.
+    let buffers: Vec<(String, AlignedBytes)> = a
+        .arrays()
+        .into_iter()
+        .map(|(n, b)| (n, AlignedBytes::from_slice(b)))
+        .collect();
+    let views: Vec<(String, &[u8])> = buffers
+        .iter()
+        .map(|(n, b)| (n.clone(), b.as_slice()))
+        .collect();
+    let meta_bytes = serde_json::to_vec(&a.meta).unwrap();
+    let meta = serde_json::from_slice(&meta_bytes).unwrap();
+    let r = SolidAnalysisRef::from_arrays(meta, &views).unwrap();
+    assert_eq!(r.stack, &a.stack[..]);
+    assert_eq!(r.features, &a.features[..]);
+    assert_eq!(r.candidates, &a.candidates[..]);
+    assert_eq!(r.slabs, &a.slabs[..]);
+    assert_eq!(r.pca_basis, &a.pca_basis[..]);
+    // Zero copy: the views point into the buffers.
+    let cand = buffers.iter().find(|(n, _)| n == "candidates").unwrap();
+    assert_eq!(
+        r.candidates.as_ptr() as usize,
+        cand.1.as_slice().as_ptr() as usize
+    );
+    // Same answers as the owned analysis.
+    let o = a.as_ref();
+    for li in 0..3 {
+        assert_eq!(r.candidates(li, 1, [7, 9]), o.candidates(li, 1, [7, 9]));
+        assert_eq!(r.feature(li, 0, [3, 4]), o.feature(li, 0, [3, 4]));
+    }
+    // A truncated array or a triple outside the exemplar is an error, not a panic later.
+    let mut short = views.clone();
+    let i = short.iter().position(|(n, _)| n == "features").unwrap();
+    short[i].1 = &short[i].1[..short[i].1.len() - 4];
+    assert!(matches!(
+        SolidAnalysisRef::from_arrays(a.meta.clone(), &short),
+        Err(AnalysisError::Corrupt(_))
+    ));
+    let mut bad = a.clone();
+    bad.candidates[5].c[2][0] = 500;
+    let bad_views: Vec<(String, &[u8])> = bad.arrays();
+    assert!(SolidAnalysisRef::from_arrays(a.meta.clone(), &bad_views).is_err());
+}
+
+#[test]
+fn analysis_is_identical_on_any_thread_count() {
+    let img = crop(&load("wood2.png"), 0, 0, 40, 40);
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| analyse([img.view(); 3], &small_params()).unwrap())
+    };
+    let (a, b) = (run(1), run(2));
+    assert!(a == b);
+    let bytes = |x: &SolidAnalysis| -> Vec<Vec<u8>> {
+        x.arrays().into_iter().map(|(_, b)| b.to_vec()).collect()
+    };
+    assert_eq!(bytes(&a), bytes(&b));
+}
+
+#[test]
+fn candidate_triples_beat_random_triples_by_crossbar_error() {
+    let (img, a) = small();
+    let r = a.as_ref();
+    let (w, h) = (img.width, img.height);
+    for li in 0..3 {
+        let mut cand = 0.0f64;
+        let mut rand = 0.0f64;
+        let mut n = 0;
+        for plane in 0..3 {
+            for y in (0..h as u16).step_by(3) {
+                for x in (0..w as u16).step_by(3) {
+                    cand += r.crossbar_error(li, &r.candidates(li, plane, [x, y])[0]) as f64;
+                    let k = counter_hash(7, li as u64, n);
+                    let c = |s: u32| {
+                        [
+                            ((k >> s) % w as u64) as u16,
+                            ((k >> (s + 8)) % h as u64) as u16,
+                        ]
+                    };
+                    let mut t = Triple::new(c(0), c(16), c(32));
+                    t.c[plane] = [x, y];
+                    rand += r.crossbar_error(li, &t) as f64;
+                    n += 1;
+                }
+            }
+        }
+        assert!(
+            cand < 0.3 * rand,
+            "level {li}: candidates {cand}, random {rand}"
+        );
+    }
+}
+
+#[test]
+fn exemplars_of_different_sizes_are_an_error_naming_the_sizes() {
+    let a = crop(&load("marble1.png"), 0, 0, 48, 48);
+    let b = crop(&load("marble1.png"), 0, 0, 40, 48);
+    let e = analyse([a.view(), b.view(), a.view()], &small_params()).unwrap_err();
+    assert_eq!(
+        e,
+        AnalysisError::SizeMismatch {
+            xy: (48, 48),
+            yz: (40, 48),
+            zx: (48, 48)
+        }
+    );
+    let msg = e.to_string();
+    assert!(msg.contains("48×48") && msg.contains("40×48"), "{msg}");
+    let e = analyse(
+        [a.view(); 3],
+        &CandidateParams {
+            neighbourhood: 6,
+            ..small_params()
+        },
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string().contains("analyse_exemplar.neighbourhood"),
+        "{e}"
+    );
+}
+
+fn all_bricks(s: &SolidSynthesis, store: &MemoryBrickStore) -> Vec<(u32, [i32; 3], Brick)> {
+    let mut out = vec![];
+    for level in 1..=s.volume().levels {
+        for b in store.bricks(level) {
+            out.push((level, b, (*store.get(level, b).unwrap()).clone()));
+        }
+    }
+    out
+}
+
+#[test]
+fn voxels_are_the_same_whatever_else_was_requested_and_on_any_thread_count() {
+    let (_, a) = small();
+    let vol = cube(40, 3);
+    let field = rotated_field(
+        &vol,
+        Quat::from_rotation_z(0.4) * Quat::from_rotation_x(0.3),
+    );
+    let s = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
+    let req_a = VoxelRequest::from_box([0, 0, 12], [40, 40, 13]);
+    let req_b = VoxelRequest::from_box([20, 5, 10], [30, 25, 30]);
+    let run = |threads: usize, reqs: &[&VoxelRequest]| {
+        let store = MemoryBrickStore::new();
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                for r in reqs {
+                    s.synthesize(r, &store).unwrap();
+                }
+            });
+        store
+    };
+    let only_a = run(2, &[&req_a]);
+    let only_b = run(2, &[&req_b]);
+    let both = run(2, &[&req_b, &req_a]);
+    let a_one_thread = run(1, &[&req_a]);
+    for v in req_a.voxels() {
+        let t = s.triple_at(&only_a, 3, v).unwrap();
+        assert_eq!(Some(t), s.triple_at(&both, 3, v), "{v:?}");
+        assert_eq!(Some(t), s.triple_at(&a_one_thread, 3, v), "{v:?}");
+    }
+    let mut overlap = 0;
+    for v in req_b.voxels() {
+        let t = s.triple_at(&only_b, 3, v).unwrap();
+        assert_eq!(Some(t), s.triple_at(&both, 3, v), "{v:?}");
+        overlap += req_a.contains(v) as usize;
+    }
+    assert!(overlap > 0);
+    // Every brick two stores share is identical, at every level.
+    let reference = all_bricks(&s, &both);
+    let mut shared = 0;
+    for store in [&only_a, &only_b, &a_one_thread] {
+        for (level, b, brick) in all_bricks(&s, store) {
+            let r = reference
+                .iter()
+                .find(|(l, c, _)| *l == level && *c == b)
+                .unwrap();
+            assert!(r.2 == brick, "brick {b:?} of level {level} differs");
+            shared += 1;
+        }
+    }
+    assert!(shared > 10);
+    // The synthesized voxels are not all alike (no degenerate constant solution).
+    let distinct: std::collections::BTreeSet<Triple> = req_a
+        .voxels()
+        .map(|v| s.triple_at(&only_a, 3, v).unwrap())
+        .collect();
+    assert!(distinct.len() > 200, "{}", distinct.len());
+}
+
+#[test]
+fn an_overlapping_request_reuses_bricks() {
+    let (_, a) = small();
+    let vol = cube(48, 3);
+    let field = trivial_field(&vol);
+    let s = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
+    let first = VoxelRequest::from_box([0, 0, 20], [48, 48, 21]);
+    let second = VoxelRequest::from_box([0, 0, 22], [48, 48, 23]);
+    let store = MemoryBrickStore::new();
+    let r1 = s.synthesize(&first, &store).unwrap();
+    let r2 = s.synthesize(&second, &store).unwrap();
+    let fresh = s.synthesize(&second, &MemoryBrickStore::new()).unwrap();
+    assert!(r1.bricks_computed() > 0);
+    assert!(
+        r2.bricks_computed() < fresh.bricks_computed(),
+        "{} vs {}",
+        r2.bricks_computed(),
+        fresh.bricks_computed()
+    );
+    assert!(r2.levels.iter().any(|l| l.bricks_reused > 0));
+    // At the finest level both need the same bricks; below, only what the missing ones need.
+    assert_eq!(r2.levels[2].bricks_needed, fresh.levels[2].bricks_needed);
+    for (a, b) in r2.levels.iter().zip(&fresh.levels) {
+        assert!(a.bricks_needed <= b.bricks_needed);
+        assert_eq!(a.bricks_computed + a.bricks_reused, a.bricks_needed);
+    }
+    // Asking again computes nothing.
+    let r3 = s.synthesize(&second, &store).unwrap();
+    assert_eq!(r3.bricks_computed(), 0);
+    assert_eq!(r3.voxels(), 0);
+    // The bricks a request needs are what a fresh synthesis stores.
+    let needed = s.bricks_needed(&second);
+    let fresh_store = MemoryBrickStore::new();
+    s.synthesize(&second, &fresh_store).unwrap();
+    for (li, bricks) in needed.iter().enumerate() {
+        assert_eq!(
+            *bricks,
+            fresh_store.bricks(li as u32 + 1),
+            "level {}",
+            li + 1
+        );
+    }
+}
+
+#[test]
+fn dual_grid_depends_on_fewer_voxels_than_plain_correction() {
+    let (_, a) = small();
+    let vol = cube(96, 3);
+    let field = trivial_field(&vol);
+    let req = VoxelRequest::plane(&vol, Vec3::splat(48.0), Vec3::new(0.2, 0.3, 1.0));
+    let mut params = small_solid_params();
+    params.levels[1].passes = 3;
+    params.levels[2].passes = 3;
+    let dual = SolidSynthesis::new(a.as_ref(), &field, vol, params.clone()).unwrap();
+    let plain =
+        SolidSynthesis::new(a.as_ref(), &field, vol, params.with_scheme(Scheme::Plain)).unwrap();
+    let d = dual.dependent_set(&req);
+    let p = plain.dependent_set(&req);
+    for li in 1..3 {
+        assert!(
+            d[li].voxels < p[li].voxels && d[li].corrections < p[li].corrections,
+            "level {}: dual {:?} plain {:?}",
+            li + 1,
+            (d[li].voxels, d[li].corrections),
+            (p[li].voxels, p[li].corrections)
+        );
+        assert!(d[li].bricks.len() <= p[li].bricks.len());
+    }
+    // The finest level of the dual scheme stays within a few cells of the plane.
+    assert!(
+        d[2].voxels * 2 < p[2].voxels,
+        "{} vs {}",
+        d[2].voxels,
+        p[2].voxels
+    );
+}
+
+/// A 48² crop of wood2 as a solid layered across x: xy shows the stripes, zx the transposed
+/// stripes, yz (weight 0) is not matched.
+fn wood_layers() -> &'static (Image, SolidAnalysis) {
+    static S: OnceLock<(Image, SolidAnalysis)> = OnceLock::new();
+    S.get_or_init(|| {
+        let img = crop(&load("wood2.png"), 10, 20, 48, 48);
+        let tr = transpose(&img);
+        let params = CandidateParams {
+            plane_weights: [1.0, 0.0, 1.0],
+            ..small_params()
+        };
+        let a = analyse([img.view(), img.view(), tr.view()], &params).unwrap();
+        (img, a)
+    })
+}
+
+#[test]
+fn a_section_looks_more_like_the_exemplar_than_random_triples() {
+    let (img, a) = wood_layers();
+    let vol = cube(32, 3);
+    let field = trivial_field(&vol);
+    let s = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
+    let store = MemoryBrickStore::new();
+    s.synthesize(&VoxelRequest::from_box([0, 0, 16], [32, 32, 17]), &store)
+        .unwrap();
+    let r = a.as_ref();
+    let mut synth = vec![];
+    let mut random = vec![];
+    for y in 0..32 {
+        for x in 0..32 {
+            synth.push(s.colour_at(&store, [x, y, 16]).unwrap());
+            let k = counter_hash(3, 0, (y * 32 + x) as u64);
+            let c = |s: u32| [((k >> s) % 48) as u16, ((k >> (s + 8)) % 48) as u16];
+            random.push(r.colour(2, &Triple::new(c(0), c(16), c(32))));
+        }
+    }
+    let ds = nearest_patch_distance(&synth, 32, 32, img);
+    let dr = nearest_patch_distance(&random, 32, 32, img);
+    assert!(ds < 0.5 * dr, "synthesized {ds}, random {dr}");
+}
+
+#[test]
+fn bricks_round_trip_and_bad_setups_are_errors() {
+    let b = Brick {
+        level: 2,
+        coord: [1, -2, 3],
+        size: 2,
+        triples: (0..8)
+            .map(|i| Triple::new([i, 1], [2, i], [3, 4]))
+            .collect(),
+    };
+    let arrays = b.arrays();
+    let back = Brick::from_arrays(b.meta(), &arrays).unwrap();
+    assert_eq!(back, b);
+    let short: Vec<(String, &[u8])> = vec![("triples".into(), &arrays[0].1[..12])];
+    assert!(Brick::from_arrays(b.meta(), &short).is_err());
+
+    let (_, a) = small();
+    let vol = cube(16, 4);
+    let field = trivial_field(&vol);
+    let e = SolidSynthesis::new(a.as_ref(), &field, vol, SolidParams::paper(4))
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("3 levels"), "{e}");
+    let mut p = small_solid_params();
+    p.cell = 7;
+    let e = SolidSynthesis::new(a.as_ref(), &field, cube(16, 3), p)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("synthesize.cell"), "{e}");
+}
+
+// ----- Looking at results and timing (run with --ignored --nocapture) -----
+
+fn write_png(path: &str, px: &[[f32; 3]], w: u32, h: u32, zoom: u32) {
+    let mut img = image::RgbImage::new(w * zoom, h * zoom);
+    for y in 0..h * zoom {
+        for x in 0..w * zoom {
+            let c = px[((y / zoom) * w + x / zoom) as usize];
+            img.put_pixel(
+                x,
+                y,
+                image::Rgb(c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)),
+            );
+        }
+    }
+    img.save(path).unwrap();
+}
+
+fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// Writes sections of synthesized solids to /tmp. Env: EXEMPLAR (file in tests/data/exemplars
+/// or a path), SIZE, LEVELS, CONFIG (same|layers|layers3), ANGLE (degrees about z), K,
+/// WEIGHTS (e.g. 1,0,1), SCHEME (dual|plain), PASSES, PASSES0, JITTER, SEED, TRILINEAR,
+/// NO_COHERENT, LEVELS_DUMP.
+#[test]
+#[ignore]
+fn look() {
+    let name: String = env_or("EXEMPLAR", "wood2.png".to_string());
+    let n: u32 = env_or("SIZE", 64);
+    let levels: u32 = env_or("LEVELS", 4);
+    let config: String = env_or("CONFIG", "same".to_string());
+    let angle: f32 = env_or("ANGLE", 0.0);
+    let img = load(&name);
+    let mut cp = CandidateParams {
+        levels,
+        candidates: env_or("K", 4),
+        ..Default::default()
+    };
+    if let Ok(w) = std::env::var("WEIGHTS") {
+        let v: Vec<f32> = w.split(',').map(|x| x.parse().unwrap()).collect();
+        cp.plane_weights = [v[0], v[1], v[2]];
+    }
+    let t = std::time::Instant::now();
+    let a = if config == "layers" {
+        // A solid layered across x: xy shows the stripes, zx the transposed stripes, yz is
+        // not matched.
+        let tr = transpose(&img);
+        cp.plane_weights = [1.0, 0.0, 1.0];
+        analyse([img.view(), img.view(), tr.view()], &cp).unwrap()
+    } else if config == "layers3" {
+        // The same, with a constant image (the mean colour) for yz: fully consistent.
+        let tr = transpose(&img);
+        let mut flat = img.clone();
+        let n = img.pixels.len() as f32;
+        let mean = img
+            .pixels
+            .iter()
+            .fold([0.0f32; 4], |a, p| std::array::from_fn(|c| a[c] + p[c] / n));
+        flat.pixels.iter_mut().for_each(|p| *p = mean);
+        analyse([img.view(), flat.view(), tr.view()], &cp).unwrap()
+    } else {
+        analyse([img.view(); 3], &cp).unwrap()
+    };
+    println!(
+        "analysis of {name} ({}×{}): {:.2} s",
+        img.width,
+        img.height,
+        t.elapsed().as_secs_f64()
+    );
+    let vol = cube(n, levels);
+    let q = Quat::from_rotation_z(angle.to_radians());
+    let field = rotated_field(&vol, q);
+    let mut params = SolidParams::paper(levels);
+    params.seed = env_or("SEED", 0);
+    for l in params.levels.iter_mut().skip(1) {
+        l.jitter = env_or("JITTER", 0.0);
+        if std::env::var("TRILINEAR").is_ok() {
+            l.trilinear = true;
+        }
+        l.passes = env_or("PASSES", l.passes);
+    }
+    params.levels[0].passes = env_or("PASSES0", params.levels[0].passes);
+    params.coherent_candidates = std::env::var("NO_COHERENT").is_err();
+    if env_or("SCHEME", "dual".to_string()) == "plain" {
+        params = params.with_scheme(Scheme::Plain);
+    }
+    let s = SolidSynthesis::new(a.as_ref(), &field, vol, params).unwrap();
+    let store = MemoryBrickStore::new();
+    let stem = Path::new(&name)
+        .file_stem()
+        .unwrap()
+        .to_string_lossy()
+        .to_string();
+    let tag = format!("{stem}_{config}_{angle}");
+    let c = n as i32 / 2;
+    for (axis, req) in [
+        (
+            "z",
+            VoxelRequest::from_box([0, 0, c], [n as i32, n as i32, c + 1]),
+        ),
+        (
+            "x",
+            VoxelRequest::from_box([c, 0, 0], [c + 1, n as i32, n as i32]),
+        ),
+        (
+            "y",
+            VoxelRequest::from_box([0, c, 0], [n as i32, c + 1, n as i32]),
+        ),
+    ] {
+        let t = std::time::Instant::now();
+        let rep = s.synthesize(&req, &store).unwrap();
+        println!("section {axis}: {:.2} s", t.elapsed().as_secs_f64());
+        for l in &rep.levels {
+            println!("  {l:?}");
+        }
+        let mut px = vec![];
+        for i in 0..n as i32 {
+            for j in 0..n as i32 {
+                let v = match axis {
+                    "z" => [j, i, c],
+                    "x" => [c, j, i],
+                    _ => [i, c, j],
+                };
+                px.push(s.colour_at(&store, v).unwrap());
+            }
+        }
+        write_png(&format!("/tmp/solid_{tag}_{axis}.png"), &px, n, n, 2);
+        if axis == "z" {
+            // Each plane's texel alone, and how much the three disagree.
+            let r = a.as_ref();
+            let mut spread = 0.0f64;
+            for p in 0..3 {
+                let mut px = vec![];
+                for i in 0..n as i32 {
+                    for j in 0..n as i32 {
+                        let t = s.triple_at(&store, levels, [j, i, c]).unwrap();
+                        let col = r.texel(levels as usize - 1, r.image_of(p), t.c[p]);
+                        if p == 0 {
+                            let o = r.texel(levels as usize - 1, r.image_of(2), t.c[2]);
+                            spread += (0..3).map(|k| (col[k] - o[k]).abs() as f64).sum::<f64>();
+                        }
+                        px.push(col);
+                    }
+                }
+                write_png(&format!("/tmp/solid_{tag}_z_plane{p}.png"), &px, n, n, 2);
+            }
+            println!(
+                "mean |xy - zx| texel difference: {:.4}",
+                spread / (n * n) as f64 / 3.0
+            );
+        }
+        if axis == "z" && std::env::var("LEVELS_DUMP").is_ok() {
+            for level in 1..levels {
+                let shift = levels - level;
+                let m = n as i32 >> shift;
+                let mut px = vec![];
+                for i in 0..m {
+                    for j in 0..m {
+                        let t = s.triple_at(&store, level, [j, i, c >> shift]).unwrap();
+                        px.push(s.colour(level, &t));
+                    }
+                }
+                write_png(
+                    &format!("/tmp/solid_{tag}_z_level{level}.png"),
+                    &px,
+                    m as u32,
+                    m as u32,
+                    2 << shift,
+                );
+            }
+        }
+    }
+}
+
+/// Table 1/2-style numbers: analysis time of a 128² exemplar and a cross-section through a
+/// 128³ volume, 4 levels, N = 7 then 9, dual-grid vs standard (run with --ignored --nocapture).
+#[test]
+#[ignore]
+fn bench_table() {
+    let name: String = env_or("EXEMPLAR", "marble1.png".to_string());
+    let img = load(&name);
+    let t = std::time::Instant::now();
+    let a = analyse([img.view(); 3], &CandidateParams::default()).unwrap();
+    println!(
+        "analysis {name} {}×{} (L=4, N=7/9, k=4): {:.2} s on {} threads",
+        img.width,
+        img.height,
+        t.elapsed().as_secs_f64(),
+        rayon::current_num_threads()
+    );
+    let n: u32 = env_or("SIZE", 128);
+    let vol = cube(n, 4);
+    let field = trivial_field(&vol);
+    let req = VoxelRequest::from_box([0, 0, n as i32 / 2], [n as i32, n as i32, n as i32 / 2 + 1]);
+    for (label, params) in [
+        ("dual-grid", SolidParams::paper(4)),
+        ("standard", SolidParams::paper(4).with_scheme(Scheme::Plain)),
+    ] {
+        let s = SolidSynthesis::new(a.as_ref(), &field, vol, params).unwrap();
+        let t = std::time::Instant::now();
+        let rep = s.synthesize(&req, &MemoryBrickStore::new()).unwrap();
+        println!("{label}: {:.2} s in all", t.elapsed().as_secs_f64());
+        println!("level | bricks | voxels | corrections | comparisons | seconds");
+        for l in &rep.levels {
+            println!(
+                "{} | {} | {} | {} | {} | {:.2}",
+                l.level, l.bricks_computed, l.voxels, l.corrections, l.comparisons, l.seconds
+            );
+        }
+    }
+}
