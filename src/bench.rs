@@ -15,7 +15,6 @@ use crate::stages::parameterize::edge_offsets::{edge_offsets, validity_boxes};
 use crate::stages::parameterize::region_growing::region_growing_order;
 use crate::stages::synthesize::jump_walk::{WalkParams, jump_walk};
 use anyhow::{Context, Result};
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -48,28 +47,7 @@ fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     (median(times), last.unwrap())
 }
 
-/// Midpoint subdivision: every triangle into four, edge midpoints shared.
-pub fn subdivide(mesh: &Mesh) -> Mesh {
-    let mut positions = mesh.positions.clone();
-    let mut mid: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.triangles.len() * 2);
-    let mut triangles = Vec::with_capacity(mesh.triangles.len() * 4);
-    for t in &mesh.triangles {
-        let mut m = [0u32; 3];
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let key = (a.min(b), a.max(b));
-            m[k] = *mid.entry(key).or_insert_with(|| {
-                positions.push((positions[a as usize] + positions[b as usize]) * 0.5);
-                positions.len() as u32 - 1
-            });
-        }
-        triangles.push([t[0], m[0], m[2]]);
-        triangles.push([t[1], m[1], m[0]]);
-        triangles.push([t[2], m[2], m[1]]);
-        triangles.push([m[0], m[1], m[2]]);
-    }
-    Mesh::new(positions, triangles)
-}
+pub use crate::geom::subdivide::subdivide;
 
 struct Row {
     what: String,
@@ -244,7 +222,8 @@ pub fn run_all(runs: usize) -> Result<String> {
     rows.push(rerun_row(runs)?);
     match &data {
         Some(d) => geometry_image_rows(d, runs.min(3), &mut rows)?,
-        None => notes.push("../shared/data is not here: the geometry-image rows are not measured".into()),
+        None => notes
+            .push("../shared/data is not here: the geometry-image rows are not measured".into()),
     }
 
     let threads = rayon::current_num_threads();
@@ -309,13 +288,17 @@ fn rerun_row(runs: usize) -> Result<Row> {
 /// Issue 3's goals (Lai et al. 2005 on a Pentium IV 2.4 GHz: 10 s extraction, 2–10 s
 /// synthesis at 257², 0.6 s reconstruction).
 fn geometry_image_rows(data: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<()> {
-    use crate::stages::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
-    use crate::stages::extract::{ExtractMethod, ExtractParams, extract_mesh_texture};
+    use crate::stages::analyse_exemplar::texel_variants::{
+        TexelVariantParams, build_texel_variants,
+    };
     use crate::stages::extract::sample_region::Region;
+    use crate::stages::extract::{ExtractMethod, ExtractParams, extract_mesh_texture};
     use crate::stages::field::param_field::{ParamFieldParams, param_field};
     use crate::stages::parameterize::geometry_image::{GeometryImageParams, build_geometry_image};
     use crate::stages::reconstruct::displacement::{DisplacementParams, displace, grid_mesh};
-    use crate::stages::synthesize::geometry_texture::{GeometrySynthParams, synthesize_geometry_texture};
+    use crate::stages::synthesize::geometry_texture::{
+        GeometrySynthParams, synthesize_geometry_texture,
+    };
     let read = |name: &str| -> Result<Mesh> {
         let p = data.join("meshes").join(name);
         let bytes = std::fs::read(&p).with_context(|| p.display().to_string())?;
@@ -326,7 +309,10 @@ fn geometry_image_rows(data: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<
     let (t, b) = time(runs, || build_geometry_image(&big, &gp, &|_| {}));
     let gi_big = b.map_err(|e| anyhow::anyhow!("{e}"))?.image;
     rows.push(Row {
-        what: format!("geometry images: parameterize refined_elephant.off ({} vertices, genus 3) at 257²", big.vertex_count()),
+        what: format!(
+            "geometry images: parameterize refined_elephant.off ({} vertices, genus 3) at 257²",
+            big.vertex_count()
+        ),
         measured: format!("{t:.2} s"),
         goal: "< 5 s on 2 cores".into(),
         verdict: verdict_below(t, 5.0),
@@ -335,7 +321,10 @@ fn geometry_image_rows(data: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<
     let ep = ExtractParams {
         method: ExtractMethod::Bilateral,
         size: 64,
-        region: Some(Region::Sphere { center: [18.6, 43.5, -967.5], radius: 17.0 }),
+        region: Some(Region::Sphere {
+            center: [18.6, 43.5, -967.5],
+            radius: 17.0,
+        }),
         ..Default::default()
     };
     let (t, e) = time(runs, || extract_mesh_texture(&dragon, &ep, &|_| {}));
@@ -357,10 +346,14 @@ fn geometry_image_rows(data: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<
     });
     let field = param_field(&gi_big, &ParamFieldParams::default()).map_err(anyhow::Error::msg)?;
     let sp = GeometrySynthParams::default();
-    let (ts, texels) = time(runs, || synthesize_geometry_texture(&gi_big, &field, &variants.as_ref(), &sp, &|_| {}));
+    let (ts, texels) = time(runs, || {
+        synthesize_geometry_texture(&gi_big, &field, &variants.as_ref(), &sp, &|_| {})
+    });
     let texels = texels.map_err(anyhow::Error::msg)?;
     rows.push(Row {
-        what: "geometry images: synthesize 257² with the 64² sample (3 levels, boundary resynthesis)".into(),
+        what:
+            "geometry images: synthesize 257² with the 64² sample (3 levels, boundary resynthesis)"
+                .into(),
         measured: format!("{ts:.3} s"),
         goal: "< 2 s on 2 cores (paper: 2–10 s)".into(),
         verdict: verdict_below(ts, 2.0),
@@ -397,7 +390,10 @@ fn density_rerun_row() -> Result<Row> {
             .arg(tmp.join("out"))
             .args(extra)
             .output()?;
-        anyhow::ensure!(out.status.success(), "texsyn run configs/dragon_elephant.toml failed");
+        anyhow::ensure!(
+            out.status.success(),
+            "texsyn run configs/dragon_elephant.toml failed"
+        );
         let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
         let ran: Vec<String> = v["nodes"]
             .as_array()
@@ -411,9 +407,13 @@ fn density_rerun_row() -> Result<Row> {
     let (first, _) = run(&[])?;
     let (t, ran) = run(&["--set", "field.density_offset=2.0"])?;
     let _ = std::fs::remove_dir_all(&tmp);
-    let ok = !ran.contains("parameterize") && !ran.contains("extract") && !ran.contains("analyse_exemplar");
+    let ok = !ran.contains("parameterize")
+        && !ran.contains("extract")
+        && !ran.contains("analyse_exemplar");
     Ok(Row {
-        what: format!("geometry images: rerun of configs/dragon_elephant.toml after changing only field.density_offset (first run {first:.1} s)"),
+        what: format!(
+            "geometry images: rerun of configs/dragon_elephant.toml after changing only field.density_offset (first run {first:.1} s)"
+        ),
         measured: format!("{t:.2} s wall; reran: {ran}"),
         goal: "repeats neither parameterize nor extract nor analyse_exemplar".into(),
         verdict: if ok { "met".into() } else { "missed".into() },

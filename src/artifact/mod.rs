@@ -46,6 +46,11 @@ pub enum Kind {
     TexelImage = 10,
     ParamField = 11,
     TexelVariants = 12,
+    SolidAnalysis = 13,
+    RotationField = 14,
+    VoxelRequest = 15,
+    SolidBrick = 16,
+    SolidSamples = 17,
 }
 
 impl Kind {
@@ -64,6 +69,11 @@ impl Kind {
             TexelImage,
             ParamField,
             TexelVariants,
+            SolidAnalysis,
+            RotationField,
+            VoxelRequest,
+            SolidBrick,
+            SolidSamples,
         ]
         .into_iter()
         .find(|k| *k as u32 == code)
@@ -419,6 +429,11 @@ impl Artifact {
             .ok_or_else(|| ArtifactError::MissingArray(name.to_owned()))?;
         let start = HEADER_LEN + a.offset as usize;
         Ok(&self.backing.bytes()[start..start + a.len as usize])
+    }
+
+    /// The names of the arrays, in stored order.
+    pub fn array_names(&self) -> Vec<&str> {
+        self.arrays.iter().map(|a| a.name.as_str()).collect()
     }
 
     /// A typed view of an array, in place (zero copy).

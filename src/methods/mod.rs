@@ -2,6 +2,7 @@
 
 pub mod geometry_images;
 pub mod jump_maps;
+pub mod solid;
 pub mod synth2d;
 
 use crate::artifact::kinds::{write_image, write_mesh};
@@ -10,7 +11,7 @@ use crate::pipeline::{Dag, InputRef, Node, NodeError, Stage};
 use std::path::{Path, PathBuf};
 
 /// The methods a config may name.
-pub const METHODS: &[&str] = &["jump_maps", "synth2d", "geometry_images"];
+pub const METHODS: &[&str] = &["jump_maps", "synth2d", "geometry_images", "solid"];
 
 #[derive(Debug, thiserror::Error)]
 pub enum MethodError {
@@ -39,6 +40,7 @@ pub fn plan(config: &Config) -> Result<Plan, MethodError> {
         "jump_maps" => jump_maps::build(config)?,
         "synth2d" => synth2d::build(config)?,
         "geometry_images" => geometry_images::build(config)?,
+        "solid" => solid::build(config)?,
         other => {
             return Err(MethodError::UnknownMethod {
                 path: config.path.clone(),

@@ -239,6 +239,7 @@ impl Executor<'_> {
         }
         let start = Instant::now();
         let progress = Progress::new(self.opts.progress, &node.name);
+        let input_hashes = self.input_hashes(i);
         let result = {
             let inputs = node
                 .inputs
@@ -253,6 +254,8 @@ impl Executor<'_> {
             let ctx = NodeContext {
                 inputs,
                 progress: &progress,
+                cache: self.cache,
+                input_hashes,
             };
             (node.compute)(&ctx)
         };

@@ -98,6 +98,11 @@ impl From<crate::artifact::ArtifactError> for NodeError {
 pub struct NodeContext<'a> {
     pub(crate) inputs: Vec<InputData<'a>>,
     pub progress: &'a Progress,
+    /// The object store, for nodes that cache parts of their work themselves (solid
+    /// synthesis stores each brick as its own object, so a later request reuses them).
+    pub cache: &'a crate::cache::Cache,
+    /// Content hashes of the inputs, in order (what such parts' keys are built from).
+    pub input_hashes: Vec<ContentHash>,
 }
 
 pub(crate) enum InputData<'a> {

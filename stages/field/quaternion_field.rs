@@ -363,7 +363,7 @@ struct SmoothnessSystem {
 impl SmoothnessSystem {
     fn new(grid: &FieldGrid) -> Self {
         let n = grid.len();
-        let mut acc: std::collections::BTreeMap<(usize, usize), f64> = Default::default();
+        let mut entries: Vec<(usize, usize, f64)> = Vec::with_capacity(n * 28);
         let mut row: Vec<(usize, f64)> = Vec::with_capacity(7);
         for r in 0..n {
             row.clear();
@@ -374,15 +374,21 @@ impl SmoothnessSystem {
             for &(a, va) in &row {
                 for &(b, vb) in &row {
                     if a >= b {
-                        *acc.entry((a, b)).or_insert(0.0) += va * vb;
+                        entries.push((a, b, va * vb));
                     }
                 }
             }
         }
-        SmoothnessSystem {
-            n,
-            ltl: acc.into_iter().map(|((a, b), v)| (a, b, v)).collect(),
+        // Sum duplicates in a fixed order (sorted), so the sums are deterministic.
+        entries.sort_by_key(|e| (e.0, e.1));
+        let mut ltl: Vec<(usize, usize, f64)> = Vec::with_capacity(n * 13);
+        for (a, b, v) in entries {
+            match ltl.last_mut() {
+                Some(last) if last.0 == a && last.1 == b => last.2 += v,
+                _ => ltl.push((a, b, v)),
+            }
         }
+        SmoothnessSystem { n, ltl }
     }
 
     fn with_constraints(&self, fixed: impl Fn(usize) -> bool) -> Vec<(usize, usize, f64)> {

@@ -121,7 +121,10 @@ pub fn displace(
     let mut members: std::collections::HashMap<usize, Vec<usize>> = Default::default();
     for (k, &r) in gi.mate_rep.iter().enumerate() {
         if r as usize != k {
-            members.entry(r as usize).or_insert_with(|| vec![r as usize]).push(k);
+            members
+                .entry(r as usize)
+                .or_insert_with(|| vec![r as usize])
+                .push(k);
         }
     }
     for step in 1..=p.steps {
@@ -156,7 +159,10 @@ pub fn displace(
                     let r = gi.mate_rep[k] as usize;
                     if !frozen[r] {
                         newly = true;
-                        let group = members.get(&r).map(|g| g.as_slice()).unwrap_or(std::slice::from_ref(&r));
+                        let group = members
+                            .get(&r)
+                            .map(|g| g.as_slice())
+                            .unwrap_or(std::slice::from_ref(&r));
                         for &m in group {
                             frozen[m] = true;
                             trial[m] = positions[m];
