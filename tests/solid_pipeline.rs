@@ -24,7 +24,8 @@ const SMALL: &[&str] = &[
 fn run(config: &str, sets: &[&str], cache: &std::path::Path) -> Result<RunResult, String> {
     let mut all: Vec<String> = SMALL.iter().map(|s| s.to_string()).collect();
     all.extend(sets.iter().map(|s| s.to_string()));
-    let cfg = Config::load(&repo().join("configs").join(config), &all).map_err(|e| e.to_string())?;
+    let cfg =
+        Config::load(&repo().join("configs").join(config), &all).map_err(|e| e.to_string())?;
     let plan = texsyn::methods::plan(&cfg).map_err(|e| e.to_string())?;
     let cache = Cache::open(cache).unwrap();
     pipeline::run(&plan.dag, &cache, RunOptions::default()).map_err(|e| e.to_string())
@@ -40,7 +41,10 @@ fn err(r: Result<RunResult, String>) -> String {
 /// The brick objects in a cache (kind code 16 in the artifact header).
 fn bricks(cache: &std::path::Path) -> std::collections::BTreeSet<PathBuf> {
     let mut out = std::collections::BTreeSet::new();
-    for shard in std::fs::read_dir(cache.join("objects-v1")).unwrap().flatten() {
+    for shard in std::fs::read_dir(cache.join("objects-v1"))
+        .unwrap()
+        .flatten()
+    {
         for f in std::fs::read_dir(shard.path()).unwrap().flatten() {
             let bytes = std::fs::read(f.path()).unwrap();
             if bytes.len() >= 16 && u32::from_le_bytes(bytes[12..16].try_into().unwrap()) == 16 {
@@ -61,18 +65,38 @@ fn a_section_after_the_surface_computes_fewer_bricks_than_from_an_empty_cache() 
     let empty = tempfile::tempdir().unwrap();
     let alone = run("solid_elephant_section.toml", &[], empty.path()).unwrap();
     let made_alone = bricks(empty.path()).len();
-    assert!(made_after_surface < made_alone, "{made_after_surface} vs {made_alone}");
+    assert!(
+        made_after_surface < made_alone,
+        "{made_after_surface} vs {made_alone}"
+    );
     // The section is the same whatever the cache held (spatial determinism), and every brick
     // the two caches share is byte-identical.
-    let h = |r: &RunResult| r.reports.iter().find(|n| n.node == "synthesize").unwrap().content_hash.clone();
+    let h = |r: &RunResult| {
+        r.reports
+            .iter()
+            .find(|n| n.node == "synthesize")
+            .unwrap()
+            .content_hash
+            .clone()
+    };
     assert_eq!(h(&after_surface), h(&alone));
     let names = |c: &std::path::Path| -> std::collections::BTreeSet<PathBuf> {
-        bricks(c).into_iter().map(|p| p.strip_prefix(c).unwrap().to_owned()).collect()
+        bricks(c)
+            .into_iter()
+            .map(|p| p.strip_prefix(c).unwrap().to_owned())
+            .collect()
     };
-    let common: Vec<PathBuf> = names(shared.path()).intersection(&names(empty.path())).cloned().collect();
+    let common: Vec<PathBuf> = names(shared.path())
+        .intersection(&names(empty.path()))
+        .cloned()
+        .collect();
     assert!(!common.is_empty());
     for p in common {
-        assert_eq!(std::fs::read(shared.path().join(&p)).unwrap(), std::fs::read(empty.path().join(&p)).unwrap(), "{p:?}");
+        assert_eq!(
+            std::fs::read(shared.path().join(&p)).unwrap(),
+            std::fs::read(empty.path().join(&p)).unwrap(),
+            "{p:?}"
+        );
     }
 }
 
@@ -82,9 +106,17 @@ fn outputs_do_not_depend_on_the_thread_count() {
         .iter()
         .map(|&t| {
             let cache = tempfile::tempdir().unwrap();
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap();
-            let r = pool.install(|| run("solid_elephant_section.toml", &[], cache.path())).unwrap();
-            r.reports.iter().map(|n| format!("{} {}", n.node, n.content_hash)).collect()
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .unwrap();
+            let r = pool
+                .install(|| run("solid_elephant_section.toml", &[], cache.path()))
+                .unwrap();
+            r.reports
+                .iter()
+                .map(|n| format!("{} {}", n.node, n.content_hash))
+                .collect()
         })
         .collect();
     assert_eq!(hashes[0], hashes[1]);
@@ -93,19 +125,40 @@ fn outputs_do_not_depend_on_the_thread_count() {
 #[test]
 fn user_mistakes_are_named() {
     let cache = tempfile::tempdir().unwrap();
-    let e = err(run("solid_trivial.toml", &["field.curves=[{ points = [[0.0, 0.0, 0.0]] }]"], cache.path()));
-    assert!(e.contains("field.curves[0]") && e.contains("at least two points"), "{e}");
-    let e = err(run("solid_trivial.toml", &["field.curves=[{ points = [[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]], axis = \"w\" }]"], cache.path()));
+    let e = err(run(
+        "solid_trivial.toml",
+        &["field.curves=[{ points = [[0.0, 0.0, 0.0]] }]"],
+        cache.path(),
+    ));
+    assert!(
+        e.contains("field.curves[0]") && e.contains("at least two points"),
+        "{e}"
+    );
+    let e = err(run(
+        "solid_trivial.toml",
+        &["field.curves=[{ points = [[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]], axis = \"w\" }]"],
+        cache.path(),
+    ));
     assert!(e.contains("field.curves") && e.contains("axis"), "{e}");
     let e = err(run(
         "solid_trivial.toml",
-        &["parameterize.request={ kind = \"section\", point = [0.0, 0.0, 50.0], normal = [0.0, 0.0, 1.0] }"],
+        &[
+            "parameterize.request={ kind = \"section\", point = [0.0, 0.0, 50.0], normal = [0.0, 0.0, 1.0] }",
+        ],
         cache.path(),
     ));
     assert!(e.contains("misses the volume"), "{e}");
-    let e = err(run("solid_trivial.toml", &["inputs.yz=\"assets/wood1.png\""], cache.path()));
+    let e = err(run(
+        "solid_trivial.toml",
+        &["inputs.yz=\"assets/wood1.png\""],
+        cache.path(),
+    ));
     assert!(e.contains("same size"), "{e}");
-    let e = err(run("solid_trivial.toml", &["analyse_exemplar.levels=2"], cache.path()));
+    let e = err(run(
+        "solid_trivial.toml",
+        &["analyse_exemplar.levels=2"],
+        cache.path(),
+    ));
     assert!(e.contains("synthesize.levels"), "{e}");
 }
 
@@ -119,10 +172,20 @@ fn a_box_request_writes_a_raw_volume_with_its_header() {
     )
     .unwrap();
     let out = tempfile::tempdir().unwrap();
-    let i = r.reports.iter().position(|n| n.node == "reconstruct").unwrap();
+    let i = r
+        .reports
+        .iter()
+        .position(|n| n.node == "reconstruct")
+        .unwrap();
     pipeline::outputs::materialize(&r.artifacts[i], out.path()).unwrap();
-    let header: serde_json::Value = serde_json::from_slice(&std::fs::read(out.path().join("volume.json")).unwrap()).unwrap();
-    let d: Vec<u64> = header["dims"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+    let header: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.path().join("volume.json")).unwrap()).unwrap();
+    let d: Vec<u64> = header["dims"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
     let raw = std::fs::read(out.path().join("volume.raw")).unwrap();
     assert_eq!(raw.len() as u64, d[0] * d[1] * d[2] * 3);
     // Wood: the voxels are not all one colour.

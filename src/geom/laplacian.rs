@@ -126,28 +126,8 @@ mod tests {
     use super::*;
     use glam::Vec3;
 
-    /// A regular grid of the unit square, n×n vertices.
-    pub(crate) fn grid(n: usize) -> Mesh {
-        let mut p = Vec::new();
-        for y in 0..n {
-            for x in 0..n {
-                p.push(Vec3::new(
-                    x as f32 / (n - 1) as f32,
-                    y as f32 / (n - 1) as f32,
-                    0.0,
-                ));
-            }
-        }
-        let mut t = Vec::new();
-        for y in 0..n - 1 {
-            for x in 0..n - 1 {
-                let i = (y * n + x) as u32;
-                let n = n as u32;
-                t.push([i, i + 1, i + n + 1]);
-                t.push([i, i + n + 1, i + n]);
-            }
-        }
-        Mesh::new(p, t)
+    fn grid(n: usize) -> Mesh {
+        crate::geom::primitives::grid(n, 1.0 / (n - 1) as f32)
     }
 
     #[test]

@@ -26,7 +26,7 @@ use crate::stages::field::quaternion_field::{
     Curve, FieldGrid, RotationField, ScalePoint, rotation_field,
 };
 use crate::stages::parameterize::volume_embedding::{
-    Section, Volume as Embedding, box_voxels, embed, section, section_voxels, surface_voxels,
+    Section, Volume as Embedding, box_voxels, embed, section, section_voxels_inside, surface_voxels,
 };
 use crate::stages::reconstruct::textured_export::encode_png;
 use crate::stages::synthesize::solid_synthesis::{
@@ -40,7 +40,7 @@ use std::sync::{Arc, Mutex};
 
 const ANALYSIS_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 1;
-const REQUEST_VERSION: u32 = 1;
+const REQUEST_VERSION: u32 = 2;
 const SYNTH_VERSION: u32 = 2;
 const RECONSTRUCT_VERSION: u32 = 1;
 
@@ -132,7 +132,8 @@ pub struct SolidFieldParams {
 pub enum Request {
     /// The voxels the mesh's surface passes through (to colour the mesh).
     Surface,
-    /// The plane through `point` with `normal`, clipped to the volume (an image).
+    /// The plane through `point` with `normal`: the cut of the object (samples inside the
+    /// mesh), as an image.
     Section { point: [f32; 3], normal: [f32; 3] },
     /// Every voxel of a box (a small full volume).
     Box { min: [f32; 3], max: [f32; 3] },
@@ -405,7 +406,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                 Request::Section { point, normal } => {
                     let s = section(&vol, Vec3::from(*point), Vec3::from(*normal))
                         .map_err(|e| NodeError::input(format!("parameterize.request: {e}")))?;
-                    (section_voxels(&vol, &s), Some(s))
+                    // A cut of the object: the plane's samples inside the mesh.
+                    (section_voxels_inside(&mesh, &vol, &s), Some(s))
                 }
                 Request::Box { min, max } => (
                     box_voxels(&vol, Vec3::from(*min), Vec3::from(*max))
@@ -568,11 +570,13 @@ fn read_field(a: &Artifact) -> Result<RotationField, NodeError> {
     })
 }
 
+/// A section's sample grid: origin, u, v, width, height.
+type SectionGrid = ([f32; 3], [f32; 3], [f32; 3], u32, u32);
+
 #[derive(Serialize, Deserialize)]
 struct RequestMeta {
     volume: Embedding,
-    /// (origin, u, v, width, height) of a section's sample grid.
-    section: Option<([f32; 3], [f32; 3], [f32; 3], u32, u32)>,
+    section: Option<SectionGrid>,
 }
 
 struct RequestData {
@@ -609,11 +613,13 @@ fn read_request(a: &Artifact) -> Result<RequestData, NodeError> {
     })
 }
 
+type BrickMap = HashMap<(u32, [i32; 3]), Arc<Brick>>;
+
 /// Bricks as cache objects, plus the ones made or read in this run in memory.
 struct CacheBrickStore<'a> {
     cache: &'a Cache,
     prefix: ContentHash,
-    memory: Mutex<HashMap<(u32, [i32; 3]), Arc<Brick>>>,
+    memory: Mutex<BrickMap>,
 }
 
 impl<'a> CacheBrickStore<'a> {

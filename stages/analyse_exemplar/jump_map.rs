@@ -98,18 +98,12 @@ impl Default for JumpMapParams {
 impl JumpMapParams {
     /// Checks every field's range; the error names the field, its range and the value.
     pub fn validate(&self) -> Result<(), String> {
-        fn range<T: PartialOrd + std::fmt::Display>(
-            name: &str,
-            v: T,
-            lo: T,
-            hi: T,
-        ) -> Result<(), String> {
-            if v >= lo && v <= hi {
-                Ok(())
-            } else {
-                Err(format!("jump map: {name} must be in {lo}..={hi}, got {v}"))
-            }
-        }
+        let range = |name: &str, v, lo, hi| {
+            crate::config::check_range(name, v, lo, hi).map_err(|e| format!("jump map: {e}"))
+        };
+        let rangef = |name: &str, v, lo, hi| {
+            crate::config::check_range::<f32>(name, v, lo, hi).map_err(|e| format!("jump map: {e}"))
+        };
         range("levels", self.levels, 1, 8)?;
         range("window", self.window, 1, 15)?;
         if self.window.is_multiple_of(2) {
@@ -124,7 +118,7 @@ impl JumpMapParams {
                 self.coarse_weight
             ));
         }
-        range("coarse_weight", self.coarse_weight, 0.0, 1.0)?;
+        rangef("coarse_weight", self.coarse_weight, 0.0, 1.0)?;
         range("pca_dims", self.pca_dims, 0, 64)?;
         range("jumps_per_pixel", self.jumps_per_pixel, 1, 32)?;
         if !self.exclusion_radius.is_finite() {
@@ -133,7 +127,7 @@ impl JumpMapParams {
                 self.exclusion_radius
             ));
         }
-        range("exclusion_radius", self.exclusion_radius, 0.0, 10000.0)?;
+        rangef("exclusion_radius", self.exclusion_radius, 0.0, 10000.0)?;
         range("pca_samples", self.pca_samples, 256, 1 << 24)?;
         if !self.search_eps.is_finite() {
             return Err(format!(
@@ -141,7 +135,7 @@ impl JumpMapParams {
                 self.search_eps
             ));
         }
-        range("search_eps", self.search_eps, 0.0, 10.0)?;
+        rangef("search_eps", self.search_eps, 0.0, 10.0)?;
         Ok(())
     }
 }

@@ -113,13 +113,7 @@ fn in_range<T: PartialOrd + std::fmt::Display>(
     lo: T,
     hi: T,
 ) -> Result<(), String> {
-    if v >= lo && v <= hi {
-        Ok(())
-    } else {
-        Err(format!(
-            "texel variants: {name} must be in {lo}..={hi}, got {v}"
-        ))
-    }
+    crate::config::check_range(name, v, lo, hi).map_err(|e| format!("texel variants: {e}"))
 }
 
 impl TexelVariantParams {

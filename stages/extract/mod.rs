@@ -157,19 +157,7 @@ impl Default for ExtractParams {
     }
 }
 
-pub(crate) fn check_range<T: PartialOrd + std::fmt::Display>(
-    name: &str,
-    v: T,
-    lo: T,
-    hi: T,
-) -> Result<(), String> {
-    // Written so that NaN fails.
-    if v >= lo && v <= hi {
-        Ok(())
-    } else {
-        Err(format!("{name} must be in {lo}..={hi}, got {v}"))
-    }
-}
+pub(crate) use crate::config::check_range;
 
 pub(crate) fn check_positive(name: &str, v: f32) -> Result<(), String> {
     if v.is_finite() && v > 0.0 {

@@ -180,7 +180,7 @@ impl RotationField {
             if q.dot(q0) < 0.0 {
                 q = -q;
             }
-            acc = acc + q * w;
+            acc += q * w;
         }
         if acc.length_squared() > 1e-24 {
             acc.normalize().as_quat()
@@ -236,8 +236,7 @@ pub fn validate_curves(curves: &[Curve], scales: &[ScalePoint]) -> Result<(), Fi
         }
     }
     for (i, s) in scales.iter().enumerate() {
-        if !(s.scale.is_finite() && (0.1..=10.0).contains(&s.scale))
-            || !Vec3::from(s.at).is_finite()
+        if !(s.scale.is_finite() && (0.1..=10.0).contains(&s.scale) && Vec3::from(s.at).is_finite())
         {
             return Err(FieldError::Scale {
                 index: i,
@@ -495,7 +494,7 @@ mod tests {
             ],
             axis: None,
         };
-        let f = rotation_field(grid(), &[c.clone()], &[]).unwrap();
+        let f = rotation_field(grid(), std::slice::from_ref(&c), &[]).unwrap();
         for q in &f.rotations {
             assert!((q.length() - 1.0).abs() < 1e-5);
         }
@@ -511,7 +510,7 @@ mod tests {
             points: vec![[0.5, 0.1, 0.5], [0.5, 0.9, 0.5]],
             axis: Some(Axis::Z),
         };
-        let f = rotation_field(grid(), &[up.clone()], &[]).unwrap();
+        let f = rotation_field(grid(), std::slice::from_ref(&up), &[]).unwrap();
         for (p, _) in resample(&up.points, 0.05) {
             assert!(angle_between_axes(f.rotation_at(p), Vec3::Z, Vec3::Y) < 3.0);
         }

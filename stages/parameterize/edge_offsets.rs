@@ -135,24 +135,7 @@ pub fn largest_fitting_scale(boxes: &[OffsetBox], scale: f32, width: u32, height
 mod tests {
     use super::*;
 
-    fn grid(n: usize, spacing: f32) -> Mesh {
-        let mut p = Vec::new();
-        for y in 0..n {
-            for x in 0..n {
-                p.push(Vec3::new(x as f32 * spacing, y as f32 * spacing, 0.0));
-            }
-        }
-        let mut t = Vec::new();
-        for y in 0..n - 1 {
-            for x in 0..n - 1 {
-                let i = (y * n + x) as u32;
-                let n = n as u32;
-                t.push([i, i + 1, i + n + 1]);
-                t.push([i, i + n + 1, i + n]);
-            }
-        }
-        Mesh::new(p, t)
-    }
+    use crate::geom::primitives::grid;
 
     #[test]
     fn flat_grid_with_up_along_y_maps_to_texels_with_y_down() {

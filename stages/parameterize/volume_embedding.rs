@@ -299,3 +299,117 @@ mod tests {
         );
     }
 }
+
+/// Which voxels lie outside the mesh: a 6-connected flood fill from the volume's border over
+/// the voxels the surface does not pass through (the shell grown by one voxel, so a corner the
+/// surface sampling clipped cannot let the fill leak in). Voxel (x, y, z) is at index
+/// x + dims.x·(y + dims.y·z). A mesh with holes has no inside: everything is outside then.
+pub fn outside_voxels(mesh: &Mesh, vol: &Volume) -> Vec<bool> {
+    let [nx, ny, nz] = vol.dims.map(|d| d as i32);
+    let index = |v: IVec3| (v.x + nx * (v.y + ny * v.z)) as usize;
+    let mut wall = vec![false; (nx * ny * nz) as usize];
+    for v in surface_voxels(mesh, vol) {
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let w = v + IVec3::new(dx, dy, dz);
+                    if vol.contains(w) {
+                        wall[index(w)] = true;
+                    }
+                }
+            }
+        }
+    }
+    let mut outside = vec![false; wall.len()];
+    let mut stack: Vec<IVec3> = Vec::new();
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let on_border =
+                    x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
+                let v = IVec3::new(x, y, z);
+                if on_border && !wall[index(v)] && !outside[index(v)] {
+                    outside[index(v)] = true;
+                    stack.push(v);
+                }
+            }
+        }
+    }
+    while let Some(v) = stack.pop() {
+        for d in [
+            IVec3::X,
+            -IVec3::X,
+            IVec3::Y,
+            -IVec3::Y,
+            IVec3::Z,
+            -IVec3::Z,
+        ] {
+            let w = v + d;
+            if vol.contains(w) && !wall[index(w)] && !outside[index(w)] {
+                outside[index(w)] = true;
+                stack.push(w);
+            }
+        }
+    }
+    outside
+}
+
+/// The voxels of a section that are inside the mesh (or on its surface).
+pub fn section_voxels_inside(mesh: &Mesh, vol: &Volume, s: &Section) -> Vec<IVec3> {
+    let outside = outside_voxels(mesh, vol);
+    let [nx, ny, _] = vol.dims.map(|d| d as i32);
+    section_voxels(vol, s)
+        .into_iter()
+        .filter(|v| !outside[(v.x + nx * (v.y + ny * v.z)) as usize])
+        .collect()
+}
+
+#[cfg(test)]
+mod inside_tests {
+    use super::*;
+
+    #[test]
+    fn a_cube_s_inside_is_found_and_its_outside_is_not() {
+        let p = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(1.0, 0.0, 1.0),
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(0.0, 1.0, 1.0),
+        ];
+        let t = vec![
+            [0, 2, 1],
+            [0, 3, 2],
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [2, 3, 7],
+            [2, 7, 6],
+            [1, 2, 6],
+            [1, 6, 5],
+            [3, 0, 4],
+            [3, 4, 7],
+        ];
+        let m = Mesh::new(p, t);
+        let v = embed(&m, 32, 1.0).unwrap();
+        let s = section(&v, Vec3::splat(0.5), Vec3::Z).unwrap();
+        let inside = section_voxels_inside(&m, &v, &s);
+        let all = section_voxels(&v, &s);
+        assert!(inside.len() < all.len());
+        for vx in &inside {
+            let c = v.centre(*vx);
+            assert!(
+                c.x > -2.0 * v.voxel
+                    && c.x < 1.0 + 2.0 * v.voxel
+                    && c.y > -2.0 * v.voxel
+                    && c.y < 1.0 + 2.0 * v.voxel
+            );
+        }
+        // The unit square at 16 voxels per unit: at least its 16 × 16 voxels.
+        assert!(inside.len() as f32 >= (1.0 / v.voxel).powi(2) * 0.9);
+    }
+}

@@ -1,0 +1,25 @@
+//! Simple meshes for tests, examples and benchmarks.
+
+use super::Mesh;
+use glam::Vec3;
+
+/// An n×n grid of vertices in the z = 0 plane, `spacing` apart, x along columns and y along
+/// rows, each cell split into two counter-clockwise triangles (normal +z).
+pub fn grid(n: usize, spacing: f32) -> Mesh {
+    let mut p = Vec::with_capacity(n * n);
+    for y in 0..n {
+        for x in 0..n {
+            p.push(Vec3::new(x as f32 * spacing, y as f32 * spacing, 0.0));
+        }
+    }
+    let mut t = Vec::with_capacity(2 * n.saturating_sub(1).pow(2));
+    for y in 0..n.saturating_sub(1) {
+        for x in 0..n - 1 {
+            let i = (y * n + x) as u32;
+            let n = n as u32;
+            t.push([i, i + 1, i + n + 1]);
+            t.push([i, i + n + 1, i + n]);
+        }
+    }
+    Mesh::new(p, t)
+}
