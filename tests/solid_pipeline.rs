@@ -192,3 +192,86 @@ fn a_box_request_writes_a_raw_volume_with_its_header() {
     let first = &raw[0..3];
     assert!(raw.chunks(3).any(|c| c != first));
 }
+
+fn samples(r: &RunResult, node: &str) -> std::collections::BTreeMap<[i32; 3], [u8; 12]> {
+    let i = r.reports.iter().position(|n| n.node == node).unwrap();
+    let a = &r.artifacts[i];
+    let voxels: &[[i32; 3]] = a.array("voxels").unwrap();
+    let triples = a.raw_array("triples").unwrap();
+    let per = triples.len() / voxels.len().max(1);
+    assert_eq!(per, 12, "a triple is three 2D coordinates of u16 pairs");
+    voxels
+        .iter()
+        .enumerate()
+        .map(|(k, v)| (*v, triples[k * per..(k + 1) * per].try_into().unwrap()))
+        .collect()
+}
+
+#[test]
+fn regions_split_a_section_by_depth_and_the_core_is_the_same_solid() {
+    use texsyn::geom::surface_distance::closest_point_on_triangle;
+    let cache = tempfile::tempdir().unwrap();
+    let plain = run("solid_elephant_section.toml", &[], cache.path()).unwrap();
+    let layered = run("solid_elephant_bark.toml", &[], cache.path()).unwrap();
+    let all = samples(&plain, "synthesize");
+    let core = samples(&layered, "synthesize");
+    let shell = samples(&layered, "synthesize.region1");
+    assert!(!core.is_empty() && !shell.is_empty());
+    // The two regions partition the section's voxels …
+    assert_eq!(core.len() + shell.len(), all.len());
+    assert!(core.keys().chain(shell.keys()).all(|v| all.contains_key(v)));
+    // … and the core is the same solid as without regions, voxel for voxel.
+    for (v, t) in &core {
+        assert_eq!(all[v], *t, "{v:?}");
+    }
+    // Depth by brute force over every triangle: the shell is the shallow part.
+    let cfg = Config::load(&repo().join("configs/solid_elephant_bark.toml"), &[]).unwrap();
+    let mesh =
+        texsyn::geom::io::read_mesh(&cfg.resolve(std::path::Path::new("assets/elephant.off")))
+            .unwrap();
+    let vol = texsyn::stages::parameterize::volume_embedding::embed(&mesh, 40, 0.25).unwrap();
+    let depth = |v: &[i32; 3]| {
+        let p = vol.centre(glam::IVec3::from(*v));
+        mesh.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+                closest_point_on_triangle(p, a, b, c).distance(p)
+            })
+            .fold(f32::INFINITY, f32::min)
+    };
+    for v in shell.keys() {
+        assert!(depth(v) < 0.03 + 1e-4, "{v:?} at {}", depth(v));
+    }
+    for v in core.keys() {
+        assert!(depth(v) >= 0.03 - 1e-4, "{v:?} at {}", depth(v));
+    }
+}
+
+#[test]
+fn region_mistakes_are_named() {
+    let cache = tempfile::tempdir().unwrap();
+    let e = err(run(
+        "solid_elephant_bark.toml",
+        &["regions=[{ depth = -1.0, exemplar = \"assets/bark.png\" }]"],
+        cache.path(),
+    ));
+    assert!(e.contains("regions[0].depth"), "{e}");
+    let e = err(run(
+        "solid_elephant_bark.toml",
+        &[
+            "regions=[{ depth = 0.05, exemplar = \"assets/bark.png\" }, { depth = 0.02, exemplar = \"assets/wood1.png\" }]",
+        ],
+        cache.path(),
+    ));
+    assert!(
+        e.contains("regions[1].depth") && e.contains("increasing"),
+        "{e}"
+    );
+    let e = err(run(
+        "solid_elephant_bark.toml",
+        &["regions=[{ depth = 0.05, xy = \"assets/bark.png\" }]"],
+        cache.path(),
+    ));
+    assert!(e.contains("regions[0].yz") && e.contains("missing"), "{e}");
+}

@@ -12,6 +12,7 @@ pub mod laplacian;
 pub mod mean_value;
 pub mod primitives;
 pub mod subdivide;
+pub mod surface_distance;
 
 use glam::Vec3;
 use std::sync::OnceLock;

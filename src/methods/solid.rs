@@ -26,7 +26,8 @@ use crate::stages::field::quaternion_field::{
     Curve, FieldGrid, RotationField, ScalePoint, rotation_field,
 };
 use crate::stages::parameterize::volume_embedding::{
-    Section, Volume as Embedding, box_voxels, embed, section, section_voxels_inside, surface_voxels,
+    Section, Volume as Embedding, box_voxels, embed, section, section_voxels_inside,
+    surface_voxels, voxel_depths,
 };
 use crate::stages::reconstruct::textured_export::encode_png;
 use crate::stages::synthesize::solid_synthesis::{
@@ -40,7 +41,7 @@ use std::sync::{Arc, Mutex};
 
 const ANALYSIS_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 1;
-const REQUEST_VERSION: u32 = 2;
+const REQUEST_VERSION: u32 = 3;
 const SYNTH_VERSION: u32 = 2;
 const RECONSTRUCT_VERSION: u32 = 1;
 
@@ -60,6 +61,35 @@ pub struct SolidConfig {
     pub synthesize: SolidParams,
     #[serde(default)]
     pub reconstruct: SolidExportParams,
+    /// `[[regions]]`: other exemplar sets for shells under the surface (§7, Fig. 15), listed
+    /// from the surface inwards; the voxels deeper than the last one take `[inputs]`'s.
+    #[serde(default)]
+    pub regions: Vec<SolidRegion>,
+}
+
+/// A shell under the surface synthesized from its own exemplars (§7, Fig. 15: tree bark near
+/// the surface, wood inside). Each region is a separate solid, synthesized only at the voxels
+/// it owns, in the same field.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolidRegion {
+    /// How deep under the surface the region reaches, in the mesh's units: it holds the
+    /// voxels whose centres are less deep than this and at least as deep as the previous
+    /// region's `depth`. Voxels outside the mesh count as depth 0. Depths must increase.
+    pub depth: f32,
+    /// One exemplar for all three planes, or one per plane, as in `[inputs]`.
+    #[serde(default)]
+    pub exemplar: Option<ExemplarSpec>,
+    #[serde(default)]
+    pub xy: Option<ExemplarSpec>,
+    #[serde(default)]
+    pub yz: Option<ExemplarSpec>,
+    #[serde(default)]
+    pub zx: Option<ExemplarSpec>,
+    /// This region's plane weights (see `analyse_exemplar.plane_weights`). Default: those of
+    /// `[analyse_exemplar]`.
+    #[serde(default)]
+    pub plane_weights: Option<[f32; 3]>,
 }
 
 /// An exemplar image, optionally transposed (so one image can show the same layers in two
@@ -259,84 +289,71 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         "inputs.mesh",
     )?;
 
-    // Exemplars: each plane's, falling back to the shared one.
-    let planes = [
-        ("xy", &c.inputs.xy),
-        ("yz", &c.inputs.yz),
-        ("zx", &c.inputs.zx),
-    ];
-    let mut specs: Vec<ExemplarSpec> = Vec::new();
-    for (name, spec) in planes {
-        match spec.as_ref().or(c.inputs.exemplar.as_ref()) {
-            Some(s) => specs.push(s.clone()),
-            None => {
-                return Err(config
-                    .invalid(
-                        &format!("inputs.{name}"),
-                        "missing: give `exemplar` for all planes or one per plane",
-                    )
-                    .into());
-            }
-        }
-    }
+    // Exemplar sets: `[inputs]`'s for the core, then each region's.
     let mut imports: Vec<(PathBuf, InputRef)> = Vec::new();
-    let mut plane_inputs = Vec::new();
-    for spec in &specs {
-        let path = config.resolve(spec.path());
-        let input = match imports.iter().find(|(p, _)| *p == path) {
-            Some((_, r)) => *r,
-            None => {
-                let name = format!(
-                    "import.exemplar{}",
-                    if imports.is_empty() {
-                        String::new()
-                    } else {
-                        format!(".{}", imports.len())
-                    }
-                );
-                let r = import_image(&mut dag, &name, &path, "inputs.exemplar")?;
-                imports.push((path.clone(), r));
-                r
-            }
-        };
-        plane_inputs.push(input);
+    let core_planes = exemplar_set(
+        config,
+        "inputs",
+        [&c.inputs.xy, &c.inputs.yz, &c.inputs.zx],
+        &c.inputs.exemplar,
+    )?;
+    let analysis = add_analysis(
+        &mut dag,
+        config,
+        &mut imports,
+        "analyse_exemplar",
+        &core_planes,
+        c.analyse_exemplar.clone(),
+    )?;
+    if c.regions.len() > 16 {
+        return Err(config
+            .invalid(
+                "regions",
+                &format!("has {} regions: at most 16", c.regions.len()),
+            )
+            .into());
     }
-    let transposes: [bool; 3] = [
-        specs[0].transpose(),
-        specs[1].transpose(),
-        specs[2].transpose(),
-    ];
-
-    let p = c.analyse_exemplar.clone();
-    let analysis = dag.add(Node {
-        name: "analyse_exemplar".into(),
-        stage: Stage::AnalyseExemplar,
-        algorithm: "candidate_triples",
-        version: ANALYSIS_VERSION,
-        params: canonical_bytes(&(&p, transposes)),
-        params_json: to_json(&p),
-        inputs: plane_inputs,
-        exports: false,
-        compute: Box::new(move |ctx| {
-            let imgs: Vec<Image> = (0..3)
-                .map(|k| {
-                    let v = view_image(ctx.artifact(k))?;
-                    Ok(if transposes[k] {
-                        transpose(v.to_owned())
-                    } else {
-                        v.to_owned()
-                    })
-                })
-                .collect::<Result<_, NodeError>>()?;
-            let a = analyse([imgs[0].view(), imgs[1].view(), imgs[2].view()], &p)
-                .map_err(NodeError::input)?;
-            let mut w = ArtifactWriter::new(Kind::SolidAnalysis, &a.meta);
-            for (name, bytes) in a.arrays() {
-                w = w.array_bytes(&name, bytes.to_vec());
-            }
-            Ok(w.finish())
-        }),
-    });
+    let mut region_analyses = Vec::new();
+    let mut depths = Vec::new();
+    for (k, r) in c.regions.iter().enumerate() {
+        let key = format!("regions[{k}]");
+        if !(r.depth.is_finite() && r.depth > 0.0) {
+            return Err(config
+                .invalid(
+                    &format!("{key}.depth"),
+                    &format!("is {}: expected a depth under the surface greater than 0, in the mesh's units", r.depth),
+                )
+                .into());
+        }
+        if let Some(&prev) = depths.last()
+            && r.depth <= prev
+        {
+            return Err(config
+                .invalid(
+                    &format!("{key}.depth"),
+                    &format!("is {} but the region before reaches {prev}: list regions from the surface inwards, depths increasing", r.depth),
+                )
+                .into());
+        }
+        depths.push(r.depth);
+        let mut p = c.analyse_exemplar.clone();
+        if let Some(w) = r.plane_weights {
+            p.plane_weights = w;
+            check(
+                &format!("{key}.plane_weights"),
+                p.validate().map_err(|e| e.to_string()),
+            )?;
+        }
+        let planes = exemplar_set(config, &key, [&r.xy, &r.yz, &r.zx], &r.exemplar)?;
+        region_analyses.push(add_analysis(
+            &mut dag,
+            config,
+            &mut imports,
+            &format!("analyse_exemplar.region{}", k + 1),
+            &planes,
+            p,
+        )?);
+    }
 
     // The field: curves from the config, then from the curves file.
     let mut field_inputs = vec![mesh];
@@ -389,12 +406,17 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     });
 
     let rp = c.parameterize.clone();
+    let region_depths = depths.clone();
     let request = dag.add(Node {
         name: "parameterize".into(),
         stage: Stage::Parameterize,
         algorithm: "volume_request",
         version: REQUEST_VERSION,
-        params: canonical_bytes(&rp),
+        params: if depths.is_empty() {
+            canonical_bytes(&rp)
+        } else {
+            canonical_bytes(&(&rp, &depths))
+        },
         params_json: to_json(&rp),
         inputs: vec![mesh],
         exports: false,
@@ -415,13 +437,211 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                     None,
                 ),
             };
-            Ok(write_request(&vol, &voxels, sec.as_ref()))
+            // Each voxel's region: the first whose depth it lies above, else the core (index
+            // `depths.len()`).
+            let regions = (!region_depths.is_empty()).then(|| {
+                voxel_depths(&mesh, &vol, &voxels)
+                    .into_iter()
+                    .map(|d| {
+                        region_depths
+                            .iter()
+                            .position(|&r| d < r)
+                            .unwrap_or(region_depths.len()) as u8
+                    })
+                    .collect::<Vec<u8>>()
+            });
+            Ok(write_request(
+                &vol,
+                &voxels,
+                sec.as_ref(),
+                regions.as_deref(),
+            ))
         }),
     });
 
     let sp = c.synthesize.clone();
-    let samples = dag.add(Node {
-        name: "synthesize".into(),
+    let core_region = (!depths.is_empty()).then_some(depths.len() as u8);
+    let samples = add_synthesis(
+        &mut dag,
+        "synthesize".into(),
+        [analysis, field, request],
+        sp.clone(),
+        core_region,
+    );
+    let region_samples: Vec<(InputRef, InputRef)> = region_analyses
+        .iter()
+        .enumerate()
+        .map(|(k, &a)| {
+            let s = add_synthesis(
+                &mut dag,
+                format!("synthesize.region{}", k + 1),
+                [a, field, request],
+                sp.clone(),
+                Some(k as u8),
+            );
+            (s, a)
+        })
+        .collect();
+
+    let ep = c.reconstruct.clone();
+    let request_kind = c.parameterize.request.clone();
+    let regions = region_samples.len();
+    dag.add(Node {
+        name: "reconstruct".into(),
+        stage: Stage::Reconstruct,
+        algorithm: "solid_colour",
+        version: RECONSTRUCT_VERSION,
+        params: canonical_bytes(&(&ep, &request_kind)),
+        params_json: to_json(&ep),
+        inputs: {
+            // The core's samples and analysis, the request and mesh, then each region's pair.
+            let mut v = vec![samples, analysis, request, mesh];
+            for (s, a) in &region_samples {
+                v.extend([*s, *a]);
+            }
+            v
+        },
+        exports: true,
+        compute: Box::new(move |ctx| {
+            let req = read_request(ctx.artifact(2))?;
+            let mut colours: HashMap<IVec3, [f32; 3]> = HashMap::new();
+            let pairs = std::iter::once((0, 1)).chain((0..regions).map(|k| (4 + 2 * k, 5 + 2 * k)));
+            for (si, ai) in pairs {
+                let s = ctx.artifact(si);
+                s.expect_kind(Kind::SolidSamples)?;
+                let voxels: &[[i32; 3]] = s.array("voxels")?;
+                let triples: &[Triple] = s.array("triples")?;
+                let analysis = view_analysis(ctx.artifact(ai))?;
+                let finest = analysis.levels() as usize - 1;
+                colours.extend(
+                    voxels
+                        .iter()
+                        .zip(triples)
+                        .map(|(v, t)| (IVec3::from(*v), analysis.colour(finest, t))),
+                );
+            }
+            let files = match &request_kind {
+                Request::Surface => {
+                    let mesh = read_mesh(ctx.artifact(3))?;
+                    export_surface(&mesh, &req.volume, &colours, &ep, &|f| ctx.progress.set(f))?
+                }
+                Request::Section { .. } => {
+                    let sec = req
+                        .section
+                        .as_ref()
+                        .ok_or_else(|| NodeError::internal("section request without its grid"))?;
+                    vec![(
+                        "section.png".into(),
+                        section_png(&req.volume, sec, &colours),
+                    )]
+                }
+                Request::Box { .. } => export_box(&req.voxels, &req.volume, &colours),
+            };
+            Ok(write_bundle(&files))
+        }),
+    });
+    Ok(dag)
+}
+
+/// One exemplar set: each plane's image, falling back to the shared one (`key` names the
+/// config table in errors).
+fn exemplar_set(
+    config: &Config,
+    key: &str,
+    planes: [&Option<ExemplarSpec>; 3],
+    shared: &Option<ExemplarSpec>,
+) -> Result<[ExemplarSpec; 3], MethodError> {
+    let mut specs = Vec::new();
+    for (name, spec) in ["xy", "yz", "zx"].into_iter().zip(planes) {
+        match spec.as_ref().or(shared.as_ref()) {
+            Some(s) => specs.push(s.clone()),
+            None => {
+                return Err(config
+                    .invalid(
+                        &format!("{key}.{name}"),
+                        "missing: give `exemplar` for all planes or one per plane",
+                    )
+                    .into());
+            }
+        }
+    }
+    Ok(specs.try_into().expect("three planes"))
+}
+
+/// The candidate-triple analysis of one exemplar set, importing each image once however many
+/// planes and sets use it.
+fn add_analysis(
+    dag: &mut Dag,
+    config: &Config,
+    imports: &mut Vec<(PathBuf, InputRef)>,
+    name: &str,
+    specs: &[ExemplarSpec; 3],
+    p: CandidateParams,
+) -> Result<InputRef, MethodError> {
+    let mut plane_inputs = Vec::new();
+    for spec in specs {
+        let path = config.resolve(spec.path());
+        let input = match imports.iter().find(|(q, _)| *q == path) {
+            Some((_, r)) => *r,
+            None => {
+                let node = match imports.len() {
+                    0 => "import.exemplar".to_string(),
+                    n => format!("import.exemplar.{n}"),
+                };
+                let r = import_image(dag, &node, &path, "inputs.exemplar")?;
+                imports.push((path.clone(), r));
+                r
+            }
+        };
+        plane_inputs.push(input);
+    }
+    let transposes: [bool; 3] = [
+        specs[0].transpose(),
+        specs[1].transpose(),
+        specs[2].transpose(),
+    ];
+    Ok(dag.add(Node {
+        name: name.into(),
+        stage: Stage::AnalyseExemplar,
+        algorithm: "candidate_triples",
+        version: ANALYSIS_VERSION,
+        params: canonical_bytes(&(&p, transposes)),
+        params_json: to_json(&p),
+        inputs: plane_inputs,
+        exports: false,
+        compute: Box::new(move |ctx| {
+            let imgs: Vec<Image> = (0..3)
+                .map(|k| {
+                    let v = view_image(ctx.artifact(k))?;
+                    Ok(if transposes[k] {
+                        transpose(v.to_owned())
+                    } else {
+                        v.to_owned()
+                    })
+                })
+                .collect::<Result<_, NodeError>>()?;
+            let a = analyse([imgs[0].view(), imgs[1].view(), imgs[2].view()], &p)
+                .map_err(NodeError::input)?;
+            let mut w = ArtifactWriter::new(Kind::SolidAnalysis, &a.meta);
+            for (name, bytes) in a.arrays() {
+                w = w.array_bytes(&name, bytes.to_vec());
+            }
+            Ok(w.finish())
+        }),
+    }))
+}
+
+/// The synthesis of one exemplar set's solid at the requested voxels it owns (`region`: the
+/// voxels of that region only, `None`: all of them).
+fn add_synthesis(
+    dag: &mut Dag,
+    name: String,
+    [analysis, field, request]: [InputRef; 3],
+    sp: SolidParams,
+    region: Option<u8>,
+) -> InputRef {
+    dag.add(Node {
+        name,
         stage: Stage::Synthesize,
         algorithm: "solid_bricks",
         version: SYNTH_VERSION,
@@ -440,7 +660,19 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                 levels: sp.levels.len() as u32,
             };
             let synth = SolidSynthesis::new(analysis, &field, volume, sp.clone()).map_err(NodeError::input)?;
-            let voxels: Vec<[i32; 3]> = req.voxels.iter().map(|v| v.to_array()).collect();
+            let voxels: Vec<[i32; 3]> = match (region, &req.regions) {
+                (Some(k), Some(owner)) => req
+                    .voxels
+                    .iter()
+                    .zip(owner)
+                    .filter(|(_, o)| **o == k)
+                    .map(|(v, _)| v.to_array())
+                    .collect(),
+                (Some(_), None) => {
+                    return Err(NodeError::internal("a region's synthesis without voxel regions"));
+                }
+                (None, _) => req.voxels.iter().map(|v| v.to_array()).collect(),
+            };
             let request = VoxelRequest::from_voxels(&voxels);
             // Bricks are keyed by everything they depend on except the request.
             let mut h = blake3::Hasher::new();
@@ -475,53 +707,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                 .array("triples", &triples)
                 .finish())
         }),
-    });
-
-    let ep = c.reconstruct.clone();
-    let request_kind = c.parameterize.request.clone();
-    dag.add(Node {
-        name: "reconstruct".into(),
-        stage: Stage::Reconstruct,
-        algorithm: "solid_colour",
-        version: RECONSTRUCT_VERSION,
-        params: canonical_bytes(&(&ep, &request_kind)),
-        params_json: to_json(&ep),
-        inputs: vec![samples, analysis, request, mesh],
-        exports: true,
-        compute: Box::new(move |ctx| {
-            let s = ctx.artifact(0);
-            s.expect_kind(Kind::SolidSamples)?;
-            let voxels: &[[i32; 3]] = s.array("voxels")?;
-            let triples: &[Triple] = s.array("triples")?;
-            let analysis = view_analysis(ctx.artifact(1))?;
-            let req = read_request(ctx.artifact(2))?;
-            let finest = analysis.levels() as usize - 1;
-            let colours: HashMap<IVec3, [f32; 3]> = voxels
-                .iter()
-                .zip(triples)
-                .map(|(v, t)| (IVec3::from(*v), analysis.colour(finest, t)))
-                .collect();
-            let files = match &request_kind {
-                Request::Surface => {
-                    let mesh = read_mesh(ctx.artifact(3))?;
-                    export_surface(&mesh, &req.volume, &colours, &ep, &|f| ctx.progress.set(f))?
-                }
-                Request::Section { .. } => {
-                    let sec = req
-                        .section
-                        .as_ref()
-                        .ok_or_else(|| NodeError::internal("section request without its grid"))?;
-                    vec![(
-                        "section.png".into(),
-                        section_png(&req.volume, sec, &colours),
-                    )]
-                }
-                Request::Box { .. } => export_box(&req.voxels, &req.volume, &colours),
-            };
-            Ok(write_bundle(&files))
-        }),
-    });
-    Ok(dag)
+    })
 }
 
 fn transpose(img: Image) -> Image {
@@ -583,24 +769,46 @@ struct RequestData {
     volume: Embedding,
     voxels: Vec<IVec3>,
     section: Option<Section>,
+    /// Each voxel's region (`[[regions]]` index, or their count for the core), when the config
+    /// has regions.
+    regions: Option<Vec<u8>>,
 }
 
-fn write_request(vol: &Embedding, voxels: &[IVec3], sec: Option<&Section>) -> Vec<u8> {
+fn write_request(
+    vol: &Embedding,
+    voxels: &[IVec3],
+    sec: Option<&Section>,
+    regions: Option<&[u8]>,
+) -> Vec<u8> {
     let meta = RequestMeta {
         volume: *vol,
         section: sec.map(|s| (s.origin.into(), s.u.into(), s.v.into(), s.width, s.height)),
     };
     let v: Vec<[i32; 3]> = voxels.iter().map(|v| v.to_array()).collect();
-    ArtifactWriter::new(Kind::VoxelRequest, &meta)
-        .array("voxels", &v)
-        .finish()
+    let w = ArtifactWriter::new(Kind::VoxelRequest, &meta).array("voxels", &v);
+    match regions {
+        Some(r) => w.array("regions", r).finish(),
+        None => w.finish(),
+    }
 }
 
 fn read_request(a: &Artifact) -> Result<RequestData, NodeError> {
     a.expect_kind(Kind::VoxelRequest)?;
     let m: RequestMeta = a.meta()?;
     let v: &[[i32; 3]] = a.array("voxels")?;
+    let regions = if a.array_names().contains(&"regions") {
+        let r: &[u8] = a.array("regions")?;
+        if r.len() != v.len() {
+            return Err(NodeError::internal(
+                "cached request: regions and voxels differ in length",
+            ));
+        }
+        Some(r.to_vec())
+    } else {
+        None
+    };
     Ok(RequestData {
+        regions,
         volume: m.volume,
         voxels: v.iter().map(|x| IVec3::from(*x)).collect(),
         section: m.section.map(|(o, u, v, width, height)| Section {

@@ -578,24 +578,7 @@ mod tests {
         }
     }
 
-    fn cube() -> Mesh {
-        let p = (0..8)
-            .map(|k| Vec3::new((k & 1) as f32, ((k >> 1) & 1) as f32, ((k >> 2) & 1) as f32))
-            .collect();
-        let quads = [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ];
-        let tris = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        Mesh::new(p, tris)
-    }
+    use crate::geom::primitives::cube;
 
     /// Meshes of very different triangle shapes and sizes, including slivers and a degenerate.
     fn corpus() -> Vec<Mesh> {

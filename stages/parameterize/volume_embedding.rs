@@ -370,31 +370,7 @@ mod inside_tests {
 
     #[test]
     fn a_cube_s_inside_is_found_and_its_outside_is_not() {
-        let p = vec![
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-            Vec3::new(0.0, 0.0, 1.0),
-            Vec3::new(1.0, 0.0, 1.0),
-            Vec3::new(1.0, 1.0, 1.0),
-            Vec3::new(0.0, 1.0, 1.0),
-        ];
-        let t = vec![
-            [0, 2, 1],
-            [0, 3, 2],
-            [4, 5, 6],
-            [4, 6, 7],
-            [0, 1, 5],
-            [0, 5, 4],
-            [2, 3, 7],
-            [2, 7, 6],
-            [1, 2, 6],
-            [1, 6, 5],
-            [3, 0, 4],
-            [3, 4, 7],
-        ];
-        let m = Mesh::new(p, t);
+        let m = crate::geom::primitives::cube();
         let v = embed(&m, 32, 1.0).unwrap();
         let s = section(&v, Vec3::splat(0.5), Vec3::Z).unwrap();
         let inside = section_voxels_inside(&m, &v, &s);
@@ -411,5 +387,46 @@ mod inside_tests {
         }
         // The unit square at 16 voxels per unit: at least its 16 × 16 voxels.
         assert!(inside.len() as f32 >= (1.0 / v.voxel).powi(2) * 0.9);
+    }
+}
+
+/// How deep below the surface each voxel's centre lies: its distance to the nearest point of
+/// the surface when inside the mesh (or in the shell the surface passes through), 0 when
+/// outside. Chooses an exemplar set by depth (§7, Fig. 15: bark near the surface, wood inside).
+pub fn voxel_depths(mesh: &Mesh, vol: &Volume, voxels: &[IVec3]) -> Vec<f32> {
+    use rayon::prelude::*;
+    let outside = outside_voxels(mesh, vol);
+    let [nx, ny, _] = vol.dims.map(|d| d as i32);
+    let distance = crate::geom::surface_distance::SurfaceDistance::new(mesh);
+    voxels
+        .par_iter()
+        .map(|v| {
+            let in_grid = vol.contains(*v);
+            if in_grid && outside[(v.x + nx * (v.y + ny * v.z)) as usize] {
+                0.0
+            } else {
+                distance.distance(vol.centre(*v))
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod depth_tests {
+    use super::*;
+
+    #[test]
+    fn depth_grows_towards_a_cube_s_centre_and_is_zero_outside() {
+        let m = crate::geom::primitives::cube();
+        let v = embed(&m, 40, 1.0).unwrap();
+        let centre = v.voxel_of(Vec3::splat(0.5));
+        let near_face = v.voxel_of(Vec3::new(0.5, 0.5, 0.1));
+        let outside = v.voxel_of(Vec3::new(0.5, 0.5, -0.3));
+        let d = voxel_depths(&m, &v, &[centre, near_face, outside]);
+        let c = v.centre(centre);
+        let expect = c.min_element().min((Vec3::ONE - c).min_element());
+        assert!((d[0] - expect).abs() < 1e-4, "{} vs {expect}", d[0]);
+        assert!((d[1] - v.centre(near_face).z).abs() < 1e-4);
+        assert_eq!(d[2], 0.0);
     }
 }
