@@ -509,9 +509,25 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
     let fine =
         |r: &SynthesisReport| r.levels.iter().rev().take(2).map(|l| l.voxels).sum::<u64>() as f64;
     let ratio = fine(&plain) / fine(&dual).max(1.0);
+    // The standard scheme's dependent set can be no larger than the level: say how much of
+    // it it fills, since that caps the ratio a volume of this size can show.
+    let filled: Vec<String> = plain
+        .levels
+        .iter()
+        .rev()
+        .take(2)
+        .map(|l| {
+            let d = volume.level_dims(l.level);
+            let all = d.x as f64 * d.y as f64 * d.z as f64;
+            format!("{:.0}% of level {}", 100.0 * l.voxels as f64 / all, l.level)
+        })
+        .collect();
     rows.push(Row {
         what: "solid: dependent voxels on the two finest levels, standard / dual-grid".into(),
-        measured: format!("{ratio:.2}× fewer with dual-grid"),
+        measured: format!(
+            "{ratio:.2}× fewer with dual-grid (standard fills {} of the volume)",
+            filled.join(" and ")
+        ),
         goal: "≥ 4× fewer (paper: about 80% fewer, i.e. 5×)".into(),
         verdict: verdict_above(ratio, 4.0),
     });
@@ -538,6 +554,12 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
     let mut t = String::from(
         "\n## Solid synthesis, Tables 1 and 2 for the cow surface (dual-grid vs standard correction)\n\n",
     );
+    t += "Voxels include those only upsampled, as in the paper's tables. A request is rounded up to \
+whole bricks (12³ dual-grid cells) so that bricks can be cached and reused; the dependent set grows \
+from those bricks. At 512 voxels the standard scheme's dependent set fills almost the whole volume \
+on the two finest levels, which caps the ratio this volume can show. The paper's Table 1 (a horse \
+at 800–1024 voxels): levels 3 and 4 need 1.51 M and 2.48 M voxels with dual-grid correction against \
+12.0 M and 12.9 M without.\n\n";
     t += "| level | voxels (dual) | corrections (dual) | comparisons (dual) | time (dual) | voxels (std) | corrections (std) | comparisons (std) | time (std) |\n";
     t += "|---|---|---|---|---|---|---|---|---|\n";
     for (d, p) in dual.levels.iter().zip(&plain.levels) {
