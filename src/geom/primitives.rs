@@ -26,16 +26,17 @@ pub fn grid(n: usize, spacing: f32) -> Mesh {
 
 /// The closed unit cube [0, 1]³ as 12 outward-facing triangles.
 pub fn cube() -> Mesh {
-    let p = vec![
-        Vec3::new(0.0, 0.0, 0.0),
-        Vec3::new(1.0, 0.0, 0.0),
-        Vec3::new(1.0, 1.0, 0.0),
-        Vec3::new(0.0, 1.0, 0.0),
-        Vec3::new(0.0, 0.0, 1.0),
-        Vec3::new(1.0, 0.0, 1.0),
-        Vec3::new(1.0, 1.0, 1.0),
-        Vec3::new(0.0, 1.0, 1.0),
-    ];
+    cuboid(Vec3::ONE)
+}
+
+/// The closed box [0, size] as 12 outward-facing triangles.
+pub fn cuboid(size: Vec3) -> Mesh {
+    let p = (0..8)
+        .map(|k: u32| {
+            let corner = [[0, 0], [1, 0], [1, 1], [0, 1]][(k % 4) as usize];
+            Vec3::new(corner[0] as f32, corner[1] as f32, (k / 4) as f32) * size
+        })
+        .collect();
     let t = vec![
         [0, 2, 1],
         [0, 3, 2],

@@ -217,32 +217,9 @@ pub fn box_voxels(vol: &Volume, min: Vec3, max: Vec3) -> Result<Vec<IVec3>, Stri
 mod tests {
     use super::*;
 
+    /// A 1 × 1 × 2 box: its longest side is z.
     fn cube() -> Mesh {
-        let p = vec![
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-            Vec3::new(0.0, 0.0, 2.0),
-            Vec3::new(1.0, 0.0, 2.0),
-            Vec3::new(1.0, 1.0, 2.0),
-            Vec3::new(0.0, 1.0, 2.0),
-        ];
-        let t = vec![
-            [0, 2, 1],
-            [0, 3, 2],
-            [4, 5, 6],
-            [4, 6, 7],
-            [0, 1, 5],
-            [0, 5, 4],
-            [2, 3, 7],
-            [2, 7, 6],
-            [1, 2, 6],
-            [1, 6, 5],
-            [3, 0, 4],
-            [3, 4, 7],
-        ];
-        Mesh::new(p, t)
+        crate::geom::primitives::cuboid(Vec3::new(1.0, 1.0, 2.0))
     }
 
     #[test]
