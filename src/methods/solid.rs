@@ -41,7 +41,7 @@ use std::sync::{Arc, Mutex};
 
 const ANALYSIS_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 1;
-const REQUEST_VERSION: u32 = 3;
+const REQUEST_VERSION: u32 = 4;
 const SYNTH_VERSION: u32 = 2;
 const RECONSTRUCT_VERSION: u32 = 1;
 

@@ -75,6 +75,14 @@ pub fn embed(mesh: &Mesh, longest: u32, margin: f32) -> Result<Volume, String> {
 /// voxel the triangle crosses by more than that), sorted and without duplicates.
 pub fn surface_voxels(mesh: &Mesh, vol: &Volume) -> Vec<IVec3> {
     let mut out = Vec::new();
+    surface_samples(mesh, vol, |vx| out.push(vx));
+    sort_dedup(&mut out);
+    out
+}
+
+/// Calls `f` with the voxel of every point of a triangle grid a third of a voxel apart on each
+/// triangle (points inside the volume or on its faces; a voxel may come many times).
+fn surface_samples(mesh: &Mesh, vol: &Volume, mut f: impl FnMut(IVec3)) {
     let step = vol.voxel / 3.0;
     for t in &mesh.triangles {
         let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
@@ -85,15 +93,14 @@ pub fn surface_voxels(mesh: &Mesh, vol: &Volume) -> Vec<IVec3> {
             for j in 0..=n - i {
                 let (u, v) = (i as f32 / n as f32, j as f32 / n as f32);
                 let p = a + (b - a) * u + (c - a) * v;
-                let vx = vol.voxel_of(p);
-                if vol.contains(vx) {
-                    out.push(vx);
+                // A point on the volume's far faces (margin 0) belongs to the last voxel.
+                if p.cmpge(vol.min()).all() && p.cmple(vol.max()).all() {
+                    let last = IVec3::from(vol.dims.map(|d| d as i32)) - 1;
+                    f(vol.voxel_of(p).clamp(IVec3::ZERO, last));
                 }
             }
         }
     }
-    sort_dedup(&mut out);
-    out
 }
 
 fn sort_dedup(v: &mut Vec<IVec3>) {
@@ -277,36 +284,58 @@ mod tests {
     }
 }
 
-/// Which voxels lie outside the mesh: a 6-connected flood fill from the volume's border over
-/// the voxels the surface does not pass through (the shell grown by one voxel, so a corner the
-/// surface sampling clipped cannot let the fill leak in). Voxel (x, y, z) is at index
-/// x + dims.x·(y + dims.y·z). A mesh with holes has no inside: everything is outside then.
+/// Which voxels lie outside the mesh: a 6-connected flood fill over the voxels the surface
+/// does not pass through (the shell grown by one voxel, so a corner the surface sampling
+/// clipped cannot let the fill leak in). The fill runs only in the mesh's bounding box grown
+/// by two voxels (everything beyond it is outside), starting from that box's border. Voxel
+/// (x, y, z) is at index x + dims.x·(y + dims.y·z). A mesh with holes has no inside:
+/// everything is outside then.
 pub fn outside_voxels(mesh: &Mesh, vol: &Volume) -> Vec<bool> {
     let [nx, ny, nz] = vol.dims.map(|d| d as i32);
-    let index = |v: IVec3| (v.x + nx * (v.y + ny * v.z)) as usize;
-    let mut wall = vec![false; (nx * ny * nz) as usize];
-    for v in surface_voxels(mesh, vol) {
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    let w = v + IVec3::new(dx, dy, dz);
-                    if vol.contains(w) {
-                        wall[index(w)] = true;
-                    }
-                }
+    let mut outside = vec![true; (nx * ny * nz) as usize];
+    if mesh.positions.is_empty() {
+        return outside;
+    }
+    let (lo, hi) = mesh.bounds();
+    let dims = IVec3::new(nx, ny, nz);
+    let blo = (vol.voxel_of(lo) - 2).clamp(IVec3::ZERO, dims - 1);
+    let bhi = (vol.voxel_of(hi) + 2).clamp(IVec3::ZERO, dims - 1);
+    let n = bhi - blo + 1;
+    let local = |v: IVec3| {
+        let q = v - blo;
+        (q.x + n.x * (q.y + n.y * q.z)) as usize
+    };
+    let in_box = |v: IVec3| v.cmpge(blo).all() && v.cmple(bhi).all();
+    // The shell, then grown by one voxel (a 3×3×3 dilation, one axis at a time).
+    let mut wall = vec![false; (n.x * n.y * n.z) as usize];
+    surface_samples(mesh, vol, |v| wall[local(v)] = true);
+    for axis in 0..3 {
+        let step = IVec3::from(std::array::from_fn(|k| (k == axis) as i32));
+        let before = wall.clone();
+        for (i, w) in wall.iter_mut().enumerate() {
+            if *w {
+                continue;
             }
+            let q = IVec3::new(
+                i as i32 % n.x,
+                (i as i32 / n.x) % n.y,
+                i as i32 / (n.x * n.y),
+            ) + blo;
+            *w = [q - step, q + step]
+                .into_iter()
+                .any(|p| in_box(p) && before[local(p)]);
         }
     }
-    let mut outside = vec![false; wall.len()];
+    // Fill from the box's border; what the fill does not reach is inside.
+    let mut reached = vec![false; wall.len()];
     let mut stack: Vec<IVec3> = Vec::new();
-    for z in 0..nz {
-        for y in 0..ny {
-            for x in 0..nx {
-                let on_border =
-                    x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
+    for z in blo.z..=bhi.z {
+        for y in blo.y..=bhi.y {
+            for x in blo.x..=bhi.x {
                 let v = IVec3::new(x, y, z);
-                if on_border && !wall[index(v)] && !outside[index(v)] {
-                    outside[index(v)] = true;
+                let on_border = v.cmpeq(blo).any() || v.cmpeq(bhi).any();
+                if on_border && !wall[local(v)] && !reached[local(v)] {
+                    reached[local(v)] = true;
                     stack.push(v);
                 }
             }
@@ -322,9 +351,17 @@ pub fn outside_voxels(mesh: &Mesh, vol: &Volume) -> Vec<bool> {
             -IVec3::Z,
         ] {
             let w = v + d;
-            if vol.contains(w) && !wall[index(w)] && !outside[index(w)] {
-                outside[index(w)] = true;
+            if in_box(w) && !wall[local(w)] && !reached[local(w)] {
+                reached[local(w)] = true;
                 stack.push(w);
+            }
+        }
+    }
+    for z in blo.z..=bhi.z {
+        for y in blo.y..=bhi.y {
+            for x in blo.x..=bhi.x {
+                let v = IVec3::new(x, y, z);
+                outside[(x + nx * (y + ny * z)) as usize] = reached[local(v)];
             }
         }
     }
@@ -386,6 +423,46 @@ pub fn voxel_depths(mesh: &Mesh, vol: &Volume, voxels: &[IVec3]) -> Vec<f32> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod outside_tests {
+    use super::*;
+
+    /// Against the box's own inside test: voxels more than 2 voxels inside are inside, more
+    /// than 2 voxels outside (along some axis: the shell is grown by a voxel in every
+    /// direction) are outside, with and without a margin (at 0 the box touches the volume's
+    /// border).
+    #[test]
+    fn the_fill_agrees_with_a_box_s_inside_away_from_its_faces() {
+        let size = Vec3::new(1.0, 0.7, 0.4);
+        let m = crate::geom::primitives::cuboid(size);
+        for (res, margin) in [(24, 0.0), (31, 0.25), (40, 1.0)] {
+            let v = embed(&m, res, margin).unwrap();
+            let outside = outside_voxels(&m, &v);
+            let [nx, ny, nz] = v.dims.map(|d| d as i32);
+            let (mut inside_seen, mut outside_seen) = (0, 0);
+            for z in 0..nz {
+                for y in 0..ny {
+                    for x in 0..nx {
+                        let c = v.centre(IVec3::new(x, y, z));
+                        let depth = c.min(size - c).min_element();
+                        let o = outside[(x + nx * (y + ny * z)) as usize];
+                        if depth > 2.0 * v.voxel {
+                            assert!(!o, "res {res} margin {margin}: {c} is inside");
+                            inside_seen += 1;
+                        } else if (c - c.clamp(Vec3::ZERO, size)).abs().max_element()
+                            > 2.0 * v.voxel
+                        {
+                            assert!(o, "res {res} margin {margin}: {c} is outside");
+                            outside_seen += 1;
+                        }
+                    }
+                }
+            }
+            assert!(inside_seen > 0 && (margin == 0.0 || outside_seen > 0));
+        }
+    }
 }
 
 #[cfg(test)]
