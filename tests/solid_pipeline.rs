@@ -275,3 +275,23 @@ fn region_mistakes_are_named() {
     ));
     assert!(e.contains("regions[0].yz") && e.contains("missing"), "{e}");
 }
+
+#[test]
+fn a_region_with_the_core_s_own_exemplars_changes_nothing() {
+    // Same exemplar set in the shell and the core: the same solid, so the two regions' samples
+    // together are exactly the section without regions (each region's synthesis must own its
+    // voxels even though its inputs equal the other's).
+    let cache = tempfile::tempdir().unwrap();
+    let plain = run("solid_elephant_section.toml", &[], cache.path()).unwrap();
+    let same = run(
+        "solid_elephant_bark.toml",
+        &["regions=[{ depth = 0.03, xy = \"assets/wood2.png\", yz = \"assets/wood2.png\", zx = { path = \"assets/wood2.png\", transpose = true } }]"],
+        cache.path(),
+    )
+    .unwrap();
+    let mut both = samples(&same, "synthesize");
+    let shell = samples(&same, "synthesize.region1");
+    assert!(!shell.is_empty() && !both.is_empty());
+    both.extend(shell);
+    assert_eq!(both, samples(&plain, "synthesize"));
+}

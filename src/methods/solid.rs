@@ -645,7 +645,12 @@ fn add_synthesis(
         stage: Stage::Synthesize,
         algorithm: "solid_bricks",
         version: SYNTH_VERSION,
-        params: canonical_bytes(&sp),
+        // The region is part of the key: two regions with the same exemplar set have the same
+        // inputs but own different voxels.
+        params: match region {
+            None => canonical_bytes(&sp),
+            Some(k) => canonical_bytes(&(&sp, k)),
+        },
         params_json: to_json(&sp),
         inputs: vec![analysis, field, request],
         exports: false,
