@@ -3,16 +3,11 @@
 //! on the thread count, a density change reruns only what depends on it, and bad inputs are
 //! named.
 
+mod common;
+use common::{artifact, err, hashes_on_one_and_two_threads, ran, repo, run_config};
 use std::collections::HashMap;
-use std::path::PathBuf;
 use texsyn::artifact::geometry_images::{read_geometry_image, read_texels};
-use texsyn::cache::Cache;
-use texsyn::config::Config;
-use texsyn::pipeline::{self, NodeStatus, RunOptions, RunResult};
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use texsyn::pipeline::{self, RunResult};
 
 /// Small and quick: a 65² geometry image, 4 orientations, tiny previews.
 const SMALL: &[&str] = &[
@@ -24,33 +19,7 @@ const SMALL: &[&str] = &[
 ];
 
 fn run(config: &str, sets: &[&str], cache: &std::path::Path) -> Result<RunResult, String> {
-    let mut all: Vec<String> = SMALL.iter().map(|s| s.to_string()).collect();
-    all.extend(sets.iter().map(|s| s.to_string()));
-    let cfg =
-        Config::load(&repo().join("configs").join(config), &all).map_err(|e| e.to_string())?;
-    let plan = texsyn::methods::plan(&cfg).map_err(|e| e.to_string())?;
-    let cache = Cache::open(cache).unwrap();
-    pipeline::run(&plan.dag, &cache, RunOptions::default()).map_err(|e| e.to_string())
-}
-
-fn err(r: Result<RunResult, String>) -> String {
-    match r {
-        Ok(_) => panic!("expected an error"),
-        Err(e) => e,
-    }
-}
-
-fn artifact<'a>(r: &'a RunResult, node: &str) -> &'a texsyn::artifact::Artifact {
-    let i = r.reports.iter().position(|n| n.node == node).unwrap();
-    &r.artifacts[i]
-}
-
-fn ran(r: &RunResult) -> Vec<&str> {
-    r.reports
-        .iter()
-        .filter(|n| n.status == NodeStatus::Ran)
-        .map(|n| n.node.as_str())
-        .collect()
+    run_config(&repo().join("configs").join(config), SMALL, sets, cache)
 }
 
 /// Reads a binary little-endian PLY written by texsyn: positions and triangles.
@@ -139,23 +108,7 @@ fn a_genus_one_input_gives_a_closed_manifold_relief_with_mates_identical_and_no_
 
 #[test]
 fn results_do_not_depend_on_the_thread_count() {
-    let hashes: Vec<Vec<String>> = [1, 2]
-        .iter()
-        .map(|&t| {
-            let cache = tempfile::tempdir().unwrap();
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(t)
-                .build()
-                .unwrap();
-            let r = pool
-                .install(|| run("relief_cow.toml", &[], cache.path()))
-                .unwrap();
-            r.reports
-                .iter()
-                .map(|n| format!("{} {}", n.node, n.content_hash))
-                .collect()
-        })
-        .collect();
+    let hashes = hashes_on_one_and_two_threads(|cache| run("relief_cow.toml", &[], cache).unwrap());
     assert_eq!(hashes[0], hashes[1]);
 }
 

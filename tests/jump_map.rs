@@ -1,7 +1,9 @@
 //! Jump maps on real exemplars: analysis (stages/analyse_exemplar/jump_map.rs), 2D synthesis
 //! (stages/synthesize/synth2d.rs) and rendering (stages/reconstruct/blend2d.rs).
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::{exemplar_path as data_path, load_exemplar as load};
+use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use texsyn::image::knn::squared_distance;
@@ -16,18 +18,6 @@ use texsyn::stages::reconstruct::blend2d::render_2d;
 use texsyn::stages::synthesize::synth2d::{Synth2dParams, synthesize_2d};
 
 const EXEMPLARS: [&str; 3] = ["wood1.png", "leopard.png", "marble1.png"];
-
-fn data_path(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data/exemplars")
-        .join(name)
-}
-
-fn load(name: &str) -> Image {
-    let path = data_path(name);
-    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    decode_image(&path, &bytes).unwrap()
-}
 
 /// Exemplars and their default jump maps, computed once for all tests.
 fn corpus() -> &'static Vec<(String, Image, JumpMap)> {

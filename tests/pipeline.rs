@@ -3,58 +3,35 @@
 //! jump-map artifacts that a wrong implementation would break.
 #![allow(clippy::needless_range_loop, clippy::type_complexity)]
 
+mod common;
+use common::{artifact, hashes_on_one_and_two_threads, ran, repo, run_config};
 use std::path::{Path, PathBuf};
-use texsyn::artifact::Artifact;
 use texsyn::artifact::jump_maps::{view_parameterization, view_walk};
-use texsyn::cache::Cache;
-use texsyn::config::Config;
-use texsyn::pipeline::{self, NodeStatus, RunOptions, RunResult};
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use texsyn::pipeline::{self, RunResult};
 
 /// Small exports keep the tests fast; the algorithm nodes are the demo's own.
 const FAST: &[&str] = &["reconstruct.atlas_size=1024", "reconstruct.preview_size=64"];
 
-fn run_config(config: &Path, sets: &[&str], cache: &Path) -> RunResult {
-    let mut all: Vec<String> = FAST.iter().map(|s| s.to_string()).collect();
-    all.extend(sets.iter().map(|s| s.to_string()));
-    let cfg = Config::load(config, &all).expect("config loads");
-    let plan = texsyn::methods::plan(&cfg).expect("plan");
-    let cache = Cache::open(cache).unwrap();
-    pipeline::run(&plan.dag, &cache, RunOptions::default()).expect("run succeeds")
+fn run(config: &Path, sets: &[&str], cache: &Path) -> RunResult {
+    run_config(config, FAST, sets, cache).expect("run succeeds")
 }
 
 fn demo() -> PathBuf {
     repo().join("configs/demo.toml")
 }
 
-fn ran(r: &RunResult) -> Vec<&str> {
-    r.reports
-        .iter()
-        .filter(|n| n.status == NodeStatus::Ran)
-        .map(|n| n.node.as_str())
-        .collect()
-}
-
-fn artifact<'a>(r: &'a RunResult, node: &str) -> &'a Artifact {
-    let i = r.reports.iter().position(|n| n.node == node).unwrap();
-    &r.artifacts[i]
-}
-
 #[test]
 fn a_second_run_runs_nothing_and_a_new_seed_reruns_only_synthesis_and_reconstruction() {
     let cache = tempfile::tempdir().unwrap();
-    let first = run_config(&demo(), &[], cache.path());
+    let first = run(&demo(), &[], cache.path());
     assert_eq!(
         ran(&first).len(),
         first.reports.len(),
         "empty cache: everything runs"
     );
-    let second = run_config(&demo(), &[], cache.path());
+    let second = run(&demo(), &[], cache.path());
     assert!(ran(&second).is_empty(), "ran: {:?}", ran(&second));
-    let seeded = run_config(&demo(), &["synthesize.seed=2"], cache.path());
+    let seeded = run(&demo(), &["synthesize.seed=2"], cache.path());
     assert_eq!(ran(&seeded), vec!["synthesize", "reconstruct"]);
     // A different seed gives different coordinates.
     assert_ne!(
@@ -66,8 +43,8 @@ fn a_second_run_runs_nothing_and_a_new_seed_reruns_only_synthesis_and_reconstruc
 #[test]
 fn a_new_field_anchor_reruns_the_surface_nodes_but_never_the_exemplar_analysis() {
     let cache = tempfile::tempdir().unwrap();
-    run_config(&demo(), &[], cache.path());
-    let anchored = run_config(
+    run(&demo(), &[], cache.path());
+    let anchored = run(
         &demo(),
         &["field.anchors=[{ at = [0.0, 0.3, 0.0], direction = [0.0, 1.0, 0.0] }]"],
         cache.path(),
@@ -94,18 +71,18 @@ fn touching_the_exemplar_reruns_nothing_and_the_same_mesh_in_another_format_is_c
     .unwrap();
     let config = dir.path().join("demo.toml");
     std::fs::copy(demo(), &config).unwrap();
-    run_config(&config, &[], &cache);
+    run(&config, &[], &cache);
 
     // Rewrite the exemplar with the same bytes: a new modification time, the same content.
     let bytes = std::fs::read(assets.join("wood1.png")).unwrap();
     std::thread::sleep(std::time::Duration::from_millis(20));
     std::fs::write(assets.join("wood1.png"), &bytes).unwrap();
-    let touched = run_config(&config, &[], &cache);
+    let touched = run(&config, &[], &cache);
     assert!(ran(&touched).is_empty(), "ran: {:?}", ran(&touched));
 
     // cow.off holds the same mesh as cow.obj: only the import reruns; its artifact is
     // identical, so nothing downstream does (early cutoff).
-    let off = run_config(&config, &["inputs.mesh=assets/cow.off"], &cache);
+    let off = run(&config, &["inputs.mesh=assets/cow.off"], &cache);
     assert_eq!(ran(&off), vec!["import.mesh"]);
 }
 
@@ -117,7 +94,7 @@ fn object_path(cache: &Path, r: &RunResult, node: &str) -> PathBuf {
 #[test]
 fn a_corrupted_artifact_is_detected_and_recomputed_to_the_same_result() {
     let cache = tempfile::tempdir().unwrap();
-    let clean = run_config(&demo(), &[], cache.path());
+    let clean = run(&demo(), &[], cache.path());
     let hashes = |r: &RunResult| -> Vec<String> {
         r.reports.iter().map(|n| n.content_hash.clone()).collect()
     };
@@ -129,7 +106,7 @@ fn a_corrupted_artifact_is_detected_and_recomputed_to_the_same_result() {
     let last = bytes.len() - 100;
     bytes[last] ^= 0x55;
     std::fs::write(&jm, &bytes).unwrap();
-    let repaired = run_config(&demo(), &["synthesize.seed=3"], cache.path());
+    let repaired = run(&demo(), &["synthesize.seed=3"], cache.path());
     assert!(
         ran(&repaired).contains(&"analyse_exemplar"),
         "ran: {:?}",
@@ -146,35 +123,21 @@ fn a_corrupted_artifact_is_detected_and_recomputed_to_the_same_result() {
     let walk = object_path(cache.path(), &clean, "synthesize");
     let bytes = std::fs::read(&walk).unwrap();
     std::fs::write(&walk, &bytes[..bytes.len() / 2]).unwrap();
-    let again = run_config(&demo(), &[], cache.path());
+    let again = run(&demo(), &[], cache.path());
     assert_eq!(ran(&again), vec!["synthesize"]);
     assert_eq!(hashes(&again), hashes(&clean));
 }
 
 #[test]
 fn artifact_hashes_do_not_depend_on_the_thread_count() {
-    let results: Vec<Vec<String>> = [1, 2]
-        .iter()
-        .map(|&n| {
-            let cache = tempfile::tempdir().unwrap();
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .unwrap();
-            let r = pool.install(|| run_config(&demo(), &[], cache.path()));
-            r.reports
-                .iter()
-                .map(|n| format!("{} {}", n.node, n.content_hash))
-                .collect()
-        })
-        .collect();
+    let results = hashes_on_one_and_two_threads(|cache| run(&demo(), &[], cache));
     assert_eq!(results[0], results[1]);
 }
 
 #[test]
 fn the_walk_honours_order_validity_boxes_and_edge_offsets() {
     let cache = tempfile::tempdir().unwrap();
-    let r = run_config(&demo(), &[], cache.path());
+    let r = run(&demo(), &[], cache.path());
     let param = view_parameterization(artifact(&r, "parameterize")).unwrap();
     let walk = view_walk(artifact(&r, "synthesize")).unwrap();
     let n = param.meta.vertices as usize;
@@ -251,7 +214,7 @@ fn obj_faces(text: &str) -> (Vec<[f32; 2]>, Vec<[(usize, usize); 3]>) {
 fn the_exported_obj_gives_each_triangle_corners_that_differ_by_its_edge_offsets() {
     let cache = tempfile::tempdir().unwrap();
     let out = tempfile::tempdir().unwrap();
-    let r = run_config(&demo(), &[], cache.path());
+    let r = run(&demo(), &[], cache.path());
     let i = r
         .reports
         .iter()
@@ -284,7 +247,7 @@ fn the_exported_obj_gives_each_triangle_corners_that_differ_by_its_edge_offsets(
 fn the_base_corner_offsets_are_exact_in_every_coordinate_set() {
     use texsyn::stages::reconstruct::jump_blend::corner_sets;
     let cache = tempfile::tempdir().unwrap();
-    let r = run_config(&demo(), &[], cache.path());
+    let r = run(&demo(), &[], cache.path());
     let param = view_parameterization(artifact(&r, "parameterize")).unwrap();
     let walk = view_walk(artifact(&r, "synthesize")).unwrap();
     let mesh = texsyn::artifact::kinds::read_mesh(artifact(&r, "import.mesh")).unwrap();

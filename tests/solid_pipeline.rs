@@ -1,14 +1,11 @@
 //! The solid method end to end: bricks cached across requests, determinism of the outputs,
 //! and the errors a user meets.
 
+mod common;
+use common::{err, repo, run_config};
 use std::path::PathBuf;
-use texsyn::cache::Cache;
 use texsyn::config::Config;
-use texsyn::pipeline::{self, RunOptions, RunResult};
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use texsyn::pipeline::{self, RunResult};
 
 /// Small: a 40-voxel volume, 3 levels, small neighbourhoods, a 48² crop of the analysis.
 const SMALL: &[&str] = &[
@@ -22,20 +19,7 @@ const SMALL: &[&str] = &[
 ];
 
 fn run(config: &str, sets: &[&str], cache: &std::path::Path) -> Result<RunResult, String> {
-    let mut all: Vec<String> = SMALL.iter().map(|s| s.to_string()).collect();
-    all.extend(sets.iter().map(|s| s.to_string()));
-    let cfg =
-        Config::load(&repo().join("configs").join(config), &all).map_err(|e| e.to_string())?;
-    let plan = texsyn::methods::plan(&cfg).map_err(|e| e.to_string())?;
-    let cache = Cache::open(cache).unwrap();
-    pipeline::run(&plan.dag, &cache, RunOptions::default()).map_err(|e| e.to_string())
-}
-
-fn err(r: Result<RunResult, String>) -> String {
-    match r {
-        Ok(_) => panic!("expected an error"),
-        Err(e) => e,
-    }
+    run_config(&repo().join("configs").join(config), SMALL, sets, cache)
 }
 
 /// The brick objects in a cache (kind code 16 in the artifact header).

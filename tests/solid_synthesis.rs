@@ -2,12 +2,14 @@
 //! (stages/analyse_exemplar/candidate_triples.rs), history windows, dependent sets and the
 //! on-demand brick synthesis (stages/synthesize/solid_synthesis.rs).
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::load_exemplar as load;
+use std::path::Path;
 use std::sync::OnceLock;
 
 use glam::{Quat, Vec3};
 use texsyn::artifact::AlignedBytes;
-use texsyn::image::{Image, decode_image};
+use texsyn::image::Image;
 use texsyn::random::counter_hash;
 use texsyn::stages::analyse_exemplar::candidate_triples::{
     AnalysisError, CandidateParams, SolidAnalysis, SolidAnalysisRef, Triple, analyse,
@@ -16,18 +18,6 @@ use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
 use texsyn::stages::synthesize::solid_synthesis::{
     Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, Volume, VoxelRequest,
 };
-
-fn data_path(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data/exemplars")
-        .join(name)
-}
-
-fn load(name: &str) -> Image {
-    let path = data_path(name);
-    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    decode_image(&path, &bytes).unwrap()
-}
 
 fn crop(img: &Image, x0: u32, y0: u32, w: u32, h: u32) -> Image {
     let mut out = Image::new(w, h);

@@ -924,28 +924,8 @@ mod tests {
         Mesh::new(p, t)
     }
 
-    /// An n×m torus grid: major radius 2, tube radius 0.5.
     fn torus(n: u32, m: u32) -> Mesh {
-        let mut p = Vec::new();
-        for i in 0..n {
-            for j in 0..m {
-                let (a, b) = (
-                    i as f32 / n as f32 * std::f32::consts::TAU,
-                    j as f32 / m as f32 * std::f32::consts::TAU,
-                );
-                let r = 2.0 + 0.5 * b.cos();
-                p.push(Vec3::new(r * a.cos(), r * a.sin(), 0.5 * b.sin()));
-            }
-        }
-        let id = |i: u32, j: u32| (i % n) * m + j % m;
-        let mut t = Vec::new();
-        for i in 0..n {
-            for j in 0..m {
-                t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        Mesh::new(p, t)
+        crate::geom::primitives::torus(n, m, 0.5)
     }
 
     fn check_disk(mesh: &Mesh, cut: &CutGraph) -> DiskCut {

@@ -53,3 +53,28 @@ pub fn cuboid(size: Vec3) -> Mesh {
     ];
     Mesh::new(p, t)
 }
+
+/// A torus of n × m quads (each split in two; genus 1), major radius 2 around the z axis,
+/// tube radius `tube`.
+pub fn torus(n: u32, m: u32, tube: f32) -> Mesh {
+    let mut p = Vec::new();
+    for i in 0..n {
+        for j in 0..m {
+            let (a, b) = (
+                i as f32 / n as f32 * std::f32::consts::TAU,
+                j as f32 / m as f32 * std::f32::consts::TAU,
+            );
+            let r = 2.0 + tube * b.cos();
+            p.push(Vec3::new(r * a.cos(), r * a.sin(), tube * b.sin()));
+        }
+    }
+    let id = |i: u32, j: u32| (i % n) * m + j % m;
+    let mut t = Vec::new();
+    for i in 0..n {
+        for j in 0..m {
+            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    Mesh::new(p, t)
+}

@@ -11,14 +11,15 @@
 //! Images: every pixel becomes a texel (0, 0, (grey − mean grey) × height_scale), row y of the
 //! image being texel row y.
 
-use super::planar_ransac::{PlanarExtraction, Plane, RansacParams, fit_plane_ransac, interpolate};
-use super::square_domain::{Locator, largest_rotated_square, rotate_into};
+use super::planar_ransac::{
+    PlanarExtraction, Plane, RansacParams, fit_plane_ransac, sample_square,
+};
+use super::square_domain::{largest_rotated_square, rotate_into};
 use super::{ExtractError, check_range};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::TexelImage;
 use crate::image::ImageView;
 use glam::Vec2;
-use rayon::prelude::*;
 use std::path::Path;
 
 /// §4.1.3 on a connected sample patch: `size`×`size` texels (0, 0, h − mean h[, r, g, b]).
@@ -49,37 +50,28 @@ pub fn mesh_height_field(
     progress(0.7);
     let plane = fit.plane.rotated(angle);
     let uv: Vec<Vec2> = uv.iter().map(|&q| rotate_into(q, angle)).collect();
-    let locator = Locator::new(&uv, &patch.triangles);
     let channels = super::channels_for(patch);
-    let mut texels = TexelImage::new(size, size, channels);
-    texels
-        .data
-        .par_chunks_mut((size * channels) as usize)
-        .enumerate()
-        .for_each(|(row, out)| {
-            for col in 0..size {
-                let q = square.sample(size, row as u32, col);
-                let t = &mut out[(col * channels) as usize..((col + 1) * channels) as usize];
-                // The highest crossing (first triangle on ties), else the nearest triangle.
-                let mut best: Option<(f32, u32, [f32; 3])> = None;
-                for (f, w) in locator.containing(q) {
-                    let tri = patch.triangles[f as usize];
-                    let h = coords[tri[0] as usize].z * w[0]
-                        + coords[tri[1] as usize].z * w[1]
-                        + coords[tri[2] as usize].z * w[2];
-                    if best.is_none_or(|b| h > b.0) {
-                        best = Some((h, f, w));
-                    }
-                }
-                let hit = best.map(|(_, f, w)| (f, w)).or_else(|| locator.nearest(q));
-                let Some((f, w)) = hit else { continue };
-                let (p, c) = interpolate(patch, f, w);
-                t[2] = plane.coords(p).z;
-                if let Some(c) = c {
-                    t[3..6].copy_from_slice(&c);
+    let mut texels = sample_square(
+        patch,
+        &uv,
+        &square,
+        size,
+        |locator, q| {
+            // The highest crossing (first triangle on ties), else the nearest triangle.
+            let mut best: Option<(f32, u32, [f32; 3])> = None;
+            for (f, w) in locator.containing(q) {
+                let tri = patch.triangles[f as usize];
+                let h = coords[tri[0] as usize].z * w[0]
+                    + coords[tri[1] as usize].z * w[1]
+                    + coords[tri[2] as usize].z * w[2];
+                if best.is_none_or(|b| h > b.0) {
+                    best = Some((h, f, w));
                 }
             }
-        });
+            best.map(|(_, f, w)| (f, w)).or_else(|| locator.nearest(q))
+        },
+        |t, _, p| t[2] = plane.coords(p).z,
+    );
     // Mean height in a fixed order.
     let c = channels as usize;
     let mean =

@@ -388,6 +388,42 @@ pub fn boundary_vertices(mesh: &Mesh) -> Vec<u32> {
         .collect()
 }
 
+/// A `size`×`size` texel image over `square` of the patch's parameter domain `uv`: at each
+/// sample point `q`, `hit` picks the triangle and barycentric weights under it (a texel with
+/// no triangle stays zero), `texel` writes the relief channels from the interpolated point,
+/// and the patch's colours, when it has them, go to channels 3..6. Rows run in parallel.
+pub(crate) fn sample_square(
+    patch: &Mesh,
+    uv: &[Vec2],
+    square: &Square,
+    size: u32,
+    hit: impl Fn(&Locator, Vec2) -> Option<(u32, [f32; 3])> + Sync,
+    texel: impl Fn(&mut [f32], Vec2, Vec3) + Sync,
+) -> TexelImage {
+    let locator = Locator::new(uv, &patch.triangles);
+    let channels = super::channels_for(patch);
+    let mut texels = TexelImage::new(size, size, channels);
+    texels
+        .data
+        .par_chunks_mut((size * channels) as usize)
+        .enumerate()
+        .for_each(|(row, out)| {
+            for col in 0..size {
+                let q = square.sample(size, row as u32, col);
+                let t = &mut out[(col * channels) as usize..((col + 1) * channels) as usize];
+                let Some((f, w)) = hit(&locator, q) else {
+                    continue;
+                };
+                let (p, c) = interpolate(patch, f, w);
+                texel(t, q, p);
+                if let Some(c) = c {
+                    t[3..6].copy_from_slice(&c);
+                }
+            }
+        });
+    texels
+}
+
 /// The texel channels at a point of triangle `f` with barycentric coordinates `w`: the
 /// interpolated position and, when the mesh has colours, its interpolated colour.
 pub(crate) fn interpolate(mesh: &Mesh, f: u32, w: [f32; 3]) -> (Vec3, Option<[f32; 3]>) {
@@ -447,30 +483,19 @@ pub fn planar_extract(
     let plane = fit.plane.rotated(angle);
     let uv: Vec<Vec2> = uv.iter().map(|&q| rotate_into(q, angle)).collect();
     progress(0.8);
-    let locator = Locator::new(&uv, &patch.triangles);
-    let channels = super::channels_for(patch);
-    let mut texels = TexelImage::new(size, size, channels);
-    texels
-        .data
-        .par_chunks_mut((size * channels) as usize)
-        .enumerate()
-        .for_each(|(row, out)| {
-            for col in 0..size {
-                let q = square.sample(size, row as u32, col);
-                let t = &mut out[(col * channels) as usize..((col + 1) * channels) as usize];
-                let Some((f, w)) = locator.nearest(q) else {
-                    continue;
-                };
-                let (p, c) = interpolate(patch, f, w);
-                let d = plane.coords(p);
-                t[0] = d.x - q.x;
-                t[1] = d.y - q.y;
-                t[2] = d.z;
-                if let Some(c) = c {
-                    t[3..6].copy_from_slice(&c);
-                }
-            }
-        });
+    let texels = sample_square(
+        patch,
+        &uv,
+        &square,
+        size,
+        |locator, q| locator.nearest(q),
+        |t, q, p| {
+            let d = plane.coords(p);
+            t[0] = d.x - q.x;
+            t[1] = d.y - q.y;
+            t[2] = d.z;
+        },
+    );
     progress(1.0);
     Ok(PlanarExtraction {
         texels,

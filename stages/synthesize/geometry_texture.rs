@@ -75,6 +75,7 @@
 //!   Orientations are still drawn per texel: per cell, stripes broke into straight pieces at the
 //!   cell borders.
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
+use crate::image::neighbourhood::mirror;
 use crate::random::{counter_hash, counter_unit};
 use crate::stages::analyse_exemplar::texel_variants::{
     Template, TexelVariantsRef, coarse_taps, template_taps,
@@ -182,17 +183,6 @@ fn quarter_turn(r: u8, v: &mut [f32]) {
     };
     v[0] = nx;
     v[1] = ny;
-}
-
-/// Mirrors an index into `[0, n)` about the edge samples.
-#[inline]
-fn mirror(i: i64, n: i64) -> i64 {
-    if n <= 1 {
-        return 0;
-    }
-    let period = 2 * (n - 1);
-    let m = i.rem_euclid(period);
-    if m < n { m } else { period - m }
 }
 
 /// One level's grid: size, mate groups and how to read across its cuts.
