@@ -437,7 +437,7 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
     use crate::stages::analyse_exemplar::candidate_triples::{CandidateParams, analyse};
     use crate::stages::field::quaternion_field::{FieldGrid, RotationField};
     use crate::stages::parameterize::volume_embedding::{
-        embed, section, section_voxels_inside, surface_voxels,
+        embed, outside_voxels, section, section_voxels_inside, surface_voxels,
     };
     use crate::stages::synthesize::solid_synthesis::{
         MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, SynthesisReport, Volume,
@@ -537,7 +537,7 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
     // A new cut after the surface: the coarse levels are in the store.
     let s = section(&emb, (lo + hi) * 0.5, glam::Vec3::new(0.0, 0.0, 1.0))
         .map_err(anyhow::Error::msg)?;
-    let cut: Vec<[i32; 3]> = section_voxels_inside(&mesh, &emb, &s)
+    let cut: Vec<[i32; 3]> = section_voxels_inside(&emb, &s, &outside_voxels(&mesh, &emb))
         .iter()
         .map(|v| v.to_array())
         .collect();

@@ -26,8 +26,8 @@ use crate::stages::field::quaternion_field::{
     Curve, FieldGrid, RotationField, ScalePoint, rotation_field,
 };
 use crate::stages::parameterize::volume_embedding::{
-    Section, Volume as Embedding, box_voxels, embed, section, section_voxels_inside,
-    surface_voxels, voxel_depths,
+    Section, Volume as Embedding, box_voxels, embed, outside_voxels, section,
+    section_voxels_inside, surface_voxels, voxel_depths,
 };
 use crate::stages::reconstruct::textured_export::encode_png;
 use crate::stages::synthesize::solid_synthesis::{
@@ -423,13 +423,20 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         compute: Box::new(move |ctx| {
             let mesh = read_mesh(ctx.artifact(0))?;
             let vol = embed(&mesh, rp.resolution, rp.margin).map_err(NodeError::input)?;
+            // Sections and regions both need inside/outside: one flood fill for both.
+            let outside_cell = std::cell::OnceCell::new();
+            let outside = || {
+                outside_cell
+                    .get_or_init(|| outside_voxels(&mesh, &vol))
+                    .as_slice()
+            };
             let (voxels, sec) = match &rp.request {
                 Request::Surface => (surface_voxels(&mesh, &vol), None),
                 Request::Section { point, normal } => {
                     let s = section(&vol, Vec3::from(*point), Vec3::from(*normal))
                         .map_err(|e| NodeError::input(format!("parameterize.request: {e}")))?;
                     // A cut of the object: the plane's samples inside the mesh.
-                    (section_voxels_inside(&mesh, &vol, &s), Some(s))
+                    (section_voxels_inside(&vol, &s, outside()), Some(s))
                 }
                 Request::Box { min, max } => (
                     box_voxels(&vol, Vec3::from(*min), Vec3::from(*max))
@@ -440,7 +447,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             // Each voxel's region: the first whose depth it lies above, else the core (index
             // `depths.len()`).
             let regions = (!region_depths.is_empty()).then(|| {
-                voxel_depths(&mesh, &vol, &voxels)
+                voxel_depths(&mesh, &vol, &voxels, outside())
                     .into_iter()
                     .map(|d| {
                         region_depths

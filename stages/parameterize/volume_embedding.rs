@@ -368,9 +368,9 @@ pub fn outside_voxels(mesh: &Mesh, vol: &Volume) -> Vec<bool> {
     outside
 }
 
-/// The voxels of a section that are inside the mesh (or on its surface).
-pub fn section_voxels_inside(mesh: &Mesh, vol: &Volume, s: &Section) -> Vec<IVec3> {
-    let outside = outside_voxels(mesh, vol);
+/// The voxels of a section that are inside the mesh (or on its surface); `outside` is
+/// [`outside_voxels`] of the mesh.
+pub fn section_voxels_inside(vol: &Volume, s: &Section, outside: &[bool]) -> Vec<IVec3> {
     let [nx, ny, _] = vol.dims.map(|d| d as i32);
     section_voxels(vol, s)
         .into_iter()
@@ -387,7 +387,7 @@ mod inside_tests {
         let m = crate::geom::primitives::cube();
         let v = embed(&m, 32, 1.0).unwrap();
         let s = section(&v, Vec3::splat(0.5), Vec3::Z).unwrap();
-        let inside = section_voxels_inside(&m, &v, &s);
+        let inside = section_voxels_inside(&v, &s, &outside_voxels(&m, &v));
         let all = section_voxels(&v, &s);
         assert!(inside.len() < all.len());
         for vx in &inside {
@@ -406,10 +406,10 @@ mod inside_tests {
 
 /// How deep below the surface each voxel's centre lies: its distance to the nearest point of
 /// the surface when inside the mesh (or in the shell the surface passes through), 0 when
-/// outside. Chooses an exemplar set by depth (§7, Fig. 15: bark near the surface, wood inside).
-pub fn voxel_depths(mesh: &Mesh, vol: &Volume, voxels: &[IVec3]) -> Vec<f32> {
+/// outside (`outside` is [`outside_voxels`] of the mesh). Chooses an exemplar set by depth
+/// (§7, Fig. 15: bark near the surface, wood inside).
+pub fn voxel_depths(mesh: &Mesh, vol: &Volume, voxels: &[IVec3], outside: &[bool]) -> Vec<f32> {
     use rayon::prelude::*;
-    let outside = outside_voxels(mesh, vol);
     let [nx, ny, _] = vol.dims.map(|d| d as i32);
     let distance = crate::geom::surface_distance::SurfaceDistance::new(mesh);
     voxels
@@ -476,7 +476,12 @@ mod depth_tests {
         let centre = v.voxel_of(Vec3::splat(0.5));
         let near_face = v.voxel_of(Vec3::new(0.5, 0.5, 0.1));
         let outside = v.voxel_of(Vec3::new(0.5, 0.5, -0.3));
-        let d = voxel_depths(&m, &v, &[centre, near_face, outside]);
+        let d = voxel_depths(
+            &m,
+            &v,
+            &[centre, near_face, outside],
+            &outside_voxels(&m, &v),
+        );
         let c = v.centre(centre);
         let expect = c.min_element().min((Vec3::ONE - c).min_element());
         assert!((d[0] - expect).abs() < 1e-4, "{} vs {expect}", d[0]);
