@@ -258,6 +258,15 @@ fn region_mistakes_are_named() {
         cache.path(),
     ));
     assert!(e.contains("regions[0].yz") && e.contains("missing"), "{e}");
+    let e = err(run(
+        "solid_elephant_bark.toml",
+        &["regions=[{ depth = 0.05, exemplar = \"assets/no_such_bark.png\" }]"],
+        cache.path(),
+    ));
+    assert!(
+        e.contains("no_such_bark.png") && e.contains("regions[0].exemplar"),
+        "{e}"
+    );
 }
 
 #[test]

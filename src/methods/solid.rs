@@ -550,19 +550,20 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     Ok(dag)
 }
 
-/// One exemplar set: each plane's image, falling back to the shared one (`key` names the
-/// config table in errors).
+/// One exemplar set: each plane's image, falling back to the shared one, with the config key
+/// it came from (`key` names the config table), for errors about the file.
 fn exemplar_set(
     config: &Config,
     key: &str,
     planes: [&Option<ExemplarSpec>; 3],
     shared: &Option<ExemplarSpec>,
-) -> Result<[ExemplarSpec; 3], MethodError> {
+) -> Result<[(ExemplarSpec, String); 3], MethodError> {
     let mut specs = Vec::new();
     for (name, spec) in ["xy", "yz", "zx"].into_iter().zip(planes) {
-        match spec.as_ref().or(shared.as_ref()) {
-            Some(s) => specs.push(s.clone()),
-            None => {
+        match (spec, shared) {
+            (Some(s), _) => specs.push((s.clone(), format!("{key}.{name}"))),
+            (None, Some(s)) => specs.push((s.clone(), format!("{key}.exemplar"))),
+            (None, None) => {
                 return Err(config
                     .invalid(
                         &format!("{key}.{name}"),
@@ -582,11 +583,11 @@ fn add_analysis(
     config: &Config,
     imports: &mut Vec<(PathBuf, InputRef)>,
     name: &str,
-    specs: &[ExemplarSpec; 3],
+    specs: &[(ExemplarSpec, String); 3],
     p: CandidateParams,
 ) -> Result<InputRef, MethodError> {
     let mut plane_inputs = Vec::new();
-    for spec in specs {
+    for (spec, key) in specs {
         let path = config.resolve(spec.path());
         let input = match imports.iter().find(|(q, _)| *q == path) {
             Some((_, r)) => *r,
@@ -595,7 +596,7 @@ fn add_analysis(
                     0 => "import.exemplar".to_string(),
                     n => format!("import.exemplar.{n}"),
                 };
-                let r = import_image(dag, &node, &path, "inputs.exemplar")?;
+                let r = import_image(dag, &node, &path, key)?;
                 imports.push((path.clone(), r));
                 r
             }
@@ -603,9 +604,9 @@ fn add_analysis(
         plane_inputs.push(input);
     }
     let transposes: [bool; 3] = [
-        specs[0].transpose(),
-        specs[1].transpose(),
-        specs[2].transpose(),
+        specs[0].0.transpose(),
+        specs[1].0.transpose(),
+        specs[2].0.transpose(),
     ];
     Ok(dag.add(Node {
         name: name.into(),
