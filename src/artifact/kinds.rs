@@ -1,8 +1,7 @@
-//! Typed artifact formats shared by several methods: meshes, images and file bundles.
-//! Method-specific formats (jump maps, fields, parameterizations) live beside the algorithm
-//! that writes them.
+//! The formats every method uses: meshes, images and file bundles (what reconstruct nodes
+//! export).
 
-use super::{Artifact, ArtifactError, ArtifactWriter, ContentHash, Kind};
+use super::{Artifact, ArtifactError, ArtifactWriter, ContentHash, Format, Kind, ReadOwned};
 use crate::geom::Mesh;
 use crate::image::{Image, ImageView};
 use glam::Vec3;
@@ -13,6 +12,24 @@ struct MeshMeta {
     vertices: u64,
     faces: u64,
     has_colors: bool,
+}
+
+impl Format for Mesh {
+    const KIND: Kind = Kind::Mesh;
+    /// An owned copy: algorithms want meshes that cache their adjacency.
+    type View<'a> = Mesh;
+    fn write(&self) -> Vec<u8> {
+        write_mesh(self)
+    }
+    fn decode(a: &Artifact) -> Result<Mesh, ArtifactError> {
+        read_mesh(a)
+    }
+}
+
+impl ReadOwned for Mesh {
+    fn read(a: &Artifact) -> Result<Mesh, ArtifactError> {
+        read_mesh(a)
+    }
 }
 
 pub fn write_mesh(mesh: &Mesh) -> Vec<u8> {
@@ -67,6 +84,17 @@ struct ImageMeta {
     height: u32,
 }
 
+impl Format for Image {
+    const KIND: Kind = Kind::Image;
+    type View<'a> = ImageView<'a>;
+    fn write(&self) -> Vec<u8> {
+        write_image(self)
+    }
+    fn decode(a: &Artifact) -> Result<ImageView<'_>, ArtifactError> {
+        view_image(a)
+    }
+}
+
 pub fn write_image(img: &Image) -> Vec<u8> {
     ArtifactWriter::new(
         Kind::Image,
@@ -104,6 +132,45 @@ pub struct BundleEntry {
     /// blake3 of the uncompressed bytes: compared with files already on disk, so a rerun
     /// rewrites only what differs.
     pub hash: ContentHash,
+}
+
+/// The files a reconstruct node exports: names and bytes. A node whose output is a bundle is
+/// exported into the run's output directory.
+#[derive(Clone, Debug, Default)]
+pub struct Bundle {
+    pub files: Vec<(String, Vec<u8>)>,
+}
+
+impl Bundle {
+    pub fn add(&mut self, name: impl Into<String>, bytes: Vec<u8>) {
+        self.files.push((name.into(), bytes));
+    }
+}
+
+impl From<Vec<(String, Vec<u8>)>> for Bundle {
+    fn from(files: Vec<(String, Vec<u8>)>) -> Bundle {
+        Bundle { files }
+    }
+}
+
+/// A bundle as stored: the entries, each file readable with [`bundle_file`].
+pub struct BundleRef<'a> {
+    pub artifact: &'a Artifact,
+    pub entries: Vec<BundleEntry>,
+}
+
+impl Format for Bundle {
+    const KIND: Kind = Kind::FileBundle;
+    type View<'a> = BundleRef<'a>;
+    fn write(&self) -> Vec<u8> {
+        write_bundle(&self.files)
+    }
+    fn decode(a: &Artifact) -> Result<BundleRef<'_>, ArtifactError> {
+        Ok(BundleRef {
+            artifact: a,
+            entries: a.meta()?,
+        })
+    }
 }
 
 /// The files a reconstruct node exports, zstd-compressed (DESIGN.md: zstd for what is not

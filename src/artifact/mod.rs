@@ -16,10 +16,13 @@
 //! The content hash covers the whole payload, so it changes exactly when the bytes a reader
 //! could see change. It is what downstream node keys are built from (early cutoff).
 
+pub mod format;
 pub mod geometry_images;
 pub mod jump_maps;
 pub mod kinds;
 
+pub use format::{Format, ReadOwned};
+pub use kinds::Bundle;
 use memmap2::Mmap;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 use std::fmt;

@@ -212,6 +212,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         params_json: to_json(&p),
         inputs: vec![mesh],
         exports: false,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let mesh = read_mesh(ctx.artifact(0))?;
             let build = build_geometry_image(&mesh, &p, &|f| ctx.progress.set(f))
@@ -239,6 +241,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             params_json: serde_json::json!({ "height_scale": p.height_scale }),
             inputs: vec![img],
             exports: false,
+            keyed: Vec::new(),
+            pieces: None,
             compute: Box::new(move |ctx| {
                 let img = view_image(ctx.artifact(0))?;
                 // Image heights are in units of the texel spacing (one pixel).
@@ -264,6 +268,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             params_json: to_json(&p),
             inputs: vec![sample],
             exports: false,
+            keyed: Vec::new(),
+            pieces: None,
             compute: Box::new(move |ctx| {
                 let mesh = read_mesh(ctx.artifact(0))?;
                 let e = extract_mesh_texture(&mesh, &p, &|f| ctx.progress.set(f))
@@ -288,6 +294,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         params_json: to_json(&p),
         inputs: vec![gi],
         exports: false,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let gi = read_geometry_image(ctx.artifact(0))?;
             let f = param_field(&gi, &p).map_err(NodeError::input)?;
@@ -307,6 +315,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         params_json: to_json(&p),
         inputs: vec![gi, synthesized, texels],
         exports: true,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let gi = read_geometry_image(ctx.artifact(0))?;
             let texels = read_texels(ctx.artifact(1))?;
@@ -474,6 +484,8 @@ fn analyse_node(dag: &mut Dag, c: &GeometryImagesConfig, texels: InputRef) -> In
         params_json: to_json(&p),
         inputs: vec![texels],
         exports: false,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let sample = read_texels(ctx.artifact(0))?;
             let v = build_texel_variants(&sample, &p, &|f| ctx.progress.set(f))
@@ -500,6 +512,8 @@ fn synthesize_node(
         params_json: to_json(&p),
         inputs: vec![gi, field, variants],
         exports: false,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let gi = read_geometry_image(ctx.artifact(0))?;
             let field = read_param_field(ctx.artifact(1))?;

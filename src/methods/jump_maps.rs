@@ -12,17 +12,18 @@
 //! the automatic scale), so a new exemplar of the same size reruns it cheaply and, by early
 //! cutoff, nothing downstream on its account.
 
-use super::{MethodError, import_image, import_mesh, to_json};
-use crate::artifact::canonical_bytes;
+use super::{MethodError, import};
+use crate::artifact::Bundle;
 use crate::artifact::jump_maps::{
-    ParamMeta, ParamParts, view_field, view_jump_map, view_parameterization, view_walk,
-    write_field, write_jump_map, write_parameterization, write_walk,
+    JumpParameterization, OrientationField, ParamMeta, ParamParts, TexelAddresses, WalkView,
 };
-use crate::artifact::kinds::{read_mesh, view_image, write_bundle};
 use crate::config::{Config, check_range};
-use crate::pipeline::{Dag, Node, NodeError, Stage};
+use crate::geom::Mesh;
+use crate::image::{Image, ImageView};
+use crate::pipeline::FileInput;
+use crate::pipeline::{Dag, Handle, NodeContext, NodeError, NodeSpec, Stage};
 use crate::stages::analyse_exemplar::jump_map::{
-    JumpMapParams, build_jump_map, check_exemplar_size,
+    JumpMap, JumpMapParams, build_jump_map, check_exemplar_size,
 };
 use crate::stages::field::orientation_field::{FieldParams, orientation_field};
 use crate::stages::parameterize::edge_offsets::{
@@ -156,91 +157,49 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     }
 
     let mut dag = Dag::default();
-    let mesh = import_mesh(
+    let mesh = import::<Mesh>(
         &mut dag,
         "import.mesh",
         &config.resolve(&c.inputs.mesh),
         "inputs.mesh",
     )?;
     let exemplar_path = config.resolve(&c.inputs.exemplar);
-    let exemplar = import_image(
+    let exemplar = import::<Image>(
         &mut dag,
         "import.exemplar",
         &exemplar_path,
         "inputs.exemplar",
     )?;
-    let exemplar_file = dag.add_file(&exemplar_path, "inputs.exemplar")?;
+    let exemplar_file = dag.file(&exemplar_path, "inputs.exemplar")?;
+    let jump_map = add_jump_map(&mut dag, exemplar, c.analyse_exemplar.clone());
 
-    let p = c.analyse_exemplar.clone();
-    let jump_map = dag.add(Node {
-        name: "analyse_exemplar".into(),
-        stage: Stage::AnalyseExemplar,
-        algorithm: "jump_map",
-        version: JUMP_MAP_VERSION,
-        params: canonical_bytes(&p),
-        params_json: to_json(&p),
-        inputs: vec![exemplar],
-        exports: false,
-        compute: Box::new(move |ctx| {
-            let img = view_image(ctx.artifact(0))?;
-            check_exemplar_size(img.width, img.height).map_err(NodeError::input)?;
-            let jm = build_jump_map(img, &p, &|f| ctx.progress.set(f));
-            Ok(write_jump_map(&jm))
-        }),
-    });
+    let field = dag.node(
+        NodeSpec::new(Stage::Field, "orientation_field", FIELD_VERSION),
+        c.field.clone(),
+        mesh,
+        |_, p, mesh| {
+            Ok(OrientationField(
+                orientation_field(&mesh, p).map_err(NodeError::input)?,
+            ))
+        },
+    );
 
-    let p = c.field.clone();
-    let field = dag.add(Node {
-        name: "field".into(),
-        stage: Stage::Field,
-        algorithm: "orientation_field",
-        version: FIELD_VERSION,
-        params: canonical_bytes(&p),
-        params_json: to_json(&p),
-        inputs: vec![mesh],
-        exports: false,
-        compute: Box::new(move |ctx| {
-            let mesh = read_mesh(ctx.artifact(0))?;
-            let up = orientation_field(&mesh, &p).map_err(NodeError::input)?;
-            Ok(write_field(&up))
-        }),
-    });
+    let param = dag.node(
+        NodeSpec::new(Stage::Parameterize, "jump_offsets", PARAMETERIZE_VERSION),
+        c.parameterize.clone(),
+        (mesh, field, exemplar),
+        |_, p, (mesh, up, img)| parameterize(&mesh, up, (img.width, img.height), p),
+    );
 
-    let p = c.parameterize.clone();
-    let param = dag.add(Node {
-        name: "parameterize".into(),
-        stage: Stage::Parameterize,
-        algorithm: "jump_offsets",
-        version: PARAMETERIZE_VERSION,
-        params: canonical_bytes(&p),
-        params_json: to_json(&p),
-        inputs: vec![mesh, field, exemplar],
-        exports: false,
-        compute: Box::new(move |ctx| {
-            let mesh = read_mesh(ctx.artifact(0))?;
-            let up = view_field(ctx.artifact(1))?;
-            let img = view_image(ctx.artifact(2))?;
-            parameterize(&mesh, up, (img.width, img.height), &p)
-        }),
-    });
-
-    let p = c.synthesize.clone();
-    let walk = dag.add(Node {
-        name: "synthesize".into(),
-        stage: Stage::Synthesize,
-        algorithm: "jump_walk",
-        version: WALK_VERSION,
-        params: canonical_bytes(&p),
-        params_json: to_json(&p),
-        inputs: vec![param, jump_map],
-        exports: false,
-        compute: Box::new(move |ctx| {
-            let param = view_parameterization(ctx.artifact(0))?;
-            let jm = view_jump_map(ctx.artifact(1))?;
+    let walk = dag.node(
+        NodeSpec::new(Stage::Synthesize, "jump_walk", WALK_VERSION),
+        c.synthesize.clone(),
+        (param, jump_map),
+        |ctx, p, (param, jm)| {
             if param.meta.exemplar != (jm.width, jm.height) {
                 return Err(NodeError::internal("parameterization and jump map disagree on the exemplar size"));
             }
-            let walk = jump_walk(param.walk_input(), jm, &p, &|f| ctx.progress.set(f));
+            let walk = jump_walk(param.walk_input(), jm, p, &|f| ctx.progress.set(f));
             tracing::info!(
                 "synthesize: {} vertices, {} jumps, {} random assignments",
                 param.order.len(),
@@ -255,93 +214,140 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                     param.order.len()
                 );
             }
-            Ok(write_walk(&walk, (jm.width, jm.height)))
-        }),
-    });
+            Ok(TexelAddresses::new(walk, (jm.width, jm.height)))
+        },
+    );
 
     let mut maps = Vec::new();
+    let mut map_names = Vec::new();
     for (name, path) in &c.inputs.maps {
         let path = config.resolve(path);
         let role = format!("inputs.maps.{name}");
-        let img = import_image(&mut dag, &format!("import.map.{name}"), &path, &role)?;
-        let file = dag.add_file(&path, &role)?;
-        maps.push((name.clone(), path, img, file));
+        let img = import::<Image>(&mut dag, &format!("import.map.{name}"), &path, &role)?;
+        maps.push((img, dag.file(&path, &role)?));
+        map_names.push((name.clone(), extension_of(&path)));
     }
 
-    let p = c.reconstruct.clone();
-    let map_names: Vec<(String, String)> = maps
-        .iter()
-        .map(|(n, path, ..)| (n.clone(), extension_of(path)))
-        .collect();
-    let exemplar_ext = extension_of(&exemplar_path);
-    let mut inputs = vec![mesh, param, walk, exemplar, exemplar_file];
-    for (_, _, img, file) in &maps {
-        inputs.push(*img);
-        inputs.push(*file);
-    }
-    dag.add(Node {
-        name: "reconstruct".into(),
-        stage: Stage::Reconstruct,
-        algorithm: "jump_blend_export",
-        version: RECONSTRUCT_VERSION,
-        params: canonical_bytes(&(&p, &map_names, &exemplar_ext)),
-        params_json: to_json(&p),
-        inputs,
-        exports: true,
-        compute: Box::new(move |ctx| {
-            let mesh = read_mesh(ctx.artifact(0))?;
-            let param = view_parameterization(ctx.artifact(1))?;
-            let walk = view_walk(ctx.artifact(2))?;
-            let exemplar = view_image(ctx.artifact(3))?;
-            if walk.addresses.len() != mesh.vertex_count() || param.meta.vertices as usize != mesh.vertex_count() {
-                return Err(NodeError::internal("texel addresses and mesh disagree on the vertex count"));
-            }
-            let sets = corner_sets(&mesh.triangles, &param, walk.addresses).map_err(NodeError::internal)?;
-            let single = random_base_set(&sets);
-            let mut surfaces = vec![ExportSurface {
-                name: "basecolor".into(),
-                extension: exemplar_ext.clone(),
-                file: &ctx.file(4).bytes,
-                shader: BlendShader { sets: &sets, texture: exemplar },
-            }];
-            for (k, (name, ext)) in map_names.iter().enumerate() {
-                let img = view_image(ctx.artifact(5 + 2 * k))?;
-                if (img.width, img.height) != (exemplar.width, exemplar.height) {
-                    return Err(NodeError::input(format!(
-                        "{}: map {name:?} is {}×{}, but the exemplar is {}×{}: maps must be aligned with the exemplar",
-                        ctx.file(6 + 2 * k).path.display(),
-                        img.width,
-                        img.height,
-                        exemplar.width,
-                        exemplar.height
-                    )));
-                }
-                surfaces.push(ExportSurface {
-                    name: name.clone(),
-                    extension: ext.clone(),
-                    file: &ctx.file(6 + 2 * k).bytes,
-                    shader: BlendShader { sets: &sets, texture: img },
-                });
-            }
-            let files = export_textured_mesh(&mesh, &single, (exemplar.width, exemplar.height), &surfaces, &p, &|f| {
-                ctx.progress.set(f)
-            })
-            .map_err(NodeError::input)?;
-            let mut files = files;
-            // Fig. 3 (right) of the paper: the surface textured with a colour ramp instead of
-            // the exemplar shows where patches meet.
-            let ramp = colour_ramp(exemplar.width, exemplar.height);
-            let opts = crate::render::ViewOptions {
-                size: p.preview_size,
-                up: glam::Vec3::from(p.up),
-                ..Default::default()
-            };
-            let view = crate::render::render_views(&mesh, &BlendShader { sets: &sets, texture: ramp.view() }, &opts);
-            files.push(("patches.png".into(), encode_png(&view, false)));
-            Ok(write_bundle(&files))
-        }),
-    });
+    let params = ReconstructParams {
+        export: c.reconstruct.clone(),
+        maps: map_names,
+        exemplar_format: extension_of(&exemplar_path),
+    };
+    dag.node(
+        NodeSpec::new(Stage::Reconstruct, "jump_blend_export", RECONSTRUCT_VERSION),
+        params,
+        (mesh, param, walk, exemplar, exemplar_file, maps),
+        |ctx, p, (mesh, param, walk, exemplar, exemplar_file, maps)| {
+            reconstruct(ctx, p, &mesh, &param, &walk, exemplar, exemplar_file, &maps)
+        },
+    );
     Ok(dag)
+}
+
+/// The jump map of an exemplar (analyse-exemplar, §2 of the 2002 paper); `synth2d` uses the
+/// same node, so the two methods share the cached map.
+pub(crate) fn add_jump_map(
+    dag: &mut Dag,
+    exemplar: Handle<Image>,
+    params: JumpMapParams,
+) -> Handle<JumpMap> {
+    dag.node(
+        NodeSpec::new(Stage::AnalyseExemplar, "jump_map", JUMP_MAP_VERSION),
+        params,
+        exemplar,
+        |ctx, p, img| {
+            check_exemplar_size(img.width, img.height).map_err(NodeError::input)?;
+            Ok(build_jump_map(img, p, &|f| ctx.progress.set(f)))
+        },
+    )
+}
+
+/// What the reconstruct node's key holds: the export parameters, each extra map's name and
+/// file format, and the exemplar's format (the files are copied into the export as they are).
+#[derive(Serialize)]
+struct ReconstructParams {
+    export: ExportParams,
+    maps: Vec<(String, String)>,
+    exemplar_format: String,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn reconstruct(
+    ctx: &NodeContext,
+    p: &ReconstructParams,
+    mesh: &Mesh,
+    param: &ParamParts,
+    walk: &WalkView,
+    exemplar: ImageView,
+    exemplar_file: &FileInput,
+    maps: &[(ImageView, &FileInput)],
+) -> Result<Bundle, NodeError> {
+    if walk.addresses.len() != mesh.vertex_count()
+        || param.meta.vertices as usize != mesh.vertex_count()
+    {
+        return Err(NodeError::internal(
+            "texel addresses and mesh disagree on the vertex count",
+        ));
+    }
+    let sets = corner_sets(&mesh.triangles, param, walk.addresses).map_err(NodeError::internal)?;
+    let single = random_base_set(&sets);
+    let mut surfaces = vec![ExportSurface {
+        name: "basecolor".into(),
+        extension: p.exemplar_format.clone(),
+        file: &exemplar_file.bytes,
+        shader: BlendShader {
+            sets: &sets,
+            texture: exemplar,
+        },
+    }];
+    for ((name, ext), (img, file)) in p.maps.iter().zip(maps) {
+        if (img.width, img.height) != (exemplar.width, exemplar.height) {
+            return Err(NodeError::input(format!(
+                "{}: map {name:?} is {}×{}, but the exemplar is {}×{}: maps must be aligned with the exemplar",
+                file.path.display(),
+                img.width,
+                img.height,
+                exemplar.width,
+                exemplar.height
+            )));
+        }
+        surfaces.push(ExportSurface {
+            name: name.clone(),
+            extension: ext.clone(),
+            file: &file.bytes,
+            shader: BlendShader {
+                sets: &sets,
+                texture: *img,
+            },
+        });
+    }
+    let mut files = export_textured_mesh(
+        mesh,
+        &single,
+        (exemplar.width, exemplar.height),
+        &surfaces,
+        &p.export,
+        &|f| ctx.progress.set(f),
+    )
+    .map_err(NodeError::input)?;
+    // Fig. 3 (right) of the paper: the surface textured with a colour ramp instead of the
+    // exemplar shows where patches meet.
+    let ramp = colour_ramp(exemplar.width, exemplar.height);
+    let opts = crate::render::ViewOptions {
+        size: p.export.preview_size,
+        up: glam::Vec3::from(p.export.up),
+        ..Default::default()
+    };
+    let view = crate::render::render_views(
+        mesh,
+        &BlendShader {
+            sets: &sets,
+            texture: ramp.view(),
+        },
+        &opts,
+    );
+    files.push(("patches.png".into(), encode_png(&view, false)));
+    Ok(Bundle::from(files))
 }
 
 fn extension_of(p: &std::path::Path) -> String {
@@ -367,7 +373,7 @@ fn parameterize(
     up: &[glam::Vec3],
     (w, h): (u32, u32),
     p: &ParameterizeParams,
-) -> Result<Vec<u8>, NodeError> {
+) -> Result<JumpParameterization, NodeError> {
     if up.len() != mesh.vertex_count() {
         return Err(NodeError::internal(
             "field and mesh disagree on the vertex count",
@@ -436,20 +442,20 @@ fn parameterize(
         0
     };
     let order = region_growing_order(adj, seed);
-    Ok(write_parameterization(&ParamParts {
+    Ok(JumpParameterization {
         meta: ParamMeta {
             vertices: n as u64,
             scale,
             exemplar: (w, h),
             components: order.seeds.len() as u32,
         },
-        order: &order.order,
-        seeds: &order.seeds,
-        adj_offsets: &adj.offsets,
-        neighbors: &adj.neighbors,
-        edge_offsets: &offsets,
-        boxes: &boxes,
-    }))
+        order: order.order,
+        seeds: order.seeds,
+        adj_offsets: adj.offsets.clone(),
+        neighbors: adj.neighbors.clone(),
+        edge_offsets: offsets,
+        boxes,
+    })
 }
 
 /// An image whose colour encodes the texel address (red along x, green along y, blue in a

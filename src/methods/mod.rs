@@ -5,9 +5,9 @@ pub mod jump_maps;
 pub mod solid;
 pub mod synth2d;
 
-use crate::artifact::kinds::{write_image, write_mesh};
+use crate::artifact::Format;
 use crate::config::{Config, ConfigError};
-use crate::pipeline::{Dag, InputRef, Node, NodeError, Stage};
+use crate::pipeline::{Dag, Handle, InputRef, NodeError, NodeSpec, Stage};
 use std::path::{Path, PathBuf};
 
 /// The methods a config may name.
@@ -55,9 +55,37 @@ pub fn plan(config: &Config) -> Result<Plan, MethodError> {
     })
 }
 
-/// Code versions of the import nodes: bump when a reader's output for the same bytes changes.
-const IMPORT_MESH_VERSION: u32 = 1;
-const IMPORT_IMAGE_VERSION: u32 = 1;
+/// A format that an input file is read into by an `import` node.
+pub(crate) trait Import: Format + Sized {
+    /// The reader's name (the node's algorithm, part of its key).
+    const READER: &'static str;
+    /// Bump when the reader's output for the same bytes changes.
+    const VERSION: u32;
+    fn read(path: &Path, bytes: &[u8]) -> Result<Self, Box<dyn std::error::Error + Send + Sync>>;
+}
+
+impl Import for crate::geom::Mesh {
+    const READER: &'static str = "mesh_reader";
+    const VERSION: u32 = 1;
+    fn read(path: &Path, bytes: &[u8]) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
+        Ok(crate::geom::io::read_mesh_bytes(path, bytes)?)
+    }
+}
+
+impl Import for crate::image::Image {
+    const READER: &'static str = "image_reader";
+    const VERSION: u32 = 1;
+    fn read(path: &Path, bytes: &[u8]) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
+        Ok(crate::image::decode_image(path, bytes)?)
+    }
+}
+
+/// The import node's parameters: the file's format, taken from its extension. It is part of
+/// the key because the same bytes read as another format mean something else.
+#[derive(serde::Serialize)]
+struct ImportParams {
+    format: String,
+}
 
 fn extension(path: &Path) -> String {
     path.extension()
@@ -65,58 +93,48 @@ fn extension(path: &Path) -> String {
         .unwrap_or_default()
 }
 
-/// Adds the node that parses and validates a mesh file.
+/// Adds the node that parses and validates an input file. `role` is the config key that
+/// named it, for errors.
+pub(crate) fn import<F: Import>(
+    dag: &mut Dag,
+    name: &str,
+    path: &Path,
+    role: &str,
+) -> Result<Handle<F>, MethodError> {
+    let file = dag.file(path, role)?;
+    let params = ImportParams {
+        format: extension(path),
+    };
+    Ok(dag.node(
+        NodeSpec::new(Stage::Import, F::READER, F::VERSION).named(name),
+        params,
+        file,
+        |_, _, f| F::read(&f.path, &f.bytes).map_err(NodeError::Input),
+    ))
+}
+
+/// Legacy: until every method imports through [`import`].
 pub(crate) fn import_mesh(
     dag: &mut Dag,
     name: &str,
     path: &Path,
     role: &str,
 ) -> Result<InputRef, MethodError> {
-    let file = dag.add_file(path, role)?;
-    // The format is part of the key: the same bytes read as another format mean something else.
-    let format = extension(path);
-    Ok(dag.add(Node {
-        name: name.to_owned(),
-        stage: Stage::Import,
-        algorithm: "mesh_reader",
-        version: IMPORT_MESH_VERSION,
-        params: crate::artifact::canonical_bytes(&format),
-        params_json: serde_json::json!({ "format": format }),
-        inputs: vec![file],
-        exports: false,
-        compute: Box::new(move |ctx| {
-            let f = ctx.file(0);
-            let mesh =
-                crate::geom::io::read_mesh_bytes(&f.path, &f.bytes).map_err(NodeError::input)?;
-            Ok(write_mesh(&mesh))
-        }),
-    }))
+    Ok(InputRef::Node(
+        import::<crate::geom::Mesh>(dag, name, path, role)?.index(),
+    ))
 }
 
-/// Adds the node that decodes an image file (PNG, JPEG, EXR).
+/// Legacy: until every method imports through [`import`].
 pub(crate) fn import_image(
     dag: &mut Dag,
     name: &str,
     path: &Path,
     role: &str,
 ) -> Result<InputRef, MethodError> {
-    let file = dag.add_file(path, role)?;
-    let format = extension(path);
-    Ok(dag.add(Node {
-        name: name.to_owned(),
-        stage: Stage::Import,
-        algorithm: "image_reader",
-        version: IMPORT_IMAGE_VERSION,
-        params: crate::artifact::canonical_bytes(&format),
-        params_json: serde_json::json!({ "format": format }),
-        inputs: vec![file],
-        exports: false,
-        compute: Box::new(move |ctx| {
-            let f = ctx.file(0);
-            let img = crate::image::decode_image(&f.path, &f.bytes).map_err(NodeError::input)?;
-            Ok(write_image(&img))
-        }),
-    }))
+    Ok(InputRef::Node(
+        import::<crate::image::Image>(dag, name, path, role)?.index(),
+    ))
 }
 
 /// The JSON form of a parameter struct (for `graph`, `status`, `--json`).

@@ -372,6 +372,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         params_json: to_json(&fp),
         inputs: field_inputs,
         exports: false,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let mesh = read_mesh(ctx.artifact(0))?;
             let mut curves = fp.curves.clone();
@@ -420,6 +422,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         params_json: to_json(&rp),
         inputs: vec![mesh],
         exports: false,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let mesh = read_mesh(ctx.artifact(0))?;
             let vol = embed(&mesh, rp.resolution, rp.margin).map_err(NodeError::input)?;
@@ -509,6 +513,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             v
         },
         exports: true,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let req = read_request(ctx.artifact(2))?;
             let mut colours: HashMap<IVec3, [f32; 3]> = HashMap::new();
@@ -617,6 +623,8 @@ fn add_analysis(
         params_json: to_json(&p),
         inputs: plane_inputs,
         exports: false,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let imgs: Vec<Image> = (0..3)
                 .map(|k| {
@@ -662,6 +670,8 @@ fn add_synthesis(
         params_json: to_json(&sp),
         inputs: vec![analysis, field, request],
         exports: false,
+        keyed: Vec::new(),
+        pieces: None,
         compute: Box::new(move |ctx| {
             let analysis = view_analysis(ctx.artifact(0))?;
             let field = read_field(ctx.artifact(1))?;

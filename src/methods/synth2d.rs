@@ -6,16 +6,14 @@
 //! inputs.exemplar ─ import.exemplar ─ analyse_exemplar ─ synthesize (addresses) ─ reconstruct ─ files
 //! ```
 
-use super::{MethodError, import_image, to_json};
-use crate::artifact::jump_maps::{view_jump_map, write_jump_map};
-use crate::artifact::kinds::{view_image, write_bundle};
-use crate::artifact::{ArtifactWriter, Kind, canonical_bytes};
+use super::jump_maps::add_jump_map;
+use super::{MethodError, import};
+use crate::artifact::Bundle;
+use crate::artifact::jump_maps::AddressImage;
 use crate::config::{Config, check_range};
 use crate::image::Image;
-use crate::pipeline::{Dag, Node, NodeError, Stage};
-use crate::stages::analyse_exemplar::jump_map::{
-    JumpMapParams, build_jump_map, check_exemplar_size,
-};
+use crate::pipeline::{Dag, NodeSpec, Stage};
+use crate::stages::analyse_exemplar::jump_map::JumpMapParams;
 use crate::stages::reconstruct::blend2d::render_2d;
 use crate::stages::reconstruct::textured_export::encode_png;
 use crate::stages::synthesize::synth2d::{Synth2dParams, synthesize_2d};
@@ -24,8 +22,6 @@ use std::path::PathBuf;
 
 const SYNTH_VERSION: u32 = 1;
 const RENDER_VERSION: u32 = 1;
-/// Must match `jump_maps`' so the two methods share the cached jump map.
-const JUMP_MAP_VERSION: u32 = 1;
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -92,17 +88,23 @@ impl Default for RenderSection {
     }
 }
 
+impl SynthSection {
+    /// The walk's own parameters (the rest say where and how much to synthesize).
+    fn walk(&self) -> Synth2dParams {
+        Synth2dParams {
+            continuation: self.continuation,
+            boundary_fraction: self.boundary_fraction,
+            combine_neighbours: self.combine_neighbours,
+        }
+    }
+}
+
 pub fn build(config: &Config) -> Result<Dag, MethodError> {
     let c: Synth2dConfig = config.parse()?;
     let check = |key: &str, r: Result<(), String>| r.map_err(|m| config.invalid(key, &m));
     check("analyse_exemplar", c.analyse_exemplar.validate())?;
     let s = c.synthesize.clone();
-    let sp = Synth2dParams {
-        continuation: s.continuation,
-        boundary_fraction: s.boundary_fraction,
-        combine_neighbours: s.combine_neighbours,
-    };
-    check("synthesize", sp.validate())?;
+    check("synthesize", s.walk().validate())?;
     check(
         "synthesize.width",
         check_range("synthesize.width", s.width, 1, 16384),
@@ -117,70 +119,31 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     )?;
 
     let mut dag = Dag::default();
-    let exemplar = import_image(
+    let exemplar = import::<Image>(
         &mut dag,
         "import.exemplar",
         &config.resolve(&c.inputs.exemplar),
         "inputs.exemplar",
     )?;
-    let p = c.analyse_exemplar.clone();
-    let jump_map = dag.add(Node {
-        name: "analyse_exemplar".into(),
-        stage: Stage::AnalyseExemplar,
-        algorithm: "jump_map",
-        version: JUMP_MAP_VERSION,
-        params: canonical_bytes(&p),
-        params_json: to_json(&p),
-        inputs: vec![exemplar],
-        exports: false,
-        compute: Box::new(move |ctx| {
-            let img = view_image(ctx.artifact(0))?;
-            check_exemplar_size(img.width, img.height).map_err(NodeError::input)?;
-            Ok(write_jump_map(&build_jump_map(img, &p, &|f| {
-                ctx.progress.set(f)
-            })))
-        }),
-    });
-    let synth = dag.add(Node {
-        name: "synthesize".into(),
-        stage: Stage::Synthesize,
-        algorithm: "jump_walk_2d",
-        version: SYNTH_VERSION,
-        params: canonical_bytes(&s),
-        params_json: to_json(&s),
-        inputs: vec![jump_map],
-        exports: false,
-        compute: Box::new(move |ctx| {
-            let jm = view_jump_map(ctx.artifact(0))?;
-            let addr = synthesize_2d(jm, s.width, s.height, &sp, s.seed);
-            Ok(
-                ArtifactWriter::new(Kind::AddressImage, &(s.width, s.height))
-                    .array("addresses", &addr)
-                    .finish(),
-            )
-        }),
-    });
-    let r = c.reconstruct.clone();
-    dag.add(Node {
-        name: "reconstruct".into(),
-        stage: Stage::Reconstruct,
-        algorithm: "blend_2d",
-        version: RENDER_VERSION,
-        params: canonical_bytes(&r),
-        params_json: to_json(&r),
-        inputs: vec![synth, exemplar],
-        exports: true,
-        compute: Box::new(move |ctx| {
-            let a = ctx.artifact(0);
-            a.expect_kind(Kind::AddressImage)?;
-            let (w, h): (u32, u32) = a.meta()?;
-            let addr: &[[u16; 2]] = a.array("addresses")?;
-            if addr.len() != w as usize * h as usize {
-                return Err(NodeError::internal(
-                    "address image size disagrees with metadata",
-                ));
-            }
-            let exemplar = view_image(ctx.artifact(1))?;
+    let jump_map = add_jump_map(&mut dag, exemplar, c.analyse_exemplar.clone());
+    let synth = dag.node(
+        NodeSpec::new(Stage::Synthesize, "jump_walk_2d", SYNTH_VERSION),
+        s,
+        jump_map,
+        |_, s, jm| {
+            Ok(AddressImage {
+                size: (s.width, s.height),
+                addresses: synthesize_2d(jm, s.width, s.height, &s.walk(), s.seed),
+            })
+        },
+    );
+    dag.node(
+        NodeSpec::new(Stage::Reconstruct, "blend_2d", RENDER_VERSION),
+        c.reconstruct.clone(),
+        (synth, exemplar),
+        |_, r, (a, exemplar)| {
+            let (w, h) = a.size;
+            let addr = a.addresses;
             let img = render_2d(exemplar, addr, w, h, r.blend_radius);
             // The coordinate map (red = x, green = y, scaled to the exemplar) lets a user
             // apply the same synthesis to other maps of the material.
@@ -193,14 +156,14 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                     1.0,
                 ];
             }
-            Ok(write_bundle(&[
+            Ok(Bundle::from(vec![
                 ("synthesized.png".into(), encode_png(&img.to_rgba8(), false)),
                 (
                     "coordinates.png".into(),
                     encode_png(&coords.to_rgba8(), false),
                 ),
             ]))
-        }),
-    });
+        },
+    );
     Ok(dag)
 }

@@ -47,6 +47,15 @@ pub struct NodeReport {
     pub bytes: u64,
     pub key: String,
     pub content_hash: String,
+    /// Pieces computed and reused (nodes that declare pieces; see [`super::pieces`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pieces: Option<PieceReport>,
+}
+
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+pub struct PieceReport {
+    pub computed: u64,
+    pub reused: u64,
 }
 
 pub struct RunResult {
@@ -73,6 +82,7 @@ struct State {
     verified: bool,
     status: NodeStatus,
     seconds: f64,
+    pieces: Option<PieceReport>,
 }
 
 struct Executor<'a> {
@@ -125,6 +135,7 @@ pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, Pipe
             bytes: s.artifact.len() as u64,
             key: s.key.to_hex(),
             content_hash: s.artifact.content_hash().to_hex(),
+            pieces: s.pieces,
         });
         artifacts.push(s.artifact);
     }
@@ -182,6 +193,7 @@ impl Executor<'_> {
                     verified,
                     status: NodeStatus::Cached,
                     seconds: start.elapsed().as_secs_f64(),
+                    pieces: None,
                 });
                 Ok(())
             }
@@ -240,7 +252,7 @@ impl Executor<'_> {
         let start = Instant::now();
         let progress = Progress::new(self.opts.progress, &node.name);
         let input_hashes = self.input_hashes(i);
-        let result = {
+        let (result, pieces) = {
             let inputs = node
                 .inputs
                 .iter()
@@ -256,8 +268,16 @@ impl Executor<'_> {
                 progress: &progress,
                 cache: self.cache,
                 input_hashes,
+                node,
+                pieces: Default::default(),
             };
-            (node.compute)(&ctx)
+            let result = (node.compute)(&ctx);
+            let (computed, reused) = ctx.pieces.get();
+            let pieces = node
+                .pieces
+                .is_some()
+                .then_some(PieceReport { computed, reused });
+            (result, pieces)
         };
         progress.finish();
         let bytes = result.map_err(|source| PipelineError::Node {
@@ -278,6 +298,7 @@ impl Executor<'_> {
             verified: true,
             status: NodeStatus::Ran,
             seconds: start.elapsed().as_secs_f64(),
+            pieces,
         });
         Ok(())
     }

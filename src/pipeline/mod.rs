@@ -15,12 +15,16 @@
 //! converted from OBJ to OFF with identical content does not invalidate anything downstream.
 
 pub mod executor;
+pub mod node;
 pub mod outputs;
+pub mod pieces;
 pub mod progress;
 
 use crate::artifact::{Artifact, ContentHash};
 use crate::cache::Key;
-pub use executor::{NodeReport, NodeStatus, RunOptions, RunResult, run, status};
+pub use executor::{NodeReport, NodeStatus, PieceReport, RunOptions, RunResult, run, status};
+pub use node::{FileHandle, Handle, Inputs, Keyed, NodeSpec};
+pub use pieces::{PieceCounts, PieceStore};
 pub use progress::{Progress, ProgressMode};
 use std::path::{Path, PathBuf};
 
@@ -70,18 +74,21 @@ pub struct FileInput {
 }
 
 /// An error from a node's computation. Messages name the input file and element when the
-/// problem is in user input.
+/// problem is in user input; the error a stage returned is kept as the source.
 #[derive(Debug, thiserror::Error)]
 pub enum NodeError {
-    #[error("{0}")]
-    Input(String),
+    /// The user's input or parameters are at fault.
+    #[error(transparent)]
+    Input(Box<dyn std::error::Error + Send + Sync>),
+    /// A bug in texsyn (artifacts that disagree, a wiring mistake).
     #[error("internal error: {0}")]
     Internal(String),
 }
 
 impl NodeError {
-    pub fn input(msg: impl std::fmt::Display) -> Self {
-        NodeError::Input(msg.to_string())
+    /// Any error (a stage's typed error, or a message) as the user's fault.
+    pub fn input(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
+        NodeError::Input(e.into())
     }
     pub fn internal(msg: impl std::fmt::Display) -> Self {
         NodeError::Internal(msg.to_string())
@@ -94,41 +101,76 @@ impl From<crate::artifact::ArtifactError> for NodeError {
     }
 }
 
-/// What a node's computation sees: its inputs in the order it declared them.
+/// What a node's computation sees besides its inputs (which it receives as typed views, see
+/// [`node`]): progress reporting and its pieces.
 pub struct NodeContext<'a> {
     pub(crate) inputs: Vec<InputData<'a>>,
     pub progress: &'a Progress,
-    /// The object store, for nodes that cache parts of their work themselves (solid
-    /// synthesis stores each brick as its own object, so a later request reuses them).
-    pub cache: &'a crate::cache::Cache,
-    /// Content hashes of the inputs, in order (what such parts' keys are built from).
-    pub input_hashes: Vec<ContentHash>,
+    pub(crate) cache: &'a crate::cache::Cache,
+    /// Content hashes of the inputs, in declared order.
+    pub(crate) input_hashes: Vec<ContentHash>,
+    pub(crate) node: &'a Node,
+    pub(crate) pieces: PieceCounts,
 }
 
+#[derive(Clone, Copy)]
 pub(crate) enum InputData<'a> {
     Artifact(&'a Artifact),
     File(&'a FileInput),
 }
 
 impl<'a> NodeContext<'a> {
-    /// The artifact of the `i`-th input (which must be a node input).
-    pub fn artifact(&self, i: usize) -> &'a Artifact {
+    /// Legacy positional access, until every method is wired through [`Dag::node`].
+    pub(crate) fn artifact(&self, i: usize) -> &'a Artifact {
         match self.inputs[i] {
             InputData::Artifact(a) => a,
             InputData::File(_) => panic!("input {i} is a file, not an artifact (wiring bug)"),
         }
     }
 
-    /// The `i`-th input file (which must be a file input).
-    pub fn file(&self, i: usize) -> &'a FileInput {
+    /// Legacy positional access, until every method is wired through [`Dag::node`].
+    pub(crate) fn file(&self, i: usize) -> &'a FileInput {
         match self.inputs[i] {
             InputData::File(f) => f,
             InputData::Artifact(_) => panic!("input {i} is an artifact, not a file (wiring bug)"),
         }
     }
+
+    /// The store of the node's pieces, which it declared with [`NodeSpec::pieces`]. `extra`
+    /// is what the pieces depend on beyond the declared parameters and keyed inputs that is
+    /// only known while computing (it goes into every piece's key).
+    pub fn pieces<K, F>(
+        &self,
+        extra: &impl serde::Serialize,
+    ) -> Result<PieceStore<'_, K, F>, NodeError>
+    where
+        K: serde::Serialize + Eq + std::hash::Hash + Clone,
+        F: crate::artifact::ReadOwned,
+    {
+        let decl =
+            self.node.pieces.as_ref().ok_or_else(|| {
+                NodeError::internal(format!("{} declared no pieces", self.node.name))
+            })?;
+        let keyed: Vec<ContentHash> = self
+            .node
+            .keyed
+            .iter()
+            .zip(&self.input_hashes)
+            .filter(|(k, _)| **k)
+            .map(|(_, h)| *h)
+            .collect();
+        let prefix = pieces::prefix(
+            decl.name,
+            self.node.version,
+            &decl.params,
+            &keyed,
+            &crate::artifact::canonical_bytes(extra),
+        );
+        Ok(PieceStore::new(self.cache, prefix, &self.pieces))
+    }
 }
 
-pub type ComputeFn = Box<dyn Fn(&NodeContext) -> Result<Vec<u8>, NodeError> + Send + Sync>;
+pub(crate) type ComputeFn = Box<dyn Fn(&NodeContext) -> Result<Vec<u8>, NodeError> + Send + Sync>;
 
 /// One node of the DAG.
 pub struct Node {
@@ -143,9 +185,12 @@ pub struct Node {
     /// The same parameters for people (graph, status, --json).
     pub params_json: serde_json::Value,
     pub inputs: Vec<InputRef>,
+    /// Per input: whether its content hash is part of the key of the node's pieces.
+    pub(crate) keyed: Vec<bool>,
+    pub(crate) pieces: Option<node::PieceDecl>,
     /// The output is a file bundle to write into the run's output directory.
     pub exports: bool,
-    pub compute: ComputeFn,
+    pub(crate) compute: ComputeFn,
 }
 
 /// A method's nodes in topological order (every input refers to an earlier node).
@@ -158,7 +203,7 @@ pub struct Dag {
 impl Dag {
     /// Reads and hashes an input file, returning its reference (the same path twice gives the
     /// same input).
-    pub fn add_file(&mut self, path: &Path, role: &str) -> Result<InputRef, std::io::Error> {
+    pub(crate) fn add_file(&mut self, path: &Path, role: &str) -> Result<InputRef, std::io::Error> {
         if let Some(i) = self.files.iter().position(|f| f.path == path) {
             return Ok(InputRef::File(i));
         }
@@ -174,8 +219,8 @@ impl Dag {
         Ok(InputRef::File(self.files.len() - 1))
     }
 
-    /// Appends a node; its inputs must already be in the DAG.
-    pub fn add(&mut self, node: Node) -> InputRef {
+    /// Appends a node; its inputs must already be in the DAG. Methods use [`Dag::node`].
+    pub(crate) fn add(&mut self, node: Node) -> InputRef {
         for input in &node.inputs {
             match *input {
                 InputRef::Node(i) => assert!(i < self.nodes.len(), "node input out of order"),
