@@ -63,26 +63,6 @@ fn scratch() -> tempfile::TempDir {
 }
 
 #[test]
-fn the_committed_lock_file_verifies_from_an_empty_cache() {
-    let o = texsyn(
-        &[
-            "verify",
-            "configs/demo.toml",
-            "configs/demo.lock",
-            "--fresh",
-            "--quiet",
-        ],
-        &repo(),
-    );
-    assert!(
-        o.status.success(),
-        "verify failed:\n{}{}",
-        stdout(&o),
-        stderr(&o)
-    );
-}
-
-#[test]
 fn a_lock_file_that_disagrees_names_each_mismatching_node() {
     let dir = scratch();
     let d = dir.path();

@@ -4,7 +4,7 @@
 #![allow(clippy::needless_range_loop, clippy::type_complexity)]
 
 mod common;
-use common::{artifact, hashes_on_one_and_two_threads, ran, repo, run_config};
+use common::{artifact, assert_same_hashes_on_any_thread_count, ran, repo, run_config};
 use std::path::{Path, PathBuf};
 use texsyn::artifact::jump_maps::{view_parameterization, view_walk};
 use texsyn::pipeline::{self, RunResult};
@@ -130,8 +130,13 @@ fn a_corrupted_artifact_is_detected_and_recomputed_to_the_same_result() {
 
 #[test]
 fn artifact_hashes_do_not_depend_on_the_thread_count() {
-    let results = hashes_on_one_and_two_threads(|cache| run(&demo(), &[], cache));
-    assert_eq!(results[0], results[1]);
+    assert_same_hashes_on_any_thread_count(|cache| run(&demo(), &[], cache));
+}
+
+#[test]
+fn synth2d_hashes_do_not_depend_on_the_thread_count() {
+    let config = repo().join("configs/synth2d.toml");
+    assert_same_hashes_on_any_thread_count(|cache| run_config(&config, &[], &[], cache).unwrap());
 }
 
 #[test]

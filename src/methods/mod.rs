@@ -56,7 +56,7 @@ pub fn plan(config: &Config) -> Result<Plan, MethodError> {
 }
 
 /// A format that an input file is read into by an `import` node.
-pub(crate) trait Import: Format + Sized {
+pub trait Import: Format + Sized {
     /// The reader's name (the node's algorithm, part of its key).
     const READER: &'static str;
     /// Bump when the reader's output for the same bytes changes.
@@ -95,7 +95,7 @@ fn extension(path: &Path) -> String {
 
 /// Adds the node that parses and validates an input file. `role` is the config key that
 /// named it, for errors.
-pub(crate) fn import<F: Import>(
+pub fn import<F: Import>(
     dag: &mut Dag,
     name: &str,
     path: &Path,

@@ -19,6 +19,51 @@ use std::marker::PhantomData;
 use std::path::Path;
 
 /// The artifact of a node, typed by its format. Only [`Dag::node`] makes one.
+///
+/// A node that wants an image takes a `Handle<Image>`, and its compute function sees an
+/// `ImageView`:
+///
+/// ```
+/// use texsyn::image::Image;
+/// use texsyn::pipeline::{Dag, Handle, NodeSpec, Stage};
+///
+/// fn brighten(dag: &mut Dag, image: Handle<Image>) -> Handle<Image> {
+///     dag.node(NodeSpec::new(Stage::Synthesize, "brighten", 1), 2.0f32, image, |_, gain, v| {
+///         let mut out = Image::new(v.width, v.height);
+///         for (o, p) in out.pixels.iter_mut().zip(v.pixels) {
+///             *o = p.map(|c| c * gain);
+///         }
+///         Ok(out)
+///     })
+/// }
+///
+/// fn wire(dag: &mut Dag, image: Handle<Image>) -> Handle<Image> {
+///     brighten(dag, image)
+/// }
+/// ```
+///
+/// and passing it a mesh's handle does not compile (the same code as above but for the
+/// handle's type; with `Handle<Image>` there, this example compiles and its test fails):
+///
+/// ```compile_fail,E0308
+/// use texsyn::geom::Mesh;
+/// use texsyn::image::Image;
+/// use texsyn::pipeline::{Dag, Handle, NodeSpec, Stage};
+///
+/// fn brighten(dag: &mut Dag, image: Handle<Image>) -> Handle<Image> {
+///     dag.node(NodeSpec::new(Stage::Synthesize, "brighten", 1), 2.0f32, image, |_, gain, v| {
+///         let mut out = Image::new(v.width, v.height);
+///         for (o, p) in out.pixels.iter_mut().zip(v.pixels) {
+///             *o = p.map(|c| c * gain);
+///         }
+///         Ok(out)
+///     })
+/// }
+///
+/// fn wire(dag: &mut Dag, mesh: Handle<Mesh>) -> Handle<Image> {
+///     brighten(dag, mesh)
+/// }
+/// ```
 pub struct Handle<F> {
     index: usize,
     _format: PhantomData<fn() -> F>,

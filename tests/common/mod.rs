@@ -69,14 +69,26 @@ pub fn node_hashes(r: &RunResult) -> Vec<String> {
         .collect()
 }
 
-/// The node hashes of `run` on one thread and on two, each from an empty cache.
-pub fn hashes_on_one_and_two_threads(run: impl Fn(&Path) -> RunResult + Sync) -> [Vec<String>; 2] {
-    [1, 2].map(|threads| {
+/// The thread counts every method's results are compared across: one, the machine's two,
+/// and oversubscribed pools (3 and 8 threads on 2 cores), which change how rayon splits work.
+pub const THREAD_COUNTS: [usize; 3] = [1, 3, 8];
+
+/// Runs `run` from an empty cache in a pool of each of [`THREAD_COUNTS`] and asserts that
+/// every node's content hash is the same for all of them.
+pub fn assert_same_hashes_on_any_thread_count(run: impl Fn(&Path) -> RunResult + Sync) {
+    let hashes = THREAD_COUNTS.map(|threads| {
         let cache = tempfile::tempdir().unwrap();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
         node_hashes(&pool.install(|| run(cache.path())))
-    })
+    });
+    for (threads, h) in THREAD_COUNTS.iter().zip(&hashes).skip(1) {
+        assert_eq!(
+            &hashes[0], h,
+            "{threads} threads give other artifacts than {}",
+            THREAD_COUNTS[0]
+        );
+    }
 }
