@@ -393,17 +393,28 @@ fn human_bytes(b: u64) -> String {
 }
 
 fn print_table(reports: &[pipeline::NodeReport]) {
+    // The pieces column appears only when a node caches pieces (the solid's bricks).
+    let pieces = reports.iter().any(|r| r.pieces.is_some());
     println!(
-        "{:<24} {:<17} {:<7} {:>9} {:>11}",
-        "node", "stage", "status", "seconds", "bytes"
+        "{:<24} {:<17} {:<7} {:>9} {:>11}{}",
+        "node",
+        "stage",
+        "status",
+        "seconds",
+        "bytes",
+        if pieces { "  pieces computed / reused" } else { "" }
     );
     for r in reports {
         let status = match r.status {
             pipeline::NodeStatus::Cached => "cached",
             pipeline::NodeStatus::Ran => "ran",
         };
+        let piece_counts = r
+            .pieces
+            .map(|p| format!("  {} / {}", p.computed, p.reused))
+            .unwrap_or_default();
         println!(
-            "{:<24} {:<17} {:<7} {:>9.3} {:>11}",
+            "{:<24} {:<17} {:<7} {:>9.3} {:>11}{piece_counts}",
             r.node,
             r.stage,
             status,
