@@ -22,7 +22,7 @@ pub mod square_domain;
 
 use crate::geom::Mesh;
 use crate::geom::geometry_image::{Frame, TexelImage};
-use crate::stages::parameterize::geometry_image::{GeometryImageParams, build_geometry_image};
+use crate::parameterize::geometry_image::{GeometryImageParams, build_geometry_image};
 use glam::Vec3;
 use sample_region::Region;
 use serde::{Deserialize, Serialize};

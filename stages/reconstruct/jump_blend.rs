@@ -8,8 +8,8 @@
 //! weighted by a linear alpha ramp that is 1 at its base corner and 0 at the other two (the
 //! base corner's barycentric coordinate), which hides the seams between patches.
 
-use crate::artifact::jump_maps::ParamParts;
 use crate::image::ImageView;
+use crate::parameterize::edge_offsets::ParamParts;
 use crate::random::counter_hash;
 use crate::render::shader::SurfaceShader;
 use glam::{Vec2, Vec3};

@@ -4,7 +4,7 @@
 //! Transfer via Geometry Images" (SPM 2005): §4.2.1 (initial synthesis), §4.2.2 (boundary
 //! resynthesis) and the synthesis side of §4.3 (discretized orientation and scaling). The
 //! oriented and scaled sample set, its pyramids, features and kd-trees come from
-//! [`crate::stages::analyse_exemplar::texel_variants`].
+//! [`crate::analyse_exemplar::texel_variants`].
 //!
 //! A geometry image of side `n = 2^k + 1` has `(n − 1) / 2^l + 1` samples per side at pyramid
 //! level `l`; sample `i` of level `l` is sample `i · 2^l` of level 0, and its field values are
@@ -74,18 +74,18 @@
 //!   different scales and the texture turned into grain where `R` falls between two scales.
 //!   Orientations are still drawn per texel: per cell, stripes broke into straight pieces at the
 //!   cell borders.
+use crate::analyse_exemplar::texel_variants::{
+    Template, TexelVariantsRef, coarse_taps, template_taps,
+};
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::image::neighbourhood::mirror;
 use crate::random::{counter_hash, counter_unit};
-use crate::stages::analyse_exemplar::texel_variants::{
-    Template, TexelVariantsRef, coarse_taps, template_taps,
-};
 use glam::Vec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// The per-sample controls of synthesis (§4.3), computed by the field stage.
-pub use crate::stages::field::param_field::ParamField;
+pub use crate::field::param_field::ParamField;
 
 /// Parameters of the synthesis.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -1014,9 +1014,7 @@ mod tests {
 
     #[test]
     fn wavefront_order_reproduces_the_scanline_order() {
-        use crate::stages::analyse_exemplar::texel_variants::{
-            TexelVariantParams, build_texel_variants,
-        };
+        use crate::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
         use glam::Vec3;
         let mut sample = TexelImage::new(40, 40, 3);
         for y in 0..40u32 {
@@ -1072,9 +1070,7 @@ mod tests {
 
     #[test]
     fn destination_features_equal_the_sample_features_where_the_images_agree() {
-        use crate::stages::analyse_exemplar::texel_variants::{
-            TexelVariantParams, build_texel_variants,
-        };
+        use crate::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
         // A 33×33 sample is itself a valid 2-level destination: the pyramids coincide, so each
         // candidate's gathered feature must be found at distance 0, at itself.
         let n = 33usize;

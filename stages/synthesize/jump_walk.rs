@@ -16,9 +16,9 @@
 //! Randomness is a counter-based hash of (seed, vertex index), so the result depends only on
 //! the inputs, not on how they were scheduled.
 
+use crate::analyse_exemplar::jump_map::JumpMapRef;
+use crate::parameterize::edge_offsets::OffsetBox;
 use crate::random::counter_unit;
-use crate::stages::analyse_exemplar::jump_map::JumpMapRef;
-use crate::stages::parameterize::edge_offsets::OffsetBox;
 use glam::Vec2;
 
 /// `[synthesize]` parameters of the jump walk.
@@ -380,10 +380,10 @@ impl Table {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analyse_exemplar::jump_map::Jump;
     use crate::geom::Mesh;
-    use crate::stages::analyse_exemplar::jump_map::Jump;
-    use crate::stages::parameterize::edge_offsets::{edge_offsets, validity_boxes};
-    use crate::stages::parameterize::region_growing::region_growing_order;
+    use crate::parameterize::edge_offsets::{edge_offsets, validity_boxes};
+    use crate::parameterize::region_growing::region_growing_order;
     use glam::Vec3;
 
     fn grid(n: usize) -> Mesh {

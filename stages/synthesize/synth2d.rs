@@ -29,8 +29,8 @@
 //! - Randomness comes from [`crate::random::counter_hash`] of (seed, draw, output pixel index), never from a
 //!   shared stream, so any output pixel's choices can be recomputed independently.
 
+use crate::analyse_exemplar::jump_map::JumpMapRef;
 use crate::random::counter_unit;
-use crate::stages::analyse_exemplar::jump_map::JumpMapRef;
 
 /// Parameters of the 2D jump-map synthesis.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize, PartialEq)]

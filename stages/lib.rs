@@ -1,0 +1,31 @@
+//! Stage algorithms, grouped by pipeline stage. Each file implements one algorithm of one paper.
+//!
+//! This crate depends on the core only (DESIGN.md, Layout): it cannot reach the pipeline, the
+//! cache, the artifact formats, configs or methods.
+
+// Numeric code indexes several parallel arrays by one vertex or corner index; iterator
+// chains over zips of them read worse than the index loop.
+#![allow(clippy::needless_range_loop)]
+
+// The core's modules under their usual names, so `crate::geom::…` reads as in the core.
+#[allow(unused_imports)]
+use texsyn_core::{check, export, geom, image, linalg, random, render};
+
+pub mod analyse_exemplar;
+pub mod extract;
+pub mod field;
+pub mod parameterize;
+pub mod reconstruct;
+pub mod synthesize;
+
+// TEMPORARY (removed in the typed-errors commit): validators still return String.
+mod config {
+    pub fn check_range<T: PartialOrd + std::fmt::Display>(
+        key: &str,
+        v: T,
+        lo: T,
+        hi: T,
+    ) -> Result<(), String> {
+        crate::check::check_range(key, v, lo, hi).map_err(|e| e.to_string())
+    }
+}
