@@ -8,7 +8,6 @@
 #![allow(clippy::needless_range_loop)]
 
 // The core's modules under their usual names, so `crate::geom::…` reads as in the core.
-#[allow(unused_imports)]
 use texsyn_core::{check, export, geom, image, linalg, random, render};
 
 pub mod analyse_exemplar;
@@ -17,15 +16,3 @@ pub mod field;
 pub mod parameterize;
 pub mod reconstruct;
 pub mod synthesize;
-
-// TEMPORARY (removed in the typed-errors commit): validators still return String.
-mod config {
-    pub fn check_range<T: PartialOrd + std::fmt::Display>(
-        key: &str,
-        v: T,
-        lo: T,
-        hi: T,
-    ) -> Result<(), String> {
-        crate::check::check_range(key, v, lo, hi).map_err(|e| e.to_string())
-    }
-}

@@ -430,7 +430,8 @@ fn output_does_not_depend_on_the_thread_count_and_follows_the_seed() {
 #[test]
 fn too_small_samples_and_bad_inputs_are_errors() {
     let e = build_texel_variants(&stripes(16, 5.0), &TexelVariantParams::default(), &|_| {})
-        .unwrap_err();
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("16×16") && e.contains("at least"), "{e}");
     let v = variants(&stripes(48, 6.0));
     let p = GeometrySynthParams::default();
@@ -442,11 +443,14 @@ fn too_small_samples_and_bad_inputs_are_errors() {
         &p,
         &|_| {},
     )
-    .unwrap_err();
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("side 31"), "{e}");
     let mut f = field(33, Vec2::Y, 1.0);
     f.rel_scale[40] = 0.0;
-    let e = synthesize_geometry_texture(&flat(33), &f, &v.as_ref(), &p, &|_| {}).unwrap_err();
+    let e = synthesize_geometry_texture(&flat(33), &f, &v.as_ref(), &p, &|_| {})
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("(1, 7)"), "{e}");
     let mut f = field(33, Vec2::Y, 1.0);
     f.dir.pop();

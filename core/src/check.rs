@@ -28,11 +28,38 @@ impl ParamError {
         }
     }
 
+    /// An out-of-range error with the range written as given (`"0"`, `"1e9"`), for checks
+    /// whose bounds do not print as wanted through [`check_range`].
+    pub fn out_of_range(
+        key: impl Into<String>,
+        min: impl Display,
+        max: impl Display,
+        value: impl Display,
+    ) -> Self {
+        ParamError::OutOfRange {
+            key: key.into(),
+            min: min.to_string(),
+            max: max.to_string(),
+            value: value.to_string(),
+        }
+    }
+
     /// The key the error names.
     pub fn key(&self) -> &str {
         match self {
             ParamError::OutOfRange { key, .. } | ParamError::Invalid { key, .. } => key,
         }
+    }
+
+    /// The same error with its key prefixed by `context` and `": "`: a struct's validator
+    /// checks `levels`, its caller reports `jump map: levels`.
+    pub fn within(mut self, context: &str) -> Self {
+        match &mut self {
+            ParamError::OutOfRange { key, .. } | ParamError::Invalid { key, .. } => {
+                *key = format!("{context}: {key}")
+            }
+        }
+        self
     }
 }
 
@@ -79,5 +106,13 @@ mod tests {
             "extract.sigma must be a positive number, got -1"
         );
         assert_eq!(e.key(), "extract.sigma");
+        let e = check_range("levels", 9, 1, 8)
+            .unwrap_err()
+            .within("jump map");
+        assert_eq!(e.to_string(), "jump map: levels must be in 1..=8, got 9");
+        assert_eq!(
+            ParamError::out_of_range("c", "0", "1e9", -1.0).to_string(),
+            "c must be in 0..=1e9, got -1"
+        );
     }
 }

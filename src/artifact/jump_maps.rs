@@ -38,7 +38,7 @@ pub fn view_jump_map(a: &Artifact) -> Result<JumpMapRef<'_>, ArtifactError> {
     a.expect_kind(Kind::JumpMap)?;
     let m: JumpMapMeta = a.meta()?;
     let jumps: &[Jump] = a.array("jumps")?;
-    JumpMapRef::new(m.width, m.height, m.k, jumps).map_err(bad)
+    JumpMapRef::new(m.width, m.height, m.k, jumps).map_err(|e| bad(e.to_string()))
 }
 
 pub fn write_field(up: &[Vec3]) -> Vec<u8> {

@@ -94,7 +94,7 @@ impl Default for RenderSection {
 
 pub fn build(config: &Config) -> Result<Dag, MethodError> {
     let c: Synth2dConfig = config.parse()?;
-    let check = |key: &str, r: Result<(), String>| r.map_err(|m| config.invalid(key, &m));
+    let check = |key: &str, r: Result<(), crate::check::ParamError>| config.check(key, r);
     check("analyse_exemplar", c.analyse_exemplar.validate())?;
     let s = c.synthesize.clone();
     let sp = Synth2dParams {

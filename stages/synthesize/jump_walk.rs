@@ -17,6 +17,7 @@
 //! the inputs, not on how they were scheduled.
 
 use crate::analyse_exemplar::jump_map::JumpMapRef;
+use crate::check::{ParamError, check_range};
 use crate::parameterize::edge_offsets::OffsetBox;
 use crate::random::counter_unit;
 use glam::Vec2;
@@ -47,20 +48,14 @@ impl Default for WalkParams {
 }
 
 impl WalkParams {
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.continuation.is_finite() && (0.01..=10000.0).contains(&self.continuation)) {
-            return Err(format!(
-                "synthesize.continuation must be in 0.01..=10000, got {}",
-                self.continuation
-            ));
-        }
-        if !(self.boundary_fraction.is_finite() && (0.0..=0.5).contains(&self.boundary_fraction)) {
-            return Err(format!(
-                "synthesize.boundary_fraction must be in 0..=0.5, got {}",
-                self.boundary_fraction
-            ));
-        }
-        Ok(())
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range("synthesize.continuation", self.continuation, 0.01, 10000.0)?;
+        check_range(
+            "synthesize.boundary_fraction",
+            self.boundary_fraction,
+            0.0,
+            0.5,
+        )
     }
 }
 
