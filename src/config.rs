@@ -115,6 +115,17 @@ impl Config {
         }
     }
 
+    /// A validator's verdict as an error naming the config file and `key`, with the
+    /// validator's message kept word for word, e.g. `config.check("synthesize",
+    /// params.validate())?` gives `demo.toml: synthesize: synth2d: continuation must be in …`.
+    pub fn check<E: std::fmt::Display>(
+        &self,
+        key: &str,
+        verdict: Result<(), E>,
+    ) -> Result<(), ConfigError> {
+        verdict.map_err(|e| self.invalid(key, &e.to_string()))
+    }
+
     /// Resolves a path from the config against the config's directory.
     pub fn resolve(&self, p: &Path) -> PathBuf {
         if p.is_absolute() {
@@ -162,19 +173,9 @@ fn parse_value(raw: &str) -> toml::Value {
     }
 }
 
-/// Range check used by validators: the message names the key, the range and the value.
-pub fn check_range<T: PartialOrd + std::fmt::Display>(
-    key: &str,
-    v: T,
-    lo: T,
-    hi: T,
-) -> Result<(), String> {
-    if v >= lo && v <= hi {
-        Ok(())
-    } else {
-        Err(format!("{key} must be in {lo}..={hi}, got {v}"))
-    }
-}
+/// Range check used by validators (the core's): the error names the key, the range and the
+/// value. [`Config::check`] turns it into a [`ConfigError`] that keeps its text.
+pub use crate::check::{ParamError, check_range};
 
 #[cfg(test)]
 mod tests {

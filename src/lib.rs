@@ -8,15 +8,12 @@ pub mod artifact;
 pub mod bench;
 pub mod cache;
 pub mod config;
-pub mod export;
-pub mod geom;
-pub mod image;
-pub mod linalg;
 pub mod methods;
 pub mod pipeline;
-pub mod random;
-pub mod render;
 
+// The core (meshes, images, solvers, randomness, rasterizer, writers) and the stage algorithms
+// are crates of their own (DESIGN.md, Layout); re-exported so `crate::geom::…`,
+// `texsyn::stages::…` keep their paths.
+pub use texsyn_core::{check, export, geom, image, linalg, random, render};
 /// The stage algorithms, one file per algorithm (DESIGN.md, Layout).
-#[path = "../stages/mod.rs"]
-pub mod stages;
+pub use texsyn_stages as stages;

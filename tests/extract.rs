@@ -625,21 +625,26 @@ fn params_read_from_toml_and_validate_by_field() {
         size: 4,
         ..Default::default()
     };
-    assert!(
-        bad.validate()
-            .unwrap_err()
-            .contains("size must be in 8..=1024, got 4")
+    assert_eq!(
+        bad.validate().unwrap_err().to_string(),
+        "size must be in 8..=1024, got 4"
     );
     let bad = ExtractParams {
         inlier_distance: Some(-1.0),
         ..Default::default()
     };
-    assert!(bad.validate().unwrap_err().contains("inlier_distance"));
+    assert_eq!(
+        bad.validate().unwrap_err().to_string(),
+        "inlier_distance must be a finite number > 0, got -1"
+    );
     let bad = ExtractParams {
         sigma_grid: Some(f32::NAN),
         ..Default::default()
     };
-    assert!(bad.validate().unwrap_err().contains("sigma_grid"));
+    assert_eq!(
+        bad.validate().unwrap_err().to_string(),
+        "sigma_grid must be in 0.5..=1024, got NaN"
+    );
 }
 
 fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {

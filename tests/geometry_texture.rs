@@ -430,7 +430,8 @@ fn output_does_not_depend_on_the_thread_count_and_follows_the_seed() {
 #[test]
 fn too_small_samples_and_bad_inputs_are_errors() {
     let e = build_texel_variants(&stripes(16, 5.0), &TexelVariantParams::default(), &|_| {})
-        .unwrap_err();
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("16×16") && e.contains("at least"), "{e}");
     let v = variants(&stripes(48, 6.0));
     let p = GeometrySynthParams::default();
@@ -442,11 +443,14 @@ fn too_small_samples_and_bad_inputs_are_errors() {
         &p,
         &|_| {},
     )
-    .unwrap_err();
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("side 31"), "{e}");
     let mut f = field(33, Vec2::Y, 1.0);
     f.rel_scale[40] = 0.0;
-    let e = synthesize_geometry_texture(&flat(33), &f, &v.as_ref(), &p, &|_| {}).unwrap_err();
+    let e = synthesize_geometry_texture(&flat(33), &f, &v.as_ref(), &p, &|_| {})
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("(1, 7)"), "{e}");
     let mut f = field(33, Vec2::Y, 1.0);
     f.dir.pop();
@@ -550,4 +554,79 @@ fn previews() {
         let out = synth(&cylinder(m), &f, &v, 3);
         save(&out, &format!("/tmp/gt_{name}_257.png"));
     }
+}
+
+/// The variant set's arrays stored in an artifact read back equal to the owned set (levels,
+/// template sets, trees), and a missing array, a short array or inconsistent metadata is an
+/// error (moved here from the stage's unit tests: the artifact format lives above the stages).
+#[test]
+fn arrays_round_trip_through_an_artifact_and_damage_is_an_error() {
+    use texsyn::artifact::{Artifact, ArtifactWriter, Kind};
+    use texsyn::stages::analyse_exemplar::texel_variants::{
+        Template, TexelVariantsRef, VariantsMeta,
+    };
+    // Stripes along x in channel 2 over constant channels 0 and 1.
+    let mut sample = TexelImage::new(40, 40, 3);
+    for y in 0..40 {
+        for x in 0..40 {
+            let p = sample.texel_mut(x, y);
+            p[0] = 1.0;
+            p[1] = 0.25;
+            p[2] = (std::f32::consts::TAU * x as f32 / 7.0).sin();
+        }
+    }
+    let p = TexelVariantParams {
+        orientations: 2,
+        ..Default::default()
+    };
+    let v = build_texel_variants(&sample, &p, &|_| {}).unwrap();
+    let mut w = ArtifactWriter::new(Kind::Image, &v.meta);
+    for (name, bytes) in v.arrays() {
+        w = w.array_bytes(name, bytes.to_vec());
+    }
+    let art = Artifact::from_bytes(w.finish()).unwrap();
+    let meta: VariantsMeta = art.meta().unwrap();
+    let r = TexelVariantsRef::from_arrays(meta.clone(), |n| art.raw_array(n).ok()).unwrap();
+    let owned = v.as_ref();
+    assert_eq!(r.meta, v.meta);
+    for var in 0..r.variant_count() {
+        for l in 0..r.levels() {
+            assert_eq!(r.level(var, l).texels, owned.level(var, l).texels);
+            for kind in [Template::Causal, Template::Full] {
+                let (a, b) = (r.set(var, l, kind), owned.set(var, l, kind));
+                assert_eq!(a.centres, b.centres);
+                assert_eq!(a.basis, b.basis);
+                let q = vec![0.1f32; a.dims];
+                let mut s = Vec::new();
+                assert_eq!(
+                    a.tree.nearest1_approx(&q, 0.0, &mut s),
+                    b.tree.nearest1_approx(&q, 0.0, &mut s)
+                );
+            }
+        }
+    }
+    // A missing array, a short array and inconsistent metadata are errors.
+    assert!(
+        TexelVariantsRef::from_arrays(meta.clone(), |n| {
+            (n != "centres").then(|| art.raw_array(n).ok()).flatten()
+        })
+        .is_err()
+    );
+    assert!(
+        TexelVariantsRef::from_arrays(meta.clone(), |n| {
+            let a = art.raw_array(n).ok()?;
+            Some(if n == "tree_points" {
+                &a[..a.len() - 4]
+            } else {
+                a
+            })
+        })
+        .is_err()
+    );
+    let mut bad = meta.clone();
+    bad.sets[3].dims += 1;
+    assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
+    let mut bad = meta;
+    bad.levels.pop();
+    assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
 }

@@ -5,8 +5,8 @@
 
 use super::{Artifact, ArtifactError, ArtifactWriter, Format, Kind};
 use crate::stages::analyse_exemplar::jump_map::{Jump, JumpMap, JumpMapRef};
-use crate::stages::parameterize::edge_offsets::OffsetBox;
-use crate::stages::synthesize::jump_walk::{Walk, WalkInput};
+pub use crate::stages::parameterize::edge_offsets::{OffsetBox, ParamMeta, ParamParts};
+use crate::stages::synthesize::jump_walk::Walk;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -63,7 +63,7 @@ pub fn view_jump_map(a: &Artifact) -> Result<JumpMapRef<'_>, ArtifactError> {
     a.expect_kind(Kind::JumpMap)?;
     let m: JumpMapMeta = a.meta()?;
     let jumps: &[Jump] = a.array("jumps")?;
-    JumpMapRef::new(m.width, m.height, m.k, jumps).map_err(bad)
+    JumpMapRef::new(m.width, m.height, m.k, jumps).map_err(|e| bad(e.to_string()))
 }
 
 pub fn write_field(up: &[Vec3]) -> Vec<u8> {
@@ -80,28 +80,6 @@ pub fn view_field(a: &Artifact) -> Result<&[Vec3], ArtifactError> {
         return Err(bad("field length disagrees with metadata"));
     }
     Ok(up)
-}
-
-/// Metadata of a parameterization.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct ParamMeta {
-    pub vertices: u64,
-    /// Texels per object-space unit actually used.
-    pub scale: f32,
-    /// The exemplar size the boxes were checked against.
-    pub exemplar: (u32, u32),
-    /// Connected components (= seeds of the order).
-    pub components: u32,
-}
-
-pub struct ParamParts<'a> {
-    pub meta: ParamMeta,
-    pub order: &'a [u32],
-    pub seeds: &'a [u32],
-    pub adj_offsets: &'a [u32],
-    pub neighbors: &'a [u32],
-    pub edge_offsets: &'a [Vec2],
-    pub boxes: &'a [OffsetBox],
 }
 
 /// The parameterization as its node computes it; [`ParamParts`] is how readers see it.
@@ -172,28 +150,6 @@ pub fn view_parameterization(a: &Artifact) -> Result<ParamParts<'_>, ArtifactErr
         return Err(bad("parameterization arrays are inconsistent"));
     }
     Ok(p)
-}
-
-impl ParamParts<'_> {
-    pub fn walk_input(&self) -> WalkInput<'_> {
-        WalkInput {
-            adj_offsets: self.adj_offsets,
-            neighbors: self.neighbors,
-            edge_offsets: self.edge_offsets,
-            boxes: self.boxes,
-            order: self.order,
-        }
-    }
-
-    /// Offset of the half-edge a → b, if the edge exists.
-    pub fn offset(&self, a: u32, b: u32) -> Option<Vec2> {
-        let start = self.adj_offsets[a as usize] as usize;
-        let end = self.adj_offsets[a as usize + 1] as usize;
-        self.neighbors[start..end]
-            .binary_search(&b)
-            .ok()
-            .map(|k| self.edge_offsets[start + k])
-    }
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]

@@ -156,7 +156,7 @@ fn normalize(mut t: TexelImage, spacing: f32) -> TexelImage {
 
 pub fn build(config: &Config) -> Result<Dag, MethodError> {
     let c: GeometryImagesConfig = config.parse()?;
-    let check = |key: &str, r: Result<(), String>| r.map_err(|m| config.invalid(key, &m));
+    let check = |key: &str, r: Result<(), crate::check::ParamError>| config.check(key, r);
     check("parameterize", c.parameterize.validate())?;
     check("extract", c.extract.validate())?;
     check("analyse_exemplar", c.analyse_exemplar.validate())?;
@@ -395,11 +395,11 @@ fn export_relief(
     progress(0.5);
     files.push((
         "geometry_image.exr".into(),
-        crate::export::exr::write_exr_rgb(gi.n, gi.n, &gi.positions)?,
+        crate::export::exr::write_exr_rgb(gi.n, gi.n, &gi.positions).map_err(|e| e.to_string())?,
     ));
     files.push((
         "geometry_image_normals.exr".into(),
-        crate::export::exr::write_exr_rgb(gi.n, gi.n, &gi.normals)?,
+        crate::export::exr::write_exr_rgb(gi.n, gi.n, &gi.normals).map_err(|e| e.to_string())?,
     ));
     files.push(("sample_relief.png".into(), dn_png(sample)));
     files.push(("synthesized_relief.png".into(), dn_png(texels)));

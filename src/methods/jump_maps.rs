@@ -136,11 +136,11 @@ impl ParameterizeParams {
 pub fn build(config: &Config) -> Result<Dag, MethodError> {
     let c: JumpMapsConfig = config.parse()?;
     let check = |key: &str, r: Result<(), String>| r.map_err(|m| config.invalid(key, &m));
-    check("analyse_exemplar", c.analyse_exemplar.validate())?;
+    config.check("analyse_exemplar", c.analyse_exemplar.validate())?;
     check("field", c.field.validate().map_err(|e| e.to_string()))?;
     check("parameterize", c.parameterize.validate())?;
-    check("synthesize", c.synthesize.validate())?;
-    check("reconstruct", c.reconstruct.validate())?;
+    config.check("synthesize", c.synthesize.validate())?;
+    config.check("reconstruct", c.reconstruct.validate())?;
     for name in c.inputs.maps.keys() {
         if name.is_empty()
             || !name

@@ -247,7 +247,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             )
             .into());
     }
-    check(
+    config.check(
         "parameterize.resolution",
         check_range(
             "parameterize.resolution",
@@ -256,25 +256,25 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             4096,
         ),
     )?;
-    check(
+    config.check(
         "parameterize.margin",
         check_range("parameterize.margin", c.parameterize.margin, 0.0, 4.0),
     )?;
     let e = &c.reconstruct;
-    check(
+    config.check(
         "reconstruct.preview_size",
         check_range("reconstruct.preview_size", e.preview_size, 16, 4096),
     )?;
-    check(
+    config.check(
         "reconstruct.atlas_size",
         check_range("reconstruct.atlas_size", e.atlas_size, 64, 8192),
     )?;
-    check(
+    config.check(
         "reconstruct.edge_voxels",
         check_range("reconstruct.edge_voxels", e.edge_voxels, 0.5, 16.0),
     )?;
     let cells = c.field.cells.unwrap_or(24);
-    check("field.cells", check_range("field.cells", cells, 4, 128))?;
+    config.check("field.cells", check_range("field.cells", cells, 4, 128))?;
     check(
         "field",
         crate::stages::field::quaternion_field::validate_curves(&c.field.curves, &c.field.scales)

@@ -101,7 +101,7 @@ impl SynthSection {
 
 pub fn build(config: &Config) -> Result<Dag, MethodError> {
     let c: Synth2dConfig = config.parse()?;
-    let check = |key: &str, r: Result<(), String>| r.map_err(|m| config.invalid(key, &m));
+    let check = |key: &str, r: Result<(), crate::check::ParamError>| config.check(key, r);
     check("analyse_exemplar", c.analyse_exemplar.validate())?;
     let s = c.synthesize.clone();
     check("synthesize", s.walk().validate())?;

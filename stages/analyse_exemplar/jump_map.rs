@@ -31,6 +31,7 @@
 //! Output is identical for any number of threads: neighbourhoods, PCA and kd-tree are
 //! deterministic and every pixel's search writes only its own slots.
 
+use crate::check::{ParamError, check_range};
 use crate::image::ImageView;
 use crate::image::knn::KdTree;
 use crate::image::neighbourhood::{NeighbourhoodParams, Neighbourhoods};
@@ -97,55 +98,55 @@ impl Default for JumpMapParams {
 
 impl JumpMapParams {
     /// Checks every field's range; the error names the field, its range and the value.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        // Finite bounds: NaN and infinities fail the range check too.
         let range = |name: &str, v, lo, hi| {
-            crate::config::check_range(name, v, lo, hi).map_err(|e| format!("jump map: {e}"))
+            check_range::<u32>(name, v, lo, hi).map_err(|e| e.within("jump map"))
         };
         let rangef = |name: &str, v, lo, hi| {
-            crate::config::check_range::<f32>(name, v, lo, hi).map_err(|e| format!("jump map: {e}"))
+            check_range::<f32>(name, v, lo, hi).map_err(|e| e.within("jump map"))
         };
         range("levels", self.levels, 1, 8)?;
         range("window", self.window, 1, 15)?;
         if self.window.is_multiple_of(2) {
-            return Err(format!(
-                "jump map: window must be odd (1..=15), got {}",
-                self.window
-            ));
-        }
-        if !self.coarse_weight.is_finite() {
-            return Err(format!(
-                "jump map: coarse_weight must be in 0..=1, got {}",
-                self.coarse_weight
-            ));
+            return Err(ParamError::invalid(
+                "window",
+                format!("must be odd (1..=15), got {}", self.window),
+            )
+            .within("jump map"));
         }
         rangef("coarse_weight", self.coarse_weight, 0.0, 1.0)?;
         range("pca_dims", self.pca_dims, 0, 64)?;
         range("jumps_per_pixel", self.jumps_per_pixel, 1, 32)?;
-        if !self.exclusion_radius.is_finite() {
-            return Err(format!(
-                "jump map: exclusion_radius must be in 0..=10000, got {}",
-                self.exclusion_radius
-            ));
-        }
         rangef("exclusion_radius", self.exclusion_radius, 0.0, 10000.0)?;
         range("pca_samples", self.pca_samples, 256, 1 << 24)?;
-        if !self.search_eps.is_finite() {
-            return Err(format!(
-                "jump map: search_eps must be in 0..=10, got {}",
-                self.search_eps
-            ));
-        }
-        rangef("search_eps", self.search_eps, 0.0, 10.0)?;
-        Ok(())
+        rangef("search_eps", self.search_eps, 0.0, 10.0)
     }
 }
 
+/// Why an exemplar or a stored jump map cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum JumpMapError {
+    #[error(
+        "jump map: exemplar must be 1..={MAX_EXEMPLAR_SIDE} pixels on each side, got {width}×{height}"
+    )]
+    ExemplarSize { width: u32, height: u32 },
+    #[error("jump map: {width}×{height} with {k} jumps per pixel needs {want} slots, got {got}")]
+    SlotCount {
+        width: u32,
+        height: u32,
+        k: u32,
+        want: u64,
+        got: usize,
+    },
+    #[error("jump map: slot {slot} is not a valid jump: {jump:?}")]
+    BadJump { slot: usize, jump: Jump },
+}
+
 /// Checks that an exemplar can have a jump map (addresses are u16).
-pub fn check_exemplar_size(width: u32, height: u32) -> Result<(), String> {
+pub fn check_exemplar_size(width: u32, height: u32) -> Result<(), JumpMapError> {
     if width == 0 || height == 0 || width > MAX_EXEMPLAR_SIDE || height > MAX_EXEMPLAR_SIDE {
-        return Err(format!(
-            "jump map: exemplar must be 1..={MAX_EXEMPLAR_SIDE} pixels on each side, got {width}×{height}"
-        ));
+        return Err(JumpMapError::ExemplarSize { width, height });
     }
     Ok(())
 }
@@ -188,23 +189,26 @@ impl JumpMap {
 impl<'a> JumpMapRef<'a> {
     /// Checks sizes and contents of data from outside (an artifact): the slot count matches,
     /// every used jump lies inside the exemplar, weights are finite and non-negative.
-    pub fn new(width: u32, height: u32, k: u32, jumps: &'a [Jump]) -> Result<Self, String> {
+    pub fn new(width: u32, height: u32, k: u32, jumps: &'a [Jump]) -> Result<Self, JumpMapError> {
         check_exemplar_size(width, height)?;
         let want = width as u64 * height as u64 * k as u64;
         if jumps.len() as u64 != want {
-            return Err(format!(
-                "jump map: {width}×{height} with {k} jumps per pixel needs {want} slots, got {}",
-                jumps.len()
-            ));
+            return Err(JumpMapError::SlotCount {
+                width,
+                height,
+                k,
+                want,
+                got: jumps.len(),
+            });
         }
         if let Some(i) = jumps.iter().position(|j| {
             !(j.weight.is_finite() && j.weight >= 0.0)
                 || (j.weight > 0.0 && (j.x as u32 >= width || j.y as u32 >= height))
         }) {
-            return Err(format!(
-                "jump map: slot {i} is not a valid jump: {:?}",
-                jumps[i]
-            ));
+            return Err(JumpMapError::BadJump {
+                slot: i,
+                jump: jumps[i],
+            });
         }
         Ok(JumpMapRef {
             width,
@@ -446,18 +450,24 @@ mod tests {
             window: 4,
             ..Default::default()
         };
-        assert!(bad.validate().unwrap_err().contains("window"));
+        assert_eq!(
+            bad.validate().unwrap_err().to_string(),
+            "jump map: window must be odd (1..=15), got 4"
+        );
         let bad = JumpMapParams {
             jumps_per_pixel: 0,
             ..Default::default()
         };
-        let e = bad.validate().unwrap_err();
-        assert!(e.contains("jumps_per_pixel") && e.contains("1..=32"), "{e}");
+        let e = bad.validate().unwrap_err().to_string();
+        assert_eq!(e, "jump map: jumps_per_pixel must be in 1..=32, got 0");
         let bad = JumpMapParams {
             exclusion_radius: f32::NAN,
             ..Default::default()
         };
-        assert!(bad.validate().unwrap_err().contains("exclusion_radius"));
+        assert_eq!(
+            bad.validate().unwrap_err().to_string(),
+            "jump map: exclusion_radius must be in 0..=10000, got NaN"
+        );
     }
 
     #[test]
@@ -477,6 +487,7 @@ mod tests {
         assert!(
             JumpMapRef::new(2, 2, 1, &bad)
                 .unwrap_err()
+                .to_string()
                 .contains("slot 3")
         );
     }

@@ -55,8 +55,9 @@
 //! (e.g. in a memory-mapped artifact), checking every length and index. Building is parallel
 //! and gives identical bytes for any number of threads.
 
+use crate::check::{ParamError, check_range};
 use crate::geom::geometry_image::TexelImage;
-use crate::image::knn::{KdNode, KdTree, KdTreeRef};
+use crate::image::knn::{KdNode, KdTree, KdTreeError, KdTreeRef};
 use crate::image::pca::{Pca, PcaParams};
 use crate::image::{Image, pyramid};
 use rayon::prelude::*;
@@ -107,54 +108,136 @@ impl Default for TexelVariantParams {
     }
 }
 
+/// Why a variant set could not be built or read back. Messages name the sample or the
+/// damaged part of a stored set.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum VariantsError {
+    #[error(transparent)]
+    Params(#[from] ParamError),
+    #[error(
+        "texel variants: the sample is {width}×{height} texels, too small: at scale {scale} of \
+         {scales} and orientation {degrees}° its cropped pyramid level {level} has only \
+         {side}×{side} texels, too few for the {template}×{template} template and the \
+         {boundary_template}×{boundary_template} boundary template (with the coarser level's \
+         neighbourhood above the coarsest level); with these parameters the sample must be at \
+         least {need}×{need}"
+    )]
+    TooSmall {
+        width: u32,
+        height: u32,
+        /// 1-based.
+        scale: usize,
+        scales: u32,
+        degrees: f64,
+        level: usize,
+        side: u32,
+        template: u32,
+        boundary_template: u32,
+        need: u32,
+    },
+    #[error(
+        "texel variants: the sample has {channels} channels, expected 3 (dx, dy, dn) or 6 (dx, dy, dn, r, g, b)"
+    )]
+    SampleChannels { channels: u32 },
+    #[error(
+        "texel variants: a {width}×{height} sample with {channels} channels needs {} values, got {got}",
+        .width * .height * .channels
+    )]
+    SampleLength {
+        width: u32,
+        height: u32,
+        channels: u32,
+        got: usize,
+    },
+    #[error("texel variants: sample texel ({x}, {y}) channel {channel} is not a finite number")]
+    SampleNotFinite { x: u32, y: u32, channel: u32 },
+    #[error("texel variants: no array {name:?}")]
+    NoArray { name: String },
+    #[error(
+        "texel variants: array {name:?} ({bytes} bytes) is not a {size}-byte aligned array: {cause}"
+    )]
+    Misaligned {
+        name: String,
+        bytes: usize,
+        size: usize,
+        cause: bytemuck::PodCastError,
+    },
+    #[error("texel variants: {what} ({len} values at {off}) lies outside its array ({array_len})")]
+    OutsideArray {
+        what: String,
+        len: u64,
+        off: u64,
+        array_len: usize,
+    },
+    #[error("texel variants: {channels} channels, expected 3 or 6")]
+    MetaChannels { channels: u32 },
+    #[error("texel variants: bad channel weights")]
+    ChannelWeights,
+    #[error(
+        "texel variants: metadata lists {levels} levels and {sets} feature sets, expected {want_levels} and {want_sets}"
+    )]
+    MetaCounts {
+        levels: usize,
+        sets: usize,
+        want_levels: usize,
+        want_sets: usize,
+    },
+    #[error("texel variants: {what} is not where the layout puts it")]
+    Layout { what: String },
+    #[error(
+        "texel variants: {what} has dimensions {dim_in}→{dims} and {count} candidates (raw length {want} expected)"
+    )]
+    SetDims {
+        what: String,
+        dim_in: u32,
+        dims: u32,
+        count: u32,
+        want: usize,
+    },
+    #[error("texel variants: {what} has a candidate outside its level")]
+    CandidateOutside { what: String },
+    #[error("texel variants: {what}: {cause}")]
+    Tree { what: String, cause: KdTreeError },
+}
+
 fn in_range<T: PartialOrd + std::fmt::Display>(
     name: &str,
     v: T,
     lo: T,
     hi: T,
-) -> Result<(), String> {
-    crate::config::check_range(name, v, lo, hi).map_err(|e| format!("texel variants: {e}"))
+) -> Result<(), ParamError> {
+    check_range(name, v, lo, hi).map_err(|e| e.within("texel variants"))
+}
+
+fn odd(name: &str, expected: &str, v: u32) -> Result<(), ParamError> {
+    if v.is_multiple_of(2) {
+        Err(
+            ParamError::invalid(name, format!("must be odd ({expected}), got {v}"))
+                .within("texel variants"),
+        )
+    } else {
+        Ok(())
+    }
 }
 
 impl TexelVariantParams {
-    /// Checks every field; the error names the field, its range and the value.
-    pub fn validate(&self) -> Result<(), String> {
+    /// Checks every field; the error names the field, its range and the value. Float ranges
+    /// have finite bounds, so NaN and infinities are out of range too.
+    pub fn validate(&self) -> Result<(), ParamError> {
         in_range("orientations", self.orientations, 1, 64)?;
         in_range("scales", self.scales, 1, 5)?;
-        if self.scales.is_multiple_of(2) {
-            return Err(format!(
-                "texel variants: scales must be odd (1, 3 or 5), got {}",
-                self.scales
-            ));
-        }
+        odd("scales", "1, 3 or 5", self.scales)?;
         in_range("levels", self.levels, 1, 6)?;
         for (name, v) in [
             ("template", self.template),
             ("boundary_template", self.boundary_template),
         ] {
             in_range(name, v, 3, 15)?;
-            if v.is_multiple_of(2) {
-                return Err(format!(
-                    "texel variants: {name} must be odd (3..=15), got {v}"
-                ));
-            }
+            odd(name, "3..=15", v)?;
         }
         in_range("pca_dims", self.pca_dims, 0, 64)?;
-        if !self.coarse_weight.is_finite() {
-            return Err(format!(
-                "texel variants: coarse_weight must be in 0..=4, got {}",
-                self.coarse_weight
-            ));
-        }
         in_range("coarse_weight", self.coarse_weight, 0.0, 4.0)?;
-        if !self.color_weight.is_finite() {
-            return Err(format!(
-                "texel variants: color_weight must be in 0..=100, got {}",
-                self.color_weight
-            ));
-        }
-        in_range("color_weight", self.color_weight, 0.0, 100.0)?;
-        Ok(())
+        in_range("color_weight", self.color_weight, 0.0, 100.0)
     }
 
     /// Number of variants (`orientations × scales`).
@@ -373,50 +456,56 @@ impl<'a> TexelVariantsRef<'a> {
     pub fn from_arrays(
         meta: VariantsMeta,
         get: impl Fn(&str) -> Option<&'a [u8]>,
-    ) -> Result<TexelVariantsRef<'a>, String> {
+    ) -> Result<TexelVariantsRef<'a>, VariantsError> {
+        use VariantsError as E;
         fn arr<'b, T: bytemuck::Pod>(
             get: &impl Fn(&str) -> Option<&'b [u8]>,
             name: &str,
-        ) -> Result<&'b [T], String> {
-            let raw = get(name).ok_or_else(|| format!("texel variants: no array {name:?}"))?;
-            bytemuck::try_cast_slice(raw).map_err(|e| {
-                format!(
-                    "texel variants: array {name:?} ({} bytes) is not a {}-byte aligned array: {e}",
-                    raw.len(),
-                    std::mem::size_of::<T>()
-                )
+        ) -> Result<&'b [T], VariantsError> {
+            let raw = get(name).ok_or_else(|| E::NoArray { name: name.into() })?;
+            bytemuck::try_cast_slice(raw).map_err(|e| E::Misaligned {
+                name: name.into(),
+                bytes: raw.len(),
+                size: std::mem::size_of::<T>(),
+                cause: e,
             })
         }
-        fn sub<'b, T>(a: &'b [T], off: u64, len: u64, what: &str) -> Result<&'b [T], String> {
+        fn sub<'b, T>(
+            a: &'b [T],
+            off: u64,
+            len: u64,
+            what: &str,
+        ) -> Result<&'b [T], VariantsError> {
             let end = off.checked_add(len);
             match end {
                 Some(e) if e <= a.len() as u64 => Ok(&a[off as usize..e as usize]),
-                _ => Err(format!(
-                    "texel variants: {what} ({len} values at {off}) lies outside its array ({})",
-                    a.len()
-                )),
+                _ => Err(E::OutsideArray {
+                    what: what.into(),
+                    len,
+                    off,
+                    array_len: a.len(),
+                }),
             }
         }
         meta.params.validate()?;
         let c = meta.channels;
         if c != 3 && c != 6 {
-            return Err(format!("texel variants: {c} channels, expected 3 or 6"));
+            return Err(E::MetaChannels { channels: c });
         }
         if meta.channel_weights.len() != c as usize
             || meta.channel_weights.iter().any(|w| !w.is_finite())
         {
-            return Err("texel variants: bad channel weights".into());
+            return Err(E::ChannelWeights);
         }
         let nv = meta.params.variant_count();
         let nl = meta.params.levels as usize;
         if meta.levels.len() != nv * nl || meta.sets.len() != nv * nl * 2 {
-            return Err(format!(
-                "texel variants: metadata lists {} levels and {} feature sets, expected {} and {}",
-                meta.levels.len(),
-                meta.sets.len(),
-                nv * nl,
-                nv * nl * 2
-            ));
+            return Err(E::MetaCounts {
+                levels: meta.levels.len(),
+                sets: meta.sets.len(),
+                want_levels: nv * nl,
+                want_sets: nv * nl * 2,
+            });
         }
         let texels: &[f32] = arr(&get, "texels")?;
         let centres: &[u32] = arr(&get, "centres")?;
@@ -427,8 +516,7 @@ impl<'a> TexelVariantsRef<'a> {
         let tree_nodes: &[KdNode] = arr(&get, "tree_nodes")?;
         // The layout is the canonical one (arrays concatenated in order, nothing between or
         // after), so a metadata entry that disagrees with its neighbours is caught.
-        let layout_err =
-            |what: &str| format!("texel variants: {what} is not where the layout puts it");
+        let layout_err = |what: &str| E::Layout { what: what.into() };
         let mut next_texel = 0u64;
         let mut levels = Vec::with_capacity(meta.levels.len());
         for (i, lm) in meta.levels.iter().enumerate() {
@@ -464,10 +552,13 @@ impl<'a> TexelVariantsRef<'a> {
             let want = feature_dim(kind, side, with_coarse, c);
             let what = format!("feature set {i}");
             if sm.dim_in as usize != want || sm.dims == 0 || sm.dims > sm.dim_in || sm.count == 0 {
-                return Err(format!(
-                    "texel variants: {what} has dimensions {}→{} and {} candidates (raw length {want} expected)",
-                    sm.dim_in, sm.dims, sm.count
-                ));
+                return Err(E::SetDims {
+                    what,
+                    dim_in: sm.dim_in,
+                    dims: sm.dims,
+                    count: sm.count,
+                    want,
+                });
             }
             let offsets = [
                 sm.centre_offset,
@@ -488,9 +579,7 @@ impl<'a> TexelVariantsRef<'a> {
             let cs = sub(centres, sm.centre_offset, sm.count as u64, &what)?;
             let texel_count = lv.width * lv.height;
             if cs.iter().any(|&x| x >= texel_count) {
-                return Err(format!(
-                    "texel variants: {what} has a candidate outside its level"
-                ));
+                return Err(E::CandidateOutside { what });
             }
             let ids = sub(tree_ids, sm.centre_offset, sm.count as u64, &what)?;
             let points = sub(
@@ -501,7 +590,10 @@ impl<'a> TexelVariantsRef<'a> {
             )?;
             let nodes = sub(tree_nodes, sm.node_offset, sm.node_count, &what)?;
             let tree = KdTreeRef::from_parts(sm.dims as usize, points, ids, nodes, sm.count)
-                .map_err(|e| format!("texel variants: {what}: {e}"))?;
+                .map_err(|e| E::Tree {
+                    what: what.clone(),
+                    cause: e,
+                })?;
             sets.push(SetRef {
                 dim_in: sm.dim_in as usize,
                 dims: sm.dims as usize,
@@ -702,26 +794,23 @@ pub fn check_sample_size(
     width: u32,
     height: u32,
     params: &TexelVariantParams,
-) -> Result<(), String> {
+) -> Result<(), VariantsError> {
     params.validate()?;
     let Some((scale, k, l, side, _)) = shortfall(width, height, params, 1) else {
         return Ok(());
     };
-    let need = side_needed(params, 1, width.max(height));
-    Err(format!(
-        "texel variants: the sample is {width}×{height} texels, too small: at scale {} of {} and \
-         orientation {}° its cropped pyramid level {l} has only {side}×{side} texels, too few \
-         for the {}×{} template and the {}×{} boundary template (with the coarser level's \
-         neighbourhood above the coarsest level); with these parameters the sample must be at \
-         least {need}×{need}",
-        scale + 1,
-        params.scales,
-        k as f64 * 360.0 / params.orientations as f64,
-        params.template,
-        params.template,
-        params.boundary_template,
-        params.boundary_template,
-    ))
+    Err(VariantsError::TooSmall {
+        width,
+        height,
+        scale: scale + 1,
+        scales: params.scales,
+        degrees: k as f64 * 360.0 / params.orientations as f64,
+        level: l,
+        side,
+        template: params.template,
+        boundary_template: params.boundary_template,
+        need: side_needed(params, 1, width.max(height)),
+    })
 }
 
 /// Packs a texel image's channels into RGBA images (3 channels each, alpha 1), so the image
@@ -967,31 +1056,27 @@ pub fn build_texel_variants(
     sample: &TexelImage,
     params: &TexelVariantParams,
     progress: &dyn Fn(f32),
-) -> Result<TexelVariants, String> {
+) -> Result<TexelVariants, VariantsError> {
     params.validate()?;
     let c = sample.channels;
     if c != 3 && c != 6 {
-        return Err(format!(
-            "texel variants: the sample has {c} channels, expected 3 (dx, dy, dn) or 6 (dx, dy, dn, r, g, b)"
-        ));
+        return Err(VariantsError::SampleChannels { channels: c });
     }
     if sample.data.len() != (sample.width * sample.height * c) as usize {
-        return Err(format!(
-            "texel variants: a {}×{} sample with {c} channels needs {} values, got {}",
-            sample.width,
-            sample.height,
-            sample.width * sample.height * c,
-            sample.data.len()
-        ));
+        return Err(VariantsError::SampleLength {
+            width: sample.width,
+            height: sample.height,
+            channels: c,
+            got: sample.data.len(),
+        });
     }
     if let Some(i) = sample.data.iter().position(|v| !v.is_finite()) {
         let t = i as u32 / c;
-        return Err(format!(
-            "texel variants: sample texel ({}, {}) channel {} is not a finite number",
-            t % sample.width,
-            t / sample.width,
-            i as u32 % c
-        ));
+        return Err(VariantsError::SampleNotFinite {
+            x: t % sample.width,
+            y: t / sample.width,
+            channel: i as u32 % c,
+        });
     }
     check_sample_size(sample.width, sample.height, params)?;
     if let Some((scale, k, l, side, count)) =
@@ -1176,22 +1261,28 @@ mod tests {
             ..Default::default()
         }
         .validate()
-        .unwrap_err();
-        assert!(e.contains("template") && e.contains("odd"), "{e}");
+        .unwrap_err()
+        .to_string();
+        assert_eq!(e, "texel variants: template must be odd (3..=15), got 4");
         let e = TexelVariantParams {
             scales: 2,
             ..Default::default()
         }
         .validate()
-        .unwrap_err();
-        assert!(e.contains("scales"), "{e}");
+        .unwrap_err()
+        .to_string();
+        assert_eq!(e, "texel variants: scales must be odd (1, 3 or 5), got 2");
         let e = TexelVariantParams {
             color_weight: f32::NAN,
             ..Default::default()
         }
         .validate()
-        .unwrap_err();
-        assert!(e.contains("color_weight"), "{e}");
+        .unwrap_err()
+        .to_string();
+        assert_eq!(
+            e,
+            "texel variants: color_weight must be in 0..=100, got NaN"
+        );
         let e: Result<TexelVariantParams, _> = toml::from_str("orientation = 8");
         assert!(e.is_err(), "unknown fields are refused");
     }
@@ -1253,6 +1344,10 @@ mod tests {
     fn too_small_sample_names_the_size_needed() {
         let p = TexelVariantParams::default();
         let e = build_texel_variants(&stripes(20, 20, 6.0), &p, &|_| {}).unwrap_err();
+        let VariantsError::TooSmall { need: n, .. } = e else {
+            panic!("{e}")
+        };
+        let e = e.to_string();
         assert!(e.contains("20×20") && e.contains("at least"), "{e}");
         let need: u32 = e
             .rsplit("at least ")
@@ -1263,6 +1358,7 @@ mod tests {
             .unwrap()
             .parse()
             .unwrap();
+        assert_eq!(need, n);
         assert!(check_sample_size(need, need, &p).is_ok());
         assert!(check_sample_size(need - 1, need - 1, &p).is_err());
     }
@@ -1279,65 +1375,6 @@ mod tests {
         assert!(shortfall(n, n, &p, FEW_CANDIDATES).is_none());
         assert!(shortfall(n - 1, n - 1, &p, FEW_CANDIDATES).is_some());
         println!("a sample of {n}² gives every level {FEW_CANDIDATES} candidates");
-    }
-
-    #[test]
-    fn arrays_round_trip_through_an_artifact_and_damage_is_an_error() {
-        use crate::artifact::{Artifact, ArtifactWriter, Kind};
-        let p = TexelVariantParams {
-            orientations: 2,
-            ..Default::default()
-        };
-        let v = build_texel_variants(&stripes(40, 40, 7.0), &p, &|_| {}).unwrap();
-        let mut w = ArtifactWriter::new(Kind::Image, &v.meta);
-        for (name, bytes) in v.arrays() {
-            w = w.array_bytes(name, bytes.to_vec());
-        }
-        let art = Artifact::from_bytes(w.finish()).unwrap();
-        let meta: VariantsMeta = art.meta().unwrap();
-        let r = TexelVariantsRef::from_arrays(meta.clone(), |n| art.raw_array(n).ok()).unwrap();
-        let owned = v.as_ref();
-        assert_eq!(r.meta, v.meta);
-        for var in 0..r.variant_count() {
-            for l in 0..r.levels() {
-                assert_eq!(r.level(var, l).texels, owned.level(var, l).texels);
-                for kind in [Template::Causal, Template::Full] {
-                    let (a, b) = (r.set(var, l, kind), owned.set(var, l, kind));
-                    assert_eq!(a.centres, b.centres);
-                    assert_eq!(a.basis, b.basis);
-                    let q = vec![0.1f32; a.dims];
-                    let mut s = Vec::new();
-                    assert_eq!(
-                        a.tree.nearest1_approx(&q, 0.0, &mut s),
-                        b.tree.nearest1_approx(&q, 0.0, &mut s)
-                    );
-                }
-            }
-        }
-        // A missing array, a short array and inconsistent metadata are errors.
-        assert!(
-            TexelVariantsRef::from_arrays(meta.clone(), |n| {
-                (n != "centres").then(|| art.raw_array(n).ok()).flatten()
-            })
-            .is_err()
-        );
-        assert!(
-            TexelVariantsRef::from_arrays(meta.clone(), |n| {
-                let a = art.raw_array(n).ok()?;
-                Some(if n == "tree_points" {
-                    &a[..a.len() - 4]
-                } else {
-                    a
-                })
-            })
-            .is_err()
-        );
-        let mut bad = meta.clone();
-        bad.sets[3].dims += 1;
-        assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
-        let mut bad = meta;
-        bad.levels.pop();
-        assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
     }
 
     #[test]

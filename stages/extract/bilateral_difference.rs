@@ -20,7 +20,7 @@
 //! - Mates (samples that are the same surface point, across cuts) take their representative's
 //!   smoothed position, so that they get the same texel.
 
-use super::{ExtractError, check_positive, check_range};
+use super::{ExtractError, ParamError, check_positive, check_range};
 use crate::geom::geometry_image::{Frame, GeometryImage, TexelImage, local_frames};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -40,7 +40,7 @@ pub struct BilateralParams {
 
 impl BilateralParams {
     /// Checks the fields that are set; the error names the field, its range and the value.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         if let Some(s) = self.sigma_grid {
             check_range("sigma_grid", s, 0.5, 1024.0)?;
         }
@@ -75,7 +75,7 @@ pub fn bilateral_difference(
     params: &BilateralParams,
     progress: &(dyn Fn(f32) + Sync),
 ) -> Result<BilateralExtraction, ExtractError> {
-    params.validate().map_err(ExtractError::Params)?;
+    params.validate()?;
     let n = gi.n as usize;
     let count = n * n;
     if n < 2 {

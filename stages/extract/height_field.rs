@@ -15,7 +15,7 @@ use super::planar_ransac::{
     PlanarExtraction, Plane, RansacParams, fit_plane_ransac, sample_square,
 };
 use super::square_domain::{largest_rotated_square, rotate_into};
-use super::{ExtractError, check_range};
+use super::{ExtractError, ParamError, check_range};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::TexelImage;
 use crate::image::ImageView;
@@ -31,7 +31,7 @@ pub fn mesh_height_field(
     params: &RansacParams,
     progress: &(dyn Fn(f32) + Sync),
 ) -> Result<PlanarExtraction, ExtractError> {
-    check_range("size", size, 1, 8192).map_err(ExtractError::Params)?;
+    check_range("size", size, 1, 8192)?;
     let fit = fit_plane_ransac(patch, params)?;
     progress(0.3);
     let faces = patch.triangles.len();
@@ -106,9 +106,11 @@ pub fn height_field_image(
     min_size: u32,
 ) -> Result<TexelImage, ExtractError> {
     if !height_scale.is_finite() {
-        return Err(ExtractError::Params(format!(
-            "height_scale must be a finite number, got {height_scale}"
-        )));
+        return Err(ParamError::invalid(
+            "height_scale",
+            format!("must be a finite number, got {height_scale}"),
+        )
+        .into());
     }
     if img.width < min_size.max(1) || img.height < min_size.max(1) {
         return Err(ExtractError::TooSmall {
@@ -120,13 +122,13 @@ pub fn height_field_image(
     }
     let expected = img.width as usize * img.height as usize;
     if img.pixels.len() != expected {
-        return Err(ExtractError::Params(format!(
-            "{}: the image holds {} pixels, {expected} expected for {}×{}",
-            path.display(),
-            img.pixels.len(),
-            img.width,
-            img.height
-        )));
+        return Err(ExtractError::PixelCount {
+            path: path.to_owned(),
+            pixels: img.pixels.len(),
+            expected,
+            width: img.width,
+            height: img.height,
+        });
     }
     for (i, p) in img.pixels.iter().enumerate() {
         let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));

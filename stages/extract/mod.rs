@@ -22,7 +22,7 @@ pub mod square_domain;
 
 use crate::geom::Mesh;
 use crate::geom::geometry_image::{Frame, TexelImage};
-use crate::stages::parameterize::geometry_image::{GeometryImageParams, build_geometry_image};
+use crate::parameterize::geometry_image::{GeometryImageParams, build_geometry_image};
 use glam::Vec3;
 use sample_region::Region;
 use serde::{Deserialize, Serialize};
@@ -33,7 +33,19 @@ use std::path::PathBuf;
 pub enum ExtractError {
     /// A parameter out of range; the message names the field, its range and the value.
     #[error("extract: {0}")]
-    Params(String),
+    Params(#[from] ParamError),
+    /// A decoded image whose pixel array disagrees with its size.
+    #[error(
+        "extract: {}: the image holds {pixels} pixels, {expected} expected for {width}×{height}",
+        path.display()
+    )]
+    PixelCount {
+        path: PathBuf,
+        pixels: usize,
+        expected: usize,
+        width: u32,
+        height: u32,
+    },
     #[error("the sample mesh has no triangles")]
     EmptyMesh,
     #[error(
@@ -157,29 +169,32 @@ impl Default for ExtractParams {
     }
 }
 
-pub(crate) use crate::config::check_range;
+pub(crate) use crate::check::{ParamError, check_range};
 
-pub(crate) fn check_positive(name: &str, v: f32) -> Result<(), String> {
+pub(crate) fn check_positive(name: &str, v: f32) -> Result<(), ParamError> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        Err(format!("{name} must be a finite number > 0, got {v}"))
+        Err(ParamError::invalid(
+            name,
+            format!("must be a finite number > 0, got {v}"),
+        ))
     }
 }
 
 impl ExtractParams {
     /// Checks every field; the error names the field, its range and the value.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         check_range("size", self.size, 8, 1024)?;
         if let Some(r) = &self.region {
-            r.validate().map_err(|m| format!("region: {m}"))?;
+            r.validate().map_err(|e| e.within("region"))?;
         }
         self.bilateral().validate()?;
         self.ransac().validate()?;
         if !self.height_scale.is_finite() {
-            return Err(format!(
-                "height_scale must be a finite number, got {}",
-                self.height_scale
+            return Err(ParamError::invalid(
+                "height_scale",
+                format!("must be a finite number, got {}", self.height_scale),
             ));
         }
         Ok(())
@@ -261,7 +276,7 @@ pub fn extract_mesh_texture(
     params: &ExtractParams,
     progress: &(dyn Fn(f32) + Sync),
 ) -> Result<Extraction, ExtractError> {
-    params.validate().map_err(ExtractError::Params)?;
+    params.validate()?;
     let patch = sample_region::select_region(mesh, params.region.as_ref())?;
     let (patch_vertices, patch_faces) = (patch.positions.len(), patch.triangles.len());
     let size = params.size;

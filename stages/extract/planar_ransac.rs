@@ -21,7 +21,7 @@
 //! patch's face normals, so dn > 0 is outside the surface.
 
 use super::square_domain::{Locator, Square, largest_rotated_square, rotate_into};
-use super::{ExtractError, check_range};
+use super::{ExtractError, ParamError, check_range};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::TexelImage;
 use crate::geom::mean_value::convex_combination_map;
@@ -100,7 +100,7 @@ impl Default for RansacParams {
 
 impl RansacParams {
     /// Checks every field; the error names the field, its range and the value.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         check_range("ransac_iterations", self.iterations, 1, 1_000_000)?;
         check_range("surface_samples", self.samples, 16, 1_000_000)?;
         if let Some(d) = self.inlier_distance {
@@ -126,7 +126,7 @@ pub struct PlaneFit {
 /// Fits a plane to the surface of `mesh` (§4.1.2): RANSAC over area-uniform random samples
 /// with a least-squares (PCA) refit to the best plane's inliers. Deterministic for a seed.
 pub fn fit_plane_ransac(mesh: &Mesh, params: &RansacParams) -> Result<PlaneFit, ExtractError> {
-    params.validate().map_err(ExtractError::Params)?;
+    params.validate()?;
     if mesh.triangles.is_empty() {
         return Err(ExtractError::EmptyMesh);
     }
@@ -448,7 +448,7 @@ pub fn planar_extract(
     params: &RansacParams,
     progress: &(dyn Fn(f32) + Sync),
 ) -> Result<PlanarExtraction, ExtractError> {
-    check_range("size", size, 1, 8192).map_err(ExtractError::Params)?;
+    check_range("size", size, 1, 8192)?;
     let fit = fit_plane_ransac(patch, params)?;
     progress(0.2);
     let faces = patch.triangles.len();

@@ -8,6 +8,7 @@
 //! one plane.
 
 use super::ExtractError;
+use crate::check::ParamError;
 use crate::geom::Mesh;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -29,12 +30,15 @@ pub enum Region {
 
 impl Region {
     /// Checks the shape; the error names the field and what was wrong.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         let finite = |name: &str, v: [f32; 3]| {
             if v.iter().all(|c| c.is_finite()) {
                 Ok(())
             } else {
-                Err(format!("{name} must be 3 finite numbers, got {v:?}"))
+                Err(ParamError::invalid(
+                    name,
+                    format!("must be 3 finite numbers, got {v:?}"),
+                ))
             }
         };
         match self {
@@ -47,8 +51,11 @@ impl Region {
                 finite("max", *max)?;
                 for k in 0..3 {
                     if min[k] > max[k] {
-                        return Err(format!(
-                            "min must not exceed max in any coordinate, got min {min:?}, max {max:?}"
+                        return Err(ParamError::invalid(
+                            "min",
+                            format!(
+                                "must not exceed max in any coordinate, got min {min:?}, max {max:?}"
+                            ),
                         ));
                     }
                 }
@@ -94,8 +101,7 @@ impl std::fmt::Display for Region {
 /// dropped.
 pub fn select_region(mesh: &Mesh, region: Option<&Region>) -> Result<Mesh, ExtractError> {
     if let Some(r) = region {
-        r.validate()
-            .map_err(|m| ExtractError::Params(format!("region: {m}")))?;
+        r.validate().map_err(|e| e.within("region"))?;
     }
     if mesh.triangles.is_empty() {
         return Err(ExtractError::EmptyMesh);
@@ -235,21 +241,24 @@ mod tests {
             radius: -1.0,
         }
         .validate()
-        .unwrap_err();
-        assert!(e.contains("radius"), "{e}");
+        .unwrap_err()
+        .to_string();
+        assert_eq!(e, "radius must be a finite number > 0, got -1");
         let e = Region::Box {
             min: [0.0, 2.0, 0.0],
             max: [1.0, 1.0, 1.0],
         }
         .validate()
-        .unwrap_err();
-        assert!(e.contains("min"), "{e}");
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with("min must not exceed max"), "{e}");
         let e = Region::Sphere {
             center: [f32::NAN, 0.0, 0.0],
             radius: 1.0,
         }
         .validate()
-        .unwrap_err();
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("center"), "{e}");
     }
 }

@@ -15,8 +15,9 @@
 //!   the median over the image (the paper says mean; see [`reference_spacing`]). The global density offset of §5 (Fig. 8) multiplies R by
 //!   2^offset: positive offsets pick smaller sample variants, so the texture gets denser.
 
+use crate::check::{ParamError, check_range};
 use crate::geom::geometry_image::GeometryImage;
-use crate::linalg::SpdSolver;
+use crate::linalg::{SolveError, SpdSolver};
 use glam::{DVec3, Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -40,17 +41,30 @@ pub struct ParamFieldParams {
 }
 
 impl ParamFieldParams {
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         for (k, key) in self.keys.iter().enumerate() {
             let d = Vec3::from(key.direction);
             if !Vec3::from(key.at).is_finite() || !d.is_finite() || d.length() < 1e-12 {
-                return Err(format!(
-                    "field.keys[{k}]: `at` must be finite and `direction` finite and non-zero"
-                ));
+                return Err(ParamError::invalid(
+                    "`at`",
+                    "must be finite and `direction` finite and non-zero",
+                )
+                .within(&format!("field.keys[{k}]")));
             }
         }
-        crate::config::check_range("field.density_offset", self.density_offset, -3.0, 3.0)
+        check_range("field.density_offset", self.density_offset, -3.0, 3.0)
     }
+}
+
+/// Why the field could not be computed.
+#[derive(Debug, thiserror::Error)]
+pub enum ParamFieldError {
+    #[error(transparent)]
+    Params(#[from] ParamError),
+    #[error("field.keys[{index}]: direction is normal to the surface at {at:?}")]
+    NormalKey { index: usize, at: [f32; 3] },
+    #[error(transparent)]
+    Solve(#[from] SolveError),
 }
 
 /// The per-sample controls of synthesis (§4.3), one entry per geometry-image sample
@@ -67,7 +81,10 @@ pub struct ParamField {
     pub rel_scale: Vec<f32>,
 }
 
-pub fn param_field(gi: &GeometryImage, p: &ParamFieldParams) -> Result<ParamField, String> {
+pub fn param_field(
+    gi: &GeometryImage,
+    p: &ParamFieldParams,
+) -> Result<ParamField, ParamFieldError> {
     p.validate()?;
     let n = gi.n as usize;
     let count = n * n;
@@ -135,7 +152,7 @@ pub fn local_spacing(gi: &GeometryImage) -> Vec<f32> {
 
 /// Harmonic interpolation of the key vectors over the grid (mates merged), projected into
 /// each sample's tangent plane.
-fn diffuse_keys(gi: &GeometryImage, keys: &[KeyVector]) -> Result<Vec<Vec3>, String> {
+fn diffuse_keys(gi: &GeometryImage, keys: &[KeyVector]) -> Result<Vec<Vec3>, ParamFieldError> {
     let n = gi.n as usize;
     let count = n * n;
     // Unknowns: one per mate group.
@@ -166,10 +183,10 @@ fn diffuse_keys(gi: &GeometryImage, keys: &[KeyVector]) -> Result<Vec<Vec3>, Str
         let d = Vec3::from(key.direction);
         let t = d - d.dot(nrm) * nrm;
         if t.length() < 1e-6 * d.length() {
-            return Err(format!(
-                "field.keys[{idx}]: direction is normal to the surface at {:?}",
-                key.at
-            ));
+            return Err(ParamFieldError::NormalKey {
+                index: idx,
+                at: key.at,
+            });
         }
         fixed[unknown[k] as usize] = Some(t.normalize().as_dvec3());
     }
@@ -228,9 +245,7 @@ fn diffuse_keys(gi: &GeometryImage, keys: &[KeyVector]) -> Result<Vec<Vec3>, Str
         triplets.push((u, u, d + eps.max(1e-300)));
     }
     if nfree > 0 {
-        SpdSolver::new(nfree, &triplets)
-            .map_err(|e| e.to_string())?
-            .solve(&mut rhs, 3);
+        SpdSolver::new(nfree, &triplets)?.solve(&mut rhs, 3);
     }
     Ok((0..count)
         .map(|k| {
@@ -389,6 +404,13 @@ mod tests {
             }],
             density_offset: 0.0,
         };
-        assert!(param_field(&gi, &p).unwrap_err().contains("field.keys[0]"));
+        let e = param_field(&gi, &p).unwrap_err().to_string();
+        assert!(e.starts_with("field.keys[0]: direction is normal"), "{e}");
+        let mut p = p;
+        p.keys[0].direction = [0.0; 3];
+        assert_eq!(
+            param_field(&gi, &p).unwrap_err().to_string(),
+            "field.keys[0]: `at` must be finite and `direction` finite and non-zero"
+        );
     }
 }

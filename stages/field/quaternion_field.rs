@@ -21,7 +21,7 @@
 //! The optional scale field (§3, last paragraph) interpolates user scalings at sparse points
 //! harmonically on the same grid.
 
-use crate::linalg::SpdSolver;
+use crate::linalg::{SolveError, SpdSolver};
 use glam::{DQuat, DVec3, Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -209,7 +209,7 @@ pub enum FieldError {
     #[error("field.scales[{index}]: scale must be a finite number in 0.1..=10, got {scale}")]
     Scale { index: usize, scale: f32 },
     #[error("field: {0}")]
-    Solve(String),
+    Solve(#[from] SolveError),
 }
 
 /// Weight of the curve constraints in eq. (2); §3 uses 100 for every example.
@@ -401,10 +401,9 @@ impl SmoothnessSystem {
         t
     }
 
-    fn solve(&self, targets: &[Option<DQuat>]) -> Result<Vec<DQuat>, String> {
+    fn solve(&self, targets: &[Option<DQuat>]) -> Result<Vec<DQuat>, SolveError> {
         let w2 = CONSTRAINT_WEIGHT * CONSTRAINT_WEIGHT;
-        let solver = SpdSolver::new(self.n, &self.with_constraints(|v| targets[v].is_some()))
-            .map_err(|e| e.to_string())?;
+        let solver = SpdSolver::new(self.n, &self.with_constraints(|v| targets[v].is_some()))?;
         let mut rhs = vec![0.0; 4 * self.n];
         for (v, t) in targets.iter().enumerate() {
             if let Some(q) = t {
@@ -426,10 +425,9 @@ impl SmoothnessSystem {
             .collect())
     }
 
-    fn solve_scalar(&self, targets: &[Option<f64>]) -> Result<Vec<f64>, String> {
+    fn solve_scalar(&self, targets: &[Option<f64>]) -> Result<Vec<f64>, SolveError> {
         let w2 = CONSTRAINT_WEIGHT * CONSTRAINT_WEIGHT;
-        let solver = SpdSolver::new(self.n, &self.with_constraints(|v| targets[v].is_some()))
-            .map_err(|e| e.to_string())?;
+        let solver = SpdSolver::new(self.n, &self.with_constraints(|v| targets[v].is_some()))?;
         let mut rhs: Vec<f64> = targets.iter().map(|t| t.map_or(0.0, |x| w2 * x)).collect();
         solver.solve(&mut rhs, 1);
         Ok(rhs)

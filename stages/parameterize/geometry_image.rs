@@ -60,6 +60,7 @@
 //! - Corner insertion and chord splitting are ours: they make the disk cover the square and
 //!   keep every triangle non-degenerate in the plane.
 
+use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use crate::geom::cut_graph::{CutError, cut_graph, cut_to_disk};
 use crate::geom::geometry_image::GeometryImage;
@@ -103,34 +104,29 @@ impl Default for GeometryImageParams {
 
 impl GeometryImageParams {
     /// Checks every field's range; the message names the field, the range and the value.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         let k = size_exponent(self.size).ok_or_else(|| {
-            format!(
-                "size must be 2^k + 1 with 2 <= k <= 12 (5, 9, 17, 33, 65, 129, 257, 513, 1025, \
-                 2049 or 4097), got {}",
-                self.size
+            ParamError::invalid(
+                "size",
+                format!(
+                    "must be 2^k + 1 with 2 <= k <= 12 (5, 9, 17, 33, 65, 129, 257, 513, 1025, \
+                     2049 or 4097), got {}",
+                    self.size
+                ),
             )
         })?;
         if self.coarse_levels < 1 || self.coarse_levels > k {
-            return Err(format!(
-                "coarse_levels must be in 1..={k} for size {} (the coarsest grid needs at \
-                 least 3 samples per side), got {}",
-                self.size, self.coarse_levels
+            return Err(ParamError::invalid(
+                "coarse_levels",
+                format!(
+                    "must be in 1..={k} for size {} (the coarsest grid needs at least 3 samples \
+                     per side), got {}",
+                    self.size, self.coarse_levels
+                ),
             ));
         }
-        if self.extremity_cuts > 256 {
-            return Err(format!(
-                "extremity_cuts must be in 0..=256, got {}",
-                self.extremity_cuts
-            ));
-        }
-        if self.stretch_iterations > 100 {
-            return Err(format!(
-                "stretch_iterations must be in 0..=100, got {}",
-                self.stretch_iterations
-            ));
-        }
-        Ok(())
+        check_range("extremity_cuts", self.extremity_cuts, 0, 256)?;
+        check_range("stretch_iterations", self.stretch_iterations, 0, 100)
     }
 }
 
@@ -143,7 +139,7 @@ fn size_exponent(size: u32) -> Option<u32> {
 #[derive(Debug, thiserror::Error)]
 pub enum GeometryImageError {
     #[error("invalid geometry image parameters: {0}")]
-    Params(String),
+    Params(#[from] ParamError),
     #[error("the mesh is not a surface a geometry image can be made of: {0}")]
     Topology(#[from] TopologyError),
     #[error("cutting the mesh to a disk failed: {0}")]
@@ -220,7 +216,7 @@ pub fn build_geometry_image(
     p: &GeometryImageParams,
     progress: &dyn Fn(f32),
 ) -> Result<GeometryImageBuild, GeometryImageError> {
-    p.validate().map_err(GeometryImageError::Params)?;
+    p.validate()?;
     progress(0.0);
     let n = p.size as usize;
     let side = (n - 1) as u64;
@@ -830,18 +826,31 @@ mod tests {
             size: 100,
             ..ok.clone()
         };
-        assert!(bad.validate().unwrap_err().contains("size"));
+        assert_eq!(
+            bad.validate().unwrap_err().to_string(),
+            "size must be 2^k + 1 with 2 <= k <= 12 (5, 9, 17, 33, 65, 129, 257, 513, 1025, 2049 \
+             or 4097), got 100"
+        );
         let bad = GeometryImageParams {
             coarse_levels: 9,
             ..ok.clone()
         };
-        assert!(bad.validate().unwrap_err().contains("coarse_levels"));
+        assert!(
+            bad.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("coarse_levels")
+        );
         let bad = GeometryImageParams {
             size: 65,
             coarse_levels: 7,
             ..ok.clone()
         };
-        assert!(bad.validate().unwrap_err().contains("1..=6"));
+        assert_eq!(
+            bad.validate().unwrap_err().to_string(),
+            "coarse_levels must be in 1..=6 for size 65 (the coarsest grid needs at least 3 \
+             samples per side), got 7"
+        );
         let parsed: GeometryImageParams = toml::from_str("size = 65").unwrap();
         assert_eq!(parsed.size, 65);
         assert_eq!(parsed.coarse_levels, 3);

@@ -7,6 +7,7 @@
 //! a cross-section plane (a grid of sample points on the plane, one voxel apart, clipped to
 //! the volume), or a box.
 
+use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use glam::{IVec3, Vec3};
 use serde::{Deserialize, Serialize};
@@ -51,12 +52,37 @@ impl Volume {
 
 /// A volume around the mesh: its bounding box grown by `margin` (a fraction of each side;
 /// 0.25 by default) and cut into `longest` voxels along its longest side.
-pub fn embed(mesh: &Mesh, longest: u32, margin: f32) -> Result<Volume, String> {
+/// Why a volume, a section or a box could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EmbeddingError {
+    #[error(transparent)]
+    Params(#[from] ParamError),
+    #[error("the mesh has no triangles to embed")]
+    EmptyMesh,
+    #[error("the plane needs a finite point and a non-zero normal")]
+    BadPlane,
+    #[error("the plane through {point} with normal {normal} misses the volume ({min} to {max})")]
+    PlaneMisses {
+        point: Vec3,
+        normal: Vec3,
+        min: Vec3,
+        max: Vec3,
+    },
+    #[error("the box {min} to {max} misses the volume ({vol_min} to {vol_max})")]
+    BoxMisses {
+        min: Vec3,
+        max: Vec3,
+        vol_min: Vec3,
+        vol_max: Vec3,
+    },
+}
+
+pub fn embed(mesh: &Mesh, longest: u32, margin: f32) -> Result<Volume, EmbeddingError> {
     if mesh.triangles.is_empty() {
-        return Err("the mesh has no triangles to embed".into());
+        return Err(EmbeddingError::EmptyMesh);
     }
-    crate::config::check_range("parameterize.resolution", longest, 8, 4096)?;
-    crate::config::check_range("parameterize.margin", margin, 0.0, 4.0)?;
+    check_range("parameterize.resolution", longest, 8, 4096)?;
+    check_range("parameterize.margin", margin, 0.0, 4.0)?;
     let (lo, hi) = mesh.bounds();
     let size = (hi - lo).max(Vec3::splat(1e-6));
     let grown = size * (1.0 + margin);
@@ -127,9 +153,9 @@ impl Section {
 
 /// The section of the volume by the plane through `point` with `normal`. Errors when the
 /// plane misses the volume.
-pub fn section(vol: &Volume, point: Vec3, normal: Vec3) -> Result<Section, String> {
+pub fn section(vol: &Volume, point: Vec3, normal: Vec3) -> Result<Section, EmbeddingError> {
     if !point.is_finite() || !normal.is_finite() || normal.length() < 1e-12 {
-        return Err("the plane needs a finite point and a non-zero normal".into());
+        return Err(EmbeddingError::BadPlane);
     }
     let n = normal.normalize();
     // In-plane axes: the world axis least aligned with n, orthogonalized.
@@ -153,9 +179,12 @@ pub fn section(vol: &Volume, point: Vec3, normal: Vec3) -> Result<Section, Strin
         .collect();
     let sides: Vec<f32> = corners.iter().map(|c| (*c - point).dot(n)).collect();
     if sides.iter().all(|&s| s > 0.0) || sides.iter().all(|&s| s < 0.0) {
-        return Err(format!(
-            "the plane through {point} with normal {n} misses the volume ({lo} to {hi})"
-        ));
+        return Err(EmbeddingError::PlaneMisses {
+            point,
+            normal: n,
+            min: lo,
+            max: hi,
+        });
     }
     let (mut umin, mut umax, mut vmin, mut vmax) = (
         f32::INFINITY,
@@ -197,17 +226,18 @@ pub fn section_voxels(vol: &Volume, s: &Section) -> Vec<IVec3> {
 }
 
 /// The voxels of a box (clipped to the volume). Errors when the box misses it.
-pub fn box_voxels(vol: &Volume, min: Vec3, max: Vec3) -> Result<Vec<IVec3>, String> {
+pub fn box_voxels(vol: &Volume, min: Vec3, max: Vec3) -> Result<Vec<IVec3>, EmbeddingError> {
     let a = vol.voxel_of(min.min(max)).max(IVec3::ZERO);
     let b = vol
         .voxel_of(min.max(max))
         .min(glam::UVec3::from(vol.dims).as_ivec3() - IVec3::ONE);
     if a.cmpgt(b).any() {
-        return Err(format!(
-            "the box {min} to {max} misses the volume ({} to {})",
-            vol.min(),
-            vol.max()
-        ));
+        return Err(EmbeddingError::BoxMisses {
+            min,
+            max,
+            vol_min: vol.min(),
+            vol_max: vol.max(),
+        });
     }
     let mut out = Vec::new();
     for z in a.z..=b.z {
@@ -270,7 +300,9 @@ mod tests {
         // A z-slice: every voxel of that layer.
         assert_eq!(voxels.len(), (v.dims[0] * v.dims[1]) as usize);
         assert!(voxels.iter().all(|x| x.z == voxels[0].z));
-        let e = section(&v, Vec3::new(0.0, 0.0, 50.0), Vec3::Z).unwrap_err();
+        let e = section(&v, Vec3::new(0.0, 0.0, 50.0), Vec3::Z)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("misses the volume"), "{e}");
         assert!(box_voxels(&v, Vec3::splat(10.0), Vec3::splat(11.0)).is_err());
         assert_eq!(

@@ -17,6 +17,7 @@
 //! keeps its proportions to the texture's features on the new surface. The paper transfers
 //! between models of similar scale and leaves this implicit.
 
+use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::{GeometryImage, TexelImage, local_frames};
 use glam::Vec3;
@@ -47,10 +48,10 @@ impl Default for DisplacementParams {
 }
 
 impl DisplacementParams {
-    pub fn validate(&self) -> Result<(), String> {
-        crate::config::check_range("reconstruct.amplitude", self.amplitude, 0.0, 100.0)?;
-        crate::config::check_range("reconstruct.steps", self.steps, 1, 100)?;
-        crate::config::check_range("reconstruct.flip_angle", self.flip_angle, 1.0, 180.0)
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range("reconstruct.amplitude", self.amplitude, 0.0, 100.0)?;
+        check_range("reconstruct.steps", self.steps, 1, 100)?;
+        check_range("reconstruct.flip_angle", self.flip_angle, 1.0, 180.0)
     }
 }
 

@@ -8,11 +8,20 @@
 //! weighted by a linear alpha ramp that is 1 at its base corner and 0 at the other two (the
 //! base corner's barycentric coordinate), which hides the seams between patches.
 
-use crate::artifact::jump_maps::ParamParts;
 use crate::image::ImageView;
+use crate::parameterize::edge_offsets::ParamParts;
 use crate::random::counter_hash;
 use crate::render::shader::SurfaceShader;
 use glam::{Vec2, Vec3};
+
+/// A triangle edge that the parameterization does not hold: it is not of this mesh.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("face {face}: edge {from}-{to} is not in the parameterization")]
+pub struct MissingEdge {
+    pub face: usize,
+    pub from: u32,
+    pub to: u32,
+}
 
 /// Per face, per base corner `b`, the texel address of each corner `c`: `sets[f][b][c]`.
 pub type CornerSets = Vec<[[Vec2; 3]; 3]>;
@@ -24,7 +33,7 @@ pub fn corner_sets(
     triangles: &[[u32; 3]],
     param: &ParamParts,
     addresses: &[Vec2],
-) -> Result<CornerSets, String> {
+) -> Result<CornerSets, MissingEdge> {
     triangles
         .iter()
         .enumerate()
@@ -36,11 +45,10 @@ pub fn corner_sets(
                     sets[b][c] = if c == b {
                         base
                     } else {
-                        base + param.offset(t[b], t[c]).ok_or_else(|| {
-                            format!(
-                                "face {f}: edge {}-{} is not in the parameterization",
-                                t[b], t[c]
-                            )
+                        base + param.offset(t[b], t[c]).ok_or(MissingEdge {
+                            face: f,
+                            from: t[b],
+                            to: t[c],
                         })?
                     };
                 }

@@ -11,11 +11,12 @@
 //!
 //! Surfaces are exported in the order given; the first is the base colour.
 
+use crate::check::{ParamError, check_range};
 use crate::export::glb::{GlbMaterial, GlbMesh, write_glb};
 use crate::export::obj::{MtlMaps, write_mtl, write_obj};
 use crate::geom::Mesh;
 use crate::image::texel_to_uv;
-use crate::render::atlas::{Atlas, bake, build_atlas};
+use crate::render::atlas::{Atlas, AtlasError, bake, build_atlas};
 use crate::render::shader::SurfaceShader;
 use crate::render::views::{ViewOptions, render_views};
 use glam::{Vec2, Vec3, Vec4};
@@ -44,14 +45,14 @@ impl Default for ExportParams {
 }
 
 impl ExportParams {
-    pub fn validate(&self) -> Result<(), String> {
-        crate::config::check_range("reconstruct.atlas_size", self.atlas_size, 64, 8192)?;
-        crate::config::check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range("reconstruct.atlas_size", self.atlas_size, 64, 8192)?;
+        check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
         let up = Vec3::from(self.up);
         if !up.is_finite() || up.length() < 1e-12 {
-            return Err(format!(
-                "reconstruct.up must be a finite non-zero vector, got {:?}",
-                self.up
+            return Err(ParamError::invalid(
+                "reconstruct.up",
+                format!("must be a finite non-zero vector, got {:?}", self.up),
             ));
         }
         Ok(())
@@ -102,6 +103,14 @@ fn file_name(surface: &str, ext: &str) -> String {
     }
 }
 
+/// Why the export files could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// The mesh does not fit an atlas of `reconstruct.atlas_size`.
+    #[error("reconstruct.atlas_size: {0}")]
+    Atlas(#[from] AtlasError),
+}
+
 /// Builds every export file. `single_set` holds one corner-coordinate set per face in texel
 /// addresses of an exemplar of size `exemplar` (for the OBJ).
 pub fn export_textured_mesh<S: SurfaceShader>(
@@ -111,7 +120,7 @@ pub fn export_textured_mesh<S: SurfaceShader>(
     surfaces: &[ExportSurface<S>],
     p: &ExportParams,
     progress: &dyn Fn(f32),
-) -> Result<Vec<(String, Vec<u8>)>, String> {
+) -> Result<Vec<(String, Vec<u8>)>, ExportError> {
     let mut files: Vec<(String, Vec<u8>)> = Vec::new();
     let (w, h) = exemplar;
     let uv: Vec<[Vec2; 3]> = single_set
@@ -139,8 +148,7 @@ pub fn export_textured_mesh<S: SurfaceShader>(
     }
     progress(0.05);
 
-    let atlas =
-        build_atlas(mesh, p.atlas_size).map_err(|e| format!("reconstruct.atlas_size: {e}"))?;
+    let atlas = build_atlas(mesh, p.atlas_size)?;
     let frames = TangentFrames::new(mesh, single_set, &atlas);
     let mut material = GlbMaterial {
         double_sided: true,
@@ -367,11 +375,17 @@ mod tests {
             atlas_size: 10,
             ..Default::default()
         };
-        assert!(p.validate().unwrap_err().contains("reconstruct.atlas_size"));
+        assert_eq!(
+            p.validate().unwrap_err().to_string(),
+            "reconstruct.atlas_size must be in 64..=8192, got 10"
+        );
         let p = ExportParams {
             up: [0.0; 3],
             ..Default::default()
         };
-        assert!(p.validate().unwrap_err().contains("reconstruct.up"));
+        assert_eq!(
+            p.validate().unwrap_err().to_string(),
+            "reconstruct.up must be a finite non-zero vector, got [0.0, 0.0, 0.0]"
+        );
     }
 }

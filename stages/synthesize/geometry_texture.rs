@@ -4,7 +4,7 @@
 //! Transfer via Geometry Images" (SPM 2005): §4.2.1 (initial synthesis), §4.2.2 (boundary
 //! resynthesis) and the synthesis side of §4.3 (discretized orientation and scaling). The
 //! oriented and scaled sample set, its pyramids, features and kd-trees come from
-//! [`crate::stages::analyse_exemplar::texel_variants`].
+//! [`crate::analyse_exemplar::texel_variants`].
 //!
 //! A geometry image of side `n = 2^k + 1` has `(n − 1) / 2^l + 1` samples per side at pyramid
 //! level `l`; sample `i` of level `l` is sample `i · 2^l` of level 0, and its field values are
@@ -74,18 +74,19 @@
 //!   different scales and the texture turned into grain where `R` falls between two scales.
 //!   Orientations are still drawn per texel: per cell, stripes broke into straight pieces at the
 //!   cell borders.
+use crate::analyse_exemplar::texel_variants::{
+    Template, TexelVariantsRef, coarse_taps, template_taps,
+};
+use crate::check::{ParamError, check_range};
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::image::neighbourhood::mirror;
 use crate::random::{counter_hash, counter_unit};
-use crate::stages::analyse_exemplar::texel_variants::{
-    Template, TexelVariantsRef, coarse_taps, template_taps,
-};
 use glam::Vec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// The per-sample controls of synthesis (§4.3), computed by the field stage.
-pub use crate::stages::field::param_field::ParamField;
+pub use crate::field::param_field::ParamField;
 
 /// Parameters of the synthesis.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -120,26 +121,11 @@ impl Default for GeometrySynthParams {
 
 impl GeometrySynthParams {
     /// Checks every field; the error names the field, its range and the value.
-    pub fn validate(&self) -> Result<(), String> {
-        if self.boundary_passes > 16 {
-            return Err(format!(
-                "geometry texture: boundary_passes must be in 0..=16, got {}",
-                self.boundary_passes
-            ));
-        }
-        if !(1..=64).contains(&self.boundary_strip) {
-            return Err(format!(
-                "geometry texture: boundary_strip must be in 1..=64, got {}",
-                self.boundary_strip
-            ));
-        }
-        if !(self.search_eps.is_finite() && (0.0..=10.0).contains(&self.search_eps)) {
-            return Err(format!(
-                "geometry texture: search_eps must be in 0..=10, got {}",
-                self.search_eps
-            ));
-        }
-        Ok(())
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let within = |e: ParamError| e.within("geometry texture");
+        check_range("boundary_passes", self.boundary_passes, 0, 16).map_err(within)?;
+        check_range("boundary_strip", self.boundary_strip, 1, 64).map_err(within)?;
+        check_range("search_eps", self.search_eps, 0.0, 10.0).map_err(within)
     }
 }
 
@@ -602,59 +588,90 @@ fn upsample(coarse: &Level, nf: usize, c: usize) -> Vec<f32> {
     fine
 }
 
-fn check_inputs(gi: &GeometryImage, field: &ParamField, levels: usize) -> Result<(), String> {
+/// Why a geometry texture could not be synthesized: bad parameters, or inputs that disagree
+/// with each other.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GeometryTextureError {
+    #[error(transparent)]
+    Params(#[from] ParamError),
+    #[error(
+        "geometry texture: a geometry image of side {n} cannot have {levels} pyramid levels: \
+         the side must be 2^{} · k + 1 with k ≥ 2 (e.g. {}, {} or {})",
+        .levels - 1,
+        2 * (1usize << (.levels - 1)) + 1,
+        4 * (1usize << (.levels - 1)) + 1,
+        8 * (1usize << (.levels - 1)) + 1
+    )]
+    Levels { n: usize, levels: usize },
+    #[error("geometry texture: the geometry image has {entries} mate entries for {n}×{n} samples")]
+    MateCount { entries: usize, n: usize },
+    #[error(
+        "geometry texture: sample {sample}'s mate representative {rep} is not a representative"
+    )]
+    MateRep { sample: usize, rep: u32 },
+    #[error(
+        "geometry texture: the field has {dirs} directions and {scales} scales for {samples} samples"
+    )]
+    FieldSize {
+        dirs: usize,
+        scales: usize,
+        samples: usize,
+    },
+    #[error("geometry texture: field direction at sample ({i}, {j}) is not finite: {dir}")]
+    FieldDirection { i: usize, j: usize, dir: Vec2 },
+    #[error(
+        "geometry texture: relative scale at sample ({i}, {j}) must be a positive number, got {scale}"
+    )]
+    FieldScale { i: usize, j: usize, scale: f32 },
+}
+
+fn check_inputs(
+    gi: &GeometryImage,
+    field: &ParamField,
+    levels: usize,
+) -> Result<(), GeometryTextureError> {
+    use GeometryTextureError as E;
     let n = gi.n as usize;
     let nn = n * n;
     let step = 1usize << (levels - 1);
     if n < 3 || !(n - 1).is_multiple_of(step) || (n - 1) / step < 2 {
-        return Err(format!(
-            "geometry texture: a geometry image of side {n} cannot have {levels} pyramid levels: \
-             the side must be 2^{} · k + 1 with k ≥ 2 (e.g. {}, {} or {})",
-            levels - 1,
-            2 * step + 1,
-            4 * step + 1,
-            8 * step + 1
-        ));
+        return Err(E::Levels { n, levels });
     }
     if gi.mate_rep.len() != nn {
-        return Err(format!(
-            "geometry texture: the geometry image has {} mate entries for {n}×{n} samples",
-            gi.mate_rep.len()
-        ));
+        return Err(E::MateCount {
+            entries: gi.mate_rep.len(),
+            n,
+        });
     }
     for (k, &r) in gi.mate_rep.iter().enumerate() {
         if r as usize >= nn || gi.mate_rep[r as usize] != r {
-            return Err(format!(
-                "geometry texture: sample {k}'s mate representative {r} is not a representative"
-            ));
+            return Err(E::MateRep { sample: k, rep: r });
         }
     }
     if field.dir.len() != nn || field.rel_scale.len() != nn {
-        return Err(format!(
-            "geometry texture: the field has {} directions and {} scales for {nn} samples",
-            field.dir.len(),
-            field.rel_scale.len()
-        ));
+        return Err(E::FieldSize {
+            dirs: field.dir.len(),
+            scales: field.rel_scale.len(),
+            samples: nn,
+        });
     }
     if let Some(k) = field.dir.iter().position(|d| !d.is_finite()) {
-        return Err(format!(
-            "geometry texture: field direction at sample ({}, {}) is not finite: {}",
-            k / n,
-            k % n,
-            field.dir[k]
-        ));
+        return Err(E::FieldDirection {
+            i: k / n,
+            j: k % n,
+            dir: field.dir[k],
+        });
     }
     if let Some(k) = field
         .rel_scale
         .iter()
         .position(|r| !(r.is_finite() && *r > 0.0))
     {
-        return Err(format!(
-            "geometry texture: relative scale at sample ({}, {}) must be a positive number, got {}",
-            k / n,
-            k % n,
-            field.rel_scale[k]
-        ));
+        return Err(E::FieldScale {
+            i: k / n,
+            j: k % n,
+            scale: field.rel_scale[k],
+        });
     }
     Ok(())
 }
@@ -680,7 +697,7 @@ pub fn synthesize_geometry_texture(
     variants: &TexelVariantsRef<'_>,
     p: &GeometrySynthParams,
     progress: &dyn Fn(f32),
-) -> Result<TexelImage, String> {
+) -> Result<TexelImage, GeometryTextureError> {
     synthesize_impl(gi, field, variants, p, progress, true)
 }
 
@@ -693,7 +710,7 @@ fn synthesize_impl(
     p: &GeometrySynthParams,
     progress: &dyn Fn(f32),
     wavefront: bool,
-) -> Result<TexelImage, String> {
+) -> Result<TexelImage, GeometryTextureError> {
     p.validate()?;
     let vp = variants.params().clone();
     let nl = vp.levels as usize;
@@ -1005,7 +1022,7 @@ mod tests {
                 "boundary_passes",
             ),
         ] {
-            let e = p.validate().unwrap_err();
+            let e = p.validate().unwrap_err().to_string();
             assert!(e.contains(name), "{e}");
         }
         let e: Result<GeometrySynthParams, _> = toml::from_str("boundary_pass = 2");
@@ -1014,9 +1031,7 @@ mod tests {
 
     #[test]
     fn wavefront_order_reproduces_the_scanline_order() {
-        use crate::stages::analyse_exemplar::texel_variants::{
-            TexelVariantParams, build_texel_variants,
-        };
+        use crate::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
         use glam::Vec3;
         let mut sample = TexelImage::new(40, 40, 3);
         for y in 0..40u32 {
@@ -1072,9 +1087,7 @@ mod tests {
 
     #[test]
     fn destination_features_equal_the_sample_features_where_the_images_agree() {
-        use crate::stages::analyse_exemplar::texel_variants::{
-            TexelVariantParams, build_texel_variants,
-        };
+        use crate::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
         // A 33×33 sample is itself a valid 2-level destination: the pyramids coincide, so each
         // candidate's gathered feature must be found at distance 0, at itself.
         let n = 33usize;

@@ -16,9 +16,10 @@
 //! Randomness is a counter-based hash of (seed, vertex index), so the result depends only on
 //! the inputs, not on how they were scheduled.
 
+use crate::analyse_exemplar::jump_map::JumpMapRef;
+use crate::check::{ParamError, check_range};
+use crate::parameterize::edge_offsets::OffsetBox;
 use crate::random::counter_unit;
-use crate::stages::analyse_exemplar::jump_map::JumpMapRef;
-use crate::stages::parameterize::edge_offsets::OffsetBox;
 use glam::Vec2;
 
 /// `[synthesize]` parameters of the jump walk.
@@ -47,20 +48,14 @@ impl Default for WalkParams {
 }
 
 impl WalkParams {
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.continuation.is_finite() && (0.01..=10000.0).contains(&self.continuation)) {
-            return Err(format!(
-                "synthesize.continuation must be in 0.01..=10000, got {}",
-                self.continuation
-            ));
-        }
-        if !(self.boundary_fraction.is_finite() && (0.0..=0.5).contains(&self.boundary_fraction)) {
-            return Err(format!(
-                "synthesize.boundary_fraction must be in 0..=0.5, got {}",
-                self.boundary_fraction
-            ));
-        }
-        Ok(())
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range("synthesize.continuation", self.continuation, 0.01, 10000.0)?;
+        check_range(
+            "synthesize.boundary_fraction",
+            self.boundary_fraction,
+            0.0,
+            0.5,
+        )
     }
 }
 
@@ -380,10 +375,10 @@ impl Table {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analyse_exemplar::jump_map::Jump;
     use crate::geom::Mesh;
-    use crate::stages::analyse_exemplar::jump_map::Jump;
-    use crate::stages::parameterize::edge_offsets::{edge_offsets, validity_boxes};
-    use crate::stages::parameterize::region_growing::region_growing_order;
+    use crate::parameterize::edge_offsets::{edge_offsets, validity_boxes};
+    use crate::parameterize::region_growing::region_growing_order;
     use glam::Vec3;
 
     fn grid(n: usize) -> Mesh {

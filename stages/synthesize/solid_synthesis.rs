@@ -81,9 +81,9 @@
 
 use super::dependent_set::{NeedGrid, dependent_set};
 use super::history_window::{HistoryWindow, Schedule};
+use crate::analyse_exemplar::candidate_triples::{SolidAnalysisRef, Triple, wrap};
+use crate::field::quaternion_field::RotationField;
 use crate::random::{counter_hash, counter_unit};
-use crate::stages::analyse_exemplar::candidate_triples::{SolidAnalysisRef, Triple, wrap};
-use crate::stages::field::quaternion_field::RotationField;
 use glam::{IVec3, Mat3, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

@@ -29,8 +29,9 @@
 //! - Randomness comes from [`crate::random::counter_hash`] of (seed, draw, output pixel index), never from a
 //!   shared stream, so any output pixel's choices can be recomputed independently.
 
+use crate::analyse_exemplar::jump_map::JumpMapRef;
+use crate::check::{ParamError, check_range};
 use crate::random::counter_unit;
-use crate::stages::analyse_exemplar::jump_map::JumpMapRef;
 
 /// Parameters of the 2D jump-map synthesis.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
@@ -65,18 +66,19 @@ impl Default for Synth2dParams {
 
 impl Synth2dParams {
     /// Checks every field's range; the error names the field, its range and the value.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         let c = self.continuation;
         if !(c.is_finite() && (0.0..=1e9).contains(&c)) {
-            return Err(format!("synth2d: continuation must be in 0..=1e9, got {c}"));
-        }
-        let b = self.boundary_fraction;
-        if !(b.is_finite() && (0.0..=0.5).contains(&b)) {
-            return Err(format!(
-                "synth2d: boundary_fraction must be in 0..=0.5, got {b}"
+            // The bound reads 1e9, not the 1000000000 check_range would print.
+            return Err(ParamError::out_of_range(
+                "synth2d: continuation",
+                "0",
+                "1e9",
+                c,
             ));
         }
-        Ok(())
+        check_range("boundary_fraction", self.boundary_fraction, 0.0, 0.5)
+            .map_err(|e| e.within("synth2d"))
     }
 }
 
@@ -341,17 +343,16 @@ mod tests {
             ..Default::default()
         }
         .validate()
-        .unwrap_err();
-        assert!(
-            e.contains("boundary_fraction") && e.contains("0..=0.5"),
-            "{e}"
-        );
+        .unwrap_err()
+        .to_string();
+        assert_eq!(e, "synth2d: boundary_fraction must be in 0..=0.5, got 0.7");
         let e = Synth2dParams {
             continuation: -1.0,
             ..Default::default()
         }
         .validate()
-        .unwrap_err();
-        assert!(e.contains("continuation"), "{e}");
+        .unwrap_err()
+        .to_string();
+        assert_eq!(e, "synth2d: continuation must be in 0..=1e9, got -1");
     }
 }

@@ -210,6 +210,35 @@ impl KdTree {
     }
 }
 
+/// Why stored kd-tree arrays cannot be searched (see [`KdTreeRef::from_parts`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum KdTreeError {
+    #[error("kd-tree: dimension 0")]
+    ZeroDimension,
+    #[error("kd-tree: {values} point values for {ids} ids of dimension {dim}")]
+    PointCount {
+        values: usize,
+        ids: usize,
+        dim: usize,
+    },
+    #[error("kd-tree: id {id} at {at} is not below {bound}")]
+    IdBound { id: u32, at: usize, bound: u32 },
+    #[error("kd-tree: nodes without points or points without nodes")]
+    NodesWithoutPoints,
+    #[error("kd-tree: the root does not cover every point")]
+    Root,
+    #[error("kd-tree: too deep or cyclic")]
+    TooDeep,
+    #[error("kd-tree: node {node} has a bad range")]
+    Range { node: u32 },
+    #[error("kd-tree: node {node} has a bad split")]
+    Split { node: u32 },
+    #[error("kd-tree: node {node} has a bad child {child}")]
+    Child { node: u32, child: u32 },
+    #[error("kd-tree: node {node} is not inside its parent")]
+    Nesting { node: u32 },
+}
+
 impl<'a> KdTreeRef<'a> {
     /// Views arrays exported by [`KdTree::parts`], checking everything a search relies on:
     /// lengths agree, nodes are in pre-order with children after their parent, ranges nest
@@ -222,31 +251,32 @@ impl<'a> KdTreeRef<'a> {
         ids: &'a [u32],
         nodes: &'a [KdNode],
         id_bound: u32,
-    ) -> Result<KdTreeRef<'a>, String> {
+    ) -> Result<KdTreeRef<'a>, KdTreeError> {
         if dim == 0 {
-            return Err("kd-tree: dimension 0".into());
+            return Err(KdTreeError::ZeroDimension);
         }
         if points.len() != ids.len() * dim {
-            return Err(format!(
-                "kd-tree: {} point values for {} ids of dimension {dim}",
-                points.len(),
-                ids.len()
-            ));
+            return Err(KdTreeError::PointCount {
+                values: points.len(),
+                ids: ids.len(),
+                dim,
+            });
         }
         if let Some(i) = ids.iter().position(|&i| i >= id_bound) {
-            return Err(format!(
-                "kd-tree: id {} at {i} is not below {id_bound}",
-                ids[i]
-            ));
+            return Err(KdTreeError::IdBound {
+                id: ids[i],
+                at: i,
+                bound: id_bound,
+            });
         }
         if ids.is_empty() != nodes.is_empty() {
-            return Err("kd-tree: nodes without points or points without nodes".into());
+            return Err(KdTreeError::NodesWithoutPoints);
         }
         if !nodes.is_empty() {
             let n = ids.len() as u32;
             let root = nodes[0];
             if root.start != 0 || root.end != n {
-                return Err("kd-tree: the root does not cover every point".into());
+                return Err(KdTreeError::Root);
             }
             // Walk from the root, checking each reachable node once (pre-order indices only
             // grow, so a node is reached through one parent at most if indices are increasing).
@@ -255,25 +285,25 @@ impl<'a> KdTreeRef<'a> {
             while let Some((i, depth)) = stack.pop() {
                 seen += 1;
                 if depth > MAX_DEPTH || seen > nodes.len() {
-                    return Err("kd-tree: too deep or cyclic".into());
+                    return Err(KdTreeError::TooDeep);
                 }
                 let nd = nodes[i as usize];
                 if nd.start > nd.end || nd.end > n {
-                    return Err(format!("kd-tree: node {i} has a bad range"));
+                    return Err(KdTreeError::Range { node: i });
                 }
                 if nd.axis == u32::MAX {
                     continue;
                 }
                 if nd.axis as usize >= dim || !nd.split.is_finite() {
-                    return Err(format!("kd-tree: node {i} has a bad split"));
+                    return Err(KdTreeError::Split { node: i });
                 }
                 for c in [nd.left, nd.right] {
                     if c <= i || c as usize >= nodes.len() {
-                        return Err(format!("kd-tree: node {i} has a bad child {c}"));
+                        return Err(KdTreeError::Child { node: i, child: c });
                     }
                     let cn = nodes[c as usize];
                     if cn.start < nd.start || cn.end > nd.end {
-                        return Err(format!("kd-tree: node {c} is not inside its parent"));
+                        return Err(KdTreeError::Nesting { node: c });
                     }
                     stack.push((c, depth + 1));
                 }

@@ -3,13 +3,18 @@
 use exr::prelude::*;
 use glam::Vec3;
 
+/// Why the EXR encoder failed.
+#[derive(Debug, thiserror::Error)]
+#[error(transparent)]
+pub struct ExrError(#[from] exr::error::Error);
+
 /// An RGB float EXR of a `width × height` grid of vectors, row 0 at the top. Uncompressed
 /// (ZIP would be smaller, but uncompressed bytes are the same on every exr version).
 pub fn write_exr_rgb(
     width: u32,
     height: u32,
     values: &[Vec3],
-) -> std::result::Result<Vec<u8>, String> {
+) -> std::result::Result<Vec<u8>, ExrError> {
     assert_eq!(
         values.len(),
         width as usize * height as usize,
@@ -27,11 +32,7 @@ pub fn write_exr_rgb(
     );
     let image = Image::from_layer(layer);
     let mut out = std::io::Cursor::new(Vec::new());
-    image
-        .write()
-        .non_parallel()
-        .to_buffered(&mut out)
-        .map_err(|e| e.to_string())?;
+    image.write().non_parallel().to_buffered(&mut out)?;
     Ok(out.into_inner())
 }
 

@@ -46,7 +46,7 @@ pub fn level_window(window: u32, level: usize) -> u32 {
 
 /// Mirrors an integer index into `[0, n)` (reflecting about the centres of the edge pixels).
 #[inline]
-pub(crate) fn mirror(i: i64, n: i64) -> i64 {
+pub fn mirror(i: i64, n: i64) -> i64 {
     if n <= 1 {
         return 0;
     }
