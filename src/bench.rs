@@ -4,15 +4,13 @@
 //! `$TEXSYN_SHARED_DATA`) when it is there; otherwise the report says which rows it could not
 //! measure. Speed is only measured here, never asserted in tests (the machines are shared).
 
-use crate::artifact::Artifact;
-use crate::artifact::jump_maps::{
-    ParamMeta, ParamParts, view_parameterization, write_parameterization,
-};
+use crate::artifact::{Artifact, Format};
 use crate::geom::Mesh;
 use crate::stages::analyse_exemplar::jump_map::{JumpMapParams, build_jump_map};
 use crate::stages::field::orientation_field::{FieldParams, orientation_field};
-use crate::stages::parameterize::edge_offsets::{edge_offsets, validity_boxes};
-use crate::stages::parameterize::region_growing::region_growing_order;
+use crate::stages::parameterize::jump_parameterization::{
+    JumpParameterization, ParameterizeParams, Scale, jump_parameterization,
+};
 use crate::stages::synthesize::jump_walk::{WalkParams, jump_walk};
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
@@ -91,28 +89,18 @@ fn surface_rows(
     .expect("isotropic field");
     // A scale at which the mean edge spans about 4 texels, as in the demo.
     let scale = 4.0 / mesh.mean_edge_length().max(1e-9);
+    let params = ParameterizeParams {
+        scale: Scale::Texels(scale),
+        ..Default::default()
+    };
+    // What the parameterize node does: the stage, then writing its artifact.
     let (t_param, bytes) = time(runs, || {
-        let adj = crate::geom::VertexAdjacency::build(n, &mesh.triangles);
-        let off = edge_offsets(mesh, &adj, &field, scale);
-        let boxes = validity_boxes(&adj, &off);
-        let order = region_growing_order(&adj, 0);
-        write_parameterization(&ParamParts {
-            meta: ParamMeta {
-                vertices: n as u64,
-                scale,
-                exemplar: (jm.width, jm.height),
-                components: order.seeds.len() as u32,
-            },
-            order: &order.order,
-            seeds: &order.seeds,
-            adj_offsets: &adj.offsets,
-            neighbors: &adj.neighbors,
-            edge_offsets: &off,
-            boxes: &boxes,
-        })
+        jump_parameterization(mesh, &field, (jm.width, jm.height), &params)
+            .expect("the bench meshes fit the exemplar at this scale")
+            .write()
     });
     let art = Artifact::from_bytes(bytes).expect("own artifact");
-    let param = view_parameterization(&art).expect("own artifact");
+    let param = JumpParameterization::view(&art).expect("own artifact");
     let per_million = t_param / (n as f64 / 1e6);
     rows.push(Row {
         what: format!("parameterize {name} ({n} vertices): order + offsets + boxes"),

@@ -402,7 +402,11 @@ fn print_table(reports: &[pipeline::NodeReport]) {
         "status",
         "seconds",
         "bytes",
-        if pieces { "  pieces computed / reused" } else { "" }
+        if pieces {
+            "  pieces computed / reused"
+        } else {
+            ""
+        }
     );
     for r in reports {
         let status = match r.status {

@@ -4,7 +4,7 @@
 //! named.
 
 mod common;
-use common::{artifact, err, assert_same_hashes_on_any_thread_count, ran, repo, run_config};
+use common::{artifact, assert_same_hashes_on_any_thread_count, err, ran, repo, run_config};
 use std::collections::HashMap;
 use texsyn::artifact::geometry_images::{read_geometry_image, read_texels};
 use texsyn::pipeline::{self, RunResult};

@@ -6,7 +6,8 @@
 mod common;
 use common::{artifact, assert_same_hashes_on_any_thread_count, ran, repo, run_config};
 use std::path::{Path, PathBuf};
-use texsyn::artifact::jump_maps::{view_parameterization, view_walk};
+use texsyn::artifact::Format;
+use texsyn::artifact::jump_maps::{JumpParameterization, TexelAddresses};
 use texsyn::pipeline::{self, RunResult};
 
 /// Small exports keep the tests fast; the algorithm nodes are the demo's own.
@@ -143,8 +144,8 @@ fn synth2d_hashes_do_not_depend_on_the_thread_count() {
 fn the_walk_honours_order_validity_boxes_and_edge_offsets() {
     let cache = tempfile::tempdir().unwrap();
     let r = run(&demo(), &[], cache.path());
-    let param = view_parameterization(artifact(&r, "parameterize")).unwrap();
-    let walk = view_walk(artifact(&r, "synthesize")).unwrap();
+    let param = JumpParameterization::view(artifact(&r, "parameterize")).unwrap();
+    let walk = TexelAddresses::view(artifact(&r, "synthesize")).unwrap();
     let n = param.meta.vertices as usize;
     let (w, h) = param.meta.exemplar;
 
@@ -228,7 +229,7 @@ fn the_exported_obj_gives_each_triangle_corners_that_differ_by_its_edge_offsets(
     pipeline::outputs::materialize(&r.artifacts[i], out.path()).unwrap();
     let text = std::fs::read_to_string(out.path().join("textured.obj")).unwrap();
     let (vt, faces) = obj_faces(&text);
-    let param = view_parameterization(artifact(&r, "parameterize")).unwrap();
+    let param = JumpParameterization::view(artifact(&r, "parameterize")).unwrap();
     let (w, h) = param.meta.exemplar;
     assert_eq!(faces.len(), 5804);
     let to_texel = |t: [f32; 2]| glam::Vec2::new(t[0] * w as f32, (1.0 - t[1]) * h as f32);
@@ -253,8 +254,8 @@ fn the_base_corner_offsets_are_exact_in_every_coordinate_set() {
     use texsyn::stages::reconstruct::jump_blend::corner_sets;
     let cache = tempfile::tempdir().unwrap();
     let r = run(&demo(), &[], cache.path());
-    let param = view_parameterization(artifact(&r, "parameterize")).unwrap();
-    let walk = view_walk(artifact(&r, "synthesize")).unwrap();
+    let param = JumpParameterization::view(artifact(&r, "parameterize")).unwrap();
+    let walk = TexelAddresses::view(artifact(&r, "synthesize")).unwrap();
     let mesh = texsyn::artifact::kinds::read_mesh(artifact(&r, "import.mesh")).unwrap();
     let sets = corner_sets(&mesh.triangles, &param, walk.addresses).unwrap();
     for (f, t) in mesh.triangles.iter().enumerate() {

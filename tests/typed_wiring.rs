@@ -24,7 +24,12 @@ fn tint_method(first: &Path, second: &Path, gain: f32, version: u32, downstream:
         (a, b),
         |_, p, (a, b)| {
             let mut out = Image::new(a.width, a.height);
-            for ((o, x), y) in out.pixels.iter_mut().zip(a.pixels).zip(b.pixels.iter().cycle()) {
+            for ((o, x), y) in out
+                .pixels
+                .iter_mut()
+                .zip(a.pixels)
+                .zip(b.pixels.iter().cycle())
+            {
                 *o = std::array::from_fn(|c| p.gain * x[c] + y[c]);
             }
             Ok(out)
@@ -46,13 +51,20 @@ fn tint_method(first: &Path, second: &Path, gain: f32, version: u32, downstream:
 }
 
 fn exemplar(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/exemplars").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/exemplars")
+        .join(name)
 }
 
 /// The key of the `tint` node (runs the DAG in a fresh cache: keys depend on content).
 fn tint_key(dag: &Dag) -> String {
     let cache = tempfile::tempdir().unwrap();
-    let r = pipeline::run(dag, &Cache::open(cache.path()).unwrap(), RunOptions::default()).unwrap();
+    let r = pipeline::run(
+        dag,
+        &Cache::open(cache.path()).unwrap(),
+        RunOptions::default(),
+    )
+    .unwrap();
     let node = r.reports.iter().find(|n| n.node == "synthesize").unwrap();
     assert_eq!(node.algorithm, "tint");
     node.key.clone()
@@ -62,18 +74,46 @@ fn tint_key(dag: &Dag) -> String {
 fn a_made_up_methods_key_follows_parameters_version_and_input_content_only() {
     let (wood, marble) = (exemplar("wood1.png"), exemplar("marble1.png"));
     let base = tint_key(&tint_method(&wood, &marble, 0.5, 1, 1.0));
-    assert_eq!(base, tint_key(&tint_method(&wood, &marble, 0.5, 1, 1.0)), "deterministic");
+    assert_eq!(
+        base,
+        tint_key(&tint_method(&wood, &marble, 0.5, 1, 1.0)),
+        "deterministic"
+    );
 
     // What the key must follow.
-    assert_ne!(base, tint_key(&tint_method(&wood, &marble, 0.25, 1, 1.0)), "parameters");
-    assert_ne!(base, tint_key(&tint_method(&wood, &marble, 0.5, 2, 1.0)), "code version");
-    assert_ne!(base, tint_key(&tint_method(&marble, &marble, 0.5, 1, 1.0)), "input content");
-    assert_ne!(base, tint_key(&tint_method(&marble, &wood, 0.5, 1, 1.0)), "input order");
+    assert_ne!(
+        base,
+        tint_key(&tint_method(&wood, &marble, 0.25, 1, 1.0)),
+        "parameters"
+    );
+    assert_ne!(
+        base,
+        tint_key(&tint_method(&wood, &marble, 0.5, 2, 1.0)),
+        "code version"
+    );
+    assert_ne!(
+        base,
+        tint_key(&tint_method(&marble, &marble, 0.5, 1, 1.0)),
+        "input content"
+    );
+    assert_ne!(
+        base,
+        tint_key(&tint_method(&marble, &wood, 0.5, 1, 1.0)),
+        "input order"
+    );
 
     // What it must not: the same bytes under another name, a downstream node's parameters.
     let dir = tempfile::tempdir().unwrap();
     let copy = dir.path().join("renamed.png");
     std::fs::copy(&wood, &copy).unwrap();
-    assert_eq!(base, tint_key(&tint_method(&copy, &marble, 0.5, 1, 1.0)), "file path");
-    assert_eq!(base, tint_key(&tint_method(&wood, &marble, 0.5, 1, 3.0)), "downstream parameters");
+    assert_eq!(
+        base,
+        tint_key(&tint_method(&copy, &marble, 0.5, 1, 1.0)),
+        "file path"
+    );
+    assert_eq!(
+        base,
+        tint_key(&tint_method(&wood, &marble, 0.5, 1, 3.0)),
+        "downstream parameters"
+    );
 }

@@ -45,8 +45,8 @@ pub fn inconsistent(what: impl Into<String>) -> ArtifactError {
 /// Implements [`Format`] for an owned/borrowed pair of structs that share field names: a
 /// metadata field (any serde value) and array fields (`Vec<T>` in the owned struct, `&[T]` in
 /// the borrowed one), written in the listed order. An optional `check` closure receives the
-/// view and returns whether its arrays are consistent. Also gives the owned struct an
-/// `as_view()` returning the borrowed form without writing anything.
+/// view and returns whether its arrays are consistent. The two structs may live in the
+/// stages (the algorithms use them too); the artifact layer only gives them their format.
 ///
 /// ```ignore
 /// format_pair! {
@@ -87,16 +87,6 @@ macro_rules! format_pair {
                     }
                 )?
                 Ok(view)
-            }
-        }
-
-        impl $owned {
-            /// The borrowed form, as a reader of the artifact would see it.
-            pub fn as_view(&self) -> $view<'_> {
-                $view {
-                    $meta: self.$meta.clone(),
-                    $($array: &self.$array,)*
-                }
             }
         }
     };

@@ -14,10 +14,8 @@
 //! an address is valid for the vertex when the box placed at it lies inside the exemplar.
 
 use crate::geom::{Mesh, VertexAdjacency};
-use crate::synthesize::jump_walk::WalkInput;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
 /// A vertex's validity box: offsets relative to its address.
 #[repr(C)]
@@ -131,52 +129,6 @@ pub fn largest_fitting_scale(boxes: &[OffsetBox], scale: f32, width: u32, height
         })
         .fold(f32::INFINITY, f32::min)
         * scale
-}
-
-/// Metadata of a jump-map parameterization (stored with it by the artifact format).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct ParamMeta {
-    pub vertices: u64,
-    /// Texels per object-space unit actually used.
-    pub scale: f32,
-    /// The exemplar size the boxes were checked against.
-    pub exemplar: (u32, u32),
-    /// Connected components (= seeds of the order).
-    pub components: u32,
-}
-
-/// A parameterization as the walk and the blend read it: the order, the edge offsets in
-/// compressed adjacency form and the validity boxes (views into an artifact, or owned arrays).
-pub struct ParamParts<'a> {
-    pub meta: ParamMeta,
-    pub order: &'a [u32],
-    pub seeds: &'a [u32],
-    pub adj_offsets: &'a [u32],
-    pub neighbors: &'a [u32],
-    pub edge_offsets: &'a [Vec2],
-    pub boxes: &'a [OffsetBox],
-}
-
-impl ParamParts<'_> {
-    pub fn walk_input(&self) -> WalkInput<'_> {
-        WalkInput {
-            adj_offsets: self.adj_offsets,
-            neighbors: self.neighbors,
-            edge_offsets: self.edge_offsets,
-            boxes: self.boxes,
-            order: self.order,
-        }
-    }
-
-    /// Offset of the half-edge a → b, if the edge exists.
-    pub fn offset(&self, a: u32, b: u32) -> Option<Vec2> {
-        let start = self.adj_offsets[a as usize] as usize;
-        let end = self.adj_offsets[a as usize + 1] as usize;
-        self.neighbors[start..end]
-            .binary_search(&b)
-            .ok()
-            .map(|k| self.edge_offsets[start + k])
-    }
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@
 //! base corner's barycentric coordinate), which hides the seams between patches.
 
 use crate::image::ImageView;
-use crate::parameterize::edge_offsets::ParamParts;
+use crate::parameterize::jump_parameterization::ParamParts;
 use crate::random::counter_hash;
 use crate::render::shader::SurfaceShader;
 use glam::{Vec2, Vec3};

@@ -1,0 +1,260 @@
+//! The jump-map parameterization of a surface (Zelinka & Garland, "Interactive Texture
+//! Synthesis on Surfaces Using Jump Maps"): the texture scale (§3), the region-growing visit
+//! order (§4.1), the per-edge texture offsets (§4.2.2) and the per-vertex validity boxes
+//! (§4.2.4), together as the walk and the blend read them.
+//!
+//! Not in the paper: `scale = "auto"` picks a scale at which the exemplar spans a quarter of
+//! the mesh's bounding-box diagonal, lowered until every vertex neighbourhood fits in half of
+//! the exemplar; and `rotation` turns the exemplar against the field, because exemplars such
+//! as wood1 have their grain across the image.
+
+use crate::check::{ParamError, check_range};
+use crate::geom::Mesh;
+use crate::parameterize::edge_offsets::{
+    OffsetBox, edge_offsets, largest_fitting_scale, validity_boxes,
+};
+use crate::parameterize::region_growing::region_growing_order;
+use crate::synthesize::jump_walk::WalkInput;
+use glam::Vec2;
+use serde::{Deserialize, Serialize};
+
+/// `[parameterize]`.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ParameterizeParams {
+    /// Texture scale in exemplar texels per object-space unit (§3), or "auto". Default: "auto", so
+    /// that the exemplar's width spans a quarter of the mesh's bounding-box diagonal (or less
+    /// if the mesh's triangles would not fit).
+    pub scale: Scale,
+    /// The vertex where region growing starts (§4.1). Default: 0.
+    pub seed_vertex: u32,
+    /// Turns the exemplar against the field, in degrees counter-clockwise, -360..=360: the
+    /// field says where the exemplar's "up" goes, and 90 makes an exemplar's horizontal
+    /// features (wood grain, stripes) follow the field instead of crossing it. Default: 0.
+    pub rotation: f32,
+}
+
+/// `parameterize.scale`: a number of texels per object unit, or "auto".
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum Scale {
+    Texels(f32),
+    Auto(AutoWord),
+}
+
+/// The word `"auto"`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AutoWord {
+    Auto,
+}
+
+impl Default for Scale {
+    fn default() -> Self {
+        Scale::Auto(AutoWord::Auto)
+    }
+}
+
+impl ParameterizeParams {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        if let Scale::Texels(s) = self.scale
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(ParamError::invalid(
+                "parameterize.scale",
+                format!("must be a positive number of texels per unit, got {s}"),
+            ));
+        }
+        if !(self.rotation.is_finite() && (-360.0..=360.0).contains(&self.rotation)) {
+            return Err(ParamError::invalid(
+                "parameterize.rotation",
+                format!("must be in -360..=360 degrees, got {}", self.rotation),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Why a parameterization cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ParameterizeError {
+    #[error(transparent)]
+    Param(#[from] ParamError),
+    #[error("the exemplar ({width}×{height}) is too small to texture a surface")]
+    ExemplarTooSmall { width: u32, height: u32 },
+    #[error(
+        "parameterize.scale = {scale} texels per unit is too large for this mesh and a {width}×{height} exemplar: \
+         some triangles do not fit in the exemplar (§1 of the paper). They fit at scale ≤ {fit:.4}; \
+         for good results use at most {half:.4}, or refine the mesh",
+        half = 0.5 * fit
+    )]
+    ScaleTooLarge {
+        scale: f32,
+        width: u32,
+        height: u32,
+        fit: f32,
+    },
+    #[error("the field has {field} directions for {vertices} vertices (a bug in texsyn)")]
+    FieldLength { field: usize, vertices: usize },
+}
+
+/// The parameterization as it is computed; [`ParamParts`] is how the walk and the blend read
+/// it (borrowed from this or from a stored artifact).
+pub struct JumpParameterization {
+    pub meta: ParamMeta,
+    pub order: Vec<u32>,
+    pub seeds: Vec<u32>,
+    pub adj_offsets: Vec<u32>,
+    pub neighbors: Vec<u32>,
+    pub edge_offsets: Vec<Vec2>,
+    pub boxes: Vec<OffsetBox>,
+}
+
+/// Metadata of a jump-map parameterization (stored with it by the artifact format).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct ParamMeta {
+    pub vertices: u64,
+    /// Texels per object-space unit actually used.
+    pub scale: f32,
+    /// The exemplar size the boxes were checked against.
+    pub exemplar: (u32, u32),
+    /// Connected components (= seeds of the order).
+    pub components: u32,
+}
+
+/// A parameterization as the walk and the blend read it: the order, the edge offsets in
+/// compressed adjacency form and the validity boxes (views into an artifact, or owned arrays).
+pub struct ParamParts<'a> {
+    pub meta: ParamMeta,
+    pub order: &'a [u32],
+    pub seeds: &'a [u32],
+    pub adj_offsets: &'a [u32],
+    pub neighbors: &'a [u32],
+    pub edge_offsets: &'a [Vec2],
+    pub boxes: &'a [OffsetBox],
+}
+
+impl ParamParts<'_> {
+    pub fn walk_input(&self) -> WalkInput<'_> {
+        WalkInput {
+            adj_offsets: self.adj_offsets,
+            neighbors: self.neighbors,
+            edge_offsets: self.edge_offsets,
+            boxes: self.boxes,
+            order: self.order,
+        }
+    }
+
+    /// Offset of the half-edge a → b, if the edge exists.
+    pub fn offset(&self, a: u32, b: u32) -> Option<Vec2> {
+        let start = self.adj_offsets[a as usize] as usize;
+        let end = self.adj_offsets[a as usize + 1] as usize;
+        self.neighbors[start..end]
+            .binary_search(&b)
+            .ok()
+            .map(|k| self.edge_offsets[start + k])
+    }
+}
+
+/// The texels-per-unit scale at which the exemplar's width spans a quarter of the bounding
+/// box diagonal.
+fn automatic_scale(mesh: &Mesh, width: u32) -> f32 {
+    let (lo, hi) = mesh.bounds();
+    let diag = (hi - lo).length();
+    if diag > 0.0 && diag.is_finite() {
+        width as f32 / (0.25 * diag)
+    } else {
+        1.0
+    }
+}
+
+pub fn jump_parameterization(
+    mesh: &Mesh,
+    up: &[glam::Vec3],
+    (w, h): (u32, u32),
+    p: &ParameterizeParams,
+) -> Result<JumpParameterization, ParameterizeError> {
+    if up.len() != mesh.vertex_count() {
+        return Err(ParameterizeError::FieldLength {
+            field: up.len(),
+            vertices: mesh.vertex_count(),
+        });
+    }
+    let n = mesh.vertex_count();
+    check_range(
+        "parameterize.seed_vertex",
+        p.seed_vertex as usize,
+        0,
+        n.saturating_sub(1),
+    )?;
+    if w < 2 || h < 2 {
+        return Err(ParameterizeError::ExemplarTooSmall {
+            width: w,
+            height: h,
+        });
+    }
+    let adj = mesh.adjacency();
+    let mut scale = match p.scale {
+        Scale::Texels(s) => s,
+        Scale::Auto(_) => automatic_scale(mesh, w),
+    };
+    let offsets_at = |scale: f32| {
+        let mut o = edge_offsets(mesh, adj, up, scale);
+        if p.rotation != 0.0 {
+            // Texel y points down, so a counter-clockwise turn on screen is clockwise in
+            // (x, y). Negation commutes with the rotation exactly, keeping offsets antisymmetric.
+            let (s, c) = (-p.rotation.to_radians()).sin_cos();
+            for d in &mut o {
+                *d = glam::Vec2::new(c * d.x - s * d.y, s * d.x + c * d.y);
+            }
+        }
+        o
+    };
+    let mut offsets = offsets_at(scale);
+    let mut boxes = validity_boxes(adj, &offsets);
+    let fit = largest_fitting_scale(&boxes, scale, w, h);
+    if let Scale::Texels(_) = p.scale {
+        if fit < scale {
+            return Err(ParameterizeError::ScaleTooLarge {
+                scale,
+                width: w,
+                height: h,
+                fit,
+            });
+        }
+        if fit < 2.0 * scale {
+            tracing::warn!(
+                "parameterize: at scale {scale} some vertex neighbourhoods span more than half the exemplar, \
+                 leaving few valid addresses; scale ≤ {:.4} gives the walk more room",
+                0.5 * fit
+            );
+        }
+    } else if fit < 2.0 * scale {
+        scale = 0.5 * fit;
+        tracing::info!(
+            "parameterize: automatic scale lowered to {scale} so that triangles fit the exemplar"
+        );
+        offsets = offsets_at(scale);
+        boxes = validity_boxes(adj, &offsets);
+    }
+    let seed = if (p.seed_vertex as usize) < n {
+        p.seed_vertex
+    } else {
+        0
+    };
+    let order = region_growing_order(adj, seed);
+    Ok(JumpParameterization {
+        meta: ParamMeta {
+            vertices: n as u64,
+            scale,
+            exemplar: (w, h),
+            components: order.seeds.len() as u32,
+        },
+        order: order.order,
+        seeds: order.seeds,
+        adj_offsets: adj.offsets.clone(),
+        neighbors: adj.neighbors.clone(),
+        edge_offsets: offsets,
+        boxes,
+    })
+}

@@ -1,0 +1,129 @@
+//! The jump-map method's reconstruction (Zelinka & Garland, §4.3–4.4): the blended surface
+//! exported with the exemplar and every map aligned with it (normal, roughness, …), each
+//! through the same corner sets, plus the paper's Fig. 3 (right): the surface textured with a
+//! colour ramp instead of the exemplar, which shows where patches meet.
+
+use crate::geom::Mesh;
+use crate::image::{Image, ImageView};
+use crate::parameterize::jump_parameterization::ParamParts;
+use crate::reconstruct::jump_blend::{BlendShader, MissingEdge, corner_sets, random_base_set};
+use crate::reconstruct::textured_export::{
+    ExportError, ExportParams, ExportSurface, encode_png, export_textured_mesh,
+};
+use glam::Vec2;
+use std::path::PathBuf;
+
+/// An image textured onto the surface with the walk's coordinates: the exemplar itself or a
+/// map aligned with it. Its original file is copied into the export as it is.
+pub struct AlignedMap<'a> {
+    /// `basecolor` for the exemplar; the config's name for a map.
+    pub name: String,
+    /// The file's format (its extension).
+    pub format: String,
+    pub image: ImageView<'a>,
+    pub path: PathBuf,
+    pub bytes: &'a [u8],
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum JumpExportError {
+    #[error(
+        "{}: map {name:?} is {}×{}, but the exemplar is {}×{}: maps must be aligned with the exemplar",
+        path.display(), size.0, size.1, exemplar.0, exemplar.1
+    )]
+    MapSize {
+        path: PathBuf,
+        name: String,
+        size: (u32, u32),
+        exemplar: (u32, u32),
+    },
+    #[error(transparent)]
+    Export(#[from] ExportError),
+    #[error("texel addresses and mesh disagree on the vertex count")]
+    VertexCount,
+    #[error(transparent)]
+    MissingEdge(#[from] MissingEdge),
+}
+
+impl JumpExportError {
+    /// Whether texsyn is at fault (stored artifacts that disagree), not the user's input.
+    pub fn is_internal(&self) -> bool {
+        matches!(
+            self,
+            JumpExportError::VertexCount | JumpExportError::MissingEdge(_)
+        )
+    }
+}
+
+/// The files of the jump-map export: textured OBJ/MTL/PNG, the baked .glb and its textures,
+/// the preview and `patches.png`.
+pub fn export_jump_textured(
+    mesh: &Mesh,
+    param: &ParamParts,
+    addresses: &[Vec2],
+    exemplar: &AlignedMap,
+    maps: &[AlignedMap],
+    p: &ExportParams,
+    progress: &dyn Fn(f32),
+) -> Result<Vec<(String, Vec<u8>)>, JumpExportError> {
+    if addresses.len() != mesh.vertex_count() || param.meta.vertices as usize != mesh.vertex_count()
+    {
+        return Err(JumpExportError::VertexCount);
+    }
+    let sets = corner_sets(&mesh.triangles, param, addresses)?;
+    let single = random_base_set(&sets);
+    let size = (exemplar.image.width, exemplar.image.height);
+    let mut surfaces = Vec::new();
+    for m in std::iter::once(exemplar).chain(maps) {
+        let map_size = (m.image.width, m.image.height);
+        if map_size != size {
+            return Err(JumpExportError::MapSize {
+                path: m.path.clone(),
+                name: m.name.clone(),
+                size: map_size,
+                exemplar: size,
+            });
+        }
+        surfaces.push(ExportSurface {
+            name: m.name.clone(),
+            extension: m.format.clone(),
+            file: m.bytes,
+            shader: BlendShader {
+                sets: &sets,
+                texture: m.image,
+            },
+        });
+    }
+    let mut files = export_textured_mesh(mesh, &single, size, &surfaces, p, progress)?;
+    let ramp = colour_ramp(size.0, size.1);
+    let opts = crate::render::ViewOptions {
+        size: p.preview_size,
+        up: glam::Vec3::from(p.up),
+        ..Default::default()
+    };
+    let shader = BlendShader {
+        sets: &sets,
+        texture: ramp.view(),
+    };
+    let view = crate::render::render_views(mesh, &shader, &opts);
+    files.push(("patches.png".into(), encode_png(&view, false)));
+    Ok(files)
+}
+
+/// An image whose colour encodes the texel address (red along x, green along y, blue in a
+/// checker of 8-texel cells), so a surface textured with it shows its patches.
+fn colour_ramp(w: u32, h: u32) -> Image {
+    let mut img = Image::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let checker = ((x / 8 + y / 8) % 2) as f32;
+            img.pixels[(y * w + x) as usize] = [
+                x as f32 / (w - 1).max(1) as f32,
+                y as f32 / (h - 1).max(1) as f32,
+                0.25 + 0.5 * checker,
+                1.0,
+            ];
+        }
+    }
+    img
+}
