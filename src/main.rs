@@ -323,7 +323,7 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
         Command::Gc { max_size } => {
-            let budget = parse_size(max_size).map_err(anyhow::Error::msg)?;
+            let budget = parse_size(max_size)?;
             let cache = Cache::open(&cache_dir)?;
             let (removed, bytes, kept) = cache.gc(budget);
             if !cli.quiet {

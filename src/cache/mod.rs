@@ -255,8 +255,17 @@ fn unique_suffix() -> u64 {
             .wrapping_mul(0x9E37_79B9_7F4A_7C15)
 }
 
+/// A size on the command line that cannot be read.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SizeError {
+    #[error("{0:?} is not a size (examples: 500M, 2G, 1000000)")]
+    NotANumber(String),
+    #[error("{given:?}: unknown size unit {unit:?} (use K, M, G or T)")]
+    Unit { given: String, unit: String },
+}
+
 /// Parses sizes like `500M`, `2G`, `1.5GiB`, `1000000`.
-pub fn parse_size(s: &str) -> Result<u64, String> {
+pub fn parse_size(s: &str) -> Result<u64, SizeError> {
     let t = s.trim();
     let split = t
         .find(|c: char| !(c.is_ascii_digit() || c == '.'))
@@ -264,7 +273,7 @@ pub fn parse_size(s: &str) -> Result<u64, String> {
     let (num, unit) = t.split_at(split);
     let value: f64 = num
         .parse()
-        .map_err(|_| format!("{s:?} is not a size (examples: 500M, 2G, 1000000)"))?;
+        .map_err(|_| SizeError::NotANumber(s.to_owned()))?;
     let mult: f64 = match unit.trim().to_ascii_lowercase().as_str() {
         "" | "b" => 1.0,
         "k" | "kb" | "kib" => 1024.0,
@@ -272,9 +281,10 @@ pub fn parse_size(s: &str) -> Result<u64, String> {
         "g" | "gb" | "gib" => 1024.0 * 1024.0 * 1024.0,
         "t" | "tb" | "tib" => 1024.0f64.powi(4),
         other => {
-            return Err(format!(
-                "{s:?}: unknown size unit {other:?} (use K, M, G or T)"
-            ));
+            return Err(SizeError::Unit {
+                given: s.to_owned(),
+                unit: other.to_owned(),
+            });
         }
     };
     Ok((value * mult) as u64)
