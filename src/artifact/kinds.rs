@@ -159,6 +159,13 @@ pub struct BundleRef<'a> {
     pub entries: Vec<BundleEntry>,
 }
 
+impl BundleRef<'_> {
+    /// One file's bytes, decompressed and checked against its hash.
+    pub fn file(&self, entry: &BundleEntry) -> Result<Vec<u8>, ArtifactError> {
+        bundle_file(self.artifact, entry)
+    }
+}
+
 impl Format for Bundle {
     const KIND: Kind = Kind::FileBundle;
     type View<'a> = BundleRef<'a>;

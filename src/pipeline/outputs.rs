@@ -5,7 +5,7 @@
 
 use crate::artifact::Artifact;
 use crate::artifact::ContentHash;
-use crate::artifact::kinds::{bundle_entries, bundle_file};
+use crate::artifact::{Bundle, Format};
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
@@ -27,13 +27,14 @@ pub fn materialize(bundle: &Artifact, dir: &Path) -> Result<Vec<(PathBuf, bool)>
     };
     std::fs::create_dir_all(dir).map_err(io(dir))?;
     let mut out = Vec::new();
-    for entry in bundle_entries(bundle)? {
+    let bundle = Bundle::view(bundle)?;
+    for entry in &bundle.entries {
         let path = dir.join(&entry.name);
         let same = std::fs::read(&path)
             .map(|b| b.len() as u64 == entry.len && ContentHash::of(&b) == entry.hash)
             .unwrap_or(false);
         if !same {
-            let bytes = bundle_file(bundle, &entry)?;
+            let bytes = bundle.file(entry)?;
             let tmp = dir.join(format!(".{}.tmp-{}", entry.name, std::process::id()));
             std::fs::write(&tmp, &bytes).map_err(io(&tmp))?;
             std::fs::rename(&tmp, &path).map_err(io(&path))?;
