@@ -1282,65 +1282,6 @@ mod tests {
     }
 
     #[test]
-    fn arrays_round_trip_through_an_artifact_and_damage_is_an_error() {
-        use crate::artifact::{Artifact, ArtifactWriter, Kind};
-        let p = TexelVariantParams {
-            orientations: 2,
-            ..Default::default()
-        };
-        let v = build_texel_variants(&stripes(40, 40, 7.0), &p, &|_| {}).unwrap();
-        let mut w = ArtifactWriter::new(Kind::Image, &v.meta);
-        for (name, bytes) in v.arrays() {
-            w = w.array_bytes(name, bytes.to_vec());
-        }
-        let art = Artifact::from_bytes(w.finish()).unwrap();
-        let meta: VariantsMeta = art.meta().unwrap();
-        let r = TexelVariantsRef::from_arrays(meta.clone(), |n| art.raw_array(n).ok()).unwrap();
-        let owned = v.as_ref();
-        assert_eq!(r.meta, v.meta);
-        for var in 0..r.variant_count() {
-            for l in 0..r.levels() {
-                assert_eq!(r.level(var, l).texels, owned.level(var, l).texels);
-                for kind in [Template::Causal, Template::Full] {
-                    let (a, b) = (r.set(var, l, kind), owned.set(var, l, kind));
-                    assert_eq!(a.centres, b.centres);
-                    assert_eq!(a.basis, b.basis);
-                    let q = vec![0.1f32; a.dims];
-                    let mut s = Vec::new();
-                    assert_eq!(
-                        a.tree.nearest1_approx(&q, 0.0, &mut s),
-                        b.tree.nearest1_approx(&q, 0.0, &mut s)
-                    );
-                }
-            }
-        }
-        // A missing array, a short array and inconsistent metadata are errors.
-        assert!(
-            TexelVariantsRef::from_arrays(meta.clone(), |n| {
-                (n != "centres").then(|| art.raw_array(n).ok()).flatten()
-            })
-            .is_err()
-        );
-        assert!(
-            TexelVariantsRef::from_arrays(meta.clone(), |n| {
-                let a = art.raw_array(n).ok()?;
-                Some(if n == "tree_points" {
-                    &a[..a.len() - 4]
-                } else {
-                    a
-                })
-            })
-            .is_err()
-        );
-        let mut bad = meta.clone();
-        bad.sets[3].dims += 1;
-        assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
-        let mut bad = meta;
-        bad.levels.pop();
-        assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
-    }
-
-    #[test]
     fn build_is_thread_count_independent() {
         let p = TexelVariantParams {
             orientations: 3,

@@ -2,4 +2,5 @@
 pub mod blend2d;
 pub mod displacement;
 pub mod jump_blend;
+pub mod relief_export;
 pub mod textured_export;
