@@ -123,8 +123,9 @@ fn checked(config: &Config) -> Result<GeometryImagesConfig, MethodError> {
         return Err(config
             .invalid(
                 "parameterize.coarse_levels",
-                "is not a setting: the cut-nodes sit on the coarsest synthesis grid (§4.2.2), so \
-                 it is analyse_exemplar.levels; remove it (and set analyse_exemplar.levels)",
+                "is no longer a setting: the cut-nodes sit on the grid of the coarsest synthesis \
+                 level (§4.2.2), so it follows analyse_exemplar.levels; remove it and set \
+                 analyse_exemplar.levels instead",
             )
             .into());
     }
@@ -132,6 +133,7 @@ fn checked(config: &Config) -> Result<GeometryImagesConfig, MethodError> {
     let check = |key: &str, r: Result<(), String>| r.map_err(|m| config.invalid(key, &m));
     check("analyse_exemplar", c.analyse_exemplar.validate())?;
     check("parameterize", c.parameterize.params(1).validate())?;
+    // Both are valid on their own now: what is left to fail is the levels against the size.
     let levels = c.analyse_exemplar.levels;
     if c.parameterize.params(levels).validate().is_err() {
         return Err(config
@@ -172,8 +174,8 @@ fn checked(config: &Config) -> Result<GeometryImagesConfig, MethodError> {
             config.invalid(
                 "extract.size",
                 &format!(
-                    "{e} (the sample is extract.size = {size} texels square; raise it, or lower \
-                     analyse_exemplar.scales, .levels, .template or .boundary_template)"
+                    "{e} (extract.size = {size}: raise it, or lower analyse_exemplar.scales, \
+                     .levels, .template or .boundary_template)"
                 ),
             )
         })?;

@@ -12,7 +12,9 @@
 //! - [`height_field`]: heights above the same plane without a parameterization (§4.1.3), and
 //!   greyscale images read as height fields (§5, the leather example).
 //!
-//! [`sample_region::select_region`] cuts the sample patch out of the sample model first.
+//! [`sample_region::select_region`] cuts the sample patch out of the sample model first, and
+//! [`Extraction::texels_in_spacing_units`] expresses the result in the sample's texel spacing
+//! (what the synthesis and the displacement expect).
 
 pub mod bilateral_difference;
 pub mod height_field;
