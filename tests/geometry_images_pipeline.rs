@@ -6,7 +6,8 @@
 mod common;
 use common::{artifact, assert_same_hashes_on_any_thread_count, err, ran, repo, run_config};
 use std::collections::HashMap;
-use texsyn::artifact::geometry_images::{read_geometry_image, read_texels};
+use texsyn::artifact::Format;
+use texsyn::geom::geometry_image::{GeometryImage, TexelImage};
 use texsyn::pipeline::{self, RunResult};
 
 /// Small and quick: a 65² geometry image, 4 orientations, tiny previews.
@@ -37,8 +38,8 @@ fn a_genus_one_input_gives_a_closed_manifold_relief_with_mates_identical_and_no_
         cache.path(),
     )
     .unwrap();
-    let gi = read_geometry_image(artifact(&r, "parameterize")).unwrap();
-    let texels = read_texels(artifact(&r, "synthesize")).unwrap();
+    let gi = GeometryImage::view(artifact(&r, "parameterize")).unwrap();
+    let texels = TexelImage::view(artifact(&r, "synthesize")).unwrap();
     let groups = gi.mate_groups();
     assert!(!groups.is_empty());
     let n = gi.n;
@@ -167,4 +168,53 @@ fn bad_inputs_are_named() {
         cache.path(),
     ));
     assert!(e.contains("extract.method"), "{e}");
+}
+
+/// The DAG of a config (nothing runs), or the error a user would see.
+fn plan(config: &str, sets: &[&str]) -> Result<texsyn::methods::Plan, String> {
+    let sets: Vec<String> = SMALL.iter().chain(sets).map(|s| s.to_string()).collect();
+    let cfg = texsyn::config::Config::load(&repo().join("configs").join(config), &sets)
+        .map_err(|e| e.to_string())?;
+    texsyn::methods::plan(&cfg).map_err(|e| e.to_string())
+}
+
+#[test]
+fn the_cut_node_grid_follows_the_synthesis_levels_and_coupled_values_are_named() {
+    // The parameterization's coarse levels are the synthesis's levels, not a key of their own.
+    let p = plan("relief_cow.toml", &["analyse_exemplar.levels=2"]).unwrap();
+    let i = p.dag.node_index("parameterize").unwrap();
+    assert_eq!(p.dag.nodes[i].params_json["coarse_levels"], 2);
+    let e = plan("relief_cow.toml", &["parameterize.coarse_levels=3"])
+        .err()
+        .unwrap();
+    assert!(
+        e.contains("parameterize.coarse_levels") && e.contains("analyse_exemplar.levels"),
+        "{e}"
+    );
+    // Levels the geometry image is too small for: both keys are named.
+    let e = plan(
+        "relief_cow.toml",
+        &["parameterize.size=9", "analyse_exemplar.levels=4"],
+    )
+    .err()
+    .unwrap();
+    assert!(
+        e.contains("analyse_exemplar.levels") && e.contains("parameterize.size >= 17"),
+        "{e}"
+    );
+    assert!(
+        plan(
+            "relief_cow.toml",
+            &["parameterize.size=9", "analyse_exemplar.levels=3"]
+        )
+        .is_ok()
+    );
+    // A mesh sample's size is checked against the variants before anything runs.
+    let e = plan("dragon_knot.toml", &["extract.size=32"])
+        .err()
+        .unwrap();
+    assert!(
+        e.contains("extract.size") && e.contains("analyse_exemplar") && e.contains("at least"),
+        "{e}"
+    );
 }

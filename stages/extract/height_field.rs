@@ -92,6 +92,18 @@ pub fn mesh_height_field(
     })
 }
 
+/// Whether a sample file is an image (read as a height field, §5) rather than a mesh: by its
+/// extension, as the readers choose their format.
+pub fn is_image_path(path: &Path) -> bool {
+    matches!(
+        path.extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .as_deref(),
+        Some("png" | "jpg" | "jpeg" | "exr")
+    )
+}
+
 /// Largest difference between an image's r, g and b that still counts as grey.
 const GREY_TOLERANCE: f32 = 2.0 / 255.0;
 

@@ -12,7 +12,9 @@
 //! - [`height_field`]: heights above the same plane without a parameterization (§4.1.3), and
 //!   greyscale images read as height fields (§5, the leather example).
 //!
-//! [`sample_region::select_region`] cuts the sample patch out of the sample model first.
+//! [`sample_region::select_region`] cuts the sample patch out of the sample model first, and
+//! [`Extraction::texels_in_spacing_units`] expresses the result in the sample's texel spacing
+//! (what the synthesis and the displacement expect).
 
 pub mod bilateral_difference;
 pub mod height_field;
@@ -262,6 +264,51 @@ pub struct Extraction {
     /// Vertices and triangles of the sample patch cut out of the mesh.
     pub patch_vertices: usize,
     pub patch_faces: usize,
+}
+
+impl Extraction {
+    /// The texels in units of the sample's texel spacing ([`texel_spacing`] of the base
+    /// points): the geometric channels divided by it, colour kept. Stored this way, a relief
+    /// keeps its proportions when it moves to a mesh of another size (the displacement scales
+    /// them by the target's spacing, see `reconstruct::displacement`). Image height fields
+    /// are in these units already (one pixel is one spacing).
+    pub fn texels_in_spacing_units(self) -> TexelImage {
+        let (w, h) = (self.texels.width as usize, self.texels.height as usize);
+        let spacing = texel_spacing(&self.base, w, h);
+        normalize(self.texels, spacing.max(1e-30))
+    }
+}
+
+/// Mean distance between grid-neighbouring base points: the sample's texel spacing (1 for a
+/// grid of one point).
+pub fn texel_spacing(base: &[Vec3], width: usize, height: usize) -> f32 {
+    let mut sum = 0.0f64;
+    let mut n = 0u64;
+    for y in 0..height {
+        for x in 0..width {
+            let p = base[y * width + x];
+            if x + 1 < width {
+                sum += p.distance(base[y * width + x + 1]) as f64;
+                n += 1;
+            }
+            if y + 1 < height {
+                sum += p.distance(base[(y + 1) * width + x]) as f64;
+                n += 1;
+            }
+        }
+    }
+    if n == 0 { 1.0 } else { (sum / n as f64) as f32 }
+}
+
+/// Divides the geometric channels (dx, dy, dn) by `spacing`; colour channels stay.
+pub fn normalize(mut t: TexelImage, spacing: f32) -> TexelImage {
+    let c = t.channels as usize;
+    for texel in t.data.chunks_mut(c) {
+        for v in &mut texel[..3] {
+            *v /= spacing;
+        }
+    }
+    t
 }
 
 /// §4.1 on a sample mesh: cuts the sample patch out with [`ExtractParams::region`]

@@ -88,6 +88,8 @@ pub struct GeometryImageParams {
     /// Levels of the synthesis pyramid: cut-nodes are placed on the grid of the coarsest
     /// level, spacing 2^(coarse_levels − 1) samples (§4.2.2, boundary-fixing pyramid).
     /// Range 1 to k where size = 2^k + 1. Default: 3 (the paper's three-level pyramid).
+    /// The geometry-image method sets it to the synthesis's levels (`analyse_exemplar.levels`);
+    /// it is not a key of its `[parameterize]`.
     pub coarse_levels: u32,
 }
 

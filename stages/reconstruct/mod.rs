@@ -3,4 +3,5 @@ pub mod blend2d;
 pub mod displacement;
 pub mod jump_blend;
 pub mod jump_export;
+pub mod relief_export;
 pub mod textured_export;

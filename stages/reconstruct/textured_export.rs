@@ -68,32 +68,9 @@ pub struct ExportSurface<'a, S: SurfaceShader> {
     pub shader: S,
 }
 
-pub fn encode_png(img: &image::RgbaImage, keep_alpha: bool) -> Vec<u8> {
-    let mut out = Vec::new();
-    let encoder = image::codecs::png::PngEncoder::new(&mut out);
-    use image::ImageEncoder;
-    let result = if keep_alpha {
-        encoder.write_image(
-            img.as_raw(),
-            img.width(),
-            img.height(),
-            image::ExtendedColorType::Rgba8,
-        )
-    } else {
-        let rgb: Vec<u8> = img
-            .pixels()
-            .flat_map(|p| [p.0[0], p.0[1], p.0[2]])
-            .collect();
-        encoder.write_image(
-            &rgb,
-            img.width(),
-            img.height(),
-            image::ExtendedColorType::Rgb8,
-        )
-    };
-    result.expect("PNG encoding into memory");
-    out
-}
+/// Moved to [`crate::export::encode_png`] (it is not specific to textured meshes); kept
+/// here so the methods that import it from this module compile unchanged.
+pub use crate::export::encode_png;
 
 fn file_name(surface: &str, ext: &str) -> String {
     if surface == "basecolor" {
