@@ -439,7 +439,7 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
     use crate::stages::parameterize::volume_embedding::{
         embed, outside_voxels, section, section_voxels_inside, surface_voxels,
     };
-    use crate::stages::synthesize::solid_synthesis::{
+    use crate::stages::synthesize::solid::solid_synthesis::{
         MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, SynthesisReport, Volume,
         VoxelRequest,
     };

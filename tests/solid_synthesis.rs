@@ -1,6 +1,6 @@
 //! Solid synthesis on real exemplars: candidate triples and slabs
 //! (stages/analyse_exemplar/candidate_triples.rs), history windows, dependent sets and the
-//! on-demand brick synthesis (stages/synthesize/solid_synthesis.rs).
+//! on-demand brick synthesis (stages/synthesize/solid/solid_synthesis.rs).
 
 mod common;
 use common::load_exemplar as load;
@@ -15,7 +15,7 @@ use texsyn::stages::analyse_exemplar::candidate_triples::{
     AnalysisError, CandidateParams, SolidAnalysis, SolidAnalysisRef, Triple, analyse,
 };
 use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
-use texsyn::stages::synthesize::solid_synthesis::{
+use texsyn::stages::synthesize::solid::solid_synthesis::{
     Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, Volume, VoxelRequest,
 };
 

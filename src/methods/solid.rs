@@ -30,7 +30,7 @@ use crate::stages::parameterize::volume_embedding::{
     section_voxels_inside, surface_voxels, voxel_depths,
 };
 use crate::stages::reconstruct::textured_export::encode_png;
-use crate::stages::synthesize::solid_synthesis::{
+use crate::stages::synthesize::solid::solid_synthesis::{
     Brick, BrickMeta, BrickStore, SolidParams, SolidSynthesis, Volume, VoxelRequest,
 };
 use glam::{IVec3, Quat, Vec3};
