@@ -7,6 +7,7 @@
 pub mod artifact;
 pub mod bench;
 pub mod cache;
+pub mod check;
 pub mod config;
 pub mod export;
 pub mod geom;

@@ -84,6 +84,48 @@ fn a_section_after_the_surface_computes_fewer_bricks_than_from_an_empty_cache() 
     }
 }
 
+/// The synthesis node's piece counts in a run's report.
+fn pieces(r: &RunResult) -> Option<pipeline::PieceReport> {
+    r.reports
+        .iter()
+        .find(|n| n.node == "synthesize")
+        .expect("a synthesize node")
+        .pieces
+}
+
+#[test]
+fn the_run_report_counts_the_bricks_a_section_reuses_from_the_surface() {
+    let shared = tempfile::tempdir().unwrap();
+    let surface = run("solid_elephant.toml", &[], shared.path()).unwrap();
+    let first = pieces(&surface).expect("the surface's synthesis ran");
+    assert!(first.computed > 0 && first.reused == 0, "{first:?}");
+    // Every brick computed is one object in the cache.
+    assert_eq!(first.computed as usize, bricks(shared.path()).len());
+
+    let before = bricks(shared.path()).len();
+    let cut = run("solid_elephant_section.toml", &[], shared.path()).unwrap();
+    let after_surface = pieces(&cut).expect("the section's synthesis ran");
+    assert!(after_surface.reused > 0, "{after_surface:?}");
+    let made = bricks(shared.path()).len() - before;
+    assert_eq!(after_surface.computed as usize, made);
+
+    let empty = tempfile::tempdir().unwrap();
+    let alone = pieces(&run("solid_elephant_section.toml", &[], empty.path()).unwrap())
+        .expect("the section's synthesis ran");
+    assert_eq!(alone.reused, 0, "{alone:?}");
+    assert!(
+        after_surface.computed < alone.computed,
+        "after the surface {after_surface:?}, alone {alone:?}"
+    );
+    // What the section did not compute, it reused; and it needs no more bricks than alone (the
+    // bricks it has at one level need nothing below).
+    assert!(after_surface.computed + after_surface.reused <= alone.computed);
+
+    // Nothing changed: the synthesis is cached, so no brick is even looked at.
+    let again = run("solid_elephant_section.toml", &[], shared.path()).unwrap();
+    assert_eq!(pieces(&again), None);
+}
+
 #[test]
 fn outputs_do_not_depend_on_the_thread_count() {
     let hashes: Vec<Vec<String>> = [1, 2]

@@ -7,7 +7,7 @@ pub mod synth2d;
 
 use crate::artifact::Format;
 use crate::config::{Config, ConfigError};
-use crate::pipeline::{Dag, Handle, InputRef, NodeError, NodeSpec, Stage};
+use crate::pipeline::{Dag, FileInput, Handle, InputRef, NodeError, NodeSpec, Stage};
 use std::path::{Path, PathBuf};
 
 /// The methods a config may name.
@@ -111,6 +111,50 @@ pub(crate) fn import<F: Import>(
         file,
         |_, _, f| F::read(&f.path, &f.bytes).map_err(NodeError::Input),
     ))
+}
+
+/// Input files of one kind that several nodes use: each path is imported once, the first as
+/// `name`, the next ones as `name.1`, `name.2`, … (in the order they are first asked for).
+pub(crate) struct Imports<F> {
+    name: &'static str,
+    done: Vec<(PathBuf, Handle<F>)>,
+}
+
+impl<F: Import> Imports<F> {
+    pub(crate) fn new(name: &'static str) -> Self {
+        Imports {
+            name,
+            done: Vec::new(),
+        }
+    }
+
+    /// The import of `path`; `role` is the config key that names it, for errors.
+    pub(crate) fn get(
+        &mut self,
+        dag: &mut Dag,
+        path: &Path,
+        role: &str,
+    ) -> Result<Handle<F>, MethodError> {
+        if let Some((_, h)) = self.done.iter().find(|(p, _)| p == path) {
+            return Ok(*h);
+        }
+        let name = match self.done.len() {
+            0 => self.name.to_string(),
+            n => format!("{}.{n}", self.name),
+        };
+        let h = import::<F>(dag, &name, path, role)?;
+        self.done.push((path.to_owned(), h));
+        Ok(h)
+    }
+}
+
+/// A TOML input file (beside the config) read into `T`; errors name the file.
+pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(f: &FileInput) -> Result<T, NodeError> {
+    let path = f.path.display();
+    let text = std::str::from_utf8(&f.bytes)
+        .map_err(|_| NodeError::input(format!("{path}: not UTF-8 text")))?;
+    toml::from_str(text)
+        .map_err(|e| NodeError::input(format!("{path}: {}", e.to_string().trim_end())))
 }
 
 /// Legacy: until every method imports through [`import`].

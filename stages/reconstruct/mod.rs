@@ -2,4 +2,5 @@
 pub mod blend2d;
 pub mod displacement;
 pub mod jump_blend;
+pub mod solid_colour;
 pub mod textured_export;
