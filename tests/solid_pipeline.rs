@@ -189,6 +189,34 @@ fn user_mistakes_are_named() {
 }
 
 #[test]
+fn the_pyramid_depth_follows_synthesize_levels_when_only_they_are_given() {
+    // solid_trivial.toml without its `analyse_exemplar.levels`, planned (not run).
+    let path = repo().join("configs/solid_trivial.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let text = text.replace("levels = 4", "");
+    let sets = ["synthesize.levels=[{ passes = 2 }, { passes = 2 }]".to_string()];
+    let plan = texsyn::methods::plan(&Config::from_str(&path, &text, &sets).unwrap()).unwrap();
+    let params = |node: &str| {
+        let i = plan.dag.node_index(node).unwrap();
+        plan.dag.nodes[i].params_json.clone()
+    };
+    // The analysis' key holds (parameters, transposed planes).
+    assert_eq!(params("analyse_exemplar")[0]["levels"], 2);
+    assert_eq!(params("synthesize")["levels"].as_array().unwrap().len(), 2);
+    // Given both, they must agree, and the error names both.
+    let e = run(
+        "solid_trivial.toml",
+        &["synthesize.levels=[{ passes = 2 }, { passes = 2 }]"],
+        tempfile::tempdir().unwrap().path(),
+    );
+    let e = err(e);
+    assert!(
+        e.contains("synthesize.levels") && e.contains("analyse_exemplar.levels is 3"),
+        "{e}"
+    );
+}
+
+#[test]
 fn a_box_request_writes_a_raw_volume_with_its_header() {
     let cache = tempfile::tempdir().unwrap();
     let r = run(

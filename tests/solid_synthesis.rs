@@ -478,6 +478,38 @@ fn bricks_round_trip_and_bad_setups_are_errors() {
     assert!(e.to_string().contains("synthesize.cell"), "{e}");
 }
 
+#[test]
+fn the_pyramid_depth_is_derived_from_whichever_of_its_two_settings_is_given() {
+    use texsyn::stages::synthesize::solid::solid_synthesis::couple_levels;
+    let couple = |depth: u32, n: usize, given: [bool; 2]| {
+        let (mut d, mut l) = (depth, SolidParams::paper(4).levels[..n].to_vec());
+        couple_levels(&mut d, &mut l, given).map(|()| (d, l))
+    };
+    // Only the depth: the paper's settings for that many levels.
+    assert_eq!(
+        couple(3, 4, [true, false]).unwrap(),
+        (3, SolidParams::paper(3).levels)
+    );
+    // Neither: the default depth with the paper's settings, as before the coupling.
+    assert_eq!(
+        couple(4, 4, [false, false]).unwrap(),
+        (4, SolidParams::default().levels)
+    );
+    // Only the levels: their count.
+    let (d, l) = couple(4, 2, [false, true]).unwrap();
+    assert_eq!((d, l.len()), (2, 2));
+    // Both, agreeing or not.
+    assert_eq!(couple(2, 2, [true, true]).unwrap().0, 2);
+    let e = couple(3, 2, [true, true]).unwrap_err();
+    assert_eq!(e.key(), "synthesize.levels");
+    assert!(
+        e.to_string().contains("analyse_exemplar.levels is 3"),
+        "{e}"
+    );
+    let e = couple(4, 0, [false, true]).unwrap_err();
+    assert!(e.to_string().contains("has 0 entries"), "{e}");
+}
+
 // ----- Looking at results and timing (run with --ignored --nocapture) -----
 
 fn write_png(path: &str, px: &[[f32; 3]], w: u32, h: u32, zoom: u32) {

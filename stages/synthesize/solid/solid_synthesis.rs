@@ -303,10 +303,16 @@ pub fn couple_levels(
         (false, true) if !(1..=8).contains(&n) => {
             format!("has {n} entries: expected 1..=8, one per pyramid level")
         }
-        (false, true) => return Ok(*depth = n as u32),
-        // A depth out of range is the analysis parameters' error.
-        (_, false) => return Ok(*levels = SolidParams::paper((*depth).min(8)).levels),
         (true, true) => return Ok(()),
+        (false, true) => {
+            *depth = n as u32;
+            return Ok(());
+        }
+        // A depth out of range is the analysis parameters' error.
+        (_, false) => {
+            *levels = SolidParams::paper((*depth).min(8)).levels;
+            return Ok(());
+        }
     };
     Err(ParamError::invalid("synthesize.levels", message))
 }
