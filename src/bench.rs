@@ -427,8 +427,8 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
     use crate::stages::parameterize::volume_embedding::{
         embed, outside_voxels, section, section_voxels_inside, surface_voxels,
     };
-    use crate::stages::synthesize::solid_synthesis::{
-        MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, SynthesisReport, Volume,
+    use crate::stages::synthesize::solid::solid_synthesis::{
+        MemoryBrickStore, Pyramid, Scheme, SolidParams, SolidSynthesis, SynthesisReport,
         VoxelRequest,
     };
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -458,11 +458,9 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
         goal: "(no goal; done once per exemplar set)".into(),
         verdict: "—".into(),
     });
-    let emb = embed(&mesh, 512, 0.25).map_err(anyhow::Error::msg)?;
-    let volume = Volume {
-        origin: emb.origin,
-        voxel_size: emb.voxel,
-        dims: emb.dims,
+    let emb = embed(&mesh, 512, 0.25)?;
+    let pyramid = Pyramid {
+        volume: emb,
         levels: 4,
     };
     let (lo, hi) = (emb.min(), emb.max());
@@ -477,7 +475,7 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
                req: &VoxelRequest|
      -> Result<(SynthesisReport, f64)> {
         let params = SolidParams::paper(4).with_scheme(scheme);
-        let synth = SolidSynthesis::new(analysis.as_ref(), &field, volume, params)
+        let synth = SolidSynthesis::new(analysis.as_ref(), &field, emb, params)
             .map_err(|e| anyhow::anyhow!("{e}"))?;
         let t = Instant::now();
         let r = synth
@@ -508,7 +506,7 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
         .rev()
         .take(2)
         .map(|l| {
-            let d = volume.level_dims(l.level);
+            let d = pyramid.level_dims(l.level);
             let all = d.x as f64 * d.y as f64 * d.z as f64;
             format!("{:.0}% of level {}", 100.0 * l.voxels as f64 / all, l.level)
         })
@@ -523,8 +521,7 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
         verdict: verdict_above(ratio, 4.0),
     });
     // A new cut after the surface: the coarse levels are in the store.
-    let s = section(&emb, (lo + hi) * 0.5, glam::Vec3::new(0.0, 0.0, 1.0))
-        .map_err(anyhow::Error::msg)?;
+    let s = section(&emb, (lo + hi) * 0.5, glam::Vec3::new(0.0, 0.0, 1.0))?;
     let cut: Vec<[i32; 3]> = section_voxels_inside(&emb, &s, &outside_voxels(&mesh, &emb))
         .iter()
         .map(|v| v.to_array())

@@ -126,6 +126,12 @@ impl Config {
         verdict.map_err(|e| self.invalid(key, &e.to_string()))
     }
 
+    /// Whether the config (with its overrides) gives `table.key`, rather than leaving it to
+    /// its default: for parameters that a method derives from another when left out.
+    pub fn gives(&self, table: &str, key: &str) -> bool {
+        self.table.get(table).is_some_and(|t| t.get(key).is_some())
+    }
+
     /// Resolves a path from the config against the config's directory.
     pub fn resolve(&self, p: &Path) -> PathBuf {
         if p.is_absolute() {

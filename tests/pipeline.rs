@@ -256,7 +256,7 @@ fn the_base_corner_offsets_are_exact_in_every_coordinate_set() {
     let r = run(&demo(), &[], cache.path());
     let param = JumpParameterization::view(artifact(&r, "parameterize")).unwrap();
     let walk = TexelAddresses::view(artifact(&r, "synthesize")).unwrap();
-    let mesh = texsyn::artifact::kinds::read_mesh(artifact(&r, "import.mesh")).unwrap();
+    let mesh = <texsyn::geom::Mesh as Format>::view(artifact(&r, "import.mesh")).unwrap();
     let sets = corner_sets(&mesh.triangles, &param, walk.addresses).unwrap();
     for (f, t) in mesh.triangles.iter().enumerate() {
         for b in 0..3 {

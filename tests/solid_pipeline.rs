@@ -2,7 +2,7 @@
 //! and the errors a user meets.
 
 mod common;
-use common::{err, repo, run_config};
+use common::{assert_same_hashes_on_any_thread_count, err, repo, run_config};
 use std::path::PathBuf;
 use texsyn::config::Config;
 use texsyn::pipeline::{self, RunResult};
@@ -84,26 +84,53 @@ fn a_section_after_the_surface_computes_fewer_bricks_than_from_an_empty_cache() 
     }
 }
 
+/// The synthesis node's piece counts in a run's report.
+fn pieces(r: &RunResult) -> Option<pipeline::PieceReport> {
+    r.reports
+        .iter()
+        .find(|n| n.node == "synthesize")
+        .expect("a synthesize node")
+        .pieces
+}
+
+#[test]
+fn the_run_report_counts_the_bricks_a_section_reuses_from_the_surface() {
+    let shared = tempfile::tempdir().unwrap();
+    let surface = run("solid_elephant.toml", &[], shared.path()).unwrap();
+    let first = pieces(&surface).expect("the surface's synthesis ran");
+    assert!(first.computed > 0 && first.reused == 0, "{first:?}");
+    // Every brick computed is one object in the cache.
+    assert_eq!(first.computed as usize, bricks(shared.path()).len());
+
+    let before = bricks(shared.path()).len();
+    let cut = run("solid_elephant_section.toml", &[], shared.path()).unwrap();
+    let after_surface = pieces(&cut).expect("the section's synthesis ran");
+    assert!(after_surface.reused > 0, "{after_surface:?}");
+    let made = bricks(shared.path()).len() - before;
+    assert_eq!(after_surface.computed as usize, made);
+
+    let empty = tempfile::tempdir().unwrap();
+    let alone = pieces(&run("solid_elephant_section.toml", &[], empty.path()).unwrap())
+        .expect("the section's synthesis ran");
+    assert_eq!(alone.reused, 0, "{alone:?}");
+    assert!(
+        after_surface.computed < alone.computed,
+        "after the surface {after_surface:?}, alone {alone:?}"
+    );
+    // What the section did not compute, it reused; and it needs no more bricks than alone (the
+    // bricks it has at one level need nothing below).
+    assert!(after_surface.computed + after_surface.reused <= alone.computed);
+
+    // Nothing changed: the synthesis is cached, so no brick is even looked at.
+    let again = run("solid_elephant_section.toml", &[], shared.path()).unwrap();
+    assert_eq!(pieces(&again), None);
+}
+
 #[test]
 fn outputs_do_not_depend_on_the_thread_count() {
-    let hashes: Vec<Vec<String>> = [1, 2]
-        .iter()
-        .map(|&t| {
-            let cache = tempfile::tempdir().unwrap();
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(t)
-                .build()
-                .unwrap();
-            let r = pool
-                .install(|| run("solid_elephant_section.toml", &[], cache.path()))
-                .unwrap();
-            r.reports
-                .iter()
-                .map(|n| format!("{} {}", n.node, n.content_hash))
-                .collect()
-        })
-        .collect();
-    assert_eq!(hashes[0], hashes[1]);
+    assert_same_hashes_on_any_thread_count(|cache| {
+        run("solid_elephant_section.toml", &[], cache).unwrap()
+    });
 }
 
 #[test]
@@ -144,6 +171,34 @@ fn user_mistakes_are_named() {
         cache.path(),
     ));
     assert!(e.contains("synthesize.levels"), "{e}");
+}
+
+#[test]
+fn the_pyramid_depth_follows_synthesize_levels_when_only_they_are_given() {
+    // solid_trivial.toml without its `analyse_exemplar.levels`, planned (not run).
+    let path = repo().join("configs/solid_trivial.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let text = text.replace("levels = 4", "");
+    let sets = ["synthesize.levels=[{ passes = 2 }, { passes = 2 }]".to_string()];
+    let plan = texsyn::methods::plan(&Config::from_str(&path, &text, &sets).unwrap()).unwrap();
+    let params = |node: &str| {
+        let i = plan.dag.node_index(node).unwrap();
+        plan.dag.nodes[i].params_json.clone()
+    };
+    // The analysis' key holds (parameters, transposed planes).
+    assert_eq!(params("analyse_exemplar")[0]["levels"], 2);
+    assert_eq!(params("synthesize")["levels"].as_array().unwrap().len(), 2);
+    // Given both, they must agree, and the error names both.
+    let e = run(
+        "solid_trivial.toml",
+        &["synthesize.levels=[{ passes = 2 }, { passes = 2 }]"],
+        tempfile::tempdir().unwrap().path(),
+    );
+    let e = err(e);
+    assert!(
+        e.contains("synthesize.levels") && e.contains("analyse_exemplar.levels is 3"),
+        "{e}"
+    );
 }
 
 #[test]

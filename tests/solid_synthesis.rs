@@ -1,6 +1,6 @@
 //! Solid synthesis on real exemplars: candidate triples and slabs
 //! (stages/analyse_exemplar/candidate_triples.rs), history windows, dependent sets and the
-//! on-demand brick synthesis (stages/synthesize/solid_synthesis.rs).
+//! on-demand brick synthesis (stages/synthesize/solid/solid_synthesis.rs).
 
 mod common;
 use common::load_exemplar as load;
@@ -15,8 +15,9 @@ use texsyn::stages::analyse_exemplar::candidate_triples::{
     AnalysisError, CandidateParams, SolidAnalysis, SolidAnalysisRef, Triple, analyse,
 };
 use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
-use texsyn::stages::synthesize::solid_synthesis::{
-    Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, Volume, VoxelRequest,
+use texsyn::stages::parameterize::volume_embedding::Volume;
+use texsyn::stages::synthesize::solid::solid_synthesis::{
+    Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, VoxelRequest,
 };
 
 fn crop(img: &Image, x0: u32, y0: u32, w: u32, h: u32) -> Image {
@@ -64,7 +65,7 @@ fn trivial_field(volume: &Volume) -> RotationField {
             volume.dims[0] as f32,
             volume.dims[1] as f32,
             volume.dims[2] as f32,
-        ) * volume.voxel_size;
+        ) * volume.voxel;
     RotationField::trivial(FieldGrid::covering(volume.origin.into(), hi, 8))
 }
 
@@ -74,12 +75,11 @@ fn rotated_field(volume: &Volume, q: Quat) -> RotationField {
     f
 }
 
-fn cube(n: u32, levels: u32) -> Volume {
+fn cube(n: u32) -> Volume {
     Volume {
         origin: [0.0; 3],
-        voxel_size: 1.0,
+        voxel: 1.0,
         dims: [n; 3],
-        levels,
     }
 }
 
@@ -259,7 +259,7 @@ fn exemplars_of_different_sizes_are_an_error_naming_the_sizes() {
 
 fn all_bricks(s: &SolidSynthesis, store: &MemoryBrickStore) -> Vec<(u32, [i32; 3], Brick)> {
     let mut out = vec![];
-    for level in 1..=s.volume().levels {
+    for level in 1..=s.levels() {
         for b in store.bricks(level) {
             out.push((level, b, (*store.get(level, b).unwrap()).clone()));
         }
@@ -270,7 +270,7 @@ fn all_bricks(s: &SolidSynthesis, store: &MemoryBrickStore) -> Vec<(u32, [i32; 3
 #[test]
 fn voxels_are_the_same_whatever_else_was_requested_and_on_any_thread_count() {
     let (_, a) = small();
-    let vol = cube(40, 3);
+    let vol = cube(40);
     let field = rotated_field(
         &vol,
         Quat::from_rotation_z(0.4) * Quat::from_rotation_x(0.3),
@@ -332,7 +332,7 @@ fn voxels_are_the_same_whatever_else_was_requested_and_on_any_thread_count() {
 #[test]
 fn an_overlapping_request_reuses_bricks() {
     let (_, a) = small();
-    let vol = cube(48, 3);
+    let vol = cube(48);
     let field = trivial_field(&vol);
     let s = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
     let first = VoxelRequest::from_box([0, 0, 20], [48, 48, 21]);
@@ -376,7 +376,7 @@ fn an_overlapping_request_reuses_bricks() {
 #[test]
 fn dual_grid_depends_on_fewer_voxels_than_plain_correction() {
     let (_, a) = small();
-    let vol = cube(96, 3);
+    let vol = cube(96);
     let field = trivial_field(&vol);
     let req = VoxelRequest::plane(&vol, Vec3::splat(48.0), Vec3::new(0.2, 0.3, 1.0));
     let mut params = small_solid_params();
@@ -425,7 +425,7 @@ fn wood_layers() -> &'static (Image, SolidAnalysis) {
 #[test]
 fn a_section_looks_more_like_the_exemplar_than_random_triples() {
     let (img, a) = wood_layers();
-    let vol = cube(32, 3);
+    let vol = cube(32);
     let field = trivial_field(&vol);
     let s = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
     let store = MemoryBrickStore::new();
@@ -464,7 +464,7 @@ fn bricks_round_trip_and_bad_setups_are_errors() {
     assert!(Brick::from_arrays(b.meta(), &short).is_err());
 
     let (_, a) = small();
-    let vol = cube(16, 4);
+    let vol = cube(16);
     let field = trivial_field(&vol);
     let e = SolidSynthesis::new(a.as_ref(), &field, vol, SolidParams::paper(4))
         .err()
@@ -472,10 +472,42 @@ fn bricks_round_trip_and_bad_setups_are_errors() {
     assert!(e.to_string().contains("3 levels"), "{e}");
     let mut p = small_solid_params();
     p.cell = 7;
-    let e = SolidSynthesis::new(a.as_ref(), &field, cube(16, 3), p)
+    let e = SolidSynthesis::new(a.as_ref(), &field, cube(16), p)
         .err()
         .unwrap();
     assert!(e.to_string().contains("synthesize.cell"), "{e}");
+}
+
+#[test]
+fn the_pyramid_depth_is_derived_from_whichever_of_its_two_settings_is_given() {
+    use texsyn::stages::synthesize::solid::solid_synthesis::couple_levels;
+    let couple = |depth: u32, n: usize, given: [bool; 2]| {
+        let (mut d, mut l) = (depth, SolidParams::paper(4).levels[..n].to_vec());
+        couple_levels(&mut d, &mut l, given).map(|()| (d, l))
+    };
+    // Only the depth: the paper's settings for that many levels.
+    assert_eq!(
+        couple(3, 4, [true, false]).unwrap(),
+        (3, SolidParams::paper(3).levels)
+    );
+    // Neither: the default depth with the paper's settings, as before the coupling.
+    assert_eq!(
+        couple(4, 4, [false, false]).unwrap(),
+        (4, SolidParams::default().levels)
+    );
+    // Only the levels: their count.
+    let (d, l) = couple(4, 2, [false, true]).unwrap();
+    assert_eq!((d, l.len()), (2, 2));
+    // Both, agreeing or not.
+    assert_eq!(couple(2, 2, [true, true]).unwrap().0, 2);
+    let e = couple(3, 2, [true, true]).unwrap_err();
+    assert_eq!(e.key(), "synthesize.levels");
+    assert!(
+        e.to_string().contains("analyse_exemplar.levels is 3"),
+        "{e}"
+    );
+    let e = couple(4, 0, [false, true]).unwrap_err();
+    assert!(e.to_string().contains("has 0 entries"), "{e}");
 }
 
 // ----- Looking at results and timing (run with --ignored --nocapture) -----
@@ -551,7 +583,7 @@ fn look() {
         img.height,
         t.elapsed().as_secs_f64()
     );
-    let vol = cube(n, levels);
+    let vol = cube(n);
     let q = Quat::from_rotation_z(angle.to_radians());
     let field = rotated_field(&vol, q);
     let mut params = SolidParams::paper(levels);
@@ -673,7 +705,7 @@ fn bench_table() {
         rayon::current_num_threads()
     );
     let n: u32 = env_or("SIZE", 128);
-    let vol = cube(n, 4);
+    let vol = cube(n);
     let field = trivial_field(&vol);
     let req = VoxelRequest::from_box([0, 0, n as i32 / 2], [n as i32, n as i32, n as i32 / 2 + 1]);
     for (label, params) in [

@@ -32,7 +32,7 @@ impl ReadOwned for Mesh {
     }
 }
 
-pub fn write_mesh(mesh: &Mesh) -> Vec<u8> {
+fn write_mesh(mesh: &Mesh) -> Vec<u8> {
     let mut w = ArtifactWriter::new(
         Kind::Mesh,
         &MeshMeta {
@@ -50,7 +50,7 @@ pub fn write_mesh(mesh: &Mesh) -> Vec<u8> {
 }
 
 /// A mesh artifact as a [`Mesh`] (one copy: algorithms want owned, adjacency-caching meshes).
-pub fn read_mesh(a: &Artifact) -> Result<Mesh, ArtifactError> {
+fn read_mesh(a: &Artifact) -> Result<Mesh, ArtifactError> {
     a.expect_kind(Kind::Mesh)?;
     let meta: MeshMeta = a.meta()?;
     let positions: &[Vec3] = a.array("positions")?;
@@ -95,7 +95,7 @@ impl Format for Image {
     }
 }
 
-pub fn write_image(img: &Image) -> Vec<u8> {
+fn write_image(img: &Image) -> Vec<u8> {
     ArtifactWriter::new(
         Kind::Image,
         &ImageMeta {
@@ -108,7 +108,7 @@ pub fn write_image(img: &Image) -> Vec<u8> {
 }
 
 /// An image artifact viewed in place.
-pub fn view_image(a: &Artifact) -> Result<ImageView<'_>, ArtifactError> {
+fn view_image(a: &Artifact) -> Result<ImageView<'_>, ArtifactError> {
     a.expect_kind(Kind::Image)?;
     let meta: ImageMeta = a.meta()?;
     let pixels: &[[f32; 4]] = a.array("pixels")?;
@@ -182,7 +182,7 @@ impl Format for Bundle {
 
 /// The files a reconstruct node exports, zstd-compressed (DESIGN.md: zstd for what is not
 /// read by random access).
-pub fn write_bundle(files: &[(String, Vec<u8>)]) -> Vec<u8> {
+fn write_bundle(files: &[(String, Vec<u8>)]) -> Vec<u8> {
     let entries: Vec<BundleEntry> = files
         .iter()
         .map(|(name, bytes)| BundleEntry {
@@ -201,12 +201,7 @@ pub fn write_bundle(files: &[(String, Vec<u8>)]) -> Vec<u8> {
     w.finish()
 }
 
-pub fn bundle_entries(a: &Artifact) -> Result<Vec<BundleEntry>, ArtifactError> {
-    a.expect_kind(Kind::FileBundle)?;
-    a.meta()
-}
-
-pub fn bundle_file(a: &Artifact, entry: &BundleEntry) -> Result<Vec<u8>, ArtifactError> {
+fn bundle_file(a: &Artifact, entry: &BundleEntry) -> Result<Vec<u8>, ArtifactError> {
     let packed = a.raw_array(&entry.name)?;
     let bytes = zstd::bulk::decompress(packed, entry.len as usize)
         .map_err(|e| ArtifactError::Meta(format!("{}: {e}", entry.name)))?;
@@ -241,7 +236,7 @@ mod tests {
             ("b.bin".to_string(), vec![7u8; 1000]),
         ];
         let a = Artifact::from_bytes(write_bundle(&files)).unwrap();
-        let entries = bundle_entries(&a).unwrap();
+        let entries = Bundle::view(&a).unwrap().entries;
         assert_eq!(entries.len(), 2);
         for (e, (name, bytes)) in entries.iter().zip(&files) {
             assert_eq!(&e.name, name);

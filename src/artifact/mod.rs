@@ -20,6 +20,7 @@ pub mod format;
 pub mod geometry_images;
 pub mod jump_maps;
 pub mod kinds;
+pub mod solid;
 
 pub use format::{Format, ReadOwned};
 pub use kinds::Bundle;

@@ -7,7 +7,7 @@ pub mod synth2d;
 
 use crate::artifact::Format;
 use crate::config::{Config, ConfigError};
-use crate::pipeline::{Dag, Handle, InputRef, NodeError, NodeSpec, Stage};
+use crate::pipeline::{Dag, FileInput, Handle, NodeError, NodeSpec, Stage};
 use std::path::{Path, PathBuf};
 
 /// The methods a config may name.
@@ -113,31 +113,46 @@ pub fn import<F: Import>(
     ))
 }
 
-/// Legacy: until every method imports through [`import`].
-pub(crate) fn import_mesh(
-    dag: &mut Dag,
-    name: &str,
-    path: &Path,
-    role: &str,
-) -> Result<InputRef, MethodError> {
-    Ok(InputRef::Node(
-        import::<crate::geom::Mesh>(dag, name, path, role)?.index(),
-    ))
+/// Input files of one kind that several nodes use: each path is imported once, the first as
+/// `name`, the next ones as `name.1`, `name.2`, … (in the order they are first asked for).
+pub(crate) struct Imports<F> {
+    name: &'static str,
+    done: Vec<(PathBuf, Handle<F>)>,
 }
 
-/// Legacy: until every method imports through [`import`].
-pub(crate) fn import_image(
-    dag: &mut Dag,
-    name: &str,
-    path: &Path,
-    role: &str,
-) -> Result<InputRef, MethodError> {
-    Ok(InputRef::Node(
-        import::<crate::image::Image>(dag, name, path, role)?.index(),
-    ))
+impl<F: Import> Imports<F> {
+    pub(crate) fn new(name: &'static str) -> Self {
+        Imports {
+            name,
+            done: Vec::new(),
+        }
+    }
+
+    /// The import of `path`; `role` is the config key that names it, for errors.
+    pub(crate) fn get(
+        &mut self,
+        dag: &mut Dag,
+        path: &Path,
+        role: &str,
+    ) -> Result<Handle<F>, MethodError> {
+        if let Some((_, h)) = self.done.iter().find(|(p, _)| p == path) {
+            return Ok(*h);
+        }
+        let name = match self.done.len() {
+            0 => self.name.to_string(),
+            n => format!("{}.{n}", self.name),
+        };
+        let h = import::<F>(dag, &name, path, role)?;
+        self.done.push((path.to_owned(), h));
+        Ok(h)
+    }
 }
 
-/// The JSON form of a parameter struct (for `graph`, `status`, `--json`).
-pub(crate) fn to_json<T: serde::Serialize>(v: &T) -> serde_json::Value {
-    serde_json::to_value(v).unwrap_or(serde_json::Value::Null)
+/// A TOML input file (beside the config) read into `T`; errors name the file.
+pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(f: &FileInput) -> Result<T, NodeError> {
+    let path = f.path.display();
+    let text = std::str::from_utf8(&f.bytes)
+        .map_err(|_| NodeError::input(format!("{path}: not UTF-8 text")))?;
+    toml::from_str(text)
+        .map_err(|e| NodeError::input(format!("{path}: {}", e.to_string().trim_end())))
 }

@@ -120,22 +120,6 @@ pub(crate) enum InputData<'a> {
 }
 
 impl<'a> NodeContext<'a> {
-    /// Legacy positional access, until every method is wired through [`Dag::node`].
-    pub(crate) fn artifact(&self, i: usize) -> &'a Artifact {
-        match self.inputs[i] {
-            InputData::Artifact(a) => a,
-            InputData::File(_) => panic!("input {i} is a file, not an artifact (wiring bug)"),
-        }
-    }
-
-    /// Legacy positional access, until every method is wired through [`Dag::node`].
-    pub(crate) fn file(&self, i: usize) -> &'a FileInput {
-        match self.inputs[i] {
-            InputData::File(f) => f,
-            InputData::Artifact(_) => panic!("input {i} is an artifact, not a file (wiring bug)"),
-        }
-    }
-
     /// The store of the node's pieces, which it declared with [`NodeSpec::pieces`]. `extra`
     /// is what the pieces depend on beyond the declared parameters and keyed inputs that is
     /// only known while computing (it goes into every piece's key).

@@ -54,7 +54,7 @@
 //! i.e. with the least crossbar error summed over the `D` layers (the best triple at the slab's
 //! middle layer alone would ignore how fast its yz and zx lines drift apart). The synthesis
 //! tiles space with slabs stacked along z, each shifted in xy by a counter-based random offset
-//! (see `stages/synthesize/solid_synthesis.rs`).
+//! (see `stages/synthesize/solid/solid_synthesis.rs`).
 //!
 //! # Choosing exemplars
 //!
@@ -77,9 +77,9 @@
 //! gives the named byte slices to store, and [`SolidAnalysisRef::from_arrays`] views stored
 //! arrays in place (zero copy), checking every length against the metadata.
 
-use crate::image::ImageView;
 use crate::image::knn::KdTree;
 use crate::image::pca::{Pca, PcaParams};
+use crate::image::{Image, ImageView};
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -805,6 +805,19 @@ fn near(a: [u16; 2], b: [u16; 2], w: u32, h: u32) -> bool {
         d.min(n as i32 - d)
     };
     d(a[0], b[0], w) <= 1 && d(a[1], b[1], h) <= 1
+}
+
+/// [`analyse`] with the images of the planes marked in `transpose` transposed first, so that
+/// one image can show the same layers in two planes whose axes run the other way round.
+pub fn analyse_transposed(
+    planes: [ImageView; 3],
+    transpose: [bool; 3],
+    params: &CandidateParams,
+) -> Result<SolidAnalysis, AnalysisError> {
+    let turned: [Option<Image>; 3] =
+        std::array::from_fn(|k| transpose[k].then(|| planes[k].transposed()));
+    let views = std::array::from_fn(|k| turned[k].as_ref().map_or(planes[k], Image::view));
+    analyse(views, params)
 }
 
 /// Analyses the exemplars of the xy, yz and zx planes (pass the same image several times to

@@ -20,10 +20,88 @@
 //!
 //! The optional scale field (§3, last paragraph) interpolates user scalings at sparse points
 //! harmonically on the same grid.
+//!
+//! A solid's field ([`solid_rotation_field`]) lives on a grid over the volume's box
+//! ([`SolidBox`]), so it depends on the volume's margin as well as on the sketch.
 
+use crate::check::{ParamError, check_range};
+use crate::geom::Mesh;
 use crate::linalg::{SolveError, SpdSolver};
+use crate::parameterize::volume_embedding::SolidBox;
 use glam::{DQuat, DVec3, Quat, Vec3};
 use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// `[field]` of the solid method: the sketch.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SketchParams {
+    /// Sketch curves: `{ points = [[x, y, z], …], axis = "x" | "y" | "z" }` (axis optional),
+    /// in drawing order. Default: none (the trivial field).
+    pub curves: Vec<Curve>,
+    /// A TOML file beside the config with more curves (`curves = [...]`), appended after
+    /// `curves`. Default: none.
+    pub curves_file: Option<PathBuf>,
+    /// Cells on the shortest side of the field's grid, 4..=128. Default: 24 (§6: 20–30).
+    pub cells: Option<u32>,
+    /// User scalings at points (the optional scale field of §3). Default: none.
+    pub scales: Vec<ScalePoint>,
+}
+
+impl SketchParams {
+    /// Checks the cell count, the curves and the scales (a curves file's curves are checked
+    /// when it is read).
+    pub fn validate(&self) -> Result<(), FieldError> {
+        check_range("field.cells", self.cells(), 4, 128)?;
+        validate_curves(&self.curves, &self.scales)
+    }
+
+    pub fn cells(&self) -> u32 {
+        self.cells.unwrap_or(24)
+    }
+
+    /// What the field of a solid whose volume has `margin` depends on (besides the mesh and a
+    /// curves file's curves).
+    pub fn solid_field(&self, margin: f32) -> SolidFieldParams {
+        SolidFieldParams {
+            curves: self.curves.clone(),
+            scales: self.scales.clone(),
+            cells: self.cells(),
+            margin,
+        }
+    }
+}
+
+/// A file of more sketch curves (`field.curves_file`, beside the config): `curves = [...]`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CurvesFile {
+    pub curves: Vec<Curve>,
+}
+
+/// What a solid's rotation field depends on besides the mesh: the sketch's curves and scales,
+/// the grid's cell count, and the margin of the volume's box, which the grid covers.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SolidFieldParams {
+    pub curves: Vec<Curve>,
+    pub scales: Vec<ScalePoint>,
+    pub cells: u32,
+    /// `parameterize.margin`.
+    pub margin: f32,
+}
+
+/// §3 for a solid: the field on a grid over the volume's box around `mesh` with `p.cells`
+/// cells on its shortest side, from `p.curves` and then `more` (a curves file's).
+pub fn solid_rotation_field(
+    mesh: &Mesh,
+    p: &SolidFieldParams,
+    more: Vec<Curve>,
+) -> Result<RotationField, FieldError> {
+    let mut curves = p.curves.clone();
+    curves.extend(more);
+    let (lo, hi) = SolidBox::around(mesh, p.margin).corners();
+    rotation_field(FieldGrid::covering(lo, hi, p.cells), &curves, &p.scales)
+}
 
 /// Which local axis a curve follows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -200,6 +278,8 @@ impl RotationField {
 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum FieldError {
+    #[error(transparent)]
+    Param(#[from] ParamError),
     #[error("field.curves[{curve}]: a curve needs at least two points, this one has {points}")]
     TooFewPoints { curve: usize, points: usize },
     #[error("field.curves[{curve}]: point {point} is not finite")]
@@ -210,6 +290,16 @@ pub enum FieldError {
     Scale { index: usize, scale: f32 },
     #[error("field: {0}")]
     Solve(#[from] SolveError),
+}
+
+impl FieldError {
+    /// The config key the error is about.
+    pub fn key(&self) -> &str {
+        match self {
+            FieldError::Param(e) => e.key(),
+            _ => "field",
+        }
+    }
 }
 
 /// Weight of the curve constraints in eq. (2); §3 uses 100 for every example.

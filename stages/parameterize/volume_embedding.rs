@@ -5,18 +5,98 @@
 //!
 //! Requests: the surface shell (every voxel a triangle passes through, to colour the mesh),
 //! a cross-section plane (a grid of sample points on the plane, one voxel apart, clipped to
-//! the volume), or a box.
+//! the volume; a cut of the object keeps the samples inside the mesh), or a box. With exemplar
+//! sets by depth under the surface (§6, Fig. 15: bark near the surface, wood inside), each
+//! requested voxel is also given the region its depth falls in ([`request_voxels`]).
+//!
+//! [`SolidBox`] is the one place the volume's box is derived from the mesh and the margin:
+//! the voxel grid here and the rotation field's grid (`field::quaternion_field`) both cover it.
 
 use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use glam::{IVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
-/// A regular voxel grid: voxel (i, j, k) has its centre at origin + (i, j, k + ½)·voxel.
+/// What part of the solid to synthesize.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Request {
+    /// The voxels the mesh's surface passes through (to colour the mesh).
+    Surface,
+    /// The plane through `point` with `normal`: the cut of the object (samples inside the
+    /// mesh), as an image.
+    Section { point: [f32; 3], normal: [f32; 3] },
+    /// Every voxel of a box (a small full volume).
+    Box { min: [f32; 3], max: [f32; 3] },
+}
+
+/// `[parameterize]`: the volume and the request.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RequestParams {
+    /// Voxels along the volume's longest side, 8..=4096. Default: 256 (the paper uses
+    /// 800–1024).
+    pub resolution: u32,
+    /// How much larger than the bounding box the volume is, 0..=4. Default: 0.25 (§6: 20–30%).
+    pub margin: f32,
+    /// Default: the surface.
+    pub request: Request,
+}
+
+impl Default for RequestParams {
+    fn default() -> Self {
+        RequestParams {
+            resolution: 256,
+            margin: 0.25,
+            request: Request::Surface,
+        }
+    }
+}
+
+impl RequestParams {
+    /// Checks `resolution` and `margin` (the request's plane or box is checked against the
+    /// volume by [`request_voxels`], once the volume is known).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range("parameterize.resolution", self.resolution, 8, 4096)?;
+        check_range("parameterize.margin", self.margin, 0.0, 4.0)
+    }
+}
+
+/// Why a volume or a request's voxels could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum VolumeError {
+    #[error("the mesh has no triangles to embed")]
+    EmptyMesh,
+    #[error("the plane needs a finite point and a non-zero normal")]
+    DegeneratePlane,
+    #[error("the plane through {point} with normal {normal} misses the volume ({lo} to {hi})")]
+    PlaneMisses {
+        point: Vec3,
+        normal: Vec3,
+        lo: Vec3,
+        hi: Vec3,
+    },
+    #[error("the box {min} to {max} misses the volume ({lo} to {hi})")]
+    BoxMisses {
+        min: Vec3,
+        max: Vec3,
+        lo: Vec3,
+        hi: Vec3,
+    },
+    /// The request's plane or box does not fit the volume.
+    #[error("parameterize.request: {0}")]
+    Request(Box<VolumeError>),
+}
+
+/// A regular voxel grid: voxel (i, j, k) has its centre at origin + (i + ½, j + ½, k + ½)·voxel.
+/// The solid's finest level; synthesis builds its pyramid over it.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Volume {
+    /// Object-space corner of voxel (0, 0, 0).
     pub origin: [f32; 3],
+    /// Side of a voxel, in object units.
     pub voxel: f32,
+    /// Voxels along x, y, z.
     pub dims: [u32; 3],
 }
 
@@ -50,51 +130,168 @@ impl Volume {
     }
 }
 
-/// A volume around the mesh: its bounding box grown by `margin` (a fraction of each side;
-/// 0.25 by default) and cut into `longest` voxels along its longest side.
-/// Why a volume, a section or a box could not be made.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum EmbeddingError {
-    #[error(transparent)]
-    Params(#[from] ParamError),
-    #[error("the mesh has no triangles to embed")]
-    EmptyMesh,
-    #[error("the plane needs a finite point and a non-zero normal")]
-    BadPlane,
-    #[error("the plane through {point} with normal {normal} misses the volume ({min} to {max})")]
-    PlaneMisses {
-        point: Vec3,
-        normal: Vec3,
-        min: Vec3,
-        max: Vec3,
-    },
-    #[error("the box {min} to {max} misses the volume ({vol_min} to {vol_max})")]
-    BoxMisses {
-        min: Vec3,
-        max: Vec3,
-        vol_min: Vec3,
-        vol_max: Vec3,
-    },
+/// The box a solid lives in: the mesh's bounding box grown by `margin`, a fraction of each
+/// side (0.25 by default; §6: "about 20–30% longer"). Derived here only: the voxel grid
+/// ([`SolidBox::voxels`]) and the rotation field's grid ([`SolidBox::corners`]) both come
+/// from it, so they cannot disagree on the margin.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolidBox {
+    /// The mesh's bounding box.
+    lo: Vec3,
+    hi: Vec3,
+    margin: f32,
 }
 
-pub fn embed(mesh: &Mesh, longest: u32, margin: f32) -> Result<Volume, EmbeddingError> {
-    if mesh.triangles.is_empty() {
-        return Err(EmbeddingError::EmptyMesh);
+impl SolidBox {
+    pub fn around(mesh: &Mesh, margin: f32) -> SolidBox {
+        let (lo, hi) = mesh.bounds();
+        SolidBox { lo, hi, margin }
     }
-    check_range("parameterize.resolution", longest, 8, 4096)?;
-    check_range("parameterize.margin", margin, 0.0, 4.0)?;
-    let (lo, hi) = mesh.bounds();
-    let size = (hi - lo).max(Vec3::splat(1e-6));
-    let grown = size * (1.0 + margin);
-    let voxel = grown.max_element() / longest as f32;
-    let dims = (grown / voxel).ceil().as_uvec3().max(glam::UVec3::ONE);
-    let centre = (lo + hi) * 0.5;
-    let origin = centre - dims.as_vec3() * voxel * 0.5;
-    Ok(Volume {
-        origin: origin.into(),
-        voxel,
-        dims: dims.into(),
+
+    /// The grown box's corners (what the rotation field's grid covers).
+    pub fn corners(&self) -> (Vec3, Vec3) {
+        let grow = (self.hi - self.lo) * self.margin * 0.5;
+        (self.lo - grow, self.hi + grow)
+    }
+
+    /// The grown box cut into `longest` voxels along its longest side: whole voxels, centred
+    /// on the box, so the grid reaches up to one voxel beyond it on the other sides.
+    pub fn voxels(&self, longest: u32) -> Volume {
+        let size = (self.hi - self.lo).max(Vec3::splat(1e-6));
+        let grown = size * (1.0 + self.margin);
+        let voxel = grown.max_element() / longest.max(1) as f32;
+        let dims = (grown / voxel).ceil().as_uvec3().max(glam::UVec3::ONE);
+        let centre = (self.lo + self.hi) * 0.5;
+        let origin = centre - dims.as_vec3() * voxel * 0.5;
+        Volume {
+            origin: origin.into(),
+            voxel,
+            dims: dims.into(),
+        }
+    }
+}
+
+/// A volume around the mesh: [`SolidBox::voxels`] with `longest` voxels along its longest
+/// side (`parameterize.resolution`, checked by [`RequestParams::validate`]).
+pub fn embed(mesh: &Mesh, longest: u32, margin: f32) -> Result<Volume, VolumeError> {
+    if mesh.triangles.is_empty() {
+        return Err(VolumeError::EmptyMesh);
+    }
+    Ok(SolidBox::around(mesh, margin).voxels(longest))
+}
+
+/// The voxels a request needs, in the volume around the mesh: what the parameterize stage
+/// gives synthesis and reconstruction.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RequestedVoxels {
+    pub volume: Volume,
+    /// Sorted (z, then y, then x), without duplicates.
+    pub voxels: Vec<IVec3>,
+    /// A section request's sample grid.
+    pub section: Option<Section>,
+    /// With regions by depth: each voxel's region, the index of the first region depth it
+    /// lies above, or the number of depths for the core below them all.
+    pub regions: Option<Vec<u8>>,
+}
+
+/// Checks the depths of the regions by depth under the surface (`[[regions]]`): at most 16,
+/// each greater than 0, increasing.
+pub fn validate_region_depths(depths: &[f32]) -> Result<(), ParamError> {
+    if depths.len() > 16 {
+        let m = format!("has {} regions: at most 16", depths.len());
+        return Err(ParamError::invalid("regions", m));
+    }
+    for (k, &d) in depths.iter().enumerate() {
+        let key = format!("regions[{k}].depth");
+        if !(d.is_finite() && d > 0.0) {
+            return Err(ParamError::invalid(
+                key,
+                format!(
+                    "is {d}: expected a depth under the surface greater than 0, in the mesh's units"
+                ),
+            ));
+        }
+        if let Some(&prev) = depths[..k].last().filter(|&&prev| d <= prev) {
+            return Err(ParamError::invalid(
+                key,
+                format!(
+                    "is {d} but the region before reaches {prev}: list regions from the surface \
+                     inwards, depths increasing"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The voxels of `p.request` in the volume `p.resolution` and `p.margin` give around the mesh.
+/// With `region_depths` (increasing, in mesh units), each voxel also gets its region
+/// ([`RequestedVoxels::regions`]) by its depth under the surface ([`voxel_depths`]).
+pub fn request_voxels(
+    mesh: &Mesh,
+    p: &RequestParams,
+    region_depths: &[f32],
+) -> Result<RequestedVoxels, VolumeError> {
+    let vol = embed(mesh, p.resolution, p.margin)?;
+    // Sections and regions both need inside/outside: one flood fill for both.
+    let outside_cell = std::cell::OnceCell::new();
+    let outside = || {
+        outside_cell
+            .get_or_init(|| outside_voxels(mesh, &vol))
+            .as_slice()
+    };
+    let in_request = |e| VolumeError::Request(Box::new(e));
+    let (voxels, section) = match &p.request {
+        Request::Surface => (surface_voxels(mesh, &vol), None),
+        Request::Section { point, normal } => {
+            let s =
+                self::section(&vol, Vec3::from(*point), Vec3::from(*normal)).map_err(in_request)?;
+            // A cut of the object: the plane's samples inside the mesh.
+            (section_voxels_inside(&vol, &s, outside()), Some(s))
+        }
+        Request::Box { min, max } => (
+            box_voxels(&vol, Vec3::from(*min), Vec3::from(*max)).map_err(in_request)?,
+            None,
+        ),
+    };
+    let regions = (!region_depths.is_empty()).then(|| {
+        voxel_depths(mesh, &vol, &voxels, outside())
+            .into_iter()
+            .map(|d| {
+                region_depths
+                    .iter()
+                    .position(|&r| d < r)
+                    .unwrap_or(region_depths.len()) as u8
+            })
+            .collect()
+    });
+    Ok(RequestedVoxels {
+        volume: vol,
+        voxels,
+        section,
+        regions,
     })
+}
+
+/// The requested voxels that `region` owns (`None`: all of them), as coordinates; `None` when
+/// a region is asked of a request made without regions.
+pub fn region_voxels(
+    voxels: &[IVec3],
+    regions: Option<&[u8]>,
+    region: Option<u8>,
+) -> Option<Vec<[i32; 3]>> {
+    match (region, regions) {
+        (None, _) => Some(voxels.iter().map(|v| v.to_array()).collect()),
+        (Some(k), Some(owner)) => Some(
+            voxels
+                .iter()
+                .zip(owner)
+                .filter(|(_, o)| **o == k)
+                .map(|(v, _)| v.to_array())
+                .collect(),
+        ),
+        (Some(_), None) => None,
+    }
 }
 
 /// Every voxel a triangle passes through (sampled at a third of a voxel, which cannot skip a
@@ -153,9 +350,9 @@ impl Section {
 
 /// The section of the volume by the plane through `point` with `normal`. Errors when the
 /// plane misses the volume.
-pub fn section(vol: &Volume, point: Vec3, normal: Vec3) -> Result<Section, EmbeddingError> {
+pub fn section(vol: &Volume, point: Vec3, normal: Vec3) -> Result<Section, VolumeError> {
     if !point.is_finite() || !normal.is_finite() || normal.length() < 1e-12 {
-        return Err(EmbeddingError::BadPlane);
+        return Err(VolumeError::DegeneratePlane);
     }
     let n = normal.normalize();
     // In-plane axes: the world axis least aligned with n, orthogonalized.
@@ -179,11 +376,11 @@ pub fn section(vol: &Volume, point: Vec3, normal: Vec3) -> Result<Section, Embed
         .collect();
     let sides: Vec<f32> = corners.iter().map(|c| (*c - point).dot(n)).collect();
     if sides.iter().all(|&s| s > 0.0) || sides.iter().all(|&s| s < 0.0) {
-        return Err(EmbeddingError::PlaneMisses {
+        return Err(VolumeError::PlaneMisses {
             point,
             normal: n,
-            min: lo,
-            max: hi,
+            lo,
+            hi,
         });
     }
     let (mut umin, mut umax, mut vmin, mut vmax) = (
@@ -226,17 +423,17 @@ pub fn section_voxels(vol: &Volume, s: &Section) -> Vec<IVec3> {
 }
 
 /// The voxels of a box (clipped to the volume). Errors when the box misses it.
-pub fn box_voxels(vol: &Volume, min: Vec3, max: Vec3) -> Result<Vec<IVec3>, EmbeddingError> {
+pub fn box_voxels(vol: &Volume, min: Vec3, max: Vec3) -> Result<Vec<IVec3>, VolumeError> {
     let a = vol.voxel_of(min.min(max)).max(IVec3::ZERO);
     let b = vol
         .voxel_of(min.max(max))
         .min(glam::UVec3::from(vol.dims).as_ivec3() - IVec3::ONE);
     if a.cmpgt(b).any() {
-        return Err(EmbeddingError::BoxMisses {
+        return Err(VolumeError::BoxMisses {
             min,
             max,
-            vol_min: vol.min(),
-            vol_max: vol.max(),
+            lo: vol.min(),
+            hi: vol.max(),
         });
     }
     let mut out = Vec::new();
@@ -300,10 +497,8 @@ mod tests {
         // A z-slice: every voxel of that layer.
         assert_eq!(voxels.len(), (v.dims[0] * v.dims[1]) as usize);
         assert!(voxels.iter().all(|x| x.z == voxels[0].z));
-        let e = section(&v, Vec3::new(0.0, 0.0, 50.0), Vec3::Z)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("misses the volume"), "{e}");
+        let e = section(&v, Vec3::new(0.0, 0.0, 50.0), Vec3::Z).unwrap_err();
+        assert!(e.to_string().contains("misses the volume"), "{e}");
         assert!(box_voxels(&v, Vec3::splat(10.0), Vec3::splat(11.0)).is_err());
         assert_eq!(
             box_voxels(&v, Vec3::ZERO, Vec3::splat(0.2)).unwrap().len(),

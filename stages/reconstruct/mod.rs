@@ -4,4 +4,5 @@ pub mod displacement;
 pub mod jump_blend;
 pub mod jump_export;
 pub mod relief_export;
+pub mod solid_colour;
 pub mod textured_export;

@@ -97,6 +97,18 @@ impl<'a> ImageView<'a> {
         }
     }
 
+    /// The image mirrored about its main diagonal: pixel (x, y) goes to (y, x).
+    pub fn transposed(&self) -> Image {
+        let mut out = Image::new(self.height, self.width);
+        for y in 0..self.height {
+            for x in 0..self.width {
+                out.pixels[(x * self.height + y) as usize] =
+                    self.pixels[(y * self.width + x) as usize];
+            }
+        }
+        out
+    }
+
     pub fn to_rgba8(&self) -> image::RgbaImage {
         let mut out = image::RgbaImage::new(self.width, self.height);
         for (dst, src) in out.pixels_mut().zip(self.pixels) {

@@ -5,9 +5,10 @@
 //!
 //! # The pyramid
 //!
-//! A [`Volume`] has `L` levels numbered `1..=L` (level `L` finest). Level `l`'s voxel `v`
-//! (integer coordinates, domain `[0, ⌈dims / 2^(L−l)⌉)`) sits at finest voxel `v·2^(L−l)`,
-//! whose centre is `origin + (v·2^(L−l) + ½)·voxel_size` in object space; its parent is
+//! A [`Pyramid`] over the embedding's [`Volume`] has `L` levels numbered `1..=L` (level `L`
+//! finest, the volume's own grid). Level `l`'s voxel `v` (integer coordinates, domain
+//! `[0, ⌈dims / 2^(L−l)⌉)`) sits at finest voxel `v·2^(L−l)`, whose centre is
+//! `origin + (v·2^(L−l) + ½)·voxel` in object space; its parent is
 //! `⌊v/2⌋`. Each voxel holds a coordinate [`Triple`]; one level-`l` voxel step is
 //! `h_l = 2^(L−l)` exemplar pixels (divided by the field's scale). Reads outside the domain
 //! clamp to it (the paper embeds the object in a larger volume for the same reason).
@@ -82,7 +83,9 @@
 use super::dependent_set::{NeedGrid, dependent_set};
 use super::history_window::{HistoryWindow, Schedule};
 use crate::analyse_exemplar::candidate_triples::{SolidAnalysisRef, Triple, wrap};
+use crate::check::ParamError;
 use crate::field::quaternion_field::RotationField;
+use crate::parameterize::volume_embedding::Volume;
 use crate::random::{counter_hash, counter_unit};
 use glam::{IVec3, Mat3, Vec3};
 use rayon::prelude::*;
@@ -94,20 +97,17 @@ use std::time::Instant;
 const STREAM_SLAB: u64 = 0x51AB;
 const STREAM_JITTER: u64 = 0x7177;
 
-/// The solid's grid at its finest level, and the pyramid depth.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Volume {
-    /// Object-space corner of finest voxel (0, 0, 0).
-    pub origin: [f32; 3],
-    /// Side of a finest voxel, in object units.
-    pub voxel_size: f32,
-    /// Finest-level voxels along x, y, z (1..=65536 each).
-    pub dims: [u32; 3],
-    /// Pyramid levels L (must equal the analysis's).
+/// The solid's pyramid: its finest level is the voxel grid of the volume embedding, and it
+/// has `levels` levels. Serialized, it is the grid's origin, voxel side and dims, then the
+/// level count: what a brick depends on of the volume.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Pyramid {
+    pub volume: Volume,
+    /// Pyramid levels L (the analysis's, and one [`LevelParams`] each).
     pub levels: u32,
 }
 
-impl Volume {
+impl Pyramid {
     /// Finest voxels per voxel of `level`: `2^(L−level)`.
     pub fn step(&self, level: u32) -> i32 {
         1 << (self.levels - level)
@@ -116,34 +116,37 @@ impl Volume {
     /// The domain `[0, dims)` of `level`.
     pub fn level_dims(&self, level: u32) -> IVec3 {
         let s = self.step(level) as u32;
+        let d = self.volume.dims;
         IVec3::new(
-            self.dims[0].div_ceil(s) as i32,
-            self.dims[1].div_ceil(s) as i32,
-            self.dims[2].div_ceil(s) as i32,
+            d[0].div_ceil(s) as i32,
+            d[1].div_ceil(s) as i32,
+            d[2].div_ceil(s) as i32,
         )
     }
 
     /// Object-space position of voxel `v` of `level`.
     pub fn position(&self, level: u32, v: IVec3) -> Vec3 {
-        Vec3::from(self.origin) + ((v * self.step(level)).as_vec3() + 0.5) * self.voxel_size
+        Vec3::from(self.volume.origin)
+            + ((v * self.step(level)).as_vec3() + 0.5) * self.volume.voxel
     }
 
     fn validate(&self) -> Result<(), SolidError> {
-        let ok = Vec3::from(self.origin).is_finite()
-            && self.voxel_size.is_finite()
-            && self.voxel_size > 0.0
-            && self.dims.iter().all(|&d| (1..=65536).contains(&d));
+        let v = &self.volume;
+        let ok = Vec3::from(v.origin).is_finite()
+            && v.voxel.is_finite()
+            && v.voxel > 0.0
+            && v.dims.iter().all(|&d| (1..=65536).contains(&d));
         check(
             "volume",
-            self,
+            v,
             ok,
-            "expected a finite origin, voxel_size > 0 and 1..=65536 voxels per side",
+            "expected a finite origin, voxel > 0 and 1..=65536 voxels per side",
         )?;
         check(
-            "volume.levels",
+            "synthesize.levels",
             self.levels,
             (1..=8).contains(&self.levels),
-            "expected 1..=8",
+            "expected 1..=8 levels, one entry each",
         )
     }
 }
@@ -281,6 +284,39 @@ impl SolidParams {
     }
 }
 
+/// The pyramid depth is one choice made in two places: the analysis' `depth`
+/// (`analyse_exemplar.levels`) and one [`LevelParams`] per level (`[[synthesize.levels]]`).
+/// Whichever a config gives (`given`: the depth, the levels) sets the other, each level
+/// getting the [paper's settings](SolidParams::paper) when only the depth is given; given
+/// both, they must agree.
+pub fn couple_levels(
+    depth: &mut u32,
+    levels: &mut Vec<LevelParams>,
+    given: [bool; 2],
+) -> Result<(), ParamError> {
+    let n = levels.len();
+    let message = match (given[0], given[1]) {
+        (true, true) if n != *depth as usize => format!(
+            "has {n} entries but analyse_exemplar.levels is {depth}: give one \
+             [[synthesize.levels]] per pyramid level, or leave one of the two out to derive it"
+        ),
+        (false, true) if !(1..=8).contains(&n) => {
+            format!("has {n} entries: expected 1..=8, one per pyramid level")
+        }
+        (true, true) => return Ok(()),
+        (false, true) => {
+            *depth = n as u32;
+            return Ok(());
+        }
+        // A depth out of range is the analysis parameters' error.
+        (_, false) => {
+            *levels = SolidParams::paper((*depth).min(8)).levels;
+            return Ok(());
+        }
+    };
+    Err(ParamError::invalid("synthesize.levels", message))
+}
+
 /// What went wrong; parameter errors name the parameter.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum SolidError {
@@ -291,19 +327,17 @@ pub enum SolidError {
         expected: String,
     },
     #[error(
-        "the analysis has {analysis} levels, the volume {volume} and the parameters {params}; they must agree"
+        "the analysis has {analysis} levels and the synthesis parameters {params}; they must agree"
     )]
-    Levels {
-        analysis: u32,
-        volume: u32,
-        params: u32,
-    },
+    Levels { analysis: u32, params: u32 },
     #[error("rotation field: {0}")]
     Field(String),
     #[error("brick {brick:?} of level {level} vanished from the brick store during synthesis")]
     MissingBrick { level: u32, brick: [i32; 3] },
     #[error("brick: {0}")]
     Brick(String),
+    #[error("voxel {voxel:?} was not synthesized: it lies outside the volume")]
+    NotSynthesized { voxel: [i32; 3] },
 }
 
 fn check<T: std::fmt::Debug>(
@@ -377,14 +411,14 @@ impl VoxelRequest {
     /// object space) passes through: a cross-section.
     pub fn plane(volume: &Volume, point: Vec3, normal: Vec3) -> VoxelRequest {
         let n = normal.normalize_or(Vec3::Z);
-        let half = 0.5 * volume.voxel_size * (n.x.abs() + n.y.abs() + n.z.abs());
+        let half = 0.5 * volume.voxel * (n.x.abs() + n.y.abs() + n.z.abs());
         let hi = [
             volume.dims[0] as i32,
             volume.dims[1] as i32,
             volume.dims[2] as i32,
         ];
         VoxelRequest::from_fn([0; 3], hi, |v| {
-            let c = volume.position(volume.levels, IVec3::from(v));
+            let c = volume.centre(IVec3::from(v));
             (c - point).dot(n).abs() <= half
         })
     }
@@ -721,7 +755,7 @@ struct LevelPlan {
 pub struct SolidSynthesis<'a> {
     analysis: SolidAnalysisRef<'a>,
     field: &'a RotationField,
-    volume: Volume,
+    pyramid: Pyramid,
     params: SolidParams,
     schedules: Vec<Schedule>,
     reach: Vec<i32>,
@@ -736,13 +770,16 @@ impl<'a> SolidSynthesis<'a> {
         volume: Volume,
         params: SolidParams,
     ) -> Result<Self, SolidError> {
-        volume.validate()?;
+        let pyramid = Pyramid {
+            volume,
+            levels: params.levels.len() as u32,
+        };
+        pyramid.validate()?;
         params.validate()?;
-        if analysis.levels() != volume.levels || params.levels.len() != volume.levels as usize {
+        if analysis.levels() != pyramid.levels {
             return Err(SolidError::Levels {
                 analysis: analysis.levels(),
-                volume: volume.levels,
-                params: params.levels.len() as u32,
+                params: pyramid.levels,
             });
         }
         let g = field.grid.len();
@@ -814,7 +851,7 @@ impl<'a> SolidSynthesis<'a> {
             })
             .collect();
         let images = analysis.meta.images as usize;
-        let mean_proj = (0..volume.levels as usize)
+        let mean_proj = (0..pyramid.levels as usize)
             .map(|li| {
                 (0..images)
                     .map(|img| {
@@ -830,7 +867,7 @@ impl<'a> SolidSynthesis<'a> {
         Ok(SolidSynthesis {
             analysis,
             field,
-            volume,
+            pyramid,
             params,
             schedules,
             reach,
@@ -838,8 +875,19 @@ impl<'a> SolidSynthesis<'a> {
         })
     }
 
+    /// The finest level's grid.
     pub fn volume(&self) -> &Volume {
-        &self.volume
+        &self.pyramid.volume
+    }
+
+    /// The pyramid over it (what bricks depend on of the volume).
+    pub fn pyramid(&self) -> &Pyramid {
+        &self.pyramid
+    }
+
+    /// Pyramid levels L.
+    pub fn levels(&self) -> u32 {
+        self.pyramid.levels
     }
 
     pub fn analysis(&self) -> &SolidAnalysisRef<'a> {
@@ -873,7 +921,7 @@ impl<'a> SolidSynthesis<'a> {
 
     /// The finest bricks a request touches (inside the volume), sorted.
     fn request_bricks(&self, request: &VoxelRequest) -> Vec<[i32; 3]> {
-        let dims = self.volume.level_dims(self.volume.levels);
+        let dims = self.pyramid.level_dims(self.pyramid.levels);
         let mut set = BTreeSet::new();
         for v in request.voxels() {
             let v = IVec3::from(v);
@@ -917,7 +965,7 @@ impl<'a> SolidSynthesis<'a> {
     /// Plans a request level by level from the finest: bricks needed, those missing from
     /// `store` (all of them without a store), and the dependent set of the missing ones.
     fn plan(&self, request: &VoxelRequest, store: Option<&dyn BrickStore>) -> Vec<LevelPlan> {
-        let levels = self.volume.levels;
+        let levels = self.pyramid.levels;
         let mut plans: Vec<LevelPlan> = Vec::with_capacity(levels as usize);
         let mut needed = self.request_bricks(request);
         for level in (1..=levels).rev() {
@@ -936,7 +984,7 @@ impl<'a> SolidSynthesis<'a> {
                 .collect();
             let need = dependent_set(
                 &self.schedules[li],
-                self.volume.level_dims(level),
+                self.pyramid.level_dims(level),
                 &targets,
                 self.reach[li],
             );
@@ -1028,13 +1076,43 @@ impl<'a> SolidSynthesis<'a> {
         Ok(report)
     }
 
+    /// Synthesizes every brick `voxels` (finest level) depend on that `store` lacks, then
+    /// returns their triples, in order, with the work done per level (also logged).
+    pub fn synthesize_voxels(
+        &self,
+        voxels: &[[i32; 3]],
+        store: &dyn BrickStore,
+    ) -> Result<(Vec<Triple>, SynthesisReport), SolidError> {
+        let report = self.synthesize(&VoxelRequest::from_voxels(voxels), store)?;
+        for l in &report.levels {
+            tracing::info!(
+                "synthesize: level {}: {} bricks needed, {} computed, {} reused; {} voxels, {} corrections",
+                l.level,
+                l.bricks_needed,
+                l.bricks_computed,
+                l.bricks_reused,
+                l.voxels,
+                l.corrections
+            );
+        }
+        let finest = self.pyramid.levels;
+        let triples = voxels
+            .iter()
+            .map(|v| {
+                self.triple_at(store, finest, *v)
+                    .ok_or(SolidError::NotSynthesized { voxel: *v })
+            })
+            .collect::<Result<_, _>>()?;
+        Ok((triples, report))
+    }
+
     /// The triple of voxel `v` of `level` (1..=L), if its brick is in the store.
     pub fn triple_at(&self, store: &dyn BrickStore, level: u32, v: [i32; 3]) -> Option<Triple> {
         let v = IVec3::from(v);
-        if level == 0 || level > self.volume.levels {
+        if level == 0 || level > self.pyramid.levels {
             return None;
         }
-        let dims = self.volume.level_dims(level);
+        let dims = self.pyramid.level_dims(level);
         if !(v.cmpge(IVec3::ZERO).all() && v.cmplt(dims).all()) {
             return None;
         }
@@ -1050,7 +1128,7 @@ impl<'a> SolidSynthesis<'a> {
 
     /// The finest-level colour of voxel `v`, if its brick is in the store.
     pub fn colour_at(&self, store: &dyn BrickStore, v: [i32; 3]) -> Option<[f32; 3]> {
-        let l = self.volume.levels;
+        let l = self.pyramid.levels;
         self.triple_at(store, l, v).map(|t| self.colour(l, &t))
     }
 
@@ -1076,7 +1154,7 @@ impl<'a> SolidSynthesis<'a> {
         let k = self.params.subpart as i32;
         let part = v.div_euclid(IVec3::splat(k));
         let centre = (part * k).as_vec3() + 0.5 * k as f32;
-        let pos = self.volume.position(1, v);
+        let pos = self.pyramid.position(1, v);
         let q = self.field.rotation_at(pos);
         let s = self.field.scale_at(pos);
         let u = centre + q.inverse() * (v.as_vec3() - centre) / s;
@@ -1088,7 +1166,7 @@ impl<'a> SolidSynthesis<'a> {
         let level = li as u32 + 1;
         let vp = v.div_euclid(IVec3::splat(2));
         let tp = parents.get(vp);
-        let pos = self.volume.position(level - 1, vp);
+        let pos = self.pyramid.position(level - 1, vp);
         let q = self.field.rotation_at(pos);
         let s = self.field.scale_at(pos);
         let h = self.analysis.spacing(li) as f32;
@@ -1172,7 +1250,7 @@ impl<'a> SolidSynthesis<'a> {
             }
         }
         let m = self.m();
-        let dims = self.volume.level_dims(level);
+        let dims = self.pyramid.level_dims(level);
         let bricks = out
             .iter()
             .map(|b| {
@@ -1226,8 +1304,8 @@ impl<'a> SolidSynthesis<'a> {
         let level = li as u32 + 1;
         let (w, hh) = self.wh();
         let weights = a.weights();
-        let dmax = self.volume.level_dims(level) - 1;
-        let pos = self.volume.position(level, v);
+        let dmax = self.pyramid.level_dims(level) - 1;
+        let pos = self.pyramid.position(level, v);
         let q = self.field.rotation_at(pos);
         let s = self.field.scale_at(pos);
         let mat = Mat3::from_quat(q);

@@ -1,0 +1,7 @@
+//! Sketch-guided solid synthesis (Zhang, Du, Lai, Ni & Hu, "Sketch guided solid texturing",
+//! §4–5): the on-demand, brick-by-brick synthesis ([`solid_synthesis`]) and the two pieces of
+//! §5 it rests on, the history windows of grid and dual-grid correction ([`history_window`])
+//! and the dependent set of a request worked out backwards through them ([`dependent_set`]).
+pub mod dependent_set;
+pub mod history_window;
+pub mod solid_synthesis;
