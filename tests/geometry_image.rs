@@ -1,24 +1,17 @@
 //! Geometry images (Lai et al. 2005 §3, Gu et al. 2002): cutting to a disk, the map to the
 //! square and the samples, on real meshes closed (genus 0, 1, 3) and open.
 
+mod common;
+use common::geometry_image::{holed_knot, load_mesh as load};
 use glam::{DVec2, DVec3, Vec3};
-use std::path::{Path, PathBuf};
 use texsyn::geom::Mesh;
 use texsyn::geom::half_edge::{HalfEdgeMesh, TopologyError};
 use texsyn::stages::parameterize::geometry_image::{
     GeometryImageBuild, GeometryImageError, GeometryImageParams, build_geometry_image,
 };
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn load(rel: &str) -> Mesh {
-    texsyn::geom::io::read_mesh(&root().join(rel)).unwrap()
-}
-
 /// The corpus: (path, genus, closed). The last entry is derived from the knot (see
-/// [`holed_knot`]).
+/// `holed_knot` in tests/common/geometry_image.rs).
 const CORPUS: [(&str, u32, bool); 5] = [
     ("configs/assets/cow.obj", 0, true),
     ("tests/data/meshes/knot.off", 1, true),
@@ -26,26 +19,6 @@ const CORPUS: [(&str, u32, bool); 5] = [
     ("tests/data/meshes/mushroom.off", 0, false),
     ("knot with two holes", 1, false),
 ];
-
-/// The knot with the triangles near two of its vertices removed: genus 1 with two boundary
-/// loops, so the cut must both open the handle and reach both loops.
-fn holed_knot() -> Mesh {
-    let k = load("tests/data/meshes/knot.off");
-    let centres = [k.positions[0], k.positions[k.vertex_count() / 2]];
-    let r = 3.0 * k.mean_edge_length();
-    let tris = k
-        .triangles
-        .iter()
-        .copied()
-        .filter(|t| {
-            !centres.iter().any(|c| {
-                t.iter()
-                    .all(|&v| (k.positions[v as usize] - *c).length() < r)
-            })
-        })
-        .collect();
-    Mesh::new(k.positions.clone(), tris)
-}
 
 fn params65() -> GeometryImageParams {
     GeometryImageParams {
@@ -509,140 +482,4 @@ fn the_image_is_byte_identical_for_one_and_two_threads() {
         v
     };
     assert!(bytes(&a) == bytes(&b));
-}
-
-/// Triangulates the grid (two triangles per cell) into a mesh.
-pub fn grid_mesh(gi: &texsyn::geom::geometry_image::GeometryImage) -> Mesh {
-    let n = gi.n;
-    let mut t = Vec::new();
-    for i in 0..n - 1 {
-        for j in 0..n - 1 {
-            let (a, b, c, d) = (
-                i * n + j,
-                i * n + j + 1,
-                (i + 1) * n + j + 1,
-                (i + 1) * n + j,
-            );
-            t.push([a, b, c]);
-            t.push([a, c, d]);
-        }
-    }
-    Mesh::new(gi.positions.clone(), t)
-}
-
-/// Renders previews and prints timings at size 257 for the meshes in `TEXSYN_GI_MESHES`
-/// (a directory; default tests/data/meshes) into `TEXSYN_GI_OUT` (default the temp dir).
-#[test]
-#[ignore]
-fn previews_and_timings() {
-    let dir = std::env::var("TEXSYN_GI_MESHES")
-        .map(PathBuf::from)
-        .unwrap_or(root().join("tests/data/meshes"));
-    let out = std::env::var("TEXSYN_GI_OUT")
-        .map(PathBuf::from)
-        .unwrap_or(std::env::temp_dir());
-    let size: u32 = std::env::var("TEXSYN_GI_SIZE")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(257);
-    let mut files: Vec<PathBuf> = vec![root().join("configs/assets/cow.obj")];
-    for name in [
-        "knot.off",
-        "elephant.off",
-        "mushroom.off",
-        "refined_elephant.off",
-    ] {
-        if dir.join(name).exists() {
-            files.push(dir.join(name));
-        }
-    }
-    let mut inputs: Vec<(String, Mesh)> = files
-        .iter()
-        .map(|f| {
-            let stem = f.file_stem().unwrap().to_string_lossy().to_string();
-            (stem, texsyn::geom::io::read_mesh(f).unwrap())
-        })
-        .collect();
-    inputs.insert(2, ("holed_knot".to_string(), holed_knot()));
-    for (stem, m) in inputs {
-        let extremity_cuts: u32 = std::env::var("TEXSYN_GI_EXTREMITY")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(0);
-        let stretch_iterations: u32 = std::env::var("TEXSYN_GI_STRETCH")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(8);
-        let p = GeometryImageParams {
-            size,
-            extremity_cuts,
-            stretch_iterations,
-            ..Default::default()
-        };
-        let t0 = std::time::Instant::now();
-        let b = build_geometry_image(&m, &p, &|_| {}).unwrap();
-        let dt = t0.elapsed();
-        println!(
-            "{stem}: {} vertices, genus {}, {:.3} s, cut length {:.4} ({} edges), stretch {:.3} -> {:.3} ({} iterations), flipped {}",
-            m.vertex_count(),
-            b.genus,
-            dt.as_secs_f64(),
-            b.cut_length,
-            b.cut_edges.len(),
-            b.initial_stretch,
-            b.stretch,
-            b.stretch_iterations_used,
-            b.flipped_triangles
-        );
-        let grid = grid_mesh(&b.image);
-        let img = texsyn::render::render_views(
-            &grid,
-            &texsyn::render::ConstantShader(Vec3::splat(0.8)),
-            &texsyn::render::ViewOptions::default(),
-        );
-        img.save(out.join(format!("gi_{stem}.png"))).unwrap();
-        save_uv_plot(&b, &out.join(format!("gi_{stem}_uv.png")));
-    }
-}
-
-/// Draws the disk's parameter-domain edges (black), the boundary (red) into a PNG.
-fn save_uv_plot(b: &GeometryImageBuild, path: &Path) {
-    let px = 1024u32;
-    let n1 = (b.image.n - 1) as f32;
-    let mut img = image::RgbImage::from_pixel(px, px, image::Rgb([255, 255, 255]));
-    let to_px = |q: glam::Vec2| {
-        glam::Vec2::new(
-            q.x / n1 * (px - 1) as f32,
-            (1.0 - q.y / n1) * (px - 1) as f32,
-        )
-    };
-    let dhe = HalfEdgeMesh::new(&b.disk).unwrap();
-    let mut line = |a: glam::Vec2, c: glam::Vec2, col: [u8; 3]| {
-        let (pa, pc) = (to_px(a), to_px(c));
-        let steps = ((pc - pa).length().ceil() as usize).max(1);
-        for s in 0..=steps {
-            let q = pa.lerp(pc, s as f32 / steps as f32);
-            let (x, y) = (q.x.round() as i64, q.y.round() as i64);
-            if x >= 0 && y >= 0 && x < px as i64 && y < px as i64 {
-                img.put_pixel(x as u32, y as u32, image::Rgb(col));
-            }
-        }
-    };
-    for t in &b.disk.triangles {
-        for k in 0..3 {
-            line(
-                b.disk_uv[t[k] as usize],
-                b.disk_uv[t[(k + 1) % 3] as usize],
-                [90, 90, 90],
-            );
-        }
-    }
-    for &h in &dhe.boundary_loops()[0] {
-        line(
-            b.disk_uv[dhe.origin(h) as usize],
-            b.disk_uv[dhe.dest(h) as usize],
-            [220, 0, 0],
-        );
-    }
-    img.save(path).unwrap();
 }

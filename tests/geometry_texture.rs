@@ -1,130 +1,17 @@
 //! Geometric texture synthesis over geometry images (Lai et al. 2005, §4.2–4.3): texel variants
-//! and boundary-consistent synthesis on synthetic geometry images built here.
+//! and boundary-consistent synthesis on synthetic geometry images (tests/common/geometry_texture.rs,
+//! shared with the `geometry_texture_*` examples, which time and show the same cases).
 
-use glam::{Vec2, Vec3};
-use texsyn::geom::geometry_image::{GeometryImage, TexelImage};
-use texsyn::random::counter_unit;
-use texsyn::stages::analyse_exemplar::texel_variants::{
-    TexelVariantParams, TexelVariants, build_texel_variants,
+mod common;
+use common::geometry_texture::{
+    bumps, channel, cylinder, field, flat, folded, stripes, synth, variants,
 };
+use glam::Vec2;
+use texsyn::geom::geometry_image::TexelImage;
+use texsyn::stages::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
 use texsyn::stages::synthesize::geometry_texture::{
     GeometrySynthParams, ParamField, synthesize_geometry_texture,
 };
-
-/// A flat square: no mates.
-fn flat(n: u32) -> GeometryImage {
-    let nn = (n * n) as usize;
-    GeometryImage {
-        n,
-        positions: (0..nn)
-            .map(|k| Vec3::new((k as u32 % n) as f32, (k as u32 / n) as f32, 0.0))
-            .collect(),
-        normals: vec![Vec3::Z; nn],
-        mate_rep: (0..nn as u32).collect(),
-    }
-}
-
-/// A cylinder: column 0 mated with column n−1 row by row (the left and right sides of the
-/// square are the two sides of one cut).
-fn cylinder(n: u32) -> GeometryImage {
-    let mut gi = flat(n);
-    for i in 0..n {
-        gi.mate_rep[(i * n + n - 1) as usize] = i * n;
-    }
-    gi
-}
-
-/// A cut folded at the corner: the top side `(0, j)` glued to the left side `(j, 0)`.
-fn folded(n: u32) -> GeometryImage {
-    let mut gi = flat(n);
-    for j in 1..n {
-        gi.mate_rep[(j * n) as usize] = j;
-    }
-    gi
-}
-
-fn field(n: u32, dir: Vec2, r: f32) -> ParamField {
-    let nn = (n * n) as usize;
-    ParamField {
-        dir: vec![dir; nn],
-        rel_scale: vec![r; nn],
-    }
-}
-
-/// Stripes across x: dn = sin(2π x / period), dx = 0.3 cos(2π x / period), dy = 0.
-fn stripes(size: u32, period: f32) -> TexelImage {
-    let mut t = TexelImage::new(size, size, 3);
-    for y in 0..size {
-        for x in 0..size {
-            let a = std::f32::consts::TAU * x as f32 / period;
-            let p = t.texel_mut(x, y);
-            p[0] = 0.3 * a.cos();
-            p[1] = 0.0;
-            p[2] = a.sin();
-        }
-    }
-    t
-}
-
-/// Random Gaussian bumps; (dx, dy) point down the slopes. With `color`, r g b follow the height.
-fn bumps(size: u32, seed: u64, color: bool) -> TexelImage {
-    let c = if color { 6 } else { 3 };
-    let mut t = TexelImage::new(size, size, c);
-    let count = (size * size / 40) as u64;
-    let sigma = 2.2f32;
-    let centres: Vec<(f32, f32, f32)> = (0..count)
-        .map(|k| {
-            (
-                counter_unit(seed, 1, k) * size as f32,
-                counter_unit(seed, 2, k) * size as f32,
-                0.5 + 0.5 * counter_unit(seed, 3, k),
-            )
-        })
-        .collect();
-    for y in 0..size {
-        for x in 0..size {
-            let (mut h, mut gx, mut gy) = (0.0f32, 0.0f32, 0.0f32);
-            for &(cx, cy, a) in &centres {
-                let (dx, dy) = (x as f32 - cx, y as f32 - cy);
-                let e = a * (-(dx * dx + dy * dy) / (2.0 * sigma * sigma)).exp();
-                h += e;
-                gx -= e * dx / (sigma * sigma);
-                gy -= e * dy / (sigma * sigma);
-            }
-            let p = t.texel_mut(x, y);
-            p[0] = -0.5 * gx;
-            p[1] = -0.5 * gy;
-            p[2] = h;
-            if color {
-                p[3] = 0.2 + 0.5 * h;
-                p[4] = 0.5;
-                p[5] = 1.0 - 0.3 * h;
-            }
-        }
-    }
-    t
-}
-
-fn variants(sample: &TexelImage) -> TexelVariants {
-    build_texel_variants(sample, &TexelVariantParams::default(), &|_| {}).unwrap()
-}
-
-fn synth(gi: &GeometryImage, f: &ParamField, v: &TexelVariants, seed: u64) -> TexelImage {
-    let p = GeometrySynthParams {
-        seed,
-        ..Default::default()
-    };
-    synthesize_geometry_texture(gi, f, &v.as_ref(), &p, &|_| {}).unwrap()
-}
-
-fn channel(t: &TexelImage, ch: usize) -> Vec<f32> {
-    t.data
-        .iter()
-        .skip(ch)
-        .step_by(t.channels as usize)
-        .copied()
-        .collect()
-}
 
 fn mean_std(v: &[f32]) -> (f64, f64) {
     let n = v.len() as f64;
@@ -455,105 +342,6 @@ fn too_small_samples_and_bad_inputs_are_errors() {
     let mut f = field(33, Vec2::Y, 1.0);
     f.dir.pop();
     assert!(synthesize_geometry_texture(&flat(33), &f, &v.as_ref(), &p, &|_| {}).is_err());
-}
-
-/// Timing of the paper's setting: 257² geometry image, 64² sample, 3 levels, 8 × 3 variants.
-/// `cargo test --release --test geometry_texture -- --ignored --nocapture timing`
-#[test]
-#[ignore]
-fn timing_257_with_a_64_sample() {
-    let sample = bumps(64, 11, false);
-    let t = std::time::Instant::now();
-    let v = variants(&sample);
-    let build = t.elapsed().as_secs_f64();
-    let n = 257;
-    let gi = cylinder(n);
-    let nn = (n * n) as usize;
-    let f = ParamField {
-        dir: (0..nn)
-            .map(|k| Vec2::from_angle((k as u32 % n) as f32 * 0.02).rotate(Vec2::Y))
-            .collect(),
-        rel_scale: (0..nn)
-            .map(|k| 0.5 + 1.5 * (k as u32 / n) as f32 / n as f32)
-            .collect(),
-    };
-    let mut times = Vec::new();
-    for seed in 0..3 {
-        let t = std::time::Instant::now();
-        let out = synth(&gi, &f, &v, seed);
-        times.push(t.elapsed().as_secs_f64());
-        assert_eq!(out.width, n);
-    }
-    times.sort_by(f64::total_cmp);
-    println!(
-        "variants: {build:.3} s; synthesis 257²: median {:.3} s (runs {times:?}); threads {}",
-        times[1],
-        rayon::current_num_threads()
-    );
-}
-
-/// Writes dn previews to /tmp (greyscale PNGs) for looking at.
-/// `cargo test --release --test geometry_texture -- --ignored previews`
-#[test]
-#[ignore]
-fn previews() {
-    fn save(t: &TexelImage, path: &str) {
-        let d = channel(t, 2);
-        let lo = d.iter().copied().fold(f32::INFINITY, f32::min);
-        let hi = d.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let img = image::GrayImage::from_fn(t.width, t.height, |x, y| {
-            let v = (t.texel(x, y)[2] - lo) / (hi - lo).max(1e-9);
-            image::Luma([(v * 255.0 + 0.5) as u8])
-        });
-        img.save(path).unwrap();
-    }
-    let n = 129;
-    let nn = (n * n) as usize;
-    for (name, sample) in [
-        ("stripes", stripes(64, 10.0)),
-        ("bumps", bumps(64, 12, false)),
-    ] {
-        save(&sample, &format!("/tmp/gt_{name}_sample.png"));
-        let v = variants(&sample);
-        let out = synth(&cylinder(n), &field(n, Vec2::Y, 1.0), &v, 1);
-        save(&out, &format!("/tmp/gt_{name}_cyl.png"));
-        // The cylinder unrolled twice side by side: the seam is in the middle.
-        let mut twice = TexelImage::new(2 * n - 2, n, 3);
-        for y in 0..n {
-            for x in 0..2 * n - 2 {
-                let src = out.texel(x % (n - 1), y).to_vec();
-                twice.texel_mut(x, y).copy_from_slice(&src);
-            }
-        }
-        save(&twice, &format!("/tmp/gt_{name}_cyl_twice.png"));
-        let swirl = ParamField {
-            dir: (0..nn)
-                .map(|k| {
-                    let (i, j) = ((k as u32 / n) as f32, (k as u32 % n) as f32);
-                    let c = (n as f32 - 1.0) / 2.0;
-                    Vec2::new(i - c, -(j - c)).normalize_or(Vec2::Y)
-                })
-                .collect(),
-            rel_scale: (0..nn)
-                .map(|k| 0.5 + 1.5 * (k as u32 % n) as f32 / n as f32)
-                .collect(),
-        };
-        let out = synth(&flat(n), &swirl, &v, 2);
-        save(&out, &format!("/tmp/gt_{name}_swirl_scale.png"));
-        // The timing case: 257², direction turning along the columns, R from 0.5 to 2 down.
-        let m = 257u32;
-        let mm = (m * m) as usize;
-        let f = ParamField {
-            dir: (0..mm)
-                .map(|k| Vec2::from_angle((k as u32 % m) as f32 * 0.02).rotate(Vec2::Y))
-                .collect(),
-            rel_scale: (0..mm)
-                .map(|k| 0.5 + 1.5 * (k as u32 / m) as f32 / m as f32)
-                .collect(),
-        };
-        let out = synth(&cylinder(m), &f, &v, 3);
-        save(&out, &format!("/tmp/gt_{name}_257.png"));
-    }
 }
 
 /// The variant set's arrays stored in an artifact read back equal to the owned set (levels,

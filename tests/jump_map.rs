@@ -2,22 +2,20 @@
 //! (stages/synthesize/synth2d.rs) and rendering (stages/reconstruct/blend2d.rs).
 
 mod common;
-use common::{exemplar_path as data_path, load_exemplar as load};
-use std::path::PathBuf;
+use common::jump_map::{EXEMPLARS, coherence, patch_ssd, stats};
+use common::load_exemplar as load;
 use std::sync::OnceLock;
 
+use texsyn::image::Image;
 use texsyn::image::knn::squared_distance;
 use texsyn::image::neighbourhood::{NeighbourhoodParams, Neighbourhoods};
 use texsyn::image::pca::{Pca, PcaParams};
-use texsyn::image::{Image, ImageView, decode_image};
 use texsyn::random::counter_hash;
 use texsyn::stages::analyse_exemplar::jump_map::{
     Jump, JumpMap, JumpMapParams, JumpMapRef, build_jump_map,
 };
 use texsyn::stages::reconstruct::blend2d::render_2d;
 use texsyn::stages::synthesize::synth2d::{Synth2dParams, synthesize_2d};
-
-const EXEMPLARS: [&str; 3] = ["wood1.png", "leopard.png", "marble1.png"];
 
 /// Exemplars and their default jump maps, computed once for all tests.
 fn corpus() -> &'static Vec<(String, Image, JumpMap)> {
@@ -106,22 +104,6 @@ fn jumps_leave_the_exclusion_radius_and_each_other() {
             }
         }
     }
-}
-
-/// Gaussian-free plain 5×5 RGB sum of squared differences, clamped borders: an independent
-/// measure of how alike two pixels' surroundings are.
-fn patch_ssd(img: ImageView, a: (u32, u32), b: (u32, u32)) -> f32 {
-    let mut s = 0.0;
-    for dy in -2i64..=2 {
-        for dx in -2i64..=2 {
-            let p = img.get_clamped(a.0 as i64 + dx, a.1 as i64 + dy);
-            let q = img.get_clamped(b.0 as i64 + dx, b.1 as i64 + dy);
-            for c in 0..3 {
-                s += (p[c] - q[c]) * (p[c] - q[c]);
-            }
-        }
-    }
-    s
 }
 
 #[test]
@@ -247,28 +229,6 @@ fn progress_runs_from_zero_to_one() {
     assert!(seen.windows(2).all(|s| s[0] <= s[1]), "{seen:?}");
 }
 
-/// Fraction of horizontally and vertically adjacent output pixels whose addresses differ by
-/// exactly their offset (the same patch continues).
-fn coherence(addr: &[[u16; 2]], w: u32, h: u32) -> f64 {
-    let (mut same, mut total) = (0usize, 0usize);
-    for y in 0..h {
-        for x in 0..w {
-            let a = addr[(y * w + x) as usize];
-            if x + 1 < w {
-                let b = addr[(y * w + x + 1) as usize];
-                same += (b[0] as i32 - a[0] as i32 == 1 && b[1] == a[1]) as usize;
-                total += 1;
-            }
-            if y + 1 < h {
-                let b = addr[((y + 1) * w + x) as usize];
-                same += (b[1] as i32 - a[1] as i32 == 1 && b[0] == a[0]) as usize;
-                total += 1;
-            }
-        }
-    }
-    same as f64 / total as f64
-}
-
 #[test]
 fn synthesized_addresses_stay_inside_and_depend_only_on_the_seed() {
     for (name, _, jm) in corpus() {
@@ -343,22 +303,6 @@ fn combining_neighbours_fragments_patches_less() {
     }
 }
 
-fn stats(img: &Image) -> [(f64, f64); 3] {
-    let n = img.pixels.len() as f64;
-    let mut out = [(0.0, 0.0); 3];
-    for (c, o) in out.iter_mut().enumerate() {
-        let mean = img.pixels.iter().map(|p| p[c] as f64).sum::<f64>() / n;
-        let var = img
-            .pixels
-            .iter()
-            .map(|p| (p[c] as f64 - mean).powi(2))
-            .sum::<f64>()
-            / n;
-        *o = (mean, var.sqrt());
-    }
-    out
-}
-
 #[test]
 fn synthesized_images_have_the_exemplar_colour_statistics() {
     for (name, img, jm) in corpus() {
@@ -382,137 +326,5 @@ fn synthesized_images_have_the_exemplar_colour_statistics() {
         for (p, a) in copy.pixels.iter().zip(&addr) {
             assert_eq!(*p, img.view().get(a[0] as u32, a[1] as u32));
         }
-    }
-}
-
-/// Writes previews and prints analysis times; run with
-/// `cargo test --release --test jump_map -- --ignored --nocapture`. Uses the exemplars named
-/// in `TEXSYN_PREVIEW_EXEMPLARS` (paths, comma-separated; default: this test's corpus) and
-/// writes to `TEXSYN_PREVIEW_DIR` (default: the system temporary directory).
-#[test]
-#[ignore]
-fn preview() {
-    let dir = std::env::var_os("TEXSYN_PREVIEW_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(std::env::temp_dir);
-    let list: Vec<PathBuf> = match std::env::var("TEXSYN_PREVIEW_EXEMPLARS") {
-        Ok(s) => s.split(',').map(PathBuf::from).collect(),
-        Err(_) => EXEMPLARS.iter().map(|n| data_path(n)).collect(),
-    };
-    let size: u32 = std::env::var("TEXSYN_PREVIEW_SIZE")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(256);
-    for path in list {
-        let bytes = std::fs::read(&path).unwrap();
-        let img = decode_image(&path, &bytes).unwrap();
-        let stem = path.file_stem().unwrap().to_string_lossy().to_string();
-        let params: JumpMapParams = match std::env::var("TEXSYN_PREVIEW_PARAMS") {
-            Ok(s) => serde_json::from_str(&s).unwrap(),
-            Err(_) => JumpMapParams::default(),
-        };
-        let synth: Synth2dParams = match std::env::var("TEXSYN_PREVIEW_SYNTH") {
-            Ok(s) => serde_json::from_str(&s).unwrap(),
-            Err(_) => Synth2dParams::default(),
-        };
-        let blend: u32 = std::env::var("TEXSYN_PREVIEW_BLEND")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(1);
-        let mut times = Vec::new();
-        let mut jm = None;
-        for _ in 0..3 {
-            let t = std::time::Instant::now();
-            jm = Some(build_jump_map(img.view(), &params, &|_| {}));
-            times.push(t.elapsed().as_secs_f64());
-        }
-        times.sort_by(|a, b| a.total_cmp(b));
-        println!(
-            "{stem}: {}x{} analysis median {:.3} s (runs {:?})",
-            img.width, img.height, times[1], times
-        );
-        let jm = jm.unwrap();
-        let mut ssd = 0.0f64;
-        for y in 0..img.height {
-            for x in 0..img.width {
-                let j = jm.jumps_at(x, y)[0];
-                ssd += patch_ssd(img.view(), (x, y), (j.x as u32, j.y as u32)) as f64;
-            }
-        }
-        println!(
-            "{stem}: mean best-jump 5x5 SSD {:.5}",
-            ssd / (img.width * img.height) as f64
-        );
-        let t = std::time::Instant::now();
-        let addr = synthesize_2d(jm.as_ref(), size, size, &synth, 1);
-        let ts = t.elapsed().as_secs_f64();
-        println!("{stem}: coherence {:.3}", coherence(&addr, size, size));
-        let out = render_2d(img.view(), &addr, size, size, blend);
-        println!("{stem}: synthesis {size}x{size} {:.4} s", ts);
-        let zoom: u32 = std::env::var("TEXSYN_PREVIEW_ZOOM")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(1);
-        let zoomed = |img: &Image| {
-            let mut z = Image::new(img.width * zoom, img.height * zoom);
-            for (i, p) in z.pixels.iter_mut().enumerate() {
-                let (x, y) = (i as u32 % z.width / zoom, i as u32 / z.width / zoom);
-                *p = img.view().get(x, y);
-            }
-            z
-        };
-        zoomed(&out)
-            .to_rgba8()
-            .save(dir.join(format!("{stem}_synth.png")))
-            .unwrap();
-        zoomed(&img)
-            .to_rgba8()
-            .save(dir.join(format!("{stem}_exemplar.png")))
-            .unwrap();
-        let grad = |im: &Image| {
-            let v = im.view();
-            let (mut s, mut n) = (0.0f64, 0usize);
-            for y in 0..im.height - 1 {
-                for x in 0..im.width - 1 {
-                    let p = v.get(x, y);
-                    for q in [v.get(x + 1, y), v.get(x, y + 1)] {
-                        for c in 0..3 {
-                            s += ((p[c] - q[c]) as f64).powi(2);
-                        }
-                        n += 1;
-                    }
-                }
-            }
-            s / n as f64
-        };
-        let r0 = render_2d(img.view(), &addr, size, size, 0);
-        println!(
-            "{stem}: gradient energy ratio r0 {:.3} blended {:.3}",
-            grad(&r0) / grad(&img),
-            grad(&out) / grad(&img)
-        );
-        let (se, so) = (stats(&img), stats(&r0));
-        println!(
-            "{stem}: std ratio r0 {:.3} {:.3} {:.3}",
-            so[0].1 / se[0].1,
-            so[1].1 / se[1].1,
-            so[2].1 / se[2].1
-        );
-        r0.to_rgba8()
-            .save(dir.join(format!("{stem}_synth_r0.png")))
-            .unwrap();
-        // Patches coloured by source address.
-        let mut vis = Image::new(size, size);
-        for (p, a) in vis.pixels.iter_mut().zip(&addr) {
-            *p = [
-                a[0] as f32 / jm.width as f32,
-                a[1] as f32 / jm.height as f32,
-                0.5,
-                1.0,
-            ];
-        }
-        vis.to_rgba8()
-            .save(dir.join(format!("{stem}_addr.png")))
-            .unwrap();
     }
 }

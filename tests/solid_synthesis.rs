@@ -4,7 +4,7 @@
 
 mod common;
 use common::load_exemplar as load;
-use std::path::Path;
+use common::solid::{cube, rotated_field, transpose, trivial_field};
 use std::sync::OnceLock;
 
 use glam::{Quat, Vec3};
@@ -14,8 +14,6 @@ use texsyn::random::counter_hash;
 use texsyn::stages::analyse_exemplar::candidate_triples::{
     AnalysisError, CandidateParams, SolidAnalysis, SolidAnalysisRef, Triple, analyse,
 };
-use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
-use texsyn::stages::parameterize::volume_embedding::Volume;
 use texsyn::stages::synthesize::solid::solid_synthesis::{
     Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, VoxelRequest,
 };
@@ -25,16 +23,6 @@ fn crop(img: &Image, x0: u32, y0: u32, w: u32, h: u32) -> Image {
     for y in 0..h {
         for x in 0..w {
             out.pixels[(y * w + x) as usize] = img.pixels[((y0 + y) * img.width + x0 + x) as usize];
-        }
-    }
-    out
-}
-
-fn transpose(img: &Image) -> Image {
-    let mut out = Image::new(img.height, img.width);
-    for y in 0..img.height {
-        for x in 0..img.width {
-            out.pixels[(x * img.height + y) as usize] = img.pixels[(y * img.width + x) as usize];
         }
     }
     out
@@ -57,30 +45,6 @@ fn small() -> &'static (Image, SolidAnalysis) {
         let a = analyse([img.view(); 3], &small_params()).unwrap();
         (img, a)
     })
-}
-
-fn trivial_field(volume: &Volume) -> RotationField {
-    let hi = Vec3::from(volume.origin)
-        + Vec3::new(
-            volume.dims[0] as f32,
-            volume.dims[1] as f32,
-            volume.dims[2] as f32,
-        ) * volume.voxel;
-    RotationField::trivial(FieldGrid::covering(volume.origin.into(), hi, 8))
-}
-
-fn rotated_field(volume: &Volume, q: Quat) -> RotationField {
-    let mut f = trivial_field(volume);
-    f.rotations.iter_mut().for_each(|r| *r = q);
-    f
-}
-
-fn cube(n: u32) -> Volume {
-    Volume {
-        origin: [0.0; 3],
-        voxel: 1.0,
-        dims: [n; 3],
-    }
 }
 
 fn small_solid_params() -> SolidParams {
@@ -508,220 +472,4 @@ fn the_pyramid_depth_is_derived_from_whichever_of_its_two_settings_is_given() {
     );
     let e = couple(4, 0, [false, true]).unwrap_err();
     assert!(e.to_string().contains("has 0 entries"), "{e}");
-}
-
-// ----- Looking at results and timing (run with --ignored --nocapture) -----
-
-fn write_png(path: &str, px: &[[f32; 3]], w: u32, h: u32, zoom: u32) {
-    let mut img = image::RgbImage::new(w * zoom, h * zoom);
-    for y in 0..h * zoom {
-        for x in 0..w * zoom {
-            let c = px[((y / zoom) * w + x / zoom) as usize];
-            img.put_pixel(
-                x,
-                y,
-                image::Rgb(c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)),
-            );
-        }
-    }
-    img.save(path).unwrap();
-}
-
-fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
-/// Writes sections of synthesized solids to /tmp. Env: EXEMPLAR (file in tests/data/exemplars
-/// or a path), SIZE, LEVELS, CONFIG (same|layers|layers3), ANGLE (degrees about z), K,
-/// WEIGHTS (e.g. 1,0,1), SCHEME (dual|plain), PASSES, PASSES0, JITTER, SEED, TRILINEAR,
-/// NO_COHERENT, LEVELS_DUMP.
-#[test]
-#[ignore]
-fn look() {
-    let name: String = env_or("EXEMPLAR", "wood2.png".to_string());
-    let n: u32 = env_or("SIZE", 64);
-    let levels: u32 = env_or("LEVELS", 4);
-    let config: String = env_or("CONFIG", "same".to_string());
-    let angle: f32 = env_or("ANGLE", 0.0);
-    let img = load(&name);
-    let mut cp = CandidateParams {
-        levels,
-        candidates: env_or("K", 4),
-        ..Default::default()
-    };
-    if let Ok(w) = std::env::var("WEIGHTS") {
-        let v: Vec<f32> = w.split(',').map(|x| x.parse().unwrap()).collect();
-        cp.plane_weights = [v[0], v[1], v[2]];
-    }
-    let t = std::time::Instant::now();
-    let a = if config == "layers" {
-        // A solid layered across x: xy shows the stripes, zx the transposed stripes, yz is
-        // not matched.
-        let tr = transpose(&img);
-        cp.plane_weights = [1.0, 0.0, 1.0];
-        analyse([img.view(), img.view(), tr.view()], &cp).unwrap()
-    } else if config == "layers3" {
-        // The same, with a constant image (the mean colour) for yz: fully consistent.
-        let tr = transpose(&img);
-        let mut flat = img.clone();
-        let n = img.pixels.len() as f32;
-        let mean = img
-            .pixels
-            .iter()
-            .fold([0.0f32; 4], |a, p| std::array::from_fn(|c| a[c] + p[c] / n));
-        flat.pixels.iter_mut().for_each(|p| *p = mean);
-        analyse([img.view(), flat.view(), tr.view()], &cp).unwrap()
-    } else {
-        analyse([img.view(); 3], &cp).unwrap()
-    };
-    println!(
-        "analysis of {name} ({}×{}): {:.2} s",
-        img.width,
-        img.height,
-        t.elapsed().as_secs_f64()
-    );
-    let vol = cube(n);
-    let q = Quat::from_rotation_z(angle.to_radians());
-    let field = rotated_field(&vol, q);
-    let mut params = SolidParams::paper(levels);
-    params.seed = env_or("SEED", 0);
-    for l in params.levels.iter_mut().skip(1) {
-        l.jitter = env_or("JITTER", 0.0);
-        if std::env::var("TRILINEAR").is_ok() {
-            l.trilinear = true;
-        }
-        l.passes = env_or("PASSES", l.passes);
-    }
-    params.levels[0].passes = env_or("PASSES0", params.levels[0].passes);
-    params.coherent_candidates = std::env::var("NO_COHERENT").is_err();
-    if env_or("SCHEME", "dual".to_string()) == "plain" {
-        params = params.with_scheme(Scheme::Plain);
-    }
-    let s = SolidSynthesis::new(a.as_ref(), &field, vol, params).unwrap();
-    let store = MemoryBrickStore::new();
-    let stem = Path::new(&name)
-        .file_stem()
-        .unwrap()
-        .to_string_lossy()
-        .to_string();
-    let tag = format!("{stem}_{config}_{angle}");
-    let c = n as i32 / 2;
-    for (axis, req) in [
-        (
-            "z",
-            VoxelRequest::from_box([0, 0, c], [n as i32, n as i32, c + 1]),
-        ),
-        (
-            "x",
-            VoxelRequest::from_box([c, 0, 0], [c + 1, n as i32, n as i32]),
-        ),
-        (
-            "y",
-            VoxelRequest::from_box([0, c, 0], [n as i32, c + 1, n as i32]),
-        ),
-    ] {
-        let t = std::time::Instant::now();
-        let rep = s.synthesize(&req, &store).unwrap();
-        println!("section {axis}: {:.2} s", t.elapsed().as_secs_f64());
-        for l in &rep.levels {
-            println!("  {l:?}");
-        }
-        let mut px = vec![];
-        for i in 0..n as i32 {
-            for j in 0..n as i32 {
-                let v = match axis {
-                    "z" => [j, i, c],
-                    "x" => [c, j, i],
-                    _ => [i, c, j],
-                };
-                px.push(s.colour_at(&store, v).unwrap());
-            }
-        }
-        write_png(&format!("/tmp/solid_{tag}_{axis}.png"), &px, n, n, 2);
-        if axis == "z" {
-            // Each plane's texel alone, and how much the three disagree.
-            let r = a.as_ref();
-            let mut spread = 0.0f64;
-            for p in 0..3 {
-                let mut px = vec![];
-                for i in 0..n as i32 {
-                    for j in 0..n as i32 {
-                        let t = s.triple_at(&store, levels, [j, i, c]).unwrap();
-                        let col = r.texel(levels as usize - 1, r.image_of(p), t.c[p]);
-                        if p == 0 {
-                            let o = r.texel(levels as usize - 1, r.image_of(2), t.c[2]);
-                            spread += (0..3).map(|k| (col[k] - o[k]).abs() as f64).sum::<f64>();
-                        }
-                        px.push(col);
-                    }
-                }
-                write_png(&format!("/tmp/solid_{tag}_z_plane{p}.png"), &px, n, n, 2);
-            }
-            println!(
-                "mean |xy - zx| texel difference: {:.4}",
-                spread / (n * n) as f64 / 3.0
-            );
-        }
-        if axis == "z" && std::env::var("LEVELS_DUMP").is_ok() {
-            for level in 1..levels {
-                let shift = levels - level;
-                let m = n as i32 >> shift;
-                let mut px = vec![];
-                for i in 0..m {
-                    for j in 0..m {
-                        let t = s.triple_at(&store, level, [j, i, c >> shift]).unwrap();
-                        px.push(s.colour(level, &t));
-                    }
-                }
-                write_png(
-                    &format!("/tmp/solid_{tag}_z_level{level}.png"),
-                    &px,
-                    m as u32,
-                    m as u32,
-                    2 << shift,
-                );
-            }
-        }
-    }
-}
-
-/// Table 1/2-style numbers: analysis time of a 128² exemplar and a cross-section through a
-/// 128³ volume, 4 levels, N = 7 then 9, dual-grid vs standard (run with --ignored --nocapture).
-#[test]
-#[ignore]
-fn bench_table() {
-    let name: String = env_or("EXEMPLAR", "marble1.png".to_string());
-    let img = load(&name);
-    let t = std::time::Instant::now();
-    let a = analyse([img.view(); 3], &CandidateParams::default()).unwrap();
-    println!(
-        "analysis {name} {}×{} (L=4, N=7/9, k=4): {:.2} s on {} threads",
-        img.width,
-        img.height,
-        t.elapsed().as_secs_f64(),
-        rayon::current_num_threads()
-    );
-    let n: u32 = env_or("SIZE", 128);
-    let vol = cube(n);
-    let field = trivial_field(&vol);
-    let req = VoxelRequest::from_box([0, 0, n as i32 / 2], [n as i32, n as i32, n as i32 / 2 + 1]);
-    for (label, params) in [
-        ("dual-grid", SolidParams::paper(4)),
-        ("standard", SolidParams::paper(4).with_scheme(Scheme::Plain)),
-    ] {
-        let s = SolidSynthesis::new(a.as_ref(), &field, vol, params).unwrap();
-        let t = std::time::Instant::now();
-        let rep = s.synthesize(&req, &MemoryBrickStore::new()).unwrap();
-        println!("{label}: {:.2} s in all", t.elapsed().as_secs_f64());
-        println!("level | bricks | voxels | corrections | comparisons | seconds");
-        for l in &rep.levels {
-            println!(
-                "{} | {} | {} | {} | {} | {:.2}",
-                l.level, l.bricks_computed, l.voxels, l.corrections, l.comparisons, l.seconds
-            );
-        }
-    }
 }

@@ -1,28 +1,21 @@
 //! Helpers shared by the integration tests (`mod common;` in each file that uses them).
 #![allow(dead_code)] // each test file uses a different part of them
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use texsyn::artifact::Artifact;
 use texsyn::cache::Cache;
 use texsyn::config::Config;
-use texsyn::image::{Image, decode_image};
 use texsyn::pipeline::{self, NodeStatus, RunOptions, RunResult};
 
-pub fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// The path of an exemplar image in `tests/data/exemplars`.
-pub fn exemplar_path(name: &str) -> PathBuf {
-    repo().join("tests/data/exemplars").join(name)
-}
-
-/// An exemplar image of `tests/data/exemplars`, decoded.
-pub fn load_exemplar(name: &str) -> Image {
-    let path = exemplar_path(name);
-    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    decode_image(&path, &bytes).unwrap()
-}
+// Helpers the examples share with the tests: each file stands alone, so an example includes
+// just the one it needs with `#[path = "../tests/common/NAME.rs"] mod NAME;`.
+mod exemplars;
+#[allow(unused_imports)] // the files that use none of them
+pub use exemplars::*;
+pub mod geometry_image;
+pub mod geometry_texture;
+pub mod jump_map;
+pub mod solid;
 
 /// Loads `config` with the `base` settings and then `sets` (as `--set` would), and runs it
 /// in the cache at `cache`. Errors are the messages a user would see.

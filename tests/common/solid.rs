@@ -1,0 +1,46 @@
+//! Volumes, rotation fields and exemplar transforms for solid synthesis. Shared by
+//! tests/solid_synthesis.rs and the `solid_*` examples.
+#![allow(dead_code)] // each user takes a different part
+
+use glam::{Quat, Vec3};
+use texsyn::image::Image;
+use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
+use texsyn::stages::parameterize::volume_embedding::Volume;
+
+/// The image mirrored about its diagonal (width and height swapped).
+pub fn transpose(img: &Image) -> Image {
+    let mut out = Image::new(img.height, img.width);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            out.pixels[(x * img.height + y) as usize] = img.pixels[(y * img.width + x) as usize];
+        }
+    }
+    out
+}
+
+/// The identity rotation over a grid of spacing 8 covering `volume`.
+pub fn trivial_field(volume: &Volume) -> RotationField {
+    let hi = Vec3::from(volume.origin)
+        + Vec3::new(
+            volume.dims[0] as f32,
+            volume.dims[1] as f32,
+            volume.dims[2] as f32,
+        ) * volume.voxel;
+    RotationField::trivial(FieldGrid::covering(volume.origin.into(), hi, 8))
+}
+
+/// The rotation `q` everywhere over the grid of [`trivial_field`].
+pub fn rotated_field(volume: &Volume, q: Quat) -> RotationField {
+    let mut f = trivial_field(volume);
+    f.rotations.iter_mut().for_each(|r| *r = q);
+    f
+}
+
+/// An n³ volume of unit voxels at the origin.
+pub fn cube(n: u32) -> Volume {
+    Volume {
+        origin: [0.0; 3],
+        voxel: 1.0,
+        dims: [n; 3],
+    }
+}
