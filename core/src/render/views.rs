@@ -431,6 +431,17 @@ pub(crate) mod tests {
         Image::from_fn(8, 8, |x, y| quadrant_color(x < 4, y < 4))
     }
 
+    /// Asserts that the red, green and blue of `got` are each within 1 of `want` (8-bit
+    /// values); `place` names the pixel in the message.
+    pub(crate) fn assert_rgb_near(got: [u8; 4], want: [i32; 3], place: std::fmt::Arguments) {
+        for k in 0..3 {
+            assert!(
+                (got[k] as i32 - want[k]).abs() <= 1,
+                "{place}: {got:?} vs {want:?}"
+            );
+        }
+    }
+
     pub(crate) fn quadrant_color(left: bool, top: bool) -> [f32; 4] {
         match (left, top) {
             (true, true) => [0.8, 0.1, 0.1, 1.0],
@@ -485,14 +496,11 @@ pub(crate) mod tests {
                 let x = x0 + ((fx + dx) * w as f32) as u32;
                 let y = y0 + ((fy + dy) * h as f32) as u32;
                 let want = quadrant_color(fx < 0.5, fy < 0.5);
-                let got = img.get_pixel(x, y).0;
-                for k in 0..3 {
-                    let w8 = (want[k] * 255.0).round() as i32;
-                    assert!(
-                        (got[k] as i32 - w8).abs() <= 1,
-                        "pixel ({x}, {y}) of quadrant ({fx}, {fy}): {got:?} vs {want:?}"
-                    );
-                }
+                assert_rgb_near(
+                    img.get_pixel(x, y).0,
+                    std::array::from_fn(|k| (want[k] * 255.0).round() as i32),
+                    format_args!("pixel ({x}, {y}) of quadrant ({fx}, {fy})"),
+                );
             }
         }
     }
