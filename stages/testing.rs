@@ -1,22 +1,28 @@
 //! Helpers shared by the stages' unit tests.
 
-use std::fmt::Display;
-
-/// Asserts that `validate` accepts the default parameters, and that it rejects the defaults
-/// changed by each `change` of `rejected` with exactly the `message` given.
-pub(crate) fn assert_validation<P: Default, E: Display>(
-    validate: impl Fn(&P) -> Result<(), E>,
-    rejected: &[(fn(&mut P), &str)],
-) {
-    if let Err(e) = validate(&P::default()) {
-        panic!("the default parameters are rejected: {e}");
-    }
-    for (change, message) in rejected {
-        let mut p = P::default();
-        change(&mut p);
-        match validate(&p) {
-            Ok(()) => panic!("accepted, but expected {message:?}"),
-            Err(e) => assert_eq!(e.to_string(), *message),
+/// Asserts that the default `P` validates and that each change of one field of the defaults
+/// is rejected with exactly the message given:
+///
+/// ```ignore
+/// assert_validation!(P {
+///     field: bad_value => "context: field must be …, got …",
+/// });
+/// ```
+macro_rules! assert_validation {
+    ($params:ident { $($field:ident: $value:expr => $message:expr),+ $(,)? }) => {{
+        if let Err(e) = $params::default().validate() {
+            panic!("the default parameters are rejected: {e}");
         }
-    }
+        $(
+            let bad = $params {
+                $field: $value,
+                ..$params::default()
+            };
+            match bad.validate() {
+                Ok(()) => panic!("{} = {:?} is accepted", stringify!($field), bad.$field),
+                Err(e) => assert_eq!(e.to_string(), $message),
+            }
+        )+
+    }};
 }
+pub(crate) use assert_validation;

@@ -446,23 +446,12 @@ mod tests {
 
     #[test]
     fn default_params_are_valid_and_bad_ones_named() {
-        assert_validation(
-            JumpMapParams::validate,
-            &[
-                (
-                    |p| p.window = 4,
-                    "jump map: window must be odd (1..=15), got 4",
-                ),
-                (
-                    |p| p.jumps_per_pixel = 0,
-                    "jump map: jumps_per_pixel must be in 1..=32, got 0",
-                ),
-                (
-                    |p| p.exclusion_radius = f32::NAN,
-                    "jump map: exclusion_radius must be in 0..=10000, got NaN",
-                ),
-            ],
-        );
+        assert_validation!(JumpMapParams {
+            window: 4 => "jump map: window must be odd (1..=15), got 4",
+            jumps_per_pixel: 0 => "jump map: jumps_per_pixel must be in 1..=32, got 0",
+            exclusion_radius: f32::NAN =>
+                "jump map: exclusion_radius must be in 0..=10000, got NaN",
+        });
     }
 
     #[test]

@@ -1256,23 +1256,12 @@ mod tests {
 
     #[test]
     fn params_validate_names_the_field() {
-        assert_validation(
-            TexelVariantParams::validate,
-            &[
-                (
-                    |p| p.template = 4,
-                    "texel variants: template must be odd (3..=15), got 4",
-                ),
-                (
-                    |p| p.scales = 2,
-                    "texel variants: scales must be odd (1, 3 or 5), got 2",
-                ),
-                (
-                    |p| p.color_weight = f32::NAN,
-                    "texel variants: color_weight must be in 0..=100, got NaN",
-                ),
-            ],
-        );
+        assert_validation!(TexelVariantParams {
+            template: 4 => "texel variants: template must be odd (3..=15), got 4",
+            scales: 2 => "texel variants: scales must be odd (1, 3 or 5), got 2",
+            color_weight: f32::NAN =>
+                "texel variants: color_weight must be in 0..=100, got NaN",
+        });
         let e: Result<TexelVariantParams, _> = toml::from_str("orientation = 8");
         assert!(e.is_err(), "unknown fields are refused");
     }

@@ -338,18 +338,9 @@ mod tests {
 
     #[test]
     fn params_validate_names_the_field() {
-        assert_validation(
-            Synth2dParams::validate,
-            &[
-                (
-                    |p| p.boundary_fraction = 0.7,
-                    "synth2d: boundary_fraction must be in 0..=0.5, got 0.7",
-                ),
-                (
-                    |p| p.continuation = -1.0,
-                    "synth2d: continuation must be in 0..=1e9, got -1",
-                ),
-            ],
-        );
+        assert_validation!(Synth2dParams {
+            boundary_fraction: 0.7 => "synth2d: boundary_fraction must be in 0..=0.5, got 0.7",
+            continuation: -1.0 => "synth2d: continuation must be in 0..=1e9, got -1",
+        });
     }
 }
