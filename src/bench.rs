@@ -247,21 +247,29 @@ pub fn run_all(runs: usize) -> Result<String> {
     Ok(s)
 }
 
+/// `texsyn run <config> <args>` by this executable, in the repository (which `config` is
+/// relative to), with its cache and outputs under `tmp`.
+fn texsyn_run(config: &str, tmp: &Path, args: &[&str]) -> Result<std::process::Command> {
+    let mut texsyn = std::process::Command::new(std::env::current_exe()?);
+    texsyn
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["run", config])
+        .args(args)
+        .arg("--cache")
+        .arg(tmp.join("cache"))
+        .arg("--out")
+        .arg(tmp.join("out"));
+    Ok(texsyn)
+}
+
 /// Wall time of `texsyn run configs/demo.toml` with nothing to do, as a user sees it (a new
 /// process each time).
 fn rerun_row(runs: usize) -> Result<Row> {
-    let exe = std::env::current_exe()?;
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
     let tmp = std::env::temp_dir().join(format!("texsyn-bench-{}", std::process::id()));
     let run = || -> Result<f64> {
+        let mut texsyn = texsyn_run("configs/demo.toml", &tmp, &["--quiet"])?;
         let t = Instant::now();
-        let status = std::process::Command::new(&exe)
-            .current_dir(repo)
-            .args(["run", "configs/demo.toml", "--quiet", "--cache"])
-            .arg(tmp.join("cache"))
-            .arg("--out")
-            .arg(tmp.join("out"))
-            .status()?;
+        let status = texsyn.status()?;
         anyhow::ensure!(status.success(), "texsyn run configs/demo.toml failed");
         Ok(t.elapsed().as_secs_f64())
     };
@@ -372,19 +380,11 @@ fn geometry_image_rows(data: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<
 /// A rerun of configs/dragon_elephant.toml after changing only the density offset: which
 /// nodes run again, and the wall time.
 fn density_rerun_row() -> Result<Row> {
-    let exe = std::env::current_exe()?;
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
     let tmp = std::env::temp_dir().join(format!("texsyn-bench-gi-{}", std::process::id()));
     let run = |extra: &[&str]| -> Result<(f64, String)> {
+        let mut texsyn = texsyn_run("configs/dragon_elephant.toml", &tmp, &["--json"])?;
         let t = Instant::now();
-        let out = std::process::Command::new(&exe)
-            .current_dir(repo)
-            .args(["run", "configs/dragon_elephant.toml", "--json", "--cache"])
-            .arg(tmp.join("cache"))
-            .arg("--out")
-            .arg(tmp.join("out"))
-            .args(extra)
-            .output()?;
+        let out = texsyn.args(extra).output()?;
         anyhow::ensure!(
             out.status.success(),
             "texsyn run configs/dragon_elephant.toml failed"

@@ -220,22 +220,15 @@ mod tests {
 
     #[test]
     fn unknown_keys_are_named_with_their_path() {
-        let c = Config::from_str(
-            Path::new("demo.toml"),
-            "method = \"m\"\n[synthesize]\nseed = 1\nsede = 3\n",
-            &[],
-        )
-        .unwrap();
-        let e = c.parse::<Demo>().unwrap_err().to_string();
+        // The message of a `demo.toml` holding `text` that loads but is no `Demo`.
+        let error = |text: &str| {
+            let c = Config::from_str(Path::new("demo.toml"), text, &[]).unwrap();
+            c.parse::<Demo>().unwrap_err().to_string()
+        };
+        let e = error("method = \"m\"\n[synthesize]\nseed = 1\nsede = 3\n");
         assert!(e.starts_with("demo.toml: synthesize"), "{e}");
         assert!(e.contains("sede"), "{e}");
-        let c = Config::from_str(
-            Path::new("demo.toml"),
-            "method = \"m\"\n[synthesize]\nseed = -1\n",
-            &[],
-        )
-        .unwrap();
-        let e = c.parse::<Demo>().unwrap_err().to_string();
+        let e = error("method = \"m\"\n[synthesize]\nseed = -1\n");
         assert!(e.contains("synthesize.seed"), "{e}");
     }
 

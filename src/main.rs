@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use texsyn::cache::{Cache, parse_size};
 use texsyn::config::Config;
-use texsyn::pipeline::{self, ProgressMode, RunOptions, outputs::materialize};
+use texsyn::methods::Plan;
+use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, outputs::materialize};
 
 #[derive(Parser)]
 #[command(
@@ -169,17 +170,7 @@ fn real_main() -> Result<i32> {
     match &cli.command {
         Command::Run { config, sets, out } => {
             let start = Instant::now();
-            let cfg = Config::load(config, sets)?;
-            let plan = texsyn::methods::plan(&cfg)?;
-            let cache = Cache::open(&cache_dir)?;
-            let result = pipeline::run(
-                &plan.dag,
-                &cache,
-                RunOptions {
-                    progress,
-                    verify_all: false,
-                },
-            )?;
+            let (plan, result) = run_config(config, sets, &cache_dir, progress)?;
             let out_dir = out.clone().unwrap_or(plan.default_out.clone());
             let mut written = Vec::new();
             for (i, node) in plan.dag.nodes.iter().enumerate() {
@@ -216,8 +207,7 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
         Command::Status { config, sets } => {
-            let cfg = Config::load(config, sets)?;
-            let plan = texsyn::methods::plan(&cfg)?;
+            let plan = load_plan(config, sets)?;
             let cache = Cache::open(&cache_dir)?;
             let lines = pipeline::status(&plan.dag, &cache);
             if cli.json {
@@ -236,17 +226,7 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
         Command::Hashes { config, sets } => {
-            let cfg = Config::load(config, sets)?;
-            let plan = texsyn::methods::plan(&cfg)?;
-            let cache = Cache::open(&cache_dir)?;
-            let result = pipeline::run(
-                &plan.dag,
-                &cache,
-                RunOptions {
-                    progress,
-                    verify_all: false,
-                },
-            )?;
+            let (_, result) = run_config(config, sets, &cache_dir, progress)?;
             print!("{}", lock_text(&result.reports));
             Ok(0)
         }
@@ -256,8 +236,7 @@ fn real_main() -> Result<i32> {
             sets,
             fresh,
         } => {
-            let cfg = Config::load(config, sets)?;
-            let plan = texsyn::methods::plan(&cfg)?;
+            let plan = load_plan(config, sets)?;
             let lock = std::fs::read_to_string(lockfile)
                 .with_context(|| format!("reading lock file {}", lockfile.display()))?;
             let temp = fresh.then(|| TempDir::new("texsyn-verify"));
@@ -296,8 +275,7 @@ fn real_main() -> Result<i32> {
             }
         }
         Command::Graph { config, sets } => {
-            let cfg = Config::load(config, sets)?;
-            let plan = texsyn::methods::plan(&cfg)?;
+            let plan = load_plan(config, sets)?;
             print!("{}", plan.dag.to_dot());
             Ok(0)
         }
@@ -345,6 +323,33 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
     }
+}
+
+/// Loads `config` with the `--set` overrides and plans its DAG.
+fn load_plan(config: &Path, sets: &[String]) -> Result<Plan> {
+    let cfg = Config::load(config, sets)?;
+    Ok(texsyn::methods::plan(&cfg)?)
+}
+
+/// Plans `config` and runs it in the cache at `cache_dir`, computing what is not cached
+/// (`run` and `hashes`).
+fn run_config(
+    config: &Path,
+    sets: &[String],
+    cache_dir: &Path,
+    progress: ProgressMode,
+) -> Result<(Plan, RunResult)> {
+    let plan = load_plan(config, sets)?;
+    let cache = Cache::open(cache_dir)?;
+    let result = pipeline::run(
+        &plan.dag,
+        &cache,
+        RunOptions {
+            progress,
+            verify_all: false,
+        },
+    )?;
+    Ok((plan, result))
 }
 
 fn parse_axis(s: &str) -> Result<glam::Vec3> {

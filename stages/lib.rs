@@ -16,3 +16,6 @@ pub mod field;
 pub mod parameterize;
 pub mod reconstruct;
 pub mod synthesize;
+
+#[cfg(test)]
+mod testing;

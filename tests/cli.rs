@@ -15,6 +15,21 @@ fn texsyn(args: &[&str], cwd: &Path) -> Output {
         .expect("texsyn runs")
 }
 
+/// `texsyn run demo.toml --cache c --out <out>`, then the `extra` arguments, in `dir`.
+fn run_demo(dir: &Path, out: &str, extra: &[&str]) -> Output {
+    texsyn(
+        &[&["run", "demo.toml", "--cache", "c", "--out", out], extra].concat(),
+        dir,
+    )
+}
+
+/// `o`, once asserted to be the output of a command that succeeded (its stderr tells why
+/// not).
+fn succeeded(o: Output) -> Output {
+    assert!(o.status.success(), "{}", stderr(&o));
+    o
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -67,25 +82,26 @@ fn a_lock_file_that_disagrees_names_each_mismatching_node() {
     let dir = scratch();
     let d = dir.path();
     let cache = d.join("cache");
-    let o = texsyn(
+    let o = succeeded(texsyn(
         &["hashes", "demo.toml", "--cache", cache.to_str().unwrap()],
         d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    ));
     let lock = stdout(&o);
     assert_eq!(lock.lines().filter(|l| !l.starts_with('#')).count(), 7);
     std::fs::write(d.join("good.lock"), &lock).unwrap();
-    let o = texsyn(
-        &[
-            "verify",
-            "demo.toml",
-            "good.lock",
-            "--cache",
-            cache.to_str().unwrap(),
-        ],
-        d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    let verify = |lock: &str| {
+        texsyn(
+            &[
+                "verify",
+                "demo.toml",
+                lock,
+                "--cache",
+                cache.to_str().unwrap(),
+            ],
+            d,
+        )
+    };
+    succeeded(verify("good.lock"));
 
     // Change the locked content hash of the walk: verify must fail and name that node.
     let tampered: String = lock
@@ -102,16 +118,7 @@ fn a_lock_file_that_disagrees_names_each_mismatching_node() {
         .collect::<Vec<_>>()
         .join("\n");
     std::fs::write(d.join("bad.lock"), tampered).unwrap();
-    let o = texsyn(
-        &[
-            "verify",
-            "demo.toml",
-            "bad.lock",
-            "--cache",
-            cache.to_str().unwrap(),
-        ],
-        d,
-    );
+    let o = verify("bad.lock");
     assert_eq!(o.status.code(), Some(1));
     let e = stderr(&o);
     assert!(e.contains("mismatch: synthesize: content hash"), "{e}");
@@ -127,7 +134,7 @@ fn a_mesh_with_a_nan_is_an_error_naming_file_and_line_and_writes_nothing() {
     let i = lines.iter().position(|l| l.starts_with("v ")).unwrap() + 4;
     lines[i] = "v 0.1 nan 0.2".into();
     std::fs::write(d.join("assets/cow.obj"), lines.join("\n")).unwrap();
-    let o = texsyn(&["run", "demo.toml", "--cache", "c", "--out", "o"], d);
+    let o = run_demo(d, "o", &[]);
     assert!(!o.status.success());
     let e = stderr(&o);
     assert!(
@@ -150,68 +157,34 @@ fn a_mesh_with_a_nan_is_an_error_naming_file_and_line_and_writes_nothing() {
 fn config_mistakes_are_named_by_key() {
     let dir = scratch();
     let d = dir.path();
-    let o = texsyn(&["run", "demo.toml", "--set", "synthesize.sede=3"], d);
-    assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("synthesize") && stderr(&o).contains("sede"),
-        "{}",
-        stderr(&o)
-    );
-    let o = texsyn(
-        &[
-            "run",
-            "demo.toml",
-            "--set",
+    // Each bad --set, with what the error must name.
+    let cases: [(&str, &[&str]); 4] = [
+        ("synthesize.sede=3", &["synthesize", "sede"]),
+        (
             "synthesize.boundary_fraction=2",
-        ],
-        d,
-    );
-    assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("synthesize.boundary_fraction"),
-        "{}",
-        stderr(&o)
-    );
-    let o = texsyn(
-        &[
-            "run",
-            "demo.toml",
-            "--set",
+            &["synthesize.boundary_fraction"],
+        ),
+        (
             "field.sinks=[{ vertex = 999999 }]",
-        ],
-        d,
-    );
-    assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("field.sinks[0]") && stderr(&o).contains("999999"),
-        "{}",
-        stderr(&o)
-    );
-    let o = texsyn(&["run", "demo.toml", "--set", "method=\"nope\""], d);
-    assert!(!o.status.success());
-    assert!(stderr(&o).contains("nope"), "{}", stderr(&o));
+            &["field.sinks[0]", "999999"],
+        ),
+        ("method=\"nope\"", &["nope"]),
+    ];
+    for (set, names) in cases {
+        let o = texsyn(&["run", "demo.toml", "--set", set], d);
+        assert!(!o.status.success(), "--set {set}");
+        let err = stderr(&o);
+        assert!(names.iter().all(|n| err.contains(n)), "{err}");
+    }
 }
 
 #[test]
 fn a_scale_too_large_for_the_mesh_names_one_that_fits_and_keeps_earlier_outputs() {
     let dir = scratch();
     let d = dir.path();
-    let o = texsyn(&["run", "demo.toml", "--cache", "c", "--out", "o", "-q"], d);
-    assert!(o.status.success(), "{}", stderr(&o));
+    succeeded(run_demo(d, "o", &["-q"]));
     let before = std::fs::read(d.join("o/textured.obj")).unwrap();
-    let o = texsyn(
-        &[
-            "run",
-            "demo.toml",
-            "--cache",
-            "c",
-            "--out",
-            "o",
-            "--set",
-            "parameterize.scale=5000",
-        ],
-        d,
-    );
+    let o = run_demo(d, "o", &["--set", "parameterize.scale=5000"]);
     assert!(!o.status.success());
     let e = stderr(&o);
     assert!(e.contains("parameterize.scale = 5000"), "{e}");
@@ -229,37 +202,26 @@ fn a_scale_too_large_for_the_mesh_names_one_that_fits_and_keeps_earlier_outputs(
         "earlier outputs intact"
     );
     let fit: f32 = fit.parse().unwrap();
-    let o = texsyn(
+    succeeded(run_demo(
+        d,
+        "o2",
         &[
-            "run",
-            "demo.toml",
-            "--cache",
-            "c",
-            "--out",
-            "o2",
             "-q",
             "--set",
             &format!("parameterize.scale={}", fit * 0.999),
         ],
-        d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    ));
 }
 
 #[test]
 fn status_graph_gc_and_render_do_their_jobs() {
     let dir = scratch();
     let d = dir.path();
-    let o = texsyn(&["status", "demo.toml", "--cache", "c"], d);
-    assert!(o.status.success());
+    let o = succeeded(texsyn(&["status", "demo.toml", "--cache", "c"], d));
     let s = stdout(&o);
     assert!(s.contains("import.mesh") && s.contains("would run"), "{s}");
     assert!(!s.contains("cached"), "{s}");
-    assert!(
-        texsyn(&["run", "demo.toml", "--cache", "c", "--out", "o", "-q"], d)
-            .status
-            .success()
-    );
+    succeeded(run_demo(d, "o", &["-q"]));
     let s = stdout(&texsyn(&["status", "demo.toml", "--cache", "c"], d));
     assert_eq!(
         s.lines().filter(|l| l.ends_with("cached")).count(),
@@ -295,8 +257,7 @@ fn status_graph_gc_and_render_do_their_jobs() {
     );
 
     let before = object_count(&d.join("c"));
-    let o = texsyn(&["gc", "--max-size", "1M", "--cache", "c"], d);
-    assert!(o.status.success(), "{}", stderr(&o));
+    succeeded(texsyn(&["gc", "--max-size", "1M", "--cache", "c"], d));
     let after = object_count(&d.join("c"));
     assert!(after < before, "{before} -> {after}");
     let total: u64 = std::fs::read_dir(d.join("c/objects-v1"))
@@ -307,7 +268,7 @@ fn status_graph_gc_and_render_do_their_jobs() {
         .sum();
     assert!(total <= 1 << 20);
 
-    let o = texsyn(
+    succeeded(texsyn(
         &[
             "render",
             "o/textured.obj",
@@ -319,8 +280,7 @@ fn status_graph_gc_and_render_do_their_jobs() {
             "64",
         ],
         d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    ));
     let img = image::open(d.join("r.png")).unwrap();
     assert_eq!((img.width(), img.height()), (192, 64));
 }
@@ -329,11 +289,7 @@ fn status_graph_gc_and_render_do_their_jobs() {
 fn json_output_reports_every_node() {
     let dir = scratch();
     let d = dir.path();
-    let o = texsyn(
-        &["run", "demo.toml", "--cache", "c", "--out", "o", "--json"],
-        d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = succeeded(run_demo(d, "o", &["--json"]));
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     let nodes = v["nodes"].as_array().unwrap();
     assert_eq!(nodes.len(), 7);
@@ -350,7 +306,7 @@ fn json_output_reports_every_node() {
 #[test]
 fn synth2d_writes_an_image_of_the_requested_size() {
     let dir = tempfile::tempdir().unwrap();
-    let o = texsyn(
+    succeeded(texsyn(
         &[
             "run",
             repo().join("configs/synth2d.toml").to_str().unwrap(),
@@ -365,8 +321,7 @@ fn synth2d_writes_an_image_of_the_requested_size() {
             "synthesize.height=40",
         ],
         dir.path(),
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    ));
     let img = image::open(dir.path().join("o/synthesized.png")).unwrap();
     assert_eq!((img.width(), img.height()), (100, 40));
 }

@@ -21,10 +21,17 @@ fn demo() -> PathBuf {
     repo().join("configs/demo.toml")
 }
 
+/// The demo run in a new, empty cache, and that cache (for further runs; the result's
+/// artifacts are read from it).
+fn fresh_demo() -> (tempfile::TempDir, RunResult) {
+    let cache = tempfile::tempdir().unwrap();
+    let r = run(&demo(), &[], cache.path());
+    (cache, r)
+}
+
 #[test]
 fn a_second_run_runs_nothing_and_a_new_seed_reruns_only_synthesis_and_reconstruction() {
-    let cache = tempfile::tempdir().unwrap();
-    let first = run(&demo(), &[], cache.path());
+    let (cache, first) = fresh_demo();
     assert_eq!(
         ran(&first).len(),
         first.reports.len(),
@@ -43,8 +50,7 @@ fn a_second_run_runs_nothing_and_a_new_seed_reruns_only_synthesis_and_reconstruc
 
 #[test]
 fn a_new_field_anchor_reruns_the_surface_nodes_but_never_the_exemplar_analysis() {
-    let cache = tempfile::tempdir().unwrap();
-    run(&demo(), &[], cache.path());
+    let (cache, _) = fresh_demo();
     let anchored = run(
         &demo(),
         &["field.anchors=[{ at = [0.0, 0.3, 0.0], direction = [0.0, 1.0, 0.0] }]"],
@@ -94,8 +100,7 @@ fn object_path(cache: &Path, r: &RunResult, node: &str) -> PathBuf {
 
 #[test]
 fn a_corrupted_artifact_is_detected_and_recomputed_to_the_same_result() {
-    let cache = tempfile::tempdir().unwrap();
-    let clean = run(&demo(), &[], cache.path());
+    let (cache, clean) = fresh_demo();
     let hashes = |r: &RunResult| -> Vec<String> {
         r.reports.iter().map(|n| n.content_hash.clone()).collect()
     };
@@ -142,8 +147,7 @@ fn synth2d_hashes_do_not_depend_on_the_thread_count() {
 
 #[test]
 fn the_walk_honours_order_validity_boxes_and_edge_offsets() {
-    let cache = tempfile::tempdir().unwrap();
-    let r = run(&demo(), &[], cache.path());
+    let (_cache, r) = fresh_demo();
     let param = JumpParameterization::view(artifact(&r, "parameterize")).unwrap();
     let walk = TexelAddresses::view(artifact(&r, "synthesize")).unwrap();
     let n = param.meta.vertices as usize;
@@ -218,15 +222,9 @@ fn obj_faces(text: &str) -> (Vec<[f32; 2]>, Vec<[(usize, usize); 3]>) {
 
 #[test]
 fn the_exported_obj_gives_each_triangle_corners_that_differ_by_its_edge_offsets() {
-    let cache = tempfile::tempdir().unwrap();
+    let (_cache, r) = fresh_demo();
     let out = tempfile::tempdir().unwrap();
-    let r = run(&demo(), &[], cache.path());
-    let i = r
-        .reports
-        .iter()
-        .position(|n| n.node == "reconstruct")
-        .unwrap();
-    pipeline::outputs::materialize(&r.artifacts[i], out.path()).unwrap();
+    pipeline::outputs::materialize(artifact(&r, "reconstruct"), out.path()).unwrap();
     let text = std::fs::read_to_string(out.path().join("textured.obj")).unwrap();
     let (vt, faces) = obj_faces(&text);
     let param = JumpParameterization::view(artifact(&r, "parameterize")).unwrap();
@@ -252,8 +250,7 @@ fn the_exported_obj_gives_each_triangle_corners_that_differ_by_its_edge_offsets(
 #[test]
 fn the_base_corner_offsets_are_exact_in_every_coordinate_set() {
     use texsyn::stages::reconstruct::jump_blend::corner_sets;
-    let cache = tempfile::tempdir().unwrap();
-    let r = run(&demo(), &[], cache.path());
+    let (_cache, r) = fresh_demo();
     let param = JumpParameterization::view(artifact(&r, "parameterize")).unwrap();
     let walk = TexelAddresses::view(artifact(&r, "synthesize")).unwrap();
     let mesh = <texsyn::geom::Mesh as Format>::view(artifact(&r, "import.mesh")).unwrap();

@@ -5,6 +5,7 @@ use glam::{Vec2, Vec3};
 use std::path::Path;
 use texsyn::export::{GlbMesh, MtlMaps, write_glb, write_mtl, write_obj};
 use texsyn::geom::Mesh;
+use texsyn::geom::primitives::{cuboid, uv_quad};
 use texsyn::image::{Image, decode_image};
 use texsyn::render::{
     ConstantShader, RenderError, SurfaceShader, ViewOptions, bake, build_atlas, render_mesh_file,
@@ -12,25 +13,6 @@ use texsyn::render::{
 };
 
 const BG: [u8; 3] = [235, 236, 240];
-
-/// A quad in the XY plane facing +Z, corners in OBJ uv convention.
-fn quad() -> (Mesh, Vec<[Vec2; 3]>) {
-    let pos = vec![
-        Vec3::new(-1.0, -1.0, 0.0),
-        Vec3::new(1.0, -1.0, 0.0),
-        Vec3::new(1.0, 1.0, 0.0),
-        Vec3::new(-1.0, 1.0, 0.0),
-    ];
-    let uv = [
-        Vec2::new(0.0, 0.0),
-        Vec2::new(1.0, 0.0),
-        Vec2::new(1.0, 1.0),
-        Vec2::new(0.0, 1.0),
-    ];
-    let tris = vec![[0u32, 1, 2], [0, 2, 3]];
-    let corner_uv = tris.iter().map(|t| t.map(|i| uv[i as usize])).collect();
-    (Mesh::new(pos, tris), corner_uv)
-}
 
 /// Quadrant colours of the test texture (8-bit): top left, top right, bottom left, bottom right.
 const QUADRANTS: [[u8; 3]; 4] = [[200, 30, 30], [30, 180, 50], [40, 50, 230], [230, 220, 30]];
@@ -63,20 +45,32 @@ fn close(a: [u8; 4], b: [u8; 3], tol: i32) -> bool {
     (0..3).all(|k| (a[k] as i32 - b[k] as i32).abs() <= tol)
 }
 
+/// Views `size` pixels high that show the surface's colours as they are (no lighting).
+fn unlit(size: u32) -> ViewOptions {
+    ViewOptions {
+        size,
+        lit: false,
+        ..ViewOptions::default()
+    }
+}
+
+/// The colour at the centre of the first view of an unlit 64-pixel render of the mesh file
+/// `path` (no texture).
+fn centre_colour(path: &Path) -> [u8; 4] {
+    let img = render_mesh_file(path, None, &unlit(64)).unwrap();
+    let (x0, y0, x1, y1) = foreground_box(&img, 0).unwrap();
+    img.get_pixel((x0 + x1) / 2, (y0 + y1) / 2).0
+}
+
 #[test]
 fn render_command_shows_an_obj_texture_upright_through_its_uvs() {
     let dir = tempfile::tempdir().unwrap();
-    let (mesh, corner_uv) = quad();
+    let (mesh, corner_uv) = uv_quad();
     let obj = dir.path().join("quad.obj");
     let png = dir.path().join("quad.png");
     std::fs::write(&obj, write_obj(&mesh, Some(&corner_uv), None, "m")).unwrap();
     std::fs::write(&png, quadrant_png()).unwrap();
-    let opts = ViewOptions {
-        size: 128,
-        lit: false,
-        ..ViewOptions::default()
-    };
-    let img = render_mesh_file(&obj, Some(&png), &opts).unwrap();
+    let img = render_mesh_file(&obj, Some(&png), &unlit(128)).unwrap();
     assert_eq!(img.dimensions(), (384, 128));
     let (x0, y0, x1, y1) = foreground_box(&img, 0).unwrap();
     let (w, h) = (x1 - x0 + 1, y1 - y0 + 1);
@@ -106,16 +100,10 @@ fn render_command_uses_obj_vertex_colours_and_names_missing_files() {
          f 1 2 3 4\n",
     )
     .unwrap();
-    let opts = ViewOptions {
-        size: 64,
-        lit: false,
-        ..ViewOptions::default()
-    };
-    let img = render_mesh_file(&obj, None, &opts).unwrap();
-    let (x0, y0, x1, y1) = foreground_box(&img, 0).unwrap();
-    let p = img.get_pixel((x0 + x1) / 2, (y0 + y1) / 2).0;
+    let p = centre_colour(&obj);
     assert!(close(p, [51, 102, 204], 1), "{p:?}");
 
+    let opts = unlit(64);
     let missing = dir.path().join("nope.obj");
     let e = render_mesh_file(&missing, None, &opts).unwrap_err();
     assert!(matches!(e, RenderError::Io { .. }));
@@ -140,14 +128,7 @@ fn render_command_reads_other_formats_with_their_vertex_colours() {
          -1 1 0 200 100 50 255\n3 0 1 2\n3 0 2 3\n",
     )
     .unwrap();
-    let opts = ViewOptions {
-        size: 64,
-        lit: false,
-        ..ViewOptions::default()
-    };
-    let img = render_mesh_file(&off, None, &opts).unwrap();
-    let (x0, y0, x1, y1) = foreground_box(&img, 0).unwrap();
-    let p = img.get_pixel((x0 + x1) / 2, (y0 + y1) / 2).0;
+    let p = centre_colour(&off);
     assert!(close(p, [200, 100, 50], 1), "{p:?}");
 }
 
@@ -177,7 +158,7 @@ fn cow_renders_in_all_three_views() {
 #[test]
 fn obj_and_mtl_files_read_back_with_tobj() {
     let dir = tempfile::tempdir().unwrap();
-    let (mesh, corner_uv) = quad();
+    let (mesh, corner_uv) = uv_quad();
     let maps = MtlMaps {
         diffuse: Some("albedo.png".into()),
         normal: Some("normal.png".into()),
@@ -234,25 +215,10 @@ impl SurfaceShader for Checker<'_> {
     }
 }
 
+/// The closed box [-1, 1]³: the core's cuboid, centred on the origin.
 fn cube() -> Mesh {
-    let p = (0..8)
-        .map(|k| {
-            Vec3::new((k & 1) as f32, ((k >> 1) & 1) as f32, ((k >> 2) & 1) as f32) * 2.0 - 1.0
-        })
-        .collect();
-    let quads = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    let tris = quads
-        .iter()
-        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-        .collect();
-    Mesh::new(p, tris)
+    let c = cuboid(Vec3::splat(2.0));
+    Mesh::new(c.positions.iter().map(|&p| p - 1.0).collect(), c.triangles)
 }
 
 #[test]

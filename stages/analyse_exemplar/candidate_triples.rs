@@ -693,28 +693,29 @@ fn crossbar_error_in(
 /// One Gaussian stack level from the previous one: binomial [1 4 6 4 1]/16 with taps `step`
 /// apart, separable, wrapping around.
 fn blur_dilated(src: &[[f32; 3]], w: usize, h: usize, step: usize) -> Vec<[f32; 3]> {
+    // Tap `t` (0..5) around `i` on an axis of length `n`: `t - 2` steps away, wrapped.
+    let tap = |i: usize, t: usize, n: usize| {
+        (i as i64 + (t as i64 - 2) * step as i64).rem_euclid(n as i64) as usize
+    };
+    let rows = binomial_pass(src, w, h, |x, y, t| y * w + tap(x, t, w));
+    binomial_pass(&rows, w, h, |x, y, t| tap(y, t, h) * w + x)
+}
+
+/// One pass of [`blur_dilated`]: output pixel `(x, y)` is the [1 4 6 4 1]/16 sum of
+/// `src[index(x, y, t)]` over the taps `t` in 0..5.
+fn binomial_pass(
+    src: &[[f32; 3]],
+    w: usize,
+    h: usize,
+    index: impl Fn(usize, usize, usize) -> usize + Sync,
+) -> Vec<[f32; 3]> {
     const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
-    let mut tmp = vec![[0.0f32; 3]; w * h];
-    tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (x, out) in row.iter_mut().enumerate() {
-            let mut acc = [0.0f32; 3];
-            for (t, &k) in K.iter().enumerate() {
-                let xx = (x as i64 + (t as i64 - 2) * step as i64).rem_euclid(w as i64) as usize;
-                let p = src[y * w + xx];
-                for c in 0..3 {
-                    acc[c] += k * p[c];
-                }
-            }
-            *out = acc;
-        }
-    });
     let mut out = vec![[0.0f32; 3]; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         for (x, o) in row.iter_mut().enumerate() {
             let mut acc = [0.0f32; 3];
             for (t, &k) in K.iter().enumerate() {
-                let yy = (y as i64 + (t as i64 - 2) * step as i64).rem_euclid(h as i64) as usize;
-                let p = tmp[yy * w + x];
+                let p = src[index(x, y, t)];
                 for c in 0..3 {
                     acc[c] += k * p[c];
                 }
@@ -959,13 +960,13 @@ pub fn analyse(
                     }
                     let line = |v, i| part(v, i, ldim);
                     let pline = |v, i| part(v, i, cd);
-                    let bs = trees[ib].1.nearest_approx(
+                    let bs = trees[ib].1.as_ref().nearest_approx(
                         pline(&hp[ip], pix),
                         search,
                         params.search_eps,
                         |_| true,
                     );
-                    let as_ = trees[ia].0.nearest_approx(
+                    let as_ = trees[ia].0.as_ref().nearest_approx(
                         pline(&vp[ip], pix),
                         search,
                         params.search_eps,
@@ -1078,15 +1079,10 @@ mod tests {
     use crate::image::Image;
 
     fn stripes(w: u32, h: u32) -> Image {
-        let mut img = Image::new(w, h);
-        for y in 0..h {
-            for x in 0..w {
-                let v = if (x / 3) % 2 == 0 { 0.9 } else { 0.1 };
-                img.pixels[(y * w + x) as usize] =
-                    [v, 0.5 * v + 0.2 * (y % 5) as f32 / 5.0, 0.3, 1.0];
-            }
-        }
-        img
+        Image::from_fn(w, h, |x, y| {
+            let v = if (x / 3) % 2 == 0 { 0.9 } else { 0.1 };
+            [v, 0.5 * v + 0.2 * (y % 5) as f32 / 5.0, 0.3, 1.0]
+        })
     }
 
     #[test]

@@ -412,7 +412,7 @@ fn find_jumps(
     let mut filled = 0;
     while filled < k {
         let want = 2 * (k - filled) + 2;
-        let cands = tree.nearest_approx(q, want, eps, |id| {
+        let cands = tree.as_ref().nearest_approx(q, want, eps, |id| {
             let c = (id % w, id / w);
             far(c, p, r2) && chosen.iter().all(|&o| far(c, o, r2))
         });
@@ -442,32 +442,16 @@ fn find_jumps(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::assert_validation;
 
     #[test]
     fn default_params_are_valid_and_bad_ones_named() {
-        assert_eq!(JumpMapParams::default().validate(), Ok(()));
-        let bad = JumpMapParams {
-            window: 4,
-            ..Default::default()
-        };
-        assert_eq!(
-            bad.validate().unwrap_err().to_string(),
-            "jump map: window must be odd (1..=15), got 4"
-        );
-        let bad = JumpMapParams {
-            jumps_per_pixel: 0,
-            ..Default::default()
-        };
-        let e = bad.validate().unwrap_err().to_string();
-        assert_eq!(e, "jump map: jumps_per_pixel must be in 1..=32, got 0");
-        let bad = JumpMapParams {
-            exclusion_radius: f32::NAN,
-            ..Default::default()
-        };
-        assert_eq!(
-            bad.validate().unwrap_err().to_string(),
-            "jump map: exclusion_radius must be in 0..=10000, got NaN"
-        );
+        assert_validation!(JumpMapParams {
+            window: 4 => "jump map: window must be odd (1..=15), got 4",
+            jumps_per_pixel: 0 => "jump map: jumps_per_pixel must be in 1..=32, got 0",
+            exclusion_radius: f32::NAN =>
+                "jump map: exclusion_radius must be in 0..=10000, got NaN",
+        });
     }
 
     #[test]

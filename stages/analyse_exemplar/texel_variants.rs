@@ -1239,6 +1239,7 @@ pub fn build_texel_variants(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::assert_validation;
 
     fn stripes(w: u32, h: u32, period: f32) -> TexelImage {
         let mut t = TexelImage::new(w, h, 3);
@@ -1255,34 +1256,12 @@ mod tests {
 
     #[test]
     fn params_validate_names_the_field() {
-        assert!(TexelVariantParams::default().validate().is_ok());
-        let e = TexelVariantParams {
-            template: 4,
-            ..Default::default()
-        }
-        .validate()
-        .unwrap_err()
-        .to_string();
-        assert_eq!(e, "texel variants: template must be odd (3..=15), got 4");
-        let e = TexelVariantParams {
-            scales: 2,
-            ..Default::default()
-        }
-        .validate()
-        .unwrap_err()
-        .to_string();
-        assert_eq!(e, "texel variants: scales must be odd (1, 3 or 5), got 2");
-        let e = TexelVariantParams {
-            color_weight: f32::NAN,
-            ..Default::default()
-        }
-        .validate()
-        .unwrap_err()
-        .to_string();
-        assert_eq!(
-            e,
-            "texel variants: color_weight must be in 0..=100, got NaN"
-        );
+        assert_validation!(TexelVariantParams {
+            template: 4 => "texel variants: template must be odd (3..=15), got 4",
+            scales: 2 => "texel variants: scales must be odd (1, 3 or 5), got 2",
+            color_weight: f32::NAN =>
+                "texel variants: color_weight must be in 0..=100, got NaN",
+        });
         let e: Result<TexelVariantParams, _> = toml::from_str("orientation = 8");
         assert!(e.is_err(), "unknown fields are refused");
     }

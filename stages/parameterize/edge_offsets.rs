@@ -137,12 +137,19 @@ mod tests {
 
     use crate::geom::primitives::grid;
 
+    /// A flat `n`×`n` grid, `spacing` apart, with up along +y everywhere, and its edge
+    /// offsets at `scale` texels per unit.
+    fn flat_grid_offsets(n: usize, spacing: f32, scale: f32) -> (Mesh, Vec<Vec2>) {
+        let m = grid(n, spacing);
+        let up = vec![Vec3::Y; m.vertex_count()];
+        let off = edge_offsets(&m, m.adjacency(), &up, scale);
+        (m, off)
+    }
+
     #[test]
     fn flat_grid_with_up_along_y_maps_to_texels_with_y_down() {
-        let m = grid(5, 0.1);
+        let (m, off) = flat_grid_offsets(5, 0.1, 20.0);
         let adj = m.adjacency();
-        let up = vec![Vec3::Y; m.vertex_count()];
-        let off = edge_offsets(&m, adj, &up, 20.0);
         // Normal is +z, up is +y, so right = y × z = +x: object x → texel x, object y → -texel y.
         let h = adj.half_edge(0, 1).unwrap();
         assert!((off[h] - Vec2::new(2.0, 0.0)).length() < 1e-5, "{}", off[h]);
@@ -185,11 +192,8 @@ mod tests {
 
     #[test]
     fn boxes_enclose_offsets_and_fit_check_scales_linearly() {
-        let m = grid(4, 1.0);
-        let adj = m.adjacency();
-        let up = vec![Vec3::Y; m.vertex_count()];
-        let off = edge_offsets(&m, adj, &up, 10.0);
-        let boxes = validity_boxes(adj, &off);
+        let (m, off) = flat_grid_offsets(4, 1.0, 10.0);
+        let boxes = validity_boxes(m.adjacency(), &off);
         // Interior vertex 5: neighbours at ±10 in x and y.
         assert_eq!(boxes[5].min, Vec2::new(-10.0, -10.0));
         assert_eq!(boxes[5].max, Vec2::new(10.0, 10.0));

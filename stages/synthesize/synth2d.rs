@@ -288,6 +288,7 @@ pub fn synthesize_2d(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::assert_validation;
 
     #[test]
     fn gilbert_visits_every_pixel_once_with_local_steps() {
@@ -337,22 +338,9 @@ mod tests {
 
     #[test]
     fn params_validate_names_the_field() {
-        assert_eq!(Synth2dParams::default().validate(), Ok(()));
-        let e = Synth2dParams {
-            boundary_fraction: 0.7,
-            ..Default::default()
-        }
-        .validate()
-        .unwrap_err()
-        .to_string();
-        assert_eq!(e, "synth2d: boundary_fraction must be in 0..=0.5, got 0.7");
-        let e = Synth2dParams {
-            continuation: -1.0,
-            ..Default::default()
-        }
-        .validate()
-        .unwrap_err()
-        .to_string();
-        assert_eq!(e, "synth2d: continuation must be in 0..=1e9, got -1");
+        assert_validation!(Synth2dParams {
+            boundary_fraction: 0.7 => "synth2d: boundary_fraction must be in 0..=0.5, got 0.7",
+            continuation: -1.0 => "synth2d: continuation must be in 0..=1e9, got -1",
+        });
     }
 }

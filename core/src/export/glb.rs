@@ -160,6 +160,13 @@ fn clamp01(x: f32, default: f32) -> f32 {
     }
 }
 
+/// `v` scaled to unit length, or `fallback` if it has no direction (glTF wants unit normals
+/// and tangents).
+fn unit_or(v: Vec3, fallback: Vec3) -> Vec3 {
+    let u = v.normalize_or_zero();
+    if u == Vec3::ZERO { fallback } else { u }
+}
+
 /// Serializes `scene` as a binary glTF 2.0 file. The bytes depend only on the input.
 ///
 /// # Panics
@@ -233,10 +240,7 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
             let nrm: Vec<f32> = scene
                 .normals
                 .iter()
-                .flat_map(|n| {
-                    let u = n.normalize_or_zero();
-                    if u == Vec3::ZERO { Vec3::Z } else { u }.to_array()
-                })
+                .flat_map(|&n| unit_or(n, Vec3::Z).to_array())
                 .collect();
             attrs.insert("NORMAL".into(), json!(b.floats(&nrm, 3, "VEC3", false)));
         }
@@ -245,10 +249,8 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
                 .tangents
                 .iter()
                 .flat_map(|t| {
-                    let u = t.truncate().normalize_or_zero();
-                    let u = if u == Vec3::ZERO { Vec3::X } else { u };
                     let w = if t.w < 0.0 { -1.0 } else { 1.0 };
-                    u.extend(w).to_array()
+                    unit_or(t.truncate(), Vec3::X).extend(w).to_array()
                 })
                 .collect();
             attrs.insert("TANGENT".into(), json!(b.floats(&tan, 4, "VEC4", false)));

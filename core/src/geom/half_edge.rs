@@ -487,23 +487,8 @@ impl Iterator for Outgoing<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geom::primitives::octahedron;
     use glam::Vec3;
-
-    /// A closed octahedron (genus 0), counter-clockwise seen from outside.
-    pub(crate) fn octahedron() -> Mesh {
-        let p = vec![Vec3::X, Vec3::Y, -Vec3::X, -Vec3::Y, Vec3::Z, -Vec3::Z];
-        let t = vec![
-            [0, 1, 4],
-            [1, 2, 4],
-            [2, 3, 4],
-            [3, 0, 4],
-            [1, 0, 5],
-            [2, 1, 5],
-            [3, 2, 5],
-            [0, 3, 5],
-        ];
-        Mesh::new(p, t)
-    }
 
     fn torus(n: u32, m: u32) -> Mesh {
         crate::geom::primitives::torus(n, m, 0.7)

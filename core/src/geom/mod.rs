@@ -14,7 +14,7 @@ pub mod primitives;
 pub mod subdivide;
 pub mod surface_distance;
 
-use glam::Vec3;
+use glam::{BVec3, Vec3};
 use std::sync::OnceLock;
 
 /// A triangle mesh. Vertices not referenced by any triangle are allowed and ignored by the
@@ -128,6 +128,12 @@ impl Mesh {
         }
         if n == 0 { 0.0 } else { (sum / n as f64) as f32 }
     }
+}
+
+/// The eight corners of the axis-aligned box `[lo, hi]`: corner `k` takes its x from `hi`
+/// when bit 0 of `k` is set (else from `lo`), its y by bit 1 and its z by bit 2.
+pub fn box_corners(lo: Vec3, hi: Vec3) -> [Vec3; 8] {
+    std::array::from_fn(|k| Vec3::select(BVec3::new(k & 1 != 0, k & 2 != 0, k & 4 != 0), hi, lo))
 }
 
 /// One-ring adjacency in compressed-row form: the neighbours of vertex `v` are
@@ -244,6 +250,18 @@ mod tests {
         }
         assert_eq!(adj.half_edge(1, 3), Some(adj.offsets[1] as usize + 2));
         assert_eq!(adj.half_edge(0, 3), None);
+    }
+
+    #[test]
+    fn box_corners_follow_the_bits_of_their_index() {
+        let (lo, hi) = (Vec3::new(-1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0));
+        let c = box_corners(lo, hi);
+        assert_eq!(c[0], lo);
+        assert_eq!(c[7], hi);
+        assert_eq!(c[1], Vec3::new(4.0, 2.0, 3.0));
+        assert_eq!(c[2], Vec3::new(-1.0, 5.0, 3.0));
+        assert_eq!(c[4], Vec3::new(-1.0, 2.0, 6.0));
+        assert_eq!(c[6], Vec3::new(-1.0, 5.0, 6.0));
     }
 
     proptest::proptest! {

@@ -1,7 +1,7 @@
 //! Simple meshes for tests, examples and benchmarks.
 
 use super::Mesh;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// An n×n grid of vertices in the z = 0 plane, `spacing` apart, x along columns and y along
 /// rows, each cell split into two counter-clockwise triangles (normal +z).
@@ -52,6 +52,40 @@ pub fn cuboid(size: Vec3) -> Mesh {
         [3, 4, 7],
     ];
     Mesh::new(p, t)
+}
+
+/// The closed octahedron with its corners on the unit axes (genus 0): vertices +x, +y, -x,
+/// -y (the equator, 0 to 3), +z (4) and -z (5); the fan of four triangles round +z, then
+/// the fan round -z, counter-clockwise seen from outside.
+pub fn octahedron() -> Mesh {
+    let p = vec![Vec3::X, Vec3::Y, -Vec3::X, -Vec3::Y, Vec3::Z, -Vec3::Z];
+    let upper = (0..4).map(|i| [i, (i + 1) % 4, 4]);
+    let lower = (0..4).map(|i| [(i + 1) % 4, i, 5]);
+    Mesh::new(p, upper.chain(lower).collect())
+}
+
+/// A quad in the XY plane, [-1, 1]², facing +Z, as two triangles, with the texture
+/// coordinates of each triangle's corners in the OBJ convention: (0, 0) bottom left to
+/// (1, 1) top right.
+pub fn uv_quad() -> (Mesh, Vec<[Vec2; 3]>) {
+    let pos = vec![
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(1.0, -1.0, 0.0),
+        Vec3::new(1.0, 1.0, 0.0),
+        Vec3::new(-1.0, 1.0, 0.0),
+    ];
+    let uv = [
+        Vec2::new(0.0, 0.0),
+        Vec2::new(1.0, 0.0),
+        Vec2::new(1.0, 1.0),
+        Vec2::new(0.0, 1.0),
+    ];
+    let tris = vec![[0, 1, 2], [0, 2, 3]];
+    let corner_uv = tris
+        .iter()
+        .map(|t: &[u32; 3]| t.map(|i| uv[i as usize]))
+        .collect();
+    (Mesh::new(pos, tris), corner_uv)
 }
 
 /// A torus of n × m quads (each split in two; genus 1), major radius 2 around the z axis,

@@ -3,7 +3,7 @@
 //! nearest neighbours in feature space are its own spatial neighbours, which must be skipped,
 //! and a plain kNN would spend k on them.
 //!
-//! Results are exact (with [`KdTree::nearest`]) and ordered by (squared distance, index), so
+//! Results are exact (with [`KdTreeRef::nearest`]) and ordered by (squared distance, index), so
 //! they are deterministic and do not depend on the tree's shape. The tree is built by median
 //! splits along the widest coordinate, the median chosen under the total order (coordinate,
 //! index).
@@ -11,6 +11,9 @@
 //! A tree can be exported as flat Pod arrays ([`KdTree::parts`]) and viewed in place again
 //! ([`KdTreeRef::from_parts`]), so it can be stored in a cached artifact and searched straight
 //! from the memory-mapped file.
+//!
+//! The searches are methods of the view, [`KdTreeRef`]; a built [`KdTree`] hands out its own
+//! with [`KdTree::as_ref`].
 
 /// Points per leaf.
 const LEAF_SIZE: usize = 8;
@@ -37,8 +40,8 @@ type Node = KdNode;
 /// deep; the bound keeps the recursive search's stack use small for any input).
 pub const MAX_DEPTH: usize = 96;
 
-/// A kd-tree viewed in borrowed arrays (e.g. in place in a mapped artifact); the same search
-/// as [`KdTree`], which hands one out with [`KdTree::as_ref`].
+/// A kd-tree viewed in borrowed arrays (e.g. in place in a mapped artifact, or a [`KdTree`]'s
+/// own through [`KdTree::as_ref`]): the searches.
 #[derive(Clone, Copy, Debug)]
 pub struct KdTreeRef<'a> {
     dim: usize,
@@ -158,15 +161,15 @@ impl KdTree {
 
     /// Number of points.
     pub fn len(&self) -> usize {
-        self.ids.len()
+        self.as_ref().len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.ids.is_empty()
+        self.as_ref().is_empty()
     }
 
     pub fn dim(&self) -> usize {
-        self.dim
+        self.as_ref().dim()
     }
 
     /// The flat arrays of the tree: dimension, points in tree order (`dim` values each), the
@@ -176,7 +179,7 @@ impl KdTree {
         (self.dim, &self.points, &self.ids, &self.nodes)
     }
 
-    /// A borrowed view with the same search.
+    /// A borrowed view, which does the searches.
     pub fn as_ref(&self) -> KdTreeRef<'_> {
         KdTreeRef {
             dim: self.dim,
@@ -184,29 +187,6 @@ impl KdTree {
             ids: &self.ids,
             nodes: &self.nodes,
         }
-    }
-
-    /// The `k` nearest points to `query` among those whose index passes `filter`, as
-    /// `(index, squared distance)` by increasing distance, ties by increasing index. Fewer than
-    /// `k` if fewer points pass.
-    pub fn nearest(
-        &self,
-        query: &[f32],
-        k: usize,
-        filter: impl Fn(u32) -> bool,
-    ) -> Vec<(u32, f32)> {
-        self.as_ref().nearest_approx(query, k, 0.0, filter)
-    }
-
-    /// See [`KdTreeRef::nearest_approx`].
-    pub fn nearest_approx(
-        &self,
-        query: &[f32],
-        k: usize,
-        eps: f32,
-        filter: impl Fn(u32) -> bool,
-    ) -> Vec<(u32, f32)> {
-        self.as_ref().nearest_approx(query, k, eps, filter)
     }
 }
 
@@ -330,7 +310,19 @@ impl<'a> KdTreeRef<'a> {
         self.dim
     }
 
-    /// As [`KdTree::nearest`], but a subtree is skipped once every point in it is farther than
+    /// The `k` nearest points to `query` among those whose index passes `filter`, as
+    /// `(index, squared distance)` by increasing distance, ties by increasing index. Fewer than
+    /// `k` if fewer points pass.
+    pub fn nearest(
+        &self,
+        query: &[f32],
+        k: usize,
+        filter: impl Fn(u32) -> bool,
+    ) -> Vec<(u32, f32)> {
+        self.nearest_approx(query, k, 0.0, filter)
+    }
+
+    /// As [`Self::nearest`], but a subtree is skipped once every point in it is farther than
     /// `1 + eps` times the current k-th distance, so the i-th result is within `1 + eps` of the
     /// true i-th nearest distance (Arya & Mount's approximate search). Still deterministic.
     pub fn nearest_approx(
@@ -526,7 +518,7 @@ mod tests {
                 }).collect();
                 let keep = t % modulus;
                 let filter = |i: u32| i % modulus != keep || modulus == 1;
-                let got = tree.nearest(&q, k, filter);
+                let got = tree.as_ref().nearest(&q, k, filter);
                 let want = brute(&points, dim, &q, k, filter);
                 prop_assert_eq!(got, want);
             }
@@ -548,7 +540,7 @@ mod tests {
         let eps = 0.5f32;
         for _ in 0..50 {
             let q: Vec<f32> = (0..dim).map(|_| next()).collect();
-            let got = tree.nearest_approx(&q, 5, eps, |_| true);
+            let got = tree.as_ref().nearest_approx(&q, 5, eps, |_| true);
             let want = brute(&points, dim, &q, 5, |_| true);
             assert_eq!(got.len(), 5);
             for (g, w) in got.iter().zip(&want) {
@@ -561,7 +553,7 @@ mod tests {
     fn duplicate_points_do_not_break_the_tree() {
         let points = vec![1.0f32; 3 * 100];
         let tree = KdTree::build(&points, 3);
-        let got = tree.nearest(&[1.0, 1.0, 1.0], 3, |i| i >= 50);
+        let got = tree.as_ref().nearest(&[1.0, 1.0, 1.0], 3, |i| i >= 50);
         assert_eq!(got, vec![(50, 0.0), (51, 0.0), (52, 0.0)]);
     }
 
@@ -581,10 +573,10 @@ mod tests {
             let q = [t as f32 * 0.25, 5.0 - t as f32 * 0.1, (t % 7) as f32];
             assert_eq!(
                 view.nearest_approx(&q, 4, 0.0, |_| true),
-                tree.nearest(&q, 4, |_| true)
+                tree.as_ref().nearest(&q, 4, |_| true)
             );
             let one = view.nearest1_approx(&q, 0.0, &mut scratch);
-            assert_eq!(one, tree.nearest(&q, 1, |_| true).first().copied());
+            assert_eq!(one, tree.as_ref().nearest(&q, 1, |_| true).first().copied());
         }
         assert!(KdTreeRef::from_parts(d, pts, ids, nodes, 299).is_err());
         assert!(KdTreeRef::from_parts(d, &pts[1..], ids, nodes, 300).is_err());

@@ -40,6 +40,21 @@ impl Image {
         }
     }
 
+    /// An image whose pixel `(x, y)` is `f(x, y)`, called row by row, left to right.
+    pub fn from_fn(width: u32, height: u32, mut f: impl FnMut(u32, u32) -> [f32; 4]) -> Self {
+        let mut pixels = Vec::with_capacity(width as usize * height as usize);
+        for y in 0..height {
+            for x in 0..width {
+                pixels.push(f(x, y));
+            }
+        }
+        Image {
+            width,
+            height,
+            pixels,
+        }
+    }
+
     pub fn view(&self) -> ImageView<'_> {
         ImageView {
             width: self.width,

@@ -206,6 +206,17 @@ mod tests {
         img
     }
 
+    /// The neighbourhoods of `img` over `levels` levels with a `window` wide finest window,
+    /// other parameters default.
+    fn neighbourhoods(img: &Image, levels: u32, window: u32) -> Neighbourhoods {
+        let params = NeighbourhoodParams {
+            levels,
+            window,
+            ..Default::default()
+        };
+        Neighbourhoods::new(img.view(), &params)
+    }
+
     #[test]
     fn mirror_reflects_about_edge_centres() {
         let v: Vec<i64> = (-3..8).map(|i| mirror(i, 5)).collect();
@@ -224,15 +235,7 @@ mod tests {
         let n = Neighbourhoods::new(img.view(), &NeighbourhoodParams::default());
         assert_eq!(n.levels(), 3);
         assert_eq!(n.dim(), 3 * (25 + 9 + 9));
-        let one = Neighbourhoods::new(
-            img.view(),
-            &NeighbourhoodParams {
-                levels: 1,
-                window: 3,
-                ..Default::default()
-            },
-        );
-        assert_eq!(one.dim(), 27);
+        assert_eq!(neighbourhoods(&img, 1, 3).dim(), 27);
     }
 
     #[test]
@@ -240,12 +243,7 @@ mod tests {
         // Two pixels of a single-level neighbourhood: the squared distance of their vectors must
         // equal the Gaussian-weighted SSD computed directly, weights summing to one.
         let img = noise(20, 20, 7);
-        let params = NeighbourhoodParams {
-            levels: 1,
-            window: 5,
-            ..Default::default()
-        };
-        let n = Neighbourhoods::new(img.view(), &params);
+        let n = neighbourhoods(&img, 1, 5);
         let mut a = vec![0.0; n.dim()];
         let mut b = vec![0.0; n.dim()];
         n.write(6, 7, &mut a);
@@ -275,12 +273,7 @@ mod tests {
     #[test]
     fn borders_are_mirrored_and_coarse_levels_bilinear() {
         let img = noise(32, 32, 3);
-        let params = NeighbourhoodParams {
-            levels: 2,
-            window: 3,
-            ..Default::default()
-        };
-        let n = Neighbourhoods::new(img.view(), &params);
+        let n = neighbourhoods(&img, 2, 3);
         let mut v = vec![0.0; n.dim()];
         n.write(0, 0, &mut v);
         let sw = &n.sqrt_weights[0];

@@ -102,17 +102,7 @@ pub fn downsample(img: ImageView) -> Image {
     let blurred = blur_binomial5(img);
     let (w2, h2) = (img.width.div_ceil(2), img.height.div_ceil(2));
     let b = blurred.view();
-    let mut pixels = Vec::with_capacity(w2 as usize * h2 as usize);
-    for y in 0..h2 {
-        for x in 0..w2 {
-            pixels.push(b.get(2 * x, 2 * y));
-        }
-    }
-    Image {
-        width: w2,
-        height: h2,
-        pixels,
-    }
+    Image::from_fn(w2, h2, |x, y| b.get(2 * x, 2 * y))
 }
 
 #[cfg(test)]
@@ -120,13 +110,7 @@ mod tests {
     use super::*;
 
     fn ramp(w: u32, h: u32) -> Image {
-        let mut img = Image::new(w, h);
-        for y in 0..h {
-            for x in 0..w {
-                img.pixels[(y * w + x) as usize] = [x as f32, y as f32, 0.5, 1.0];
-            }
-        }
-        img
+        Image::from_fn(w, h, |x, y| [x as f32, y as f32, 0.5, 1.0])
     }
 
     #[test]
@@ -163,12 +147,10 @@ mod tests {
 
     #[test]
     fn blur_removes_checkerboard() {
-        let mut img = Image::new(16, 16);
-        for (i, p) in img.pixels.iter_mut().enumerate() {
-            let (x, y) = (i % 16, i / 16);
+        let img = Image::from_fn(16, 16, |x, y| {
             let v = ((x + y) % 2) as f32;
-            *p = [v, v, v, 1.0];
-        }
+            [v, v, v, 1.0]
+        });
         let b = blur_binomial5(img.view());
         // [1,4,6,4,1] has zero response at the Nyquist frequency.
         for y in 2..14 {

@@ -554,7 +554,7 @@ fn dilate(px: &mut [[u8; 4]], n: usize) {
 mod tests {
     use super::*;
     use crate::image::Image;
-    use crate::render::views::tests::uv_sphere;
+    use crate::render::views::tests::{assert_rgb_near, uv_sphere};
 
     /// A deterministic "random" colour per face (a simple integer hash, not from the code under
     /// test).
@@ -779,14 +779,11 @@ mod tests {
                         area(t[0], t[1], p) / total,
                     ];
                     if b.iter().all(|&x| x > 0.0) {
-                        let got = baked.get_pixel(i, j).0;
-                        for k in 0..3 {
-                            let want = (b[k] * 255.0).round() as i32;
-                            assert!(
-                                (got[k] as i32 - want).abs() <= 1,
-                                "face {f} texel ({i}, {j})"
-                            );
-                        }
+                        assert_rgb_near(
+                            baked.get_pixel(i, j).0,
+                            b.map(|x| (x * 255.0).round() as i32),
+                            format_args!("face {f} texel ({i}, {j})"),
+                        );
                         checked += 1;
                     }
                 }

@@ -382,6 +382,7 @@ pub fn render_views(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::geom::primitives::uv_quad;
     use crate::image::Image;
     use crate::render::shader::{ConstantShader, CornerUvShader};
 
@@ -424,38 +425,21 @@ pub(crate) mod tests {
         (Mesh::new(pos, tris), corner_uv)
     }
 
-    /// A quad in the XY plane, [-1, 1]², facing +Z, uv (0,0) bottom left to (1,1) top right.
-    pub(crate) fn quad() -> (Mesh, Vec<[Vec2; 3]>) {
-        let pos = vec![
-            Vec3::new(-1.0, -1.0, 0.0),
-            Vec3::new(1.0, -1.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(-1.0, 1.0, 0.0),
-        ];
-        let uv = [
-            Vec2::new(0.0, 0.0),
-            Vec2::new(1.0, 0.0),
-            Vec2::new(1.0, 1.0),
-            Vec2::new(0.0, 1.0),
-        ];
-        let tris = vec![[0, 1, 2], [0, 2, 3]];
-        let corner_uv = tris
-            .iter()
-            .map(|t: &[u32; 3]| t.map(|i| uv[i as usize]))
-            .collect();
-        (Mesh::new(pos, tris), corner_uv)
-    }
-
     /// An 8×8 texture with four flat quadrants: red top left, green top right, blue bottom
     /// left, yellow bottom right (texel rows go down).
     pub(crate) fn quadrant_texture() -> Image {
-        let mut img = Image::new(8, 8);
-        for y in 0..8 {
-            for x in 0..8 {
-                img.pixels[y * 8 + x] = quadrant_color(x < 4, y < 4);
-            }
+        Image::from_fn(8, 8, |x, y| quadrant_color(x < 4, y < 4))
+    }
+
+    /// Asserts that the red, green and blue of `got` are each within 1 of `want` (8-bit
+    /// values); `place` names the pixel in the message.
+    pub(crate) fn assert_rgb_near(got: [u8; 4], want: [i32; 3], place: std::fmt::Arguments) {
+        for k in 0..3 {
+            assert!(
+                (got[k] as i32 - want[k]).abs() <= 1,
+                "{place}: {got:?} vs {want:?}"
+            );
         }
-        img
     }
 
     pub(crate) fn quadrant_color(left: bool, top: bool) -> [f32; 4] {
@@ -492,7 +476,7 @@ pub(crate) mod tests {
 
     #[test]
     fn textured_quad_head_on_shows_the_texture_upright() {
-        let (mesh, corner_uv) = quad();
+        let (mesh, corner_uv) = uv_quad();
         let tex = quadrant_texture();
         let shader = CornerUvShader::new(&corner_uv, tex.view());
         let opts = ViewOptions {
@@ -512,14 +496,11 @@ pub(crate) mod tests {
                 let x = x0 + ((fx + dx) * w as f32) as u32;
                 let y = y0 + ((fy + dy) * h as f32) as u32;
                 let want = quadrant_color(fx < 0.5, fy < 0.5);
-                let got = img.get_pixel(x, y).0;
-                for k in 0..3 {
-                    let w8 = (want[k] * 255.0).round() as i32;
-                    assert!(
-                        (got[k] as i32 - w8).abs() <= 1,
-                        "pixel ({x}, {y}) of quadrant ({fx}, {fy}): {got:?} vs {want:?}"
-                    );
-                }
+                assert_rgb_near(
+                    img.get_pixel(x, y).0,
+                    std::array::from_fn(|k| (want[k] * 255.0).round() as i32),
+                    format_args!("pixel ({x}, {y}) of quadrant ({fx}, {fy})"),
+                );
             }
         }
     }
@@ -561,15 +542,7 @@ pub(crate) mod tests {
     #[test]
     fn camera_fit_keeps_every_point_in_view() {
         let (lo, hi) = (Vec3::new(-3.0, 0.0, -1.0), Vec3::new(5.0, 2.0, 0.5));
-        let corners: Vec<Vec3> = (0..8)
-            .map(|k| {
-                Vec3::new(
-                    if k & 1 == 0 { lo.x } else { hi.x },
-                    if k & 2 == 0 { lo.y } else { hi.y },
-                    if k & 4 == 0 { lo.z } else { hi.z },
-                )
-            })
-            .collect();
+        let corners = crate::geom::box_corners(lo, hi);
         let (up, dirs) = view_directions(Vec3::Y);
         for dir in dirs {
             let cam = Camera::fit(&corners, lo, hi, dir, up, 100);
@@ -612,17 +585,24 @@ pub(crate) mod tests {
         assert!(a.as_raw() == b.as_raw() && a.as_raw() == c.as_raw());
     }
 
+    /// Lit views `size` pixels high of a fine sphere with a uniform `grey` albedo, and the
+    /// background colour around it.
+    fn grey_sphere_views(size: u32, grey: f32) -> (image::RgbaImage, [u8; 3]) {
+        let (mesh, _) = uv_sphere(40, 80);
+        let opts = ViewOptions {
+            size,
+            ..ViewOptions::default()
+        };
+        let img = render_views(&mesh, &ConstantShader(Vec3::splat(grey)), &opts);
+        (img, opts.background)
+    }
+
     #[test]
     fn a_closed_sphere_has_no_background_pixels_inside_its_outline() {
         // Cracks between triangles would let the background through.
-        let (mesh, _) = uv_sphere(40, 80);
-        let opts = ViewOptions {
-            size: 200,
-            ..ViewOptions::default()
-        };
-        let img = render_views(&mesh, &ConstantShader(Vec3::splat(0.6)), &opts);
+        let (img, background) = grey_sphere_views(200, 0.6);
         for v in 0..3 {
-            let (x0, y0, x1, y1) = foreground_box(&img, v, opts.background);
+            let (x0, y0, x1, y1) = foreground_box(&img, v, background);
             let (cx, cy) = ((x0 + x1) as f32 / 2.0, (y0 + y1) as f32 / 2.0);
             let r = (x1 - x0) as f32 / 2.0;
             assert!((y1 - y0).abs_diff(x1 - x0) <= 2);
@@ -631,7 +611,7 @@ pub(crate) mod tests {
                     let d = ((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)).sqrt();
                     if d < r - 2.0 {
                         let p = img.get_pixel(v * 200 + x, y).0;
-                        assert_ne!(p[..3], opts.background, "hole at ({x}, {y}) of view {v}");
+                        assert_ne!(p[..3], background, "hole at ({x}, {y}) of view {v}");
                     }
                 }
             }
@@ -640,13 +620,8 @@ pub(crate) mod tests {
 
     #[test]
     fn lighting_comes_from_the_upper_left() {
-        let (mesh, _) = uv_sphere(40, 80);
-        let opts = ViewOptions {
-            size: 100,
-            ..ViewOptions::default()
-        };
-        let img = render_views(&mesh, &ConstantShader(Vec3::splat(0.7)), &opts);
-        let (x0, y0, x1, y1) = foreground_box(&img, 0, opts.background);
+        let (img, background) = grey_sphere_views(100, 0.7);
+        let (x0, y0, x1, y1) = foreground_box(&img, 0, background);
         let at = |fx: f32, fy: f32| {
             let x = x0 + ((x1 - x0) as f32 * fx) as u32;
             let y = y0 + ((y1 - y0) as f32 * fy) as u32;

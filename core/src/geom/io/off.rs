@@ -69,17 +69,22 @@ pub(super) fn read(bytes: &[u8]) -> Result<Mesh, Fault> {
         return Err(Fault::line(counts_no, format!("too many vertices ({nv})")));
     }
 
+    // The next line, the `i`-th of `n` `what` the header declared: its number and tokens.
+    let mut next_record = |i: usize, n: usize, what: &str| {
+        let (no, line) = lines.next().ok_or_else(|| {
+            Fault::line(
+                last_line(),
+                format!("unexpected end of file after {i} of {n} {what}"),
+            )
+        })?;
+        Ok::<_, Fault>((no, tokens(line)))
+    };
+
     // A vertex line has at least 6 bytes ("0 0 0\n"), a face line at least 8.
     let mut positions = Vec::with_capacity(capacity(nv, bytes.len(), 6));
     let mut colors = has_colors.then(|| Vec::with_capacity(capacity(nv, bytes.len(), 6)));
     for i in 0..nv {
-        let Some((no, line)) = lines.next() else {
-            return Err(Fault::line(
-                last_line(),
-                format!("unexpected end of file after {i} of {nv} vertices"),
-            ));
-        };
-        let mut t = tokens(line);
+        let (no, mut t) = next_record(i, nv, "vertices")?;
         let mut p = [0.0f32; 3];
         for x in &mut p {
             let tok = t
@@ -102,13 +107,7 @@ pub(super) fn read(bytes: &[u8]) -> Result<Mesh, Fault> {
     let mut triangles = Vec::with_capacity(capacity(nf, bytes.len(), 8));
     let mut corners: Vec<u32> = Vec::with_capacity(8);
     for i in 0..nf {
-        let Some((no, line)) = lines.next() else {
-            return Err(Fault::line(
-                last_line(),
-                format!("unexpected end of file after {i} of {nf} faces"),
-            ));
-        };
-        let mut t = tokens(line);
+        let (no, mut t) = next_record(i, nf, "faces")?;
         let first = t.next().unwrap_or_default();
         let n = parse::<usize>(first).ok_or_else(|| {
             Fault::line(no, format!("cannot parse {} as a face size", show(first)))
