@@ -411,22 +411,10 @@ fn a_section_looks_more_like_the_exemplar_than_random_triples() {
     assert!(ds < 0.5 * dr, "synthesized {ds}, random {dr}");
 }
 
+/// A pyramid deeper than the analysis' and an odd cell are refused. (Bricks round-trip with
+/// their format, in src/artifact/solid.rs.)
 #[test]
-fn bricks_round_trip_and_bad_setups_are_errors() {
-    let b = Brick {
-        level: 2,
-        coord: [1, -2, 3],
-        size: 2,
-        triples: (0..8)
-            .map(|i| Triple::new([i, 1], [2, i], [3, 4]))
-            .collect(),
-    };
-    let arrays = b.arrays();
-    let back = Brick::from_arrays(b.meta(), &arrays).unwrap();
-    assert_eq!(back, b);
-    let short: Vec<(String, &[u8])> = vec![("triples".into(), &arrays[0].1[..12])];
-    assert!(Brick::from_arrays(b.meta(), &short).is_err());
-
+fn bad_setups_are_errors() {
     let (_, a) = small();
     let vol = cube(16);
     let field = trivial_field(&vol);

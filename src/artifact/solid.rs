@@ -196,6 +196,8 @@ mod tests {
         };
         let a = Artifact::from_bytes(b.write()).unwrap();
         assert_eq!(Brick::read(&a).unwrap(), b);
+        // The stage's own arrays read back as the same brick.
+        assert_eq!(Brick::from_arrays(b.meta(), &b.arrays()).unwrap(), b);
         let short = ArtifactWriter::new(Kind::SolidBrick, &b.meta())
             .array("triples", &b.triples[..7])
             .finish();
