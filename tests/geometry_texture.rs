@@ -33,6 +33,28 @@ fn gradient_energy(t: &TexelImage) -> (f64, f64) {
     (ex, ey)
 }
 
+/// Asserts that the stripes of `t` run across axis `axis` (0: x, 1: y), its dn changing along
+/// it more than 6 times as much as along the other, and that its (dx, dy) vectors point along
+/// it, their spread there more than 4 times the other's.
+fn assert_stripes_across(t: &TexelImage, axis: usize, what: &str) {
+    let (ex, ey) = gradient_energy(t);
+    let energy = [ex, ey];
+    let spread = [0, 1].map(|c| mean_std(&channel(t, c)).1);
+    let (a, b) = (axis, 1 - axis);
+    assert!(
+        energy[a] > 6.0 * energy[b],
+        "{what}: stripes across {} expected, energies {ex} {ey}",
+        ["x", "y"][a]
+    );
+    assert!(
+        spread[a] > 4.0 * spread[b],
+        "{what}: vectors along {} expected, dx {} dy {}",
+        ["x", "y"][a],
+        spread[0],
+        spread[1]
+    );
+}
+
 /// The dominant period of dn along rows: the period in [2, 48] (steps of 0.05 texels) with the
 /// most power, summed over rows.
 fn dominant_period(t: &TexelImage) -> f64 {
@@ -172,28 +194,14 @@ fn stripes_turn_with_the_field_and_so_do_their_vectors() {
     let v = variants(&stripes(64, 8.0));
     let n = 65;
     let gi = flat(n);
+    // Up along +y: as in the sample, and its dx (0.3 cos) stays in dx.
     let up = synth(&gi, &field(n, Vec2::Y, 1.0), &v, 0);
-    let (ex, ey) = gradient_energy(&up);
-    assert!(
-        ex > 6.0 * ey,
-        "up: stripes across x expected, energies {ex} {ey}"
-    );
-    // The sample's dx (0.3 cos) stays in dx.
-    let (_, sx) = mean_std(&channel(&up, 0));
-    let (_, sy) = mean_std(&channel(&up, 1));
-    assert!(sx > 4.0 * sy, "dx {sx} dy {sy}");
+    assert_stripes_across(&up, 0, "up");
 
     // Up along +x: the sample turned by −90° (R(θ) takes the sample's up (0, 1) to (1, 0)), so
     // the stripes run across y and (dx, dy) = (c, 0) becomes (0, −c).
     let side = synth(&gi, &field(n, Vec2::X, 1.0), &v, 0);
-    let (ex, ey) = gradient_energy(&side);
-    assert!(
-        ey > 6.0 * ex,
-        "side: stripes across y expected, energies {ex} {ey}"
-    );
-    let (_, sx) = mean_std(&channel(&side, 0));
-    let (_, sy) = mean_std(&channel(&side, 1));
-    assert!(sy > 4.0 * sx, "turned vectors: dx {sx} dy {sy}");
+    assert_stripes_across(&side, 1, "side");
     // The sign: compare dy with the slope of dn along y.
     let mut agree = 0.0;
     for y in 1..n - 1 {
