@@ -18,11 +18,9 @@ impl Format for SolidAnalysis {
     const KIND: Kind = Kind::SolidAnalysis;
     type View<'a> = SolidAnalysisRef<'a>;
     fn write(&self) -> Vec<u8> {
-        let mut w = ArtifactWriter::new(Self::KIND, &self.meta);
-        for (name, bytes) in self.arrays() {
-            w = w.array_bytes(&name, bytes.to_vec());
-        }
-        w.finish()
+        ArtifactWriter::new(Self::KIND, &self.meta)
+            .arrays_bytes(self.arrays())
+            .finish()
     }
     fn decode(a: &Artifact) -> Result<SolidAnalysisRef<'_>, ArtifactError> {
         let arrays: Vec<(String, &[u8])> = a
