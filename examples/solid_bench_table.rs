@@ -21,7 +21,7 @@ mod solid;
 
 use common::env_or;
 use exemplars::load_exemplar as load;
-use solid::{cube, trivial_field};
+use solid::trivial_cube;
 use texsyn::stages::analyse_exemplar::candidate_triples::{CandidateParams, analyse};
 use texsyn::stages::synthesize::solid::solid_synthesis::{
     MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, VoxelRequest,
@@ -40,8 +40,7 @@ fn main() {
         rayon::current_num_threads()
     );
     let n: u32 = env_or("SIZE", 128);
-    let vol = cube(n);
-    let field = trivial_field(&vol);
+    let (vol, field) = trivial_cube(n);
     let req = VoxelRequest::from_box([0, 0, n as i32 / 2], [n as i32, n as i32, n as i32 / 2 + 1]);
     for (label, params) in [
         ("dual-grid", SolidParams::paper(4)),

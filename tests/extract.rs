@@ -84,6 +84,11 @@ fn relief_mesh(
     Mesh::with_colors(positions, triangles, color.map(|_| colors))
 }
 
+/// Vertex colours linear in the local position: red along x, green along y.
+fn gradient(x: f32, y: f32) -> [f32; 4] {
+    [0.5 + 0.5 * x, 0.5 + 0.5 * y, 0.25, 1.0]
+}
+
 fn mean(v: impl Iterator<Item = f32>) -> f32 {
     let (s, n) = v.fold((0.0f64, 0usize), |(s, n), x| (s + x as f64, n + 1));
     (s / n as f64) as f32
@@ -102,22 +107,33 @@ fn samples<'a>(
     })
 }
 
-#[test]
-fn planar_extraction_recovers_the_relief_of_a_tilted_plane() {
+/// The [`bumps`] relief on a 120×120-quad grid, [`Placement::tilted`].
+fn tilted_bumps() -> (Placement, Mesh) {
     let place = Placement::tilted();
     let mesh = relief_mesh(120, &bumps, &place, None);
-    let e = planar_extract(&mesh, 64, &RansacParams::default(), &no_progress).unwrap();
-    assert_eq!(
-        (e.texels.width, e.texels.height, e.texels.channels),
-        (64, 64, 3)
-    );
-    // The plane is the sample's base plane.
+    (place, mesh)
+}
+
+/// Asserts that the extraction's plane is the sample's base plane: normals within 1°.
+fn assert_base_plane(e: &PlanarExtraction, place: &Placement) {
     let angle = e
         .plane
         .normal
         .angle_between(place.rot * Vec3::Z)
         .to_degrees();
     assert!(angle < 1.0, "plane normal off by {angle}°");
+}
+
+#[test]
+fn planar_extraction_recovers_the_relief_of_a_tilted_plane() {
+    let (place, mesh) = tilted_bumps();
+    let e = planar_extract(&mesh, 64, &RansacParams::default(), &no_progress).unwrap();
+    assert_eq!(
+        (e.texels.width, e.texels.height, e.texels.channels),
+        (64, 64, 3)
+    );
+    // The plane is the sample's base plane.
+    assert_base_plane(&e, &place);
     // The square covers most of the 2×2 patch (whatever its orientation).
     assert!(e.square.side > 1.6, "square side {}", e.square.side);
 
@@ -142,8 +158,7 @@ fn planar_extraction_recovers_the_relief_of_a_tilted_plane() {
 
 #[test]
 fn planar_relief_reconstructed_on_its_plane_returns_the_surface() {
-    let place = Placement::tilted();
-    let mesh = relief_mesh(120, &bumps, &place, None);
+    let (place, mesh) = tilted_bumps();
     let e = planar_extract(&mesh, 48, &RansacParams::default(), &no_progress).unwrap();
     let n = e.texels.width;
     let mut worst = 0.0f32;
@@ -168,15 +183,9 @@ fn planar_relief_reconstructed_on_its_plane_returns_the_surface() {
 
 #[test]
 fn height_field_extraction_recovers_the_relief() {
-    let place = Placement::tilted();
-    let mesh = relief_mesh(120, &bumps, &place, None);
+    let (place, mesh) = tilted_bumps();
     let e = mesh_height_field(&mesh, 64, &RansacParams::default(), &no_progress).unwrap();
-    let angle = e
-        .plane
-        .normal
-        .angle_between(place.rot * Vec3::Z)
-        .to_degrees();
-    assert!(angle < 1.0, "plane normal off by {angle}°");
+    assert_base_plane(&e, &place);
     let h_mean = mean(samples(&e, &place).map(|(q, _)| bumps(q.x, q.y)));
     let dn_mean = mean(e.texels.data.chunks(3).map(|t| t[2]));
     assert!(
@@ -352,8 +361,7 @@ fn bilateral_keeps_the_bumps_and_removes_the_curvature() {
 #[test]
 fn a_coloured_sample_gives_six_channels_with_its_colours() {
     let place = Placement::tilted();
-    let color = |x: f32, y: f32| [0.5 + 0.5 * x, 0.5 + 0.5 * y, 0.25, 1.0];
-    let mesh = relief_mesh(80, &bumps, &place, Some(&color));
+    let mesh = relief_mesh(80, &bumps, &place, Some(&gradient));
     for e in [
         planar_extract(&mesh, 32, &RansacParams::default(), &no_progress).unwrap(),
         mesh_height_field(&mesh, 32, &RansacParams::default(), &no_progress).unwrap(),
@@ -368,7 +376,7 @@ fn a_coloured_sample_gives_six_channels_with_its_colours() {
                 // offset tangentially by dx, dy).
                 let p = e.sample_point(i, j) + t[0] * e.plane.e1 + t[1] * e.plane.e2;
                 let q = place.to_local(p);
-                let want = color(q.x, q.y);
+                let want = gradient(q.x, q.y);
                 for c in 0..3 {
                     worst = worst.max((t[3 + c] - want[c]).abs());
                 }
@@ -621,28 +629,19 @@ fn params_read_from_toml_and_validate_by_field() {
     p.validate().unwrap();
     assert!(toml::from_str::<ExtractParams>("sizes = 3").is_err());
     assert!(toml::from_str::<ExtractParams>("method = \"smooth\"").is_err());
-    let bad = ExtractParams {
-        size: 4,
-        ..Default::default()
+    // The defaults with one field changed: the error names it, its range and its value.
+    let error = |change: fn(&mut ExtractParams)| {
+        let mut bad = ExtractParams::default();
+        change(&mut bad);
+        bad.validate().unwrap_err().to_string()
     };
+    assert_eq!(error(|p| p.size = 4), "size must be in 8..=1024, got 4");
     assert_eq!(
-        bad.validate().unwrap_err().to_string(),
-        "size must be in 8..=1024, got 4"
-    );
-    let bad = ExtractParams {
-        inlier_distance: Some(-1.0),
-        ..Default::default()
-    };
-    assert_eq!(
-        bad.validate().unwrap_err().to_string(),
+        error(|p| p.inlier_distance = Some(-1.0)),
         "inlier_distance must be a finite number > 0, got -1"
     );
-    let bad = ExtractParams {
-        sigma_grid: Some(f32::NAN),
-        ..Default::default()
-    };
     assert_eq!(
-        bad.validate().unwrap_err().to_string(),
+        error(|p| p.sigma_grid = Some(f32::NAN)),
         "sigma_grid must be in 0.5..=1024, got NaN"
     );
 }
@@ -664,8 +663,7 @@ fn extraction_does_not_depend_on_the_thread_count() {
     let place = Placement::tilted();
     let mesh = relief_mesh(60, &bumps, &place, None);
     let (gi, _) = curved_geometry_image(48, 0.02, &place);
-    let color = |x: f32, y: f32| [0.5 + 0.5 * x, 0.5 + 0.5 * y, 0.25, 1.0];
-    let coloured = relief_mesh(40, &ripples, &place, Some(&color));
+    let coloured = relief_mesh(40, &ripples, &place, Some(&gradient));
     let bilateral = ExtractParams {
         method: ExtractMethod::Bilateral,
         size: 32,
@@ -744,8 +742,7 @@ fn ripples(x: f32, y: f32) -> f32 {
 #[test]
 fn every_method_returns_texels_that_rebuild_the_sample_on_its_base() {
     let place = Placement::tilted();
-    let color = |x: f32, y: f32| [0.5 + 0.5 * x, 0.5 + 0.5 * y, 0.25, 1.0];
-    let mesh = relief_mesh(120, &ripples, &place, Some(&color));
+    let mesh = relief_mesh(120, &ripples, &place, Some(&gradient));
     for method in [
         ExtractMethod::Planar,
         ExtractMethod::HeightField,
@@ -771,7 +768,7 @@ fn every_method_returns_texels_that_rebuild_the_sample_on_its_base() {
             on_surface = on_surface.max((q.z - ripples(q.x, q.y)).abs());
             // Where the base is flat, dn is the relief itself.
             relief = relief.max(((t[2] - dn_mean) - ripples(q.x, q.y)).abs());
-            let want = color(q.x, q.y);
+            let want = gradient(q.x, q.y);
             for c in 0..3 {
                 colour = colour.max((t[3 + c] - want[c]).abs());
             }

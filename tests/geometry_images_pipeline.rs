@@ -4,11 +4,14 @@
 //! named.
 
 mod common;
-use common::{artifact, assert_same_hashes_on_any_thread_count, err, ran, repo, run_config};
+use common::{
+    artifact, assert_runs_fail_naming, assert_same_hashes_on_any_thread_count, err, materialized,
+    plan_config, ran, repo, run_config,
+};
 use std::collections::HashMap;
 use texsyn::artifact::Format;
 use texsyn::geom::geometry_image::{GeometryImage, TexelImage};
-use texsyn::pipeline::{self, RunResult};
+use texsyn::pipeline::RunResult;
 
 /// Small and quick: a 65² geometry image, 4 orientations, tiny previews.
 const SMALL: &[&str] = &[
@@ -52,13 +55,7 @@ fn a_genus_one_input_gives_a_closed_manifold_relief_with_mates_identical_and_no_
     }
     // The exported mesh: every edge has exactly two faces (closed, manifold), consistently
     // oriented (each directed edge once).
-    let out = tempfile::tempdir().unwrap();
-    let i = r
-        .reports
-        .iter()
-        .position(|n| n.node == "reconstruct")
-        .unwrap();
-    pipeline::outputs::materialize(&r.artifacts[i], out.path()).unwrap();
+    let out = materialized(&r, "reconstruct");
     let mesh = read_ply(&std::fs::read(out.path().join("relief.ply")).unwrap());
     let mut undirected: HashMap<(u32, u32), u32> = HashMap::new();
     let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
@@ -127,29 +124,37 @@ fn a_new_density_reruns_neither_parameterization_nor_extraction_nor_analysis() {
 
 #[test]
 fn bad_inputs_are_named() {
-    let cache = tempfile::tempdir().unwrap();
-    // A colour image is not a height field.
-    let e = err(run(
-        "relief_cow.toml",
-        &["inputs.sample=assets/wood1.png"],
-        cache.path(),
-    ));
-    assert!(e.contains("wood1.png") && e.contains("not grey"), "{e}");
-    // A sample region that misses the sample mesh.
-    let e = err(run(
-        "dragon_knot.toml",
-        &["extract.region={ shape = \"sphere\", center = [0.0, 0.0, 0.0], radius = 1.0 }"],
-        cache.path(),
-    ));
-    assert!(e.contains("holds no triangles"), "{e}");
-    // A non-manifold input (pig.stl has a vertex where two fans meet).
-    let e = err(run(
-        "relief_cow.toml",
-        &["inputs.mesh=../tests/data/meshes/pig.stl"],
-        cache.path(),
-    ));
-    assert!(e.contains("non-manifold") && e.contains("vertex"), "{e}");
+    assert_runs_fail_naming(
+        run,
+        &[
+            // A colour image is not a height field.
+            (
+                "relief_cow.toml",
+                &["inputs.sample=assets/wood1.png"],
+                &["wood1.png", "not grey"],
+            ),
+            // A sample region that misses the sample mesh.
+            (
+                "dragon_knot.toml",
+                &["extract.region={ shape = \"sphere\", center = [0.0, 0.0, 0.0], radius = 1.0 }"],
+                &["holds no triangles"],
+            ),
+            // A non-manifold input (pig.stl has a vertex where two fans meet).
+            (
+                "relief_cow.toml",
+                &["inputs.mesh=../tests/data/meshes/pig.stl"],
+                &["non-manifold", "vertex"],
+            ),
+            // An image sample must be read as a height field.
+            (
+                "relief_cow.toml",
+                &["extract.method=\"planar\""],
+                &["extract.method"],
+            ),
+        ],
+    );
     // A sample too small for the template.
+    let cache = tempfile::tempdir().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let tiny = dir.path().join("tiny.png");
     image::GrayImage::from_fn(6, 6, |x, y| image::Luma([((x * 40 + y * 7) % 255) as u8]))
@@ -161,21 +166,11 @@ fn bad_inputs_are_named() {
         cache.path(),
     ));
     assert!(e.contains("too small") || e.contains("at least"), "{e}");
-    // An image sample must be read as a height field.
-    let e = err(run(
-        "relief_cow.toml",
-        &["extract.method=\"planar\""],
-        cache.path(),
-    ));
-    assert!(e.contains("extract.method"), "{e}");
 }
 
 /// The DAG of a config (nothing runs), or the error a user would see.
 fn plan(config: &str, sets: &[&str]) -> Result<texsyn::methods::Plan, String> {
-    let sets: Vec<String> = SMALL.iter().chain(sets).map(|s| s.to_string()).collect();
-    let cfg = texsyn::config::Config::load(&repo().join("configs").join(config), &sets)
-        .map_err(|e| e.to_string())?;
-    texsyn::methods::plan(&cfg).map_err(|e| e.to_string())
+    plan_config(&repo().join("configs").join(config), SMALL, sets)
 }
 
 #[test]

@@ -33,6 +33,28 @@ fn gradient_energy(t: &TexelImage) -> (f64, f64) {
     (ex, ey)
 }
 
+/// Asserts that the stripes of `t` run across axis `axis` (0: x, 1: y), its dn changing along
+/// it more than 6 times as much as along the other, and that its (dx, dy) vectors point along
+/// it, their spread there more than 4 times the other's.
+fn assert_stripes_across(t: &TexelImage, axis: usize, what: &str) {
+    let (ex, ey) = gradient_energy(t);
+    let energy = [ex, ey];
+    let spread = [0, 1].map(|c| mean_std(&channel(t, c)).1);
+    let (a, b) = (axis, 1 - axis);
+    assert!(
+        energy[a] > 6.0 * energy[b],
+        "{what}: stripes across {} expected, energies {ex} {ey}",
+        ["x", "y"][a]
+    );
+    assert!(
+        spread[a] > 4.0 * spread[b],
+        "{what}: vectors along {} expected, dx {} dy {}",
+        ["x", "y"][a],
+        spread[0],
+        spread[1]
+    );
+}
+
 /// The dominant period of dn along rows: the period in [2, 48] (steps of 0.05 texels) with the
 /// most power, summed over rows.
 fn dominant_period(t: &TexelImage) -> f64 {
@@ -172,28 +194,14 @@ fn stripes_turn_with_the_field_and_so_do_their_vectors() {
     let v = variants(&stripes(64, 8.0));
     let n = 65;
     let gi = flat(n);
+    // Up along +y: as in the sample, and its dx (0.3 cos) stays in dx.
     let up = synth(&gi, &field(n, Vec2::Y, 1.0), &v, 0);
-    let (ex, ey) = gradient_energy(&up);
-    assert!(
-        ex > 6.0 * ey,
-        "up: stripes across x expected, energies {ex} {ey}"
-    );
-    // The sample's dx (0.3 cos) stays in dx.
-    let (_, sx) = mean_std(&channel(&up, 0));
-    let (_, sy) = mean_std(&channel(&up, 1));
-    assert!(sx > 4.0 * sy, "dx {sx} dy {sy}");
+    assert_stripes_across(&up, 0, "up");
 
     // Up along +x: the sample turned by −90° (R(θ) takes the sample's up (0, 1) to (1, 0)), so
     // the stripes run across y and (dx, dy) = (c, 0) becomes (0, −c).
     let side = synth(&gi, &field(n, Vec2::X, 1.0), &v, 0);
-    let (ex, ey) = gradient_energy(&side);
-    assert!(
-        ey > 6.0 * ex,
-        "side: stripes across y expected, energies {ex} {ey}"
-    );
-    let (_, sx) = mean_std(&channel(&side, 0));
-    let (_, sy) = mean_std(&channel(&side, 1));
-    assert!(sy > 4.0 * sx, "turned vectors: dx {sx} dy {sy}");
+    assert_stripes_across(&side, 1, "side");
     // The sign: compare dy with the slope of dn along y.
     let mut agree = 0.0;
     for y in 1..n - 1 {
@@ -342,79 +350,4 @@ fn too_small_samples_and_bad_inputs_are_errors() {
     let mut f = field(33, Vec2::Y, 1.0);
     f.dir.pop();
     assert!(synthesize_geometry_texture(&flat(33), &f, &v.as_ref(), &p, &|_| {}).is_err());
-}
-
-/// The variant set's arrays stored in an artifact read back equal to the owned set (levels,
-/// template sets, trees), and a missing array, a short array or inconsistent metadata is an
-/// error (moved here from the stage's unit tests: the artifact format lives above the stages).
-#[test]
-fn arrays_round_trip_through_an_artifact_and_damage_is_an_error() {
-    use texsyn::artifact::{Artifact, ArtifactWriter, Kind};
-    use texsyn::stages::analyse_exemplar::texel_variants::{
-        Template, TexelVariantsRef, VariantsMeta,
-    };
-    // Stripes along x in channel 2 over constant channels 0 and 1.
-    let mut sample = TexelImage::new(40, 40, 3);
-    for y in 0..40 {
-        for x in 0..40 {
-            let p = sample.texel_mut(x, y);
-            p[0] = 1.0;
-            p[1] = 0.25;
-            p[2] = (std::f32::consts::TAU * x as f32 / 7.0).sin();
-        }
-    }
-    let p = TexelVariantParams {
-        orientations: 2,
-        ..Default::default()
-    };
-    let v = build_texel_variants(&sample, &p, &|_| {}).unwrap();
-    let mut w = ArtifactWriter::new(Kind::Image, &v.meta);
-    for (name, bytes) in v.arrays() {
-        w = w.array_bytes(name, bytes.to_vec());
-    }
-    let art = Artifact::from_bytes(w.finish()).unwrap();
-    let meta: VariantsMeta = art.meta().unwrap();
-    let r = TexelVariantsRef::from_arrays(meta.clone(), |n| art.raw_array(n).ok()).unwrap();
-    let owned = v.as_ref();
-    assert_eq!(r.meta, v.meta);
-    for var in 0..r.variant_count() {
-        for l in 0..r.levels() {
-            assert_eq!(r.level(var, l).texels, owned.level(var, l).texels);
-            for kind in [Template::Causal, Template::Full] {
-                let (a, b) = (r.set(var, l, kind), owned.set(var, l, kind));
-                assert_eq!(a.centres, b.centres);
-                assert_eq!(a.basis, b.basis);
-                let q = vec![0.1f32; a.dims];
-                let mut s = Vec::new();
-                assert_eq!(
-                    a.tree.nearest1_approx(&q, 0.0, &mut s),
-                    b.tree.nearest1_approx(&q, 0.0, &mut s)
-                );
-            }
-        }
-    }
-    // A missing array, a short array and inconsistent metadata are errors.
-    assert!(
-        TexelVariantsRef::from_arrays(meta.clone(), |n| {
-            (n != "centres").then(|| art.raw_array(n).ok()).flatten()
-        })
-        .is_err()
-    );
-    assert!(
-        TexelVariantsRef::from_arrays(meta.clone(), |n| {
-            let a = art.raw_array(n).ok()?;
-            Some(if n == "tree_points" {
-                &a[..a.len() - 4]
-            } else {
-                a
-            })
-        })
-        .is_err()
-    );
-    let mut bad = meta.clone();
-    bad.sets[3].dims += 1;
-    assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
-    let mut bad = meta;
-    bad.levels.pop();
-    assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
 }

@@ -2,7 +2,10 @@
 //! and the errors a user meets.
 
 mod common;
-use common::{assert_same_hashes_on_any_thread_count, err, repo, run_config};
+use common::{
+    artifact, assert_runs_fail_naming, assert_same_hashes_on_any_thread_count, err, materialized,
+    repo, run_config,
+};
 use std::path::PathBuf;
 use texsyn::config::Config;
 use texsyn::pipeline::{self, RunResult};
@@ -135,42 +138,38 @@ fn outputs_do_not_depend_on_the_thread_count() {
 
 #[test]
 fn user_mistakes_are_named() {
-    let cache = tempfile::tempdir().unwrap();
-    let e = err(run(
-        "solid_trivial.toml",
-        &["field.curves=[{ points = [[0.0, 0.0, 0.0]] }]"],
-        cache.path(),
-    ));
-    assert!(
-        e.contains("field.curves[0]") && e.contains("at least two points"),
-        "{e}"
-    );
-    let e = err(run(
-        "solid_trivial.toml",
-        &["field.curves=[{ points = [[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]], axis = \"w\" }]"],
-        cache.path(),
-    ));
-    assert!(e.contains("field.curves") && e.contains("axis"), "{e}");
-    let e = err(run(
-        "solid_trivial.toml",
+    assert_runs_fail_naming(
+        run,
         &[
-            "parameterize.request={ kind = \"section\", point = [0.0, 0.0, 50.0], normal = [0.0, 0.0, 1.0] }",
+            (
+                "solid_trivial.toml",
+                &["field.curves=[{ points = [[0.0, 0.0, 0.0]] }]"],
+                &["field.curves[0]", "at least two points"],
+            ),
+            (
+                "solid_trivial.toml",
+                &["field.curves=[{ points = [[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]], axis = \"w\" }]"],
+                &["field.curves", "axis"],
+            ),
+            (
+                "solid_trivial.toml",
+                &[
+                    "parameterize.request={ kind = \"section\", point = [0.0, 0.0, 50.0], normal = [0.0, 0.0, 1.0] }",
+                ],
+                &["misses the volume"],
+            ),
+            (
+                "solid_trivial.toml",
+                &["inputs.yz=\"assets/wood1.png\""],
+                &["same size"],
+            ),
+            (
+                "solid_trivial.toml",
+                &["analyse_exemplar.levels=2"],
+                &["synthesize.levels"],
+            ),
         ],
-        cache.path(),
-    ));
-    assert!(e.contains("misses the volume"), "{e}");
-    let e = err(run(
-        "solid_trivial.toml",
-        &["inputs.yz=\"assets/wood1.png\""],
-        cache.path(),
-    ));
-    assert!(e.contains("same size"), "{e}");
-    let e = err(run(
-        "solid_trivial.toml",
-        &["analyse_exemplar.levels=2"],
-        cache.path(),
-    ));
-    assert!(e.contains("synthesize.levels"), "{e}");
+    );
 }
 
 #[test]
@@ -210,13 +209,7 @@ fn a_box_request_writes_a_raw_volume_with_its_header() {
         cache.path(),
     )
     .unwrap();
-    let out = tempfile::tempdir().unwrap();
-    let i = r
-        .reports
-        .iter()
-        .position(|n| n.node == "reconstruct")
-        .unwrap();
-    pipeline::outputs::materialize(&r.artifacts[i], out.path()).unwrap();
+    let out = materialized(&r, "reconstruct");
     let header: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.path().join("volume.json")).unwrap()).unwrap();
     let d: Vec<u64> = header["dims"]
@@ -233,8 +226,7 @@ fn a_box_request_writes_a_raw_volume_with_its_header() {
 }
 
 fn samples(r: &RunResult, node: &str) -> std::collections::BTreeMap<[i32; 3], [u8; 12]> {
-    let i = r.reports.iter().position(|n| n.node == node).unwrap();
-    let a = &r.artifacts[i];
+    let a = artifact(r, node);
     let voxels: &[[i32; 3]] = a.array("voxels").unwrap();
     let triples = a.raw_array("triples").unwrap();
     let per = triples.len() / voxels.len().max(1);
@@ -289,38 +281,32 @@ fn regions_split_a_section_by_depth_and_the_core_is_the_same_solid() {
 
 #[test]
 fn region_mistakes_are_named() {
-    let cache = tempfile::tempdir().unwrap();
-    let e = err(run(
-        "solid_elephant_bark.toml",
-        &["regions=[{ depth = -1.0, exemplar = \"assets/bark.png\" }]"],
-        cache.path(),
-    ));
-    assert!(e.contains("regions[0].depth"), "{e}");
-    let e = err(run(
-        "solid_elephant_bark.toml",
+    assert_runs_fail_naming(
+        run,
         &[
-            "regions=[{ depth = 0.05, exemplar = \"assets/bark.png\" }, { depth = 0.02, exemplar = \"assets/wood1.png\" }]",
+            (
+                "solid_elephant_bark.toml",
+                &["regions=[{ depth = -1.0, exemplar = \"assets/bark.png\" }]"],
+                &["regions[0].depth"],
+            ),
+            (
+                "solid_elephant_bark.toml",
+                &[
+                    "regions=[{ depth = 0.05, exemplar = \"assets/bark.png\" }, { depth = 0.02, exemplar = \"assets/wood1.png\" }]",
+                ],
+                &["regions[1].depth", "increasing"],
+            ),
+            (
+                "solid_elephant_bark.toml",
+                &["regions=[{ depth = 0.05, xy = \"assets/bark.png\" }]"],
+                &["regions[0].yz", "missing"],
+            ),
+            (
+                "solid_elephant_bark.toml",
+                &["regions=[{ depth = 0.05, exemplar = \"assets/no_such_bark.png\" }]"],
+                &["no_such_bark.png", "regions[0].exemplar"],
+            ),
         ],
-        cache.path(),
-    ));
-    assert!(
-        e.contains("regions[1].depth") && e.contains("increasing"),
-        "{e}"
-    );
-    let e = err(run(
-        "solid_elephant_bark.toml",
-        &["regions=[{ depth = 0.05, xy = \"assets/bark.png\" }]"],
-        cache.path(),
-    ));
-    assert!(e.contains("regions[0].yz") && e.contains("missing"), "{e}");
-    let e = err(run(
-        "solid_elephant_bark.toml",
-        &["regions=[{ depth = 0.05, exemplar = \"assets/no_such_bark.png\" }]"],
-        cache.path(),
-    ));
-    assert!(
-        e.contains("no_such_bark.png") && e.contains("regions[0].exemplar"),
-        "{e}"
     );
 }
 

@@ -128,11 +128,9 @@ impl Format for TexelVariants {
     const KIND: Kind = Kind::TexelVariants;
     type View<'a> = TexelVariantsRef<'a>;
     fn write(&self) -> Vec<u8> {
-        let mut w = ArtifactWriter::new(Kind::TexelVariants, &self.meta);
-        for (name, bytes) in self.arrays() {
-            w = w.array_bytes(name, bytes.to_vec());
-        }
-        w.finish()
+        ArtifactWriter::new(Kind::TexelVariants, &self.meta)
+            .arrays_bytes(self.arrays())
+            .finish()
     }
     fn decode(a: &Artifact) -> Result<TexelVariantsRef<'_>, ArtifactError> {
         TexelVariantsRef::from_arrays(a.meta()?, |name| a.raw_array(name).ok()).map_err(bad)

@@ -243,6 +243,17 @@ impl ArtifactWriter {
         self
     }
 
+    /// [`ArtifactWriter::array_bytes`] for each of `arrays`, in order (a value's own list of
+    /// named arrays, as the stages give it).
+    pub fn arrays_bytes<'b, N: AsRef<str>>(
+        self,
+        arrays: impl IntoIterator<Item = (N, &'b [u8])>,
+    ) -> Self {
+        arrays.into_iter().fold(self, |w, (name, data)| {
+            w.array_bytes(name.as_ref(), data.to_vec())
+        })
+    }
+
     /// The complete file bytes.
     pub fn finish(self) -> Vec<u8> {
         // The envelope's array offsets depend on its own length, so lay out with a first

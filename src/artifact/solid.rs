@@ -18,11 +18,9 @@ impl Format for SolidAnalysis {
     const KIND: Kind = Kind::SolidAnalysis;
     type View<'a> = SolidAnalysisRef<'a>;
     fn write(&self) -> Vec<u8> {
-        let mut w = ArtifactWriter::new(Self::KIND, &self.meta);
-        for (name, bytes) in self.arrays() {
-            w = w.array_bytes(&name, bytes.to_vec());
-        }
-        w.finish()
+        ArtifactWriter::new(Self::KIND, &self.meta)
+            .arrays_bytes(self.arrays())
+            .finish()
     }
     fn decode(a: &Artifact) -> Result<SolidAnalysisRef<'_>, ArtifactError> {
         let arrays: Vec<(String, &[u8])> = a
@@ -196,6 +194,8 @@ mod tests {
         };
         let a = Artifact::from_bytes(b.write()).unwrap();
         assert_eq!(Brick::read(&a).unwrap(), b);
+        // The stage's own arrays read back as the same brick.
+        assert_eq!(Brick::from_arrays(b.meta(), &b.arrays()).unwrap(), b);
         let short = ArtifactWriter::new(Kind::SolidBrick, &b.meta())
             .array("triples", &b.triples[..7])
             .finish();

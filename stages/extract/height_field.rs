@@ -2,7 +2,8 @@
 //! Images", §4.1.3) and images as height fields (§5, the leather example: "intensity in the
 //! image is converted to height above a plane").
 //!
-//! Meshes: the plane is fitted as in §4.1.2 ([`fit_plane_ransac`]); the vertices are projected
+//! Meshes: the plane is fitted as in §4.1.2
+//! ([`fit_plane_ransac`](super::planar_ransac::fit_plane_ransac)); the vertices are projected
 //! straight onto it ("without the need to perform a parameterization"), an N×N grid is sampled
 //! in the largest square of the projected patch, and each sample's height is that of the
 //! highest point of the patch on the line through it along the plane's normal (projected
@@ -12,10 +13,10 @@
 //! image being texel row y.
 
 use super::planar_ransac::{
-    PlanarExtraction, Plane, RansacParams, fit_plane_ransac, sample_square,
+    PlanarExtraction, Plane, RansacParams, fit_sampling_plane, largest_square_on_plane,
+    sample_square,
 };
-use super::square_domain::{largest_rotated_square, rotate_into};
-use super::{ExtractError, ParamError, check_range};
+use super::{ExtractError, ParamError};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::TexelImage;
 use crate::image::ImageView;
@@ -31,25 +32,21 @@ pub fn mesh_height_field(
     params: &RansacParams,
     progress: &(dyn Fn(f32) + Sync),
 ) -> Result<PlanarExtraction, ExtractError> {
-    check_range("size", size, 1, 8192)?;
-    let fit = fit_plane_ransac(patch, params)?;
+    let fit = fit_sampling_plane(patch, size, params)?;
     progress(0.3);
-    let faces = patch.triangles.len();
     let coords: Vec<glam::Vec3> = patch
         .positions
         .iter()
         .map(|&p| fit.plane.coords(p))
         .collect();
     let uv: Vec<Vec2> = coords.iter().map(|c| Vec2::new(c.x, c.y)).collect();
-    let (angle, square) =
-        largest_rotated_square(&uv, &patch.triangles, super::square_domain::RESOLUTION)
-            .ok_or_else(|| ExtractError::DegeneratePatch {
-                faces,
-                message: "its projection onto its plane holds no square".into(),
-            })?;
+    let (plane, uv, square) = largest_square_on_plane(
+        patch,
+        &fit.plane,
+        &uv,
+        "its projection onto its plane holds no square",
+    )?;
     progress(0.7);
-    let plane = fit.plane.rotated(angle);
-    let uv: Vec<Vec2> = uv.iter().map(|&q| rotate_into(q, angle)).collect();
     let channels = super::channels_for(patch);
     let mut texels = sample_square(
         patch,

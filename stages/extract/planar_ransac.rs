@@ -439,6 +439,37 @@ pub(crate) fn interpolate(mesh: &Mesh, f: u32, w: [f32; 3]) -> (Vec3, Option<[f3
     (p, c)
 }
 
+/// What the planar and height-field extractors start with: `size` checked (1..=8192 texels
+/// a side), then the plane fitted to the patch ([`fit_plane_ransac`]).
+pub(crate) fn fit_sampling_plane(
+    patch: &Mesh,
+    size: u32,
+    params: &RansacParams,
+) -> Result<PlaneFit, ExtractError> {
+    check_range("size", size, 1, 8192)?;
+    fit_plane_ransac(patch, params)
+}
+
+/// The largest square of the patch's parameter domain `uv` (coordinates in `plane`), with
+/// `plane` and `uv` turned so that the square is axis-aligned in them. `no_square` is the
+/// error's message when the domain holds none.
+pub(crate) fn largest_square_on_plane(
+    patch: &Mesh,
+    plane: &Plane,
+    uv: &[Vec2],
+    no_square: &str,
+) -> Result<(Plane, Vec<Vec2>, Square), ExtractError> {
+    let (angle, square) =
+        largest_rotated_square(uv, &patch.triangles, super::square_domain::RESOLUTION).ok_or_else(
+            || ExtractError::DegeneratePatch {
+                faces: patch.triangles.len(),
+                message: no_square.into(),
+            },
+        )?;
+    let uv = uv.iter().map(|&q| rotate_into(q, angle)).collect();
+    Ok((plane.rotated(angle), uv, square))
+}
+
 /// §4.1.2 on a connected sample patch (e.g. from [`super::sample_region::select_region`]):
 /// plane fit, boundary projection, convex-combination map, largest square, `size`×`size`
 /// samples. `progress` receives fractions of the work done.
@@ -448,8 +479,7 @@ pub fn planar_extract(
     params: &RansacParams,
     progress: &(dyn Fn(f32) + Sync),
 ) -> Result<PlanarExtraction, ExtractError> {
-    check_range("size", size, 1, 8192)?;
-    let fit = fit_plane_ransac(patch, params)?;
+    let fit = fit_sampling_plane(patch, size, params)?;
     progress(0.2);
     let faces = patch.triangles.len();
     let boundary = boundary_vertices(patch);
@@ -471,17 +501,12 @@ pub fn planar_extract(
         message: e.to_string(),
     })?;
     progress(0.6);
-    let (angle, square) =
-        largest_rotated_square(&uv, &patch.triangles, super::square_domain::RESOLUTION)
-            .ok_or_else(|| {
-                ExtractError::DegeneratePatch {
-        faces,
-        message: "its parameter domain holds no square (is the patch seen edge-on from its plane?)"
-            .into(),
-    }
-            })?;
-    let plane = fit.plane.rotated(angle);
-    let uv: Vec<Vec2> = uv.iter().map(|&q| rotate_into(q, angle)).collect();
+    let (plane, uv, square) = largest_square_on_plane(
+        patch,
+        &fit.plane,
+        &uv,
+        "its parameter domain holds no square (is the patch seen edge-on from its plane?)",
+    )?;
     progress(0.8);
     let texels = sample_square(
         patch,

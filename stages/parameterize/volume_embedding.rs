@@ -447,70 +447,6 @@ pub fn box_voxels(vol: &Volume, min: Vec3, max: Vec3) -> Result<Vec<IVec3>, Volu
     Ok(out)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A 1 × 1 × 2 box: its longest side is z.
-    fn cube() -> Mesh {
-        crate::geom::primitives::cuboid(Vec3::new(1.0, 1.0, 2.0))
-    }
-
-    #[test]
-    fn the_volume_is_a_quarter_larger_and_its_longest_side_has_the_resolution() {
-        let v = embed(&cube(), 40, 0.25).unwrap();
-        assert_eq!(v.dims[2], 40);
-        assert!((v.voxel - 2.5 / 40.0).abs() < 1e-6);
-        assert!(
-            v.min().cmple(Vec3::new(-0.1, -0.1, -0.2)).all()
-                && v.max().cmpge(Vec3::new(1.1, 1.1, 2.2)).all()
-        );
-    }
-
-    #[test]
-    fn the_surface_shell_is_the_voxels_next_to_the_surface() {
-        let m = cube();
-        let v = embed(&m, 40, 0.25).unwrap();
-        let shell = surface_voxels(&m, &v);
-        assert!(!shell.is_empty());
-        for vx in &shell {
-            // Distance from the voxel centre to the cube's surface is at most a voxel diagonal.
-            let c = v.centre(*vx);
-            let inside = c.clamp(Vec3::ZERO, Vec3::new(1.0, 1.0, 2.0));
-            let d_out = c.distance(inside);
-            let d_in = [c.x, 1.0 - c.x, c.y, 1.0 - c.y, c.z, 2.0 - c.z]
-                .into_iter()
-                .fold(f32::INFINITY, f32::min);
-            let d = if d_out > 0.0 { d_out } else { d_in };
-            assert!(d <= v.voxel * 0.87 + 1e-5, "{vx}: {d}");
-        }
-        // A face of 1 × 2 units at 16 voxels per unit needs at least 16 × 32 voxels.
-        let n = 1.0 / v.voxel;
-        assert!(shell.len() as f32 >= 2.0 * (n * 2.0 * n) + 2.0 * (n * n));
-    }
-
-    #[test]
-    fn sections_cover_the_plane_inside_and_a_missing_plane_is_an_error() {
-        let v = embed(&cube(), 20, 0.25).unwrap();
-        let s = section(&v, Vec3::new(0.5, 0.5, 1.0), Vec3::Z).unwrap();
-        let voxels = section_voxels(&v, &s);
-        // A z-slice: every voxel of that layer.
-        assert_eq!(voxels.len(), (v.dims[0] * v.dims[1]) as usize);
-        assert!(voxels.iter().all(|x| x.z == voxels[0].z));
-        let e = section(&v, Vec3::new(0.0, 0.0, 50.0), Vec3::Z).unwrap_err();
-        assert!(e.to_string().contains("misses the volume"), "{e}");
-        assert!(box_voxels(&v, Vec3::splat(10.0), Vec3::splat(11.0)).is_err());
-        assert_eq!(
-            box_voxels(&v, Vec3::ZERO, Vec3::splat(0.2)).unwrap().len(),
-            {
-                let a = v.voxel_of(Vec3::ZERO);
-                let b = v.voxel_of(Vec3::splat(0.2));
-                ((b - a + IVec3::ONE).x * (b - a + IVec3::ONE).y * (b - a + IVec3::ONE).z) as usize
-            }
-        );
-    }
-}
-
 /// Which voxels lie outside the mesh: a 6-connected flood fill over the voxels the surface
 /// does not pass through (the shell grown by one voxel, so a corner the surface sampling
 /// clipped cannot let the fill leak in). The fill runs only in the mesh's bounding box grown
@@ -605,32 +541,6 @@ pub fn section_voxels_inside(vol: &Volume, s: &Section, outside: &[bool]) -> Vec
         .collect()
 }
 
-#[cfg(test)]
-mod inside_tests {
-    use super::*;
-
-    #[test]
-    fn a_cube_s_inside_is_found_and_its_outside_is_not() {
-        let m = crate::geom::primitives::cube();
-        let v = embed(&m, 32, 1.0).unwrap();
-        let s = section(&v, Vec3::splat(0.5), Vec3::Z).unwrap();
-        let inside = section_voxels_inside(&v, &s, &outside_voxels(&m, &v));
-        let all = section_voxels(&v, &s);
-        assert!(inside.len() < all.len());
-        for vx in &inside {
-            let c = v.centre(*vx);
-            assert!(
-                c.x > -2.0 * v.voxel
-                    && c.x < 1.0 + 2.0 * v.voxel
-                    && c.y > -2.0 * v.voxel
-                    && c.y < 1.0 + 2.0 * v.voxel
-            );
-        }
-        // The unit square at 16 voxels per unit: at least its 16 × 16 voxels.
-        assert!(inside.len() as f32 >= (1.0 / v.voxel).powi(2) * 0.9);
-    }
-}
-
 /// How deep below the surface each voxel's centre lies: its distance to the nearest point of
 /// the surface when inside the mesh (or in the shell the surface passes through), 0 when
 /// outside (`outside` is [`outside_voxels`] of the mesh). Chooses an exemplar set by depth
@@ -653,8 +563,94 @@ pub fn voxel_depths(mesh: &Mesh, vol: &Volume, voxels: &[IVec3], outside: &[bool
 }
 
 #[cfg(test)]
-mod outside_tests {
+mod tests {
     use super::*;
+
+    /// A 1 × 1 × 2 box: its longest side is z.
+    fn cube() -> Mesh {
+        crate::geom::primitives::cuboid(Vec3::new(1.0, 1.0, 2.0))
+    }
+
+    /// The unit cube [0, 1]³ and its volume with a margin of 1, `longest` voxels a side.
+    fn unit_cube(longest: u32) -> (Mesh, Volume) {
+        let m = crate::geom::primitives::cube();
+        let v = embed(&m, longest, 1.0).unwrap();
+        (m, v)
+    }
+
+    #[test]
+    fn the_volume_is_a_quarter_larger_and_its_longest_side_has_the_resolution() {
+        let v = embed(&cube(), 40, 0.25).unwrap();
+        assert_eq!(v.dims[2], 40);
+        assert!((v.voxel - 2.5 / 40.0).abs() < 1e-6);
+        assert!(
+            v.min().cmple(Vec3::new(-0.1, -0.1, -0.2)).all()
+                && v.max().cmpge(Vec3::new(1.1, 1.1, 2.2)).all()
+        );
+    }
+
+    #[test]
+    fn the_surface_shell_is_the_voxels_next_to_the_surface() {
+        let m = cube();
+        let v = embed(&m, 40, 0.25).unwrap();
+        let shell = surface_voxels(&m, &v);
+        assert!(!shell.is_empty());
+        for vx in &shell {
+            // Distance from the voxel centre to the cube's surface is at most a voxel diagonal.
+            let c = v.centre(*vx);
+            let inside = c.clamp(Vec3::ZERO, Vec3::new(1.0, 1.0, 2.0));
+            let d_out = c.distance(inside);
+            let d_in = [c.x, 1.0 - c.x, c.y, 1.0 - c.y, c.z, 2.0 - c.z]
+                .into_iter()
+                .fold(f32::INFINITY, f32::min);
+            let d = if d_out > 0.0 { d_out } else { d_in };
+            assert!(d <= v.voxel * 0.87 + 1e-5, "{vx}: {d}");
+        }
+        // A face of 1 × 2 units at 16 voxels per unit needs at least 16 × 32 voxels.
+        let n = 1.0 / v.voxel;
+        assert!(shell.len() as f32 >= 2.0 * (n * 2.0 * n) + 2.0 * (n * n));
+    }
+
+    #[test]
+    fn sections_cover_the_plane_inside_and_a_missing_plane_is_an_error() {
+        let v = embed(&cube(), 20, 0.25).unwrap();
+        let s = section(&v, Vec3::new(0.5, 0.5, 1.0), Vec3::Z).unwrap();
+        let voxels = section_voxels(&v, &s);
+        // A z-slice: every voxel of that layer.
+        assert_eq!(voxels.len(), (v.dims[0] * v.dims[1]) as usize);
+        assert!(voxels.iter().all(|x| x.z == voxels[0].z));
+        let e = section(&v, Vec3::new(0.0, 0.0, 50.0), Vec3::Z).unwrap_err();
+        assert!(e.to_string().contains("misses the volume"), "{e}");
+        assert!(box_voxels(&v, Vec3::splat(10.0), Vec3::splat(11.0)).is_err());
+        assert_eq!(
+            box_voxels(&v, Vec3::ZERO, Vec3::splat(0.2)).unwrap().len(),
+            {
+                let a = v.voxel_of(Vec3::ZERO);
+                let b = v.voxel_of(Vec3::splat(0.2));
+                ((b - a + IVec3::ONE).x * (b - a + IVec3::ONE).y * (b - a + IVec3::ONE).z) as usize
+            }
+        );
+    }
+
+    #[test]
+    fn a_cube_s_inside_is_found_and_its_outside_is_not() {
+        let (m, v) = unit_cube(32);
+        let s = section(&v, Vec3::splat(0.5), Vec3::Z).unwrap();
+        let inside = section_voxels_inside(&v, &s, &outside_voxels(&m, &v));
+        let all = section_voxels(&v, &s);
+        assert!(inside.len() < all.len());
+        for vx in &inside {
+            let c = v.centre(*vx);
+            assert!(
+                c.x > -2.0 * v.voxel
+                    && c.x < 1.0 + 2.0 * v.voxel
+                    && c.y > -2.0 * v.voxel
+                    && c.y < 1.0 + 2.0 * v.voxel
+            );
+        }
+        // The unit square at 16 voxels per unit: at least its 16 × 16 voxels.
+        assert!(inside.len() as f32 >= (1.0 / v.voxel).powi(2) * 0.9);
+    }
 
     /// Against the box's own inside test: voxels more than 2 voxels inside are inside, more
     /// than 2 voxels outside (along some axis: the shell is grown by a voxel in every
@@ -690,16 +686,10 @@ mod outside_tests {
             assert!(inside_seen > 0 && (margin == 0.0 || outside_seen > 0));
         }
     }
-}
-
-#[cfg(test)]
-mod depth_tests {
-    use super::*;
 
     #[test]
     fn depth_grows_towards_a_cube_s_centre_and_is_zero_outside() {
-        let m = crate::geom::primitives::cube();
-        let v = embed(&m, 40, 1.0).unwrap();
+        let (m, v) = unit_cube(40);
         let centre = v.voxel_of(Vec3::splat(0.5));
         let near_face = v.voxel_of(Vec3::new(0.5, 0.5, 0.1));
         let outside = v.voxel_of(Vec3::new(0.5, 0.5, -0.3));

@@ -348,20 +348,18 @@ mod tests {
 
     #[test]
     fn params_out_of_range_are_named() {
-        let p = ExportParams {
-            atlas_size: 10,
-            ..Default::default()
+        // The defaults with one field changed: the error names it, its range and its value.
+        let error = |change: fn(&mut ExportParams)| {
+            let mut p = ExportParams::default();
+            change(&mut p);
+            p.validate().unwrap_err().to_string()
         };
         assert_eq!(
-            p.validate().unwrap_err().to_string(),
+            error(|p| p.atlas_size = 10),
             "reconstruct.atlas_size must be in 64..=8192, got 10"
         );
-        let p = ExportParams {
-            up: [0.0; 3],
-            ..Default::default()
-        };
         assert_eq!(
-            p.validate().unwrap_err().to_string(),
+            error(|p| p.up = [0.0; 3]),
             "reconstruct.up must be a finite non-zero vector, got [0.0, 0.0, 0.0]"
         );
     }

@@ -5,6 +5,7 @@ use std::path::Path;
 use texsyn::artifact::Artifact;
 use texsyn::cache::Cache;
 use texsyn::config::Config;
+use texsyn::methods::Plan;
 use texsyn::pipeline::{self, NodeStatus, RunOptions, RunResult};
 
 // Helpers the examples share with the tests: each file stands alone, so an example includes
@@ -17,17 +18,23 @@ pub mod geometry_texture;
 pub mod jump_map;
 pub mod solid;
 
-/// Loads `config` with the `base` settings and then `sets` (as `--set` would), and runs it
-/// in the cache at `cache`. Errors are the messages a user would see.
+/// Loads `config` with the `base` settings and then `sets` (as `--set` would), and plans it
+/// (nothing runs). Errors are the messages a user would see.
+pub fn plan_config(config: &Path, base: &[&str], sets: &[&str]) -> Result<Plan, String> {
+    let all: Vec<String> = base.iter().chain(sets).map(|s| s.to_string()).collect();
+    let cfg = Config::load(config, &all).map_err(|e| e.to_string())?;
+    texsyn::methods::plan(&cfg).map_err(|e| e.to_string())
+}
+
+/// Plans `config` as [`plan_config`] does and runs it in the cache at `cache`. Errors are the
+/// messages a user would see.
 pub fn run_config(
     config: &Path,
     base: &[&str],
     sets: &[&str],
     cache: &Path,
 ) -> Result<RunResult, String> {
-    let all: Vec<String> = base.iter().chain(sets).map(|s| s.to_string()).collect();
-    let cfg = Config::load(config, &all).map_err(|e| e.to_string())?;
-    let plan = texsyn::methods::plan(&cfg).map_err(|e| e.to_string())?;
+    let plan = plan_config(config, base, sets)?;
     let cache = Cache::open(cache).unwrap();
     pipeline::run(&plan.dag, &cache, RunOptions::default()).map_err(|e| e.to_string())
 }
@@ -37,6 +44,23 @@ pub fn err(r: Result<RunResult, String>) -> String {
     match r {
         Ok(_) => panic!("expected an error"),
         Err(e) => e,
+    }
+}
+
+/// Runs each `(config, sets, words)` case with `run` (given the config's name, its `--set`s
+/// and a cache the cases share) and asserts that it fails with a message containing every one
+/// of `words`.
+pub fn assert_runs_fail_naming(
+    run: impl Fn(&str, &[&str], &Path) -> Result<RunResult, String>,
+    cases: &[(&str, &[&str], &[&str])],
+) {
+    let cache = tempfile::tempdir().unwrap();
+    for (config, sets, words) in cases {
+        let e = err(run(config, sets, cache.path()));
+        assert!(
+            words.iter().all(|w| e.contains(w)),
+            "{config} {sets:?}: expected {words:?} in {e}"
+        );
     }
 }
 
@@ -52,6 +76,13 @@ pub fn ran(r: &RunResult) -> Vec<&str> {
 pub fn artifact<'a>(r: &'a RunResult, node: &str) -> &'a Artifact {
     let i = r.reports.iter().position(|n| n.node == node).unwrap();
     &r.artifacts[i]
+}
+
+/// The files of `node`'s bundle, written into a new temporary directory.
+pub fn materialized(r: &RunResult, node: &str) -> tempfile::TempDir {
+    let out = tempfile::tempdir().unwrap();
+    pipeline::outputs::materialize(artifact(r, node), out.path()).unwrap();
+    out
 }
 
 /// "node content-hash" for every node, in order.

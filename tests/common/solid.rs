@@ -44,3 +44,10 @@ pub fn cube(n: u32) -> Volume {
         dims: [n; 3],
     }
 }
+
+/// An n³ [`cube`] and the identity rotation over it ([`trivial_field`]).
+pub fn trivial_cube(n: u32) -> (Volume, RotationField) {
+    let volume = cube(n);
+    let field = trivial_field(&volume);
+    (volume, field)
+}

@@ -349,26 +349,21 @@ mod tests {
 
     #[test]
     fn plain_dependent_set_grows_by_the_reach_per_step() {
-        // One pass without subpasses, reach 2: a single target needs its 5³ cube upsampled.
-        let s = Schedule::plain(1, false);
-        let g = dependent_set(
-            &s,
-            IVec3::splat(40),
-            &[(IVec3::splat(20), IVec3::splat(21))],
-            2,
-        );
-        assert_eq!(g.voxels(), 125);
-        assert_eq!(g.corrections(), 1);
-        // Two passes: the target's cube corrected once, the 9³ cube upsampled.
-        let s = Schedule::plain(2, false);
-        let g = dependent_set(
-            &s,
-            IVec3::splat(40),
-            &[(IVec3::splat(20), IVec3::splat(21))],
-            2,
-        );
-        assert_eq!(g.voxels(), 729);
-        assert_eq!(g.corrections(), 1 + 125);
+        // Passes without subpasses, reach 2, a single target: (passes, voxels, corrections).
+        for (passes, voxels, corrections) in [
+            // One pass: the target's 5³ cube upsampled.
+            (1, 125, 1),
+            // Two passes: the target's cube corrected once, the 9³ cube upsampled.
+            (2, 729, 1 + 125),
+        ] {
+            let g = dependent_set(
+                &Schedule::plain(passes, false),
+                IVec3::splat(40),
+                &[(IVec3::splat(20), IVec3::splat(21))],
+                2,
+            );
+            assert_eq!((g.voxels(), g.corrections()), (voxels, corrections));
+        }
     }
 
     #[test]

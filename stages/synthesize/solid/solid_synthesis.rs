@@ -1481,42 +1481,49 @@ fn triple_of_key(k: u128) -> Triple {
     Triple::new([x(0), x(1)], [x(2), x(3)], [x(4), x(5)])
 }
 
-/// Dot product with eight partial sums (so it vectorizes), added in a fixed order.
+/// Dot product with eight partial sums (see [`lane_sum`]).
 #[inline]
 fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for i in 0..8 {
-            acc[i] += x[i] * y[i];
-        }
-    }
-    let mut tail = 0.0f32;
-    for (x, y) in ra.iter().zip(rb) {
-        tail += x * y;
-    }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+    lane_sum::<8>(a, b, |x, y| x * y)
 }
 
-/// Squared Euclidean distance with four partial sums, added in a fixed order.
+/// Squared Euclidean distance with four partial sums (see [`lane_sum`]).
 #[inline]
 fn squared_distance(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 4];
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    lane_sum::<4>(a, b, |x, y| {
+        let t = x - y;
+        t * t
+    })
+}
+
+/// The sum of `term(a[i], b[i])` over `L` partial sums (so it vectorizes), added in a fixed
+/// order: lane i with lane i + L/2, then neighbours pairwise (for 8 lanes
+/// ((0+4) + (1+5)) + ((2+6) + (3+7))), then the terms past the last whole chunk.
+#[inline]
+fn lane_sum<const L: usize>(a: &[f32], b: &[f32], term: impl Fn(f32, f32) -> f32) -> f32 {
+    let mut acc = [0.0f32; L];
+    let (ca, cb) = (a.chunks_exact(L), b.chunks_exact(L));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     for (x, y) in ca.zip(cb) {
-        for i in 0..4 {
-            let t = x[i] - y[i];
-            acc[i] += t * t;
+        for i in 0..L {
+            acc[i] += term(x[i], y[i]);
         }
     }
     let mut tail = 0.0f32;
     for (x, y) in ra.iter().zip(rb) {
-        let t = x - y;
-        tail += t * t;
+        tail += term(*x, *y);
     }
-    (acc[0] + acc[2]) + (acc[1] + acc[3]) + tail
+    let mut n = L / 2;
+    for i in 0..n {
+        acc[i] += acc[i + n];
+    }
+    while n > 1 {
+        for i in 0..n / 2 {
+            acc[i] = acc[2 * i] + acc[2 * i + 1];
+        }
+        n /= 2;
+    }
+    acc[0] + tail
 }
 
 /// A 64-bit key of a voxel of a level, for counter-based randomness.
