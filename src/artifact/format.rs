@@ -3,9 +3,9 @@
 //! readers view in place.
 //!
 //! A format names its [`Kind`] (stored in the header, so a reader refuses a file of another
-//! kind), how to write itself, and how to view an artifact of its kind. Nothing else in
-//! texsyn builds artifact bytes: methods return owned values from their nodes and receive
-//! views, and the pipeline writes and opens the artifacts.
+//! kind), how to write itself, and how to view an artifact of its kind. No method or stage
+//! builds artifact bytes: methods return owned values from their nodes and receive views,
+//! and the pipeline writes and opens the artifacts.
 
 use super::{Artifact, ArtifactError, Kind};
 

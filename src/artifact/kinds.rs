@@ -153,7 +153,7 @@ impl From<Vec<(String, Vec<u8>)>> for Bundle {
     }
 }
 
-/// A bundle as stored: the entries, each file readable with [`bundle_file`].
+/// A bundle as stored: the entries, each file readable with [`BundleRef::file`].
 pub struct BundleRef<'a> {
     pub artifact: &'a Artifact,
     pub entries: Vec<BundleEntry>,

@@ -126,7 +126,10 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         c.parameterize.clone(),
         (mesh, field, exemplar),
         |_, p, (mesh, up, img)| {
-            jump_parameterization(&mesh, up, (img.width, img.height), p).map_err(NodeError::input)
+            jump_parameterization(&mesh, up, (img.width, img.height), p).map_err(|e| {
+                let internal = e.is_internal();
+                NodeError::from_stage(e, internal)
+            })
         },
     );
 
@@ -193,9 +196,9 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                 &p.export,
                 &|f| ctx.progress.set(f),
             );
-            Ok(Bundle::from(files.map_err(|e| match e.is_internal() {
-                true => NodeError::internal(e),
-                false => NodeError::input(e),
+            Ok(Bundle::from(files.map_err(|e| {
+                let internal = e.is_internal();
+                NodeError::from_stage(e, internal)
             })?))
         },
     );

@@ -122,6 +122,9 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     c.field.validate().map_err(|e| invalid(e.key(), &e))?;
     c.parameterize.validate().map_err(param)?;
     c.reconstruct.validate().map_err(param)?;
+    c.synthesize
+        .validate()
+        .map_err(|e| invalid("synthesize", &e))?;
     let depths: Vec<f32> = c.regions.iter().map(|r| r.depth).collect();
     volume::validate_region_depths(&depths).map_err(param)?;
     let mut dag = Dag::default();
@@ -182,10 +185,13 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     }
     dag.node(
         NodeSpec::new(Reconstruct, "solid_colour", RECONSTRUCT_VERSION),
-        (c.reconstruct.clone(), c.parameterize.request.clone()),
+        ReconstructParams {
+            export: c.reconstruct.clone(),
+            request: c.parameterize.request.clone(),
+        },
         // The core's samples and analysis, the request and mesh, then each region's pair.
         (samples, core_analysis, request, mesh, pairs),
-        |ctx, (export, request), (samples, analysis, req, mesh, pairs)| {
+        |ctx, ReconstructParams { export, request }, (samples, analysis, req, mesh, pairs)| {
             let mut colours = colour::VoxelColours::default();
             for (s, a) in std::iter::once((samples, analysis)).chain(pairs) {
                 colours.add(s.voxels, s.triples, &a);
@@ -210,8 +216,8 @@ fn add_analysis(
     [shared, xy, yz, zx]: [&Option<ExemplarSpec>; 4],
     params: triples::CandidateParams,
 ) -> Result<Handle<SolidAnalysis>, MethodError> {
-    let (mut planes, mut transpose) = (Vec::new(), [false; 3]);
-    for (k, (plane, spec)) in [("xy", xy), ("yz", yz), ("zx", zx)].into_iter().enumerate() {
+    // Each plane's image (imported once per file) and whether it is transposed.
+    let planes = [("xy", xy), ("yz", yz), ("zx", zx)].map(|(plane, spec)| {
         let (spec, role) = match (spec, shared) {
             (Some(s), _) => (s, format!("{key}.{plane}")),
             (None, Some(s)) => (s, format!("{key}.exemplar")),
@@ -220,19 +226,23 @@ fn add_analysis(
                 return Err(config.invalid(&format!("{key}.{plane}"), m).into());
             }
         };
-        let (path, t) = match spec {
+        let (path, transpose) = match spec {
             ExemplarSpec::Path(path) => (path, false),
             ExemplarSpec::Spec { path, transpose } => (path, *transpose),
         };
-        transpose[k] = t;
-        planes.push(images.get(dag, &config.resolve(path), &role)?);
-    }
+        Ok::<_, MethodError>((images.get(dag, &config.resolve(path), &role)?, transpose))
+    });
+    let [xy, yz, zx] = planes;
+    let [(xy, tx), (yz, ty), (zx, tz)] = [xy?, yz?, zx?];
     Ok(dag.node(
         NodeSpec::new(AnalyseExemplar, "candidate_triples", ANALYSIS_VERSION).named(name),
-        (params, transpose),
-        (planes[0], planes[1], planes[2]),
-        |_, (params, transpose), (xy, yz, zx)| {
-            triples::analyse_transposed([xy, yz, zx], *transpose, params).map_err(NodeError::input)
+        AnalysisParams {
+            analysis: params,
+            transpose: [tx, ty, tz],
+        },
+        [xy, yz, zx],
+        |_, p, planes| {
+            triples::analyse_transposed(planes, p.transpose, &p.analysis).map_err(NodeError::input)
         },
     ))
 }
@@ -258,7 +268,11 @@ fn add_synthesis(
                 .ok_or_else(|| NodeError::internal("a region's synthesis without voxel regions"))?;
             let bricks = ctx.pieces::<(u32, [i32; 3]), Brick>(synth.pyramid())?;
             let run = synth.synthesize_voxels(&voxels, &bricks);
-            Ok(SolidSamples::new(voxels, run.map_err(NodeError::input)?.0))
+            let run = run.map_err(|e| {
+                let internal = e.is_internal();
+                NodeError::from_stage(e, internal)
+            });
+            Ok(SolidSamples::new(voxels, run?.0))
         },
     )
 }
@@ -284,6 +298,21 @@ fn read_curves_file(f: Option<&FileInput>, offset: usize) -> Result<Vec<Curve>, 
     Ok(file.curves)
 }
 
+/// The analysis node's key: the parameters and which planes' images are transposed (a
+/// struct serializes to the same bytes as the pair it replaced, so keys are unchanged).
+#[derive(Serialize)]
+struct AnalysisParams {
+    analysis: triples::CandidateParams,
+    transpose: [bool; 3],
+}
+
+/// The reconstruct node's key: the export settings and the kind of request it renders.
+#[derive(Serialize)]
+struct ReconstructParams {
+    export: SolidExportParams,
+    request: volume::Request,
+}
+
 /// Parameters with a tail only configs with regions have (their depths, a synthesis' region):
 /// serialized alone without it, as the pair with it, so keys without regions stay as they were.
 struct Tail<P, T>(P, Option<T>);
@@ -292,6 +321,10 @@ impl<P: Serialize, T: Serialize> Serialize for Tail<P, T> {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         match &self.1 {
             None => self.0.serialize(s),
+            // People (graph, status, --json) see named fields; the key sees the pair.
+            Some(t) if s.is_human_readable() => {
+                serde_json::json!({ "params": &self.0, "region": t }).serialize(s)
+            }
             Some(t) => (&self.0, t).serialize(s),
         }
     }

@@ -269,10 +269,10 @@ impl Executor<'_> {
                 cache: self.cache,
                 input_hashes,
                 node,
-                pieces: Default::default(),
+                piece_counts: Default::default(),
             };
             let result = (node.compute)(&ctx);
-            let (computed, reused) = ctx.pieces.get();
+            let (computed, reused) = ctx.piece_counts.get();
             let pieces = node
                 .pieces
                 .is_some()

@@ -93,6 +93,15 @@ impl NodeError {
     pub fn internal(msg: impl std::fmt::Display) -> Self {
         NodeError::Internal(msg.to_string())
     }
+    /// A stage's error, as the user's fault unless `internal` (the stage's own verdict, e.g.
+    /// its error's `is_internal()`).
+    pub fn from_stage(e: impl std::error::Error + Send + Sync + 'static, internal: bool) -> Self {
+        if internal {
+            NodeError::internal(e)
+        } else {
+            NodeError::input(e)
+        }
+    }
 }
 
 impl From<crate::artifact::ArtifactError> for NodeError {
@@ -110,7 +119,7 @@ pub struct NodeContext<'a> {
     /// Content hashes of the inputs, in declared order.
     pub(crate) input_hashes: Vec<ContentHash>,
     pub(crate) node: &'a Node,
-    pub(crate) pieces: PieceCounts,
+    pub(crate) piece_counts: PieceCounts,
 }
 
 #[derive(Clone, Copy)]
@@ -150,7 +159,7 @@ impl<'a> NodeContext<'a> {
             &keyed,
             &crate::artifact::canonical_bytes(extra),
         );
-        Ok(PieceStore::new(self.cache, prefix, &self.pieces))
+        Ok(PieceStore::new(self.cache, prefix, &self.piece_counts))
     }
 }
 

@@ -206,6 +206,23 @@ impl<I: Inputs> Inputs for Option<I> {
     }
 }
 
+// Type parameters named A, B, C, …, skipping F and I, which name a format and an input
+// elsewhere in this file.
+impl<I: Inputs, const N: usize> Inputs for [I; N] {
+    type View<'a> = [I::View<'a>; N];
+    fn declare(&self, keyed: bool, out: &mut Vec<Declared>) {
+        for i in self {
+            i.declare(keyed, out);
+        }
+    }
+    fn view<'a>(&self, ctx: &mut InputCursor<'a, '_>) -> Result<Self::View<'a>, NodeError> {
+        let views: Vec<I::View<'a>> = self.iter().map(|i| i.view(ctx)).collect::<Result<_, _>>()?;
+        Ok(views
+            .try_into()
+            .unwrap_or_else(|_| unreachable!("one view per element")))
+    }
+}
+
 macro_rules! tuple_inputs {
     ($($name:ident),+) => {
         impl<$($name: Inputs),+> Inputs for ($($name,)+) {
@@ -316,6 +333,28 @@ impl Dag {
     {
         let mut declared = Vec::new();
         inputs.declare(false, &mut declared);
+        // Wiring mistakes that would make pieces be reused for other inputs, or mark inputs
+        // that nothing reads as keyed: caught when the DAG is built, not by a wrong result.
+        let keyed = declared.iter().any(|d| d.keyed);
+        assert_eq!(
+            spec.pieces.is_some(),
+            keyed,
+            "{}: a node with pieces keys them by at least one Keyed input, and only such a node \
+             has Keyed inputs",
+            spec.name
+        );
+        if let Some(p) = &spec.pieces {
+            let clash = self.nodes.iter().find(|n| {
+                n.pieces.as_ref().is_some_and(|q| q.name == p.name)
+                    && (n.algorithm, n.version) != (spec.algorithm, spec.version)
+            });
+            assert!(
+                clash.is_none(),
+                "{}: pieces named {:?} already belong to another algorithm or version",
+                spec.name,
+                p.name
+            );
+        }
         let node = Node {
             name: spec.name,
             stage: spec.stage,

@@ -113,7 +113,10 @@ where
     }
 }
 
-/// The key prefix shared by all pieces of one store.
+/// The key prefix shared by all pieces of one store. The parts are concatenated without
+/// lengths, as the solid's brick keys were before pieces were a pipeline feature (so bricks
+/// already in a cache stay valid); [`super::Dag::node`] makes sure one piece name belongs to
+/// one algorithm and version, and that the keyed inputs are declared.
 pub(crate) fn prefix(
     name: &str,
     version: u32,

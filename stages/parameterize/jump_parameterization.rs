@@ -98,6 +98,13 @@ pub enum ParameterizeError {
     FieldLength { field: usize, vertices: usize },
 }
 
+impl ParameterizeError {
+    /// Whether texsyn is at fault (stored artifacts that disagree), not the user's input.
+    pub fn is_internal(&self) -> bool {
+        matches!(self, ParameterizeError::FieldLength { .. })
+    }
+}
+
 /// The parameterization as it is computed; [`ParamParts`] is how the walk and the blend read
 /// it (borrowed from this or from a stored artifact).
 pub struct JumpParameterization {

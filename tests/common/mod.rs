@@ -93,8 +93,8 @@ pub fn node_hashes(r: &RunResult) -> Vec<String> {
         .collect()
 }
 
-/// The thread counts every method's results are compared across: one, the machine's two,
-/// and oversubscribed pools (3 and 8 threads on 2 cores), which change how rayon splits work.
+/// The thread counts every method's results are compared across: one thread, and pools
+/// larger than the machine's two cores (3 and 8), which change how rayon splits the work.
 pub const THREAD_COUNTS: [usize; 3] = [1, 3, 8];
 
 /// Runs `run` from an empty cache in a pool of each of [`THREAD_COUNTS`] and asserts that

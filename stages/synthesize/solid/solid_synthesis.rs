@@ -253,7 +253,9 @@ impl SolidParams {
         self
     }
 
-    fn validate(&self) -> Result<(), SolidError> {
+    /// Checks every setting (the method calls it when the config is read, so a bad value is
+    /// reported before anything runs).
+    pub fn validate(&self) -> Result<(), SolidError> {
         check(
             "synthesize.cell",
             self.cell,
@@ -336,8 +338,22 @@ pub enum SolidError {
     MissingBrick { level: u32, brick: [i32; 3] },
     #[error("brick: {0}")]
     Brick(String),
-    #[error("voxel {voxel:?} was not synthesized: it lies outside the volume")]
+    #[error("voxel {voxel:?} was requested but not synthesized (a bug in texsyn)")]
     NotSynthesized { voxel: [i32; 3] },
+}
+
+impl SolidError {
+    /// Whether texsyn is at fault (artifacts that disagree, a brick store that lost a brick),
+    /// not the user's parameters or exemplars.
+    pub fn is_internal(&self) -> bool {
+        matches!(
+            self,
+            SolidError::Levels { .. }
+                | SolidError::MissingBrick { .. }
+                | SolidError::Brick(_)
+                | SolidError::NotSynthesized { .. }
+        )
+    }
 }
 
 fn check<T: std::fmt::Debug>(
