@@ -184,8 +184,8 @@ fn the_pyramid_depth_follows_synthesize_levels_when_only_they_are_given() {
         let i = plan.dag.node_index(node).unwrap();
         plan.dag.nodes[i].params_json.clone()
     };
-    // The analysis' key holds (parameters, transposed planes).
-    assert_eq!(params("analyse_exemplar")[0]["levels"], 2);
+    // The analysis' parameters, beside which planes are transposed.
+    assert_eq!(params("analyse_exemplar")["analysis"]["levels"], 2);
     assert_eq!(params("synthesize")["levels"].as_array().unwrap().len(), 2);
     // Given both, they must agree, and the error names both.
     let e = run(
