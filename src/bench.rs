@@ -339,7 +339,9 @@ fn geometry_image_rows(data: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<
         verdict: verdict_below(t, 1.0),
     });
     let vp = TexelVariantParams::default();
-    let (tv, variants) = time(runs, || build_texel_variants(&e.texels, &vp, &|_| {}));
+    // The extract node's output: texels in units of their spacing.
+    let sample = e.texels_in_spacing_units();
+    let (tv, variants) = time(runs, || build_texel_variants(&sample, &vp, &|_| {}));
     let variants = variants.map_err(anyhow::Error::msg)?;
     rows.push(Row {
         what: "geometry images: analyse the 64² sample (8 orientations × 3 scales, pyramids, kd-trees; cached)".into(),
@@ -422,7 +424,7 @@ fn density_rerun_row() -> Result<Row> {
 /// volumes of 800–1024: 10–25 min for a surface, 10–20 s for a new cut; dual-grid correction
 /// 4× faster with about 80% fewer dependent voxels). Runs on the demo's cow.
 fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
-    use crate::stages::analyse_exemplar::candidate_triples::{CandidateParams, analyse};
+    use crate::stages::analyse_exemplar::candidate_triples::{CandidateParams, analyse_transposed};
     use crate::stages::field::quaternion_field::{FieldGrid, RotationField};
     use crate::stages::parameterize::volume_embedding::{
         embed, outside_voxels, section, section_voxels_inside, surface_voxels,
@@ -436,19 +438,15 @@ fn solid_rows(rows: &mut Vec<Row>) -> Result<String> {
     let mesh = crate::geom::io::read_mesh_bytes(&p, &std::fs::read(&p)?)?;
     let ip = repo.join("configs/assets/wood2.png");
     let img = crate::image::decode_image(&ip, &std::fs::read(&ip)?)?;
-    let mut tr = crate::image::Image::new(img.height, img.width);
-    for y in 0..img.height {
-        for x in 0..img.width {
-            tr.pixels[(x * img.height + y) as usize] = img.pixels[(y * img.width + x) as usize];
-        }
-    }
     let cp = CandidateParams {
         plane_weights: [1.0, 0.0, 1.0],
         ..Default::default()
     };
     let t = Instant::now();
     let analysis =
-        analyse([img.view(), img.view(), tr.view()], &cp).map_err(|e| anyhow::anyhow!("{e}"))?;
+        // What solid_elephant.toml asks for: wood2 in every plane, transposed in zx.
+        analyse_transposed([img.view(); 3], [false, false, true], &cp)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
     rows.push(Row {
         what: format!(
             "solid: analyse wood2.png ({}×{}; 4 levels, candidate triples and slabs)",

@@ -10,7 +10,8 @@ use super::jump_maps::add_jump_map;
 use super::{MethodError, import};
 use crate::artifact::Bundle;
 use crate::artifact::jump_maps::AddressImage;
-use crate::config::{Config, check_range};
+use crate::check::{ParamError, check_range};
+use crate::config::Config;
 use crate::image::Image;
 use crate::pipeline::{Dag, NodeSpec, Stage};
 use crate::stages::analyse_exemplar::jump_map::JumpMapParams;
@@ -88,7 +89,20 @@ impl Default for RenderSection {
     }
 }
 
+impl RenderSection {
+    fn validate(&self) -> Result<(), ParamError> {
+        check_range("reconstruct.blend_radius", self.blend_radius, 0, 8)
+    }
+}
+
 impl SynthSection {
+    /// The output size, then the walk's own parameters.
+    fn validate(&self) -> Result<(), ParamError> {
+        check_range("synthesize.width", self.width, 1, 16384)?;
+        check_range("synthesize.height", self.height, 1, 16384)?;
+        self.walk().validate()
+    }
+
     /// The walk's own parameters (the rest say where and how much to synthesize).
     fn walk(&self) -> Synth2dParams {
         Synth2dParams {
@@ -101,22 +115,10 @@ impl SynthSection {
 
 pub fn build(config: &Config) -> Result<Dag, MethodError> {
     let c: Synth2dConfig = config.parse()?;
-    let check = |key: &str, r: Result<(), crate::check::ParamError>| config.check(key, r);
-    check("analyse_exemplar", c.analyse_exemplar.validate())?;
+    config.check("analyse_exemplar", c.analyse_exemplar.validate())?;
+    config.check("synthesize", c.synthesize.validate())?;
+    config.check("reconstruct", c.reconstruct.validate())?;
     let s = c.synthesize.clone();
-    check("synthesize", s.walk().validate())?;
-    check(
-        "synthesize.width",
-        check_range("synthesize.width", s.width, 1, 16384),
-    )?;
-    check(
-        "synthesize.height",
-        check_range("synthesize.height", s.height, 1, 16384),
-    )?;
-    check(
-        "reconstruct.blend_radius",
-        check_range("reconstruct.blend_radius", c.reconstruct.blend_radius, 0, 8),
-    )?;
 
     let mut dag = Dag::default();
     let exemplar = import::<Image>(
