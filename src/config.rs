@@ -126,6 +126,15 @@ impl Config {
         verdict.map_err(|e| self.invalid(key, &e.to_string()))
     }
 
+    /// A typed parameter error as an error under the key it names. An `Invalid` error's
+    /// message completes a sentence that starts with its key, so the key is not repeated.
+    pub fn param(&self, e: crate::check::ParamError) -> ConfigError {
+        match e {
+            crate::check::ParamError::Invalid { key, message } => self.invalid(&key, &message),
+            e => self.invalid(e.key(), &e.to_string()),
+        }
+    }
+
     /// Whether the config (with its overrides) gives `table.key`, rather than leaving it to
     /// its default: for parameters that a method derives from another when left out.
     pub fn gives(&self, table: &str, key: &str) -> bool {

@@ -24,9 +24,9 @@ use crate::stages::analyse_exemplar::jump_map::{
 };
 use crate::stages::field::orientation_field::{FieldParams, orientation_field};
 use crate::stages::parameterize::jump_parameterization::{
-    ParameterizeParams, jump_parameterization,
+    ParameterizeError, ParameterizeParams, jump_parameterization,
 };
-use crate::stages::reconstruct::jump_export::{AlignedMap, export_jump_textured};
+use crate::stages::reconstruct::jump_export::{AlignedMap, JumpExportError, export_jump_textured};
 use crate::stages::reconstruct::textured_export::ExportParams;
 use crate::stages::synthesize::jump_walk::{WalkParams, jump_walk};
 use serde::{Deserialize, Serialize};
@@ -126,10 +126,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         c.parameterize.clone(),
         (mesh, field, exemplar),
         |_, p, (mesh, up, img)| {
-            jump_parameterization(&mesh, up, (img.width, img.height), p).map_err(|e| {
-                let internal = e.is_internal();
-                NodeError::from_stage(e, internal)
-            })
+            jump_parameterization(&mesh, up, (img.width, img.height), p)
+                .map_err(|e| NodeError::classify(e, ParameterizeError::is_internal))
         },
     );
 
@@ -197,8 +195,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                 &|f| ctx.progress.set(f),
             );
             Ok(Bundle::from(files.map_err(|e| {
-                let internal = e.is_internal();
-                NodeError::from_stage(e, internal)
+                NodeError::classify(e, JumpExportError::is_internal)
             })?))
         },
     );

@@ -7,7 +7,7 @@ pub mod synth2d;
 
 use crate::artifact::Format;
 use crate::config::{Config, ConfigError};
-use crate::pipeline::{Dag, FileInput, Handle, NodeError, NodeSpec, Stage};
+use crate::pipeline::{Dag, Handle, NodeError, NodeSpec, Stage};
 use std::path::{Path, PathBuf};
 
 /// The methods a config may name.
@@ -146,13 +146,4 @@ impl<F: Import> Imports<F> {
         self.done.push((path.to_owned(), h));
         Ok(h)
     }
-}
-
-/// A TOML input file (beside the config) read into `T`; errors name the file.
-pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(f: &FileInput) -> Result<T, NodeError> {
-    let path = f.path.display();
-    let text = std::str::from_utf8(&f.bytes)
-        .map_err(|_| NodeError::input(format!("{path}: not UTF-8 text")))?;
-    toml::from_str(text)
-        .map_err(|e| NodeError::input(format!("{path}: {}", e.to_string().trim_end())))
 }

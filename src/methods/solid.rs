@@ -17,7 +17,7 @@
 //! gets the paper's settings. The field's grid covers the volume's box, so the field node's
 //! key holds `parameterize.margin` too.
 
-use super::{Imports, MethodError, import, read_toml};
+use super::{Imports, MethodError, import};
 use crate::artifact::Bundle;
 use crate::artifact::solid::SolidSamples;
 use crate::check::ParamError;
@@ -25,15 +25,16 @@ use crate::config::Config;
 use crate::geom::Mesh;
 use crate::image::Image;
 use crate::pipeline::Stage::{AnalyseExemplar, Field, Parameterize, Reconstruct, Synthesize};
-use crate::pipeline::{Dag, FileInput, Handle, Keyed, NodeError, NodeSpec, PieceStore};
+use crate::pipeline::{Dag, Handle, Keyed, NodeError, NodeSpec, PieceStore, WithTail};
 use crate::stages::analyse_exemplar::candidate_triples::{self as triples, SolidAnalysis};
-use crate::stages::field::quaternion_field::{self as sketch, Curve, RotationField};
+use crate::stages::field::quaternion_field::{self as sketch, RotationField};
 use crate::stages::parameterize::volume_embedding as volume;
 use crate::stages::parameterize::volume_embedding::{RequestParams, RequestedVoxels as Request};
 use crate::stages::reconstruct::solid_colour::{self as colour, SolidExportParams};
-use crate::stages::synthesize::solid::solid_synthesis::{self as synthesis, Brick, BrickStore};
+use crate::stages::synthesize::solid::solid_synthesis::{
+    self as synthesis, Brick, BrickStore, SolidError,
+};
 use serde::{Deserialize, Serialize};
-use std::fmt::Display;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -109,22 +110,16 @@ pub enum ExemplarSpec {
 
 pub fn build(config: &Config) -> Result<Dag, MethodError> {
     let mut c: SolidConfig = config.parse()?;
-    let invalid = |k: &str, e: &dyn Display| MethodError::from(config.invalid(k, &e.to_string()));
-    let param = |e: ParamError| match e {
-        ParamError::Invalid { key, message } => invalid(&key, &message),
-        e => invalid(e.key(), &e),
-    };
+    let param = |e: ParamError| MethodError::from(config.param(e));
     let given = ["analyse_exemplar", "synthesize"].map(|t| config.gives(t, "levels"));
     let (depth, levels) = (&mut c.analyse_exemplar.levels, &mut c.synthesize.levels);
     synthesis::couple_levels(depth, levels, given).map_err(param)?;
     let p = c.analyse_exemplar.clone();
-    p.validate().map_err(|e| invalid("analyse_exemplar", &e))?;
-    c.field.validate().map_err(|e| invalid(e.key(), &e))?;
+    config.check("analyse_exemplar", p.validate())?;
+    config.check("field", c.field.validate())?;
     c.parameterize.validate().map_err(param)?;
     c.reconstruct.validate().map_err(param)?;
-    c.synthesize
-        .validate()
-        .map_err(|e| invalid("synthesize", &e))?;
+    config.check("synthesize", c.synthesize.validate())?;
     let depths: Vec<f32> = c.regions.iter().map(|r| r.depth).collect();
     volume::validate_region_depths(&depths).map_err(param)?;
     let mut dag = Dag::default();
@@ -135,16 +130,15 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         add_analysis(dag, config, &mut images, (name, key), planes, params)
     };
     let i = &c.inputs;
-    let planes = [&i.exemplar, &i.xy, &i.yz, &i.zx];
-    let core_analysis = analysis(&mut dag, "analyse_exemplar", "inputs", planes, p)?;
+    let core_planes = [&i.exemplar, &i.xy, &i.yz, &i.zx];
+    let core_analysis = analysis(&mut dag, "analyse_exemplar", "inputs", core_planes, p)?;
     let mut region_analyses = Vec::new();
     for (k, r) in c.regions.iter().enumerate() {
         let key = format!("regions[{k}]");
         let mut p = c.analyse_exemplar.clone();
         if let Some(w) = r.plane_weights {
             p.plane_weights = w;
-            p.validate()
-                .map_err(|e| invalid(&format!("{key}.plane_weights"), &e))?;
+            config.check(&format!("{key}.plane_weights"), p.validate())?;
         }
         let name = format!("analyse_exemplar.region{}", k + 1);
         let planes = [&r.exemplar, &r.xy, &r.yz, &r.zx];
@@ -157,22 +151,27 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         c.field.solid_field(c.parameterize.margin),
         (mesh, curves_file),
         |_, p, (mesh, file)| {
-            let more = read_curves_file(file, p.curves.len())?;
+            // A curves file's curves come after the config's, and are checked on reading.
+            let more = match file {
+                None => Vec::new(),
+                Some(f) => sketch::CurvesFile::read(&f.bytes, p.curves.len())
+                    .map_err(|e| NodeError::input(format!("{}: {e}", f.path.display())))?,
+            };
             sketch::solid_rotation_field(&mesh, p, more).map_err(NodeError::input)
         },
     );
     let regions = (!depths.is_empty()).then_some(depths);
     let request = dag.node(
         NodeSpec::new(Parameterize, "volume_request", REQUEST_VERSION),
-        Tail(c.parameterize.clone(), regions.clone()),
+        WithTail(c.parameterize.clone(), regions.clone()),
         mesh,
-        |_, Tail(p, depths), mesh| {
+        |_, WithTail(p, depths), mesh| {
             let depths = depths.as_deref().unwrap_or_default();
             volume::request_voxels(&mesh, p, depths).map_err(NodeError::input)
         },
     );
     let synthesis = |dag: &mut Dag, name: String, analysis, region| {
-        let params = Tail(c.synthesize.clone(), region);
+        let params = WithTail(c.synthesize.clone(), region);
         add_synthesis(dag, name, analysis, (field, request), params)
     };
     // The core owns the voxels below every region (index: the number of regions).
@@ -254,24 +253,21 @@ fn add_synthesis(
     name: String,
     analysis: Handle<SolidAnalysis>,
     (field, request): (Handle<RotationField>, Handle<Request>),
-    params: Tail<synthesis::SolidParams, u8>,
+    params: WithTail<synthesis::SolidParams, u8>,
 ) -> Handle<SolidSamples> {
     let spec = NodeSpec::new(Synthesize, "solid_bricks", SYNTH_VERSION).named(name);
     dag.node(
         spec.pieces("solid brick", &params.0),
         params,
         (Keyed(analysis), Keyed(field), request),
-        |ctx, Tail(p, region), (analysis, field, req)| {
+        |ctx, WithTail(p, region), (analysis, field, req)| {
             let synth = synthesis::SolidSynthesis::new(analysis, &field, req.volume, p.clone());
             let synth = synth.map_err(NodeError::input)?;
             let voxels = volume::region_voxels(req.voxels, req.regions, *region)
                 .ok_or_else(|| NodeError::internal("a region's synthesis without voxel regions"))?;
             let bricks = ctx.pieces::<(u32, [i32; 3]), Brick>(synth.pyramid())?;
             let run = synth.synthesize_voxels(&voxels, &bricks);
-            let run = run.map_err(|e| {
-                let internal = e.is_internal();
-                NodeError::from_stage(e, internal)
-            });
+            let run = run.map_err(|e| NodeError::classify(e, SolidError::is_internal));
             Ok(SolidSamples::new(voxels, run?.0))
         },
     )
@@ -287,19 +283,7 @@ impl BrickStore for PieceStore<'_, (u32, [i32; 3]), Brick> {
     }
 }
 
-/// The curves of `field.curves_file` (none without one), checked; `offset` curves precede them.
-fn read_curves_file(f: Option<&FileInput>, offset: usize) -> Result<Vec<Curve>, NodeError> {
-    let Some(f) = f else { return Ok(Vec::new()) };
-    let file: sketch::CurvesFile = read_toml(f)?;
-    sketch::validate_curves(&file.curves, &[]).map_err(|e| {
-        let numbers = format!("curve numbers count from {offset} after the config's");
-        NodeError::input(format!("{}: {e} ({numbers})", f.path.display()))
-    })?;
-    Ok(file.curves)
-}
-
-/// The analysis node's key: the parameters and which planes' images are transposed (a
-/// struct serializes to the same bytes as the pair it replaced, so keys are unchanged).
+/// The analysis node's key: its parameters and which planes' images are transposed.
 #[derive(Serialize)]
 struct AnalysisParams {
     analysis: triples::CandidateParams,
@@ -311,21 +295,4 @@ struct AnalysisParams {
 struct ReconstructParams {
     export: SolidExportParams,
     request: volume::Request,
-}
-
-/// Parameters with a tail only configs with regions have (their depths, a synthesis' region):
-/// serialized alone without it, as the pair with it, so keys without regions stay as they were.
-struct Tail<P, T>(P, Option<T>);
-
-impl<P: Serialize, T: Serialize> Serialize for Tail<P, T> {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        match &self.1 {
-            None => self.0.serialize(s),
-            // People (graph, status, --json) see named fields; the key sees the pair.
-            Some(t) if s.is_human_readable() => {
-                serde_json::json!({ "params": &self.0, "region": t }).serialize(s)
-            }
-            Some(t) => (&self.0, t).serialize(s),
-        }
-    }
 }

@@ -23,7 +23,7 @@ pub mod progress;
 use crate::artifact::{Artifact, ContentHash};
 use crate::cache::Key;
 pub use executor::{NodeReport, NodeStatus, PieceReport, RunOptions, RunResult, run, status};
-pub use node::{FileHandle, Handle, Inputs, Keyed, NodeSpec};
+pub use node::{FileHandle, Handle, Inputs, Keyed, NodeSpec, WithTail};
 pub use pieces::{PieceCounts, PieceStore};
 pub use progress::{Progress, ProgressMode};
 use std::path::{Path, PathBuf};
@@ -93,10 +93,13 @@ impl NodeError {
     pub fn internal(msg: impl std::fmt::Display) -> Self {
         NodeError::Internal(msg.to_string())
     }
-    /// A stage's error, as the user's fault unless `internal` (the stage's own verdict, e.g.
-    /// its error's `is_internal()`).
-    pub fn from_stage(e: impl std::error::Error + Send + Sync + 'static, internal: bool) -> Self {
-        if internal {
+    /// A stage's error, as the user's fault unless the stage says it is texsyn's
+    /// (`internal`, e.g. the error type's `is_internal`).
+    pub fn classify<E>(e: E, internal: impl Fn(&E) -> bool) -> Self
+    where
+        E: std::error::Error + Send + Sync + 'static,
+    {
+        if internal(&e) {
             NodeError::internal(e)
         } else {
             NodeError::input(e)

@@ -384,3 +384,22 @@ impl Dag {
         }
     }
 }
+
+/// Parameters with an optional tail that is left out of the key when absent: serialized as the
+/// parameters alone without it and as the pair `(params, tail)` with it. A method uses it to
+/// add a setting that only some configs have (the solid's regions) without changing the keys
+/// of the configs that do not. People (graph, status, `--json`) see `{params, tail}`.
+#[derive(Clone, Debug)]
+pub struct WithTail<P, T>(pub P, pub Option<T>);
+
+impl<P: serde::Serialize, T: serde::Serialize> serde::Serialize for WithTail<P, T> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match &self.1 {
+            None => self.0.serialize(s),
+            Some(t) if s.is_human_readable() => {
+                serde_json::json!({ "params": &self.0, "tail": t }).serialize(s)
+            }
+            Some(t) => (&self.0, t).serialize(s),
+        }
+    }
+}

@@ -79,6 +79,29 @@ pub struct CurvesFile {
     pub curves: Vec<Curve>,
 }
 
+/// Why a curves file cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum CurvesFileError {
+    #[error("not UTF-8 text")]
+    NotText,
+    #[error("{}", .0.to_string().trim_end())]
+    Toml(#[from] toml::de::Error),
+    #[error("{source} (curve numbers count from {offset} after the config's)")]
+    Curve { source: FieldError, offset: usize },
+}
+
+impl CurvesFile {
+    /// The file's curves, checked. `offset` curves (the config's own) come before them, which
+    /// an error's curve number does not count.
+    pub fn read(bytes: &[u8], offset: usize) -> Result<Vec<Curve>, CurvesFileError> {
+        let text = std::str::from_utf8(bytes).map_err(|_| CurvesFileError::NotText)?;
+        let file: CurvesFile = toml::from_str(text)?;
+        validate_curves(&file.curves, &[])
+            .map_err(|source| CurvesFileError::Curve { source, offset })?;
+        Ok(file.curves)
+    }
+}
+
 /// What a solid's rotation field depends on besides the mesh: the sketch's curves and scales,
 /// the grid's cell count, and the margin of the volume's box, which the grid covers.
 #[derive(Clone, Debug, PartialEq, Serialize)]
