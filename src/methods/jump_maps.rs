@@ -244,8 +244,10 @@ struct ReconstructParams {
     exemplar_format: String,
 }
 
+/// A map's file format for the export: its extension, or PNG for a file without one.
 fn extension_of(p: &std::path::Path) -> String {
-    p.extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_else(|| "png".into())
+    match super::extension(p) {
+        e if e.is_empty() => "png".into(),
+        e => e,
+    }
 }
