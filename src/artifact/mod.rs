@@ -18,6 +18,7 @@
 
 pub mod format;
 pub mod geometry_images;
+pub mod graph_matching;
 pub mod jump_maps;
 pub mod kinds;
 pub mod solid;
@@ -55,6 +56,11 @@ pub enum Kind {
     VoxelRequest = 15,
     SolidBrick = 16,
     SolidSamples = 17,
+    Sqrt2Hierarchy = 18,
+    FieldKeys = 19,
+    SweepField = 20,
+    GaussianStack = 21,
+    VertexColours = 22,
 }
 
 impl Kind {
@@ -78,6 +84,11 @@ impl Kind {
             VoxelRequest,
             SolidBrick,
             SolidSamples,
+            Sqrt2Hierarchy,
+            FieldKeys,
+            SweepField,
+            GaussianStack,
+            VertexColours,
         ]
         .into_iter()
         .find(|k| *k as u32 == code)

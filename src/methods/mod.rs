@@ -1,6 +1,7 @@
 //! Methods: each expands its config section into a DAG of pipeline nodes (DESIGN.md, "A run").
 
 pub mod geometry_images;
+pub mod graph_matching;
 pub mod jump_maps;
 pub mod solid;
 pub mod synth2d;
@@ -11,7 +12,7 @@ use crate::pipeline::{Dag, Handle, NodeError, NodeSpec, Stage};
 use std::path::{Path, PathBuf};
 
 /// The methods a config may name.
-pub const METHODS: &[&str] = &["jump_maps", "synth2d", "geometry_images", "solid"];
+pub const METHODS: &[&str] = &["jump_maps", "synth2d", "geometry_images", "solid", "graph_matching"];
 
 #[derive(Debug, thiserror::Error)]
 pub enum MethodError {
@@ -41,6 +42,7 @@ pub fn plan(config: &Config) -> Result<Plan, MethodError> {
         "synth2d" => synth2d::build(config)?,
         "geometry_images" => geometry_images::build(config)?,
         "solid" => solid::build(config)?,
+        "graph_matching" => graph_matching::build(config)?,
         other => {
             return Err(MethodError::UnknownMethod {
                 path: config.path.clone(),

@@ -2,3 +2,4 @@
 pub mod candidate_triples;
 pub mod jump_map;
 pub mod texel_variants;
+pub mod gaussian_stack;

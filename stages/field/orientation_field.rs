@@ -268,7 +268,9 @@ fn longest_axis(mesh: &Mesh) -> Vec3 {
     }
 }
 
-fn resolve_point(
+/// The vertex a config entry names: `at` (the nearest referenced vertex) or `vertex` (checked
+/// to exist and to belong to a triangle). `what[index]` names the entry in errors.
+pub fn resolve_point(
     mesh: &Mesh,
     referenced: &[bool],
     what: &'static str,

@@ -6,3 +6,4 @@ pub mod jump_export;
 pub mod relief_export;
 pub mod solid_colour;
 pub mod textured_export;
+pub mod vertex_colour_export;

@@ -3,3 +3,4 @@ pub mod geometry_texture;
 pub mod jump_walk;
 pub mod solid;
 pub mod synth2d;
+pub mod graph_matching;

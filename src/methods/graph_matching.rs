@@ -1,0 +1,222 @@
+//! Method `graph_matching`: vertex colours grown coarse to fine on a √2-subdivision hierarchy,
+//! each vertex's region matched against a Gaussian stack of the exemplar and copied in by a
+//! graph cut (Bangay & Morkel, "Graph Matching with Subdivision Surfaces for Texture Synthesis
+//! on Surfaces", AFRIGRAPH 2006).
+//!
+//! ```text
+//! inputs.exemplar ─ import.exemplar ─ analyse_exemplar (Gaussian stack) ──────────────┐
+//! inputs.mesh ─ import.mesh ─ field.keys ───────────────────┐                         │
+//!                          └─ parameterize (√2 hierarchy) ─ field (orientation, sweep) ─ synthesize
+//!                                                       └───────────────────────────────── reconstruct ─ files
+//! ```
+//!
+//! The keys are resolved on the input mesh in their own small node, declared before the
+//! subdivision, so a key on a vertex that does not exist is reported before any work starts;
+//! so is a region larger than the exemplar (read from the image header when the plan is made).
+
+use super::{MethodError, import};
+use crate::artifact::Bundle;
+use crate::config::Config;
+use crate::geom::Mesh;
+use crate::image::Image;
+use crate::pipeline::{Dag, NodeError, NodeSpec, Stage};
+use crate::stages::analyse_exemplar::gaussian_stack::{StackParams, build_stack};
+use crate::stages::field::sweep_field::{SweepFieldParams, resolve_keys, sweep_field};
+use crate::stages::parameterize::sqrt2_subdivision::{SubdivisionParams, build_hierarchy};
+use crate::stages::reconstruct::vertex_colour_export::{
+    ColouredLevel, VertexColourExportParams, export_vertex_colours,
+};
+use crate::stages::synthesize::graph_matching::{MatchInput, MatchParams, graph_matching};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+const STACK_VERSION: u32 = 1;
+const KEYS_VERSION: u32 = 1;
+const HIERARCHY_VERSION: u32 = 1;
+const FIELD_VERSION: u32 = 1;
+const SYNTH_VERSION: u32 = 1;
+const EXPORT_VERSION: u32 = 1;
+
+/// A `graph_matching` config.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct GraphMatchingConfig {
+    pub method: String,
+    pub inputs: Inputs,
+    #[serde(default)]
+    pub analyse_exemplar: StackParams,
+    #[serde(default)]
+    pub field: SweepFieldParams,
+    #[serde(default)]
+    pub parameterize: SubdivisionParams,
+    #[serde(default)]
+    pub synthesize: MatchParams,
+    #[serde(default)]
+    pub reconstruct: VertexColourExportParams,
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Inputs {
+    /// The mesh to colour (.obj, .off, .ply, .stl): any genus, open or closed.
+    pub mesh: PathBuf,
+    /// The exemplar (.png, .jpg, .exr): colour, or grey values for displacement.
+    pub exemplar: PathBuf,
+}
+
+/// What synthesis reads besides its inputs: its own parameters and the texture scale.
+#[derive(Serialize)]
+struct SynthParams {
+    scale: f32,
+    #[serde(flatten)]
+    matching: MatchParams,
+}
+
+pub fn build(config: &Config) -> Result<Dag, MethodError> {
+    let c: GraphMatchingConfig = config.parse()?;
+    if !config.gives("parameterize", "scale") {
+        return Err(config
+            .invalid(
+                "parameterize.scale",
+                "is required: level-0 exemplar texels per object unit (it sets how far the mesh is subdivided)",
+            )
+            .into());
+    }
+    c.analyse_exemplar.validate().map_err(|e| config.param(e))?;
+    c.parameterize.validate().map_err(|e| config.param(e))?;
+    c.field.validate().map_err(|e| config.param(e))?;
+    c.synthesize.validate().map_err(|e| config.param(e))?;
+    c.reconstruct.validate().map_err(|e| config.param(e))?;
+
+    let mut dag = Dag::default();
+    let mesh_path = config.resolve(&c.inputs.mesh);
+    let mesh = import::<Mesh>(&mut dag, "import.mesh", &mesh_path, "inputs.mesh")?;
+    let exemplar_path = config.resolve(&c.inputs.exemplar);
+    let exemplar = import::<Image>(&mut dag, "import.exemplar", &exemplar_path, "inputs.exemplar")?;
+    check_region_fits(config, &exemplar_path, &c.synthesize)?;
+
+    let stack = dag.node(
+        NodeSpec::new(Stage::AnalyseExemplar, "gaussian_stack", STACK_VERSION),
+        c.analyse_exemplar.clone(),
+        exemplar,
+        |_, p, img| build_stack(img, p).map_err(NodeError::input),
+    );
+    let keys = dag.node(
+        NodeSpec::new(Stage::Field, "field_keys", KEYS_VERSION).named("field.keys"),
+        c.field.keys.clone(),
+        mesh,
+        |_, keys, mesh| {
+            let p = SweepFieldParams {
+                keys: keys.clone(),
+                ..Default::default()
+            };
+            resolve_keys(&mesh, &p).map_err(NodeError::input)
+        },
+    );
+    let hierarchy = dag.node(
+        NodeSpec::new(Stage::Parameterize, "sqrt2_hierarchy", HIERARCHY_VERSION),
+        c.parameterize.clone(),
+        mesh,
+        |_, p, mesh| {
+            let h = build_hierarchy(&mesh, p.scale, p).map_err(NodeError::input)?;
+            tracing::info!(
+                "parameterize: {} levels, {} → {} vertices",
+                h.levels(),
+                h.level_vertices[0],
+                h.level_vertices.last().copied().unwrap_or(0)
+            );
+            Ok(h)
+        },
+    );
+    let field = dag.node(
+        NodeSpec::new(Stage::Field, "sweep_field", FIELD_VERSION),
+        c.field.clone(),
+        (hierarchy, keys),
+        |_, p, (h, keys)| sweep_field(&h, &keys, p).map_err(NodeError::input),
+    );
+    let params = SynthParams {
+        scale: c.parameterize.scale,
+        matching: c.synthesize.clone(),
+    };
+    let colours = dag.node(
+        NodeSpec::new(Stage::Synthesize, "graph_matching", SYNTH_VERSION),
+        params,
+        (hierarchy, field, stack),
+        |ctx, p, (h, field, stack)| {
+            if field.orientation.len() != h.positions.len() {
+                return Err(NodeError::internal("the field and the hierarchy disagree"));
+            }
+            let input = MatchInput {
+                hierarchy: &h,
+                field: &field,
+                stack: stack.view(),
+                scale: p.scale,
+            };
+            let out = graph_matching(&input, &p.matching, &|f| ctx.progress.set(f))
+                .map_err(NodeError::input)?;
+            let s = &out.stats;
+            tracing::info!(
+                "synthesize: {} matches, {} comparisons ({} without averaging), {} vertices transferred, {} random starts",
+                s.matches,
+                s.comparisons,
+                s.comparisons_without_averaging,
+                s.transferred,
+                s.random_starts
+            );
+            Ok(out)
+        },
+    );
+    dag.node(
+        NodeSpec::new(Stage::Reconstruct, "vertex_colour_export", EXPORT_VERSION),
+        c.reconstruct.clone(),
+        (hierarchy, colours),
+        |ctx, p, (h, out)| {
+            let mut start = 0;
+            let mut levels = Vec::new();
+            for l in 0..h.levels() {
+                let n = h.level_vertices[l] as usize;
+                if out.level_colours.len() < start + n {
+                    return Err(NodeError::internal("colours and hierarchy disagree"));
+                }
+                levels.push(ColouredLevel {
+                    mesh: h.level(l),
+                    colours: &out.level_colours[start..start + n],
+                });
+                start += n;
+            }
+            Ok(Bundle::from(export_vertex_colours(&levels, p, &|f| {
+                ctx.progress.set(f)
+            })))
+        },
+    );
+    Ok(dag)
+}
+
+/// The region must fit the exemplar: checked from the image header, before any node runs. An
+/// unreadable header is left to the import node, which names the problem.
+fn check_region_fits(
+    config: &Config,
+    path: &std::path::Path,
+    p: &MatchParams,
+) -> Result<(), MethodError> {
+    let Ok(reader) = image::ImageReader::open(path).and_then(|r| r.with_guessed_format()) else {
+        return Ok(());
+    };
+    let Ok((w, h)) = reader.into_dimensions() else {
+        return Ok(());
+    };
+    let max = w.min(h) / 2;
+    if p.region > max {
+        return Err(config
+            .invalid(
+                "synthesize.region",
+                &format!(
+                    "{} texels does not fit the {w}×{h} exemplar {}: use at most {max}, or a larger exemplar",
+                    p.region,
+                    path.display()
+                ),
+            )
+            .into());
+    }
+    Ok(())
+}

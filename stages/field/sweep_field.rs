@@ -1,0 +1,414 @@
+//! Orientation by neighbour averaging and Turk's sweep field, built coarse to fine over a √2
+//! hierarchy (Bangay & Morkel, "Graph Matching with Subdivision Surfaces for Texture Synthesis
+//! on Surfaces", §3.1.1–3.1.2, after Turk 2001).
+//!
+//! - Orientation (§3.1.1): key vertices carry the user's directions and stay fixed; every pass
+//!   sets each other vertex to the mean of its neighbours' vectors, projected to its tangent
+//!   plane and normalized, "until every vertex has a defined value" and (our stopping rule, the
+//!   paper gives none) no vector moves by more than `tolerance` in a pass, or after
+//!   `max_passes`. Passes are Gauss–Seidel in vertex order (deterministic, and twice as fast to
+//!   converge as Jacobi).
+//! - Coarse to fine: "performed in a hierarchical manner starting with the coarse mesh … and
+//!   diffusing them to the higher resolution meshes". A vertex new at a level starts from the
+//!   mean of the vertices of the face it was made from; then the level is relaxed. Synthesis
+//!   reads the finest level's vectors at every level (the old vertices barely move once their
+//!   level has converged), so one vector per vertex is stored.
+//! - No keys given: the paper always has some. Like the jump-map method, the default is the
+//!   flow from a source to a sink at the two ends of the shape's longest axis (or `axis`),
+//!   computed on level 0 ([`super::orientation_field`]), so a config runs on any mesh. Level 0
+//!   is then not relaxed (that field is already smooth); finer levels are.
+//! - Sweep (§3.1.1–3.1.2): a value increasing along the orientation, used to order the first
+//!   level's visits. From a start vertex (the first key, or the default field's source) each
+//!   vertex gets the mean over its neighbours `u` of `s(u) + (p − p_u)·ō`, `ō` the mean of the
+//!   two orientations, first in breadth-first order, then relaxed (`SWEEP_PASSES`). Turk's
+//!   sweep is a relaxation of the same relation. Only level 0 needs it (later levels are
+//!   visited in random order, §3.1.2), so only level 0's values are stored.
+
+use super::orientation_field::{Anchor, FieldError, FieldParams, orientation_field, resolve_point};
+use crate::check::{ParamError, check_range};
+use crate::geom::Mesh;
+use crate::geom::poly_mesh::PolyMesh;
+use crate::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+
+/// Relaxation passes of the sweep after its breadth-first initialization.
+const SWEEP_PASSES: usize = 30;
+
+/// `[field]` of the graph-matching method.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SweepFieldParams {
+    /// Key orientation vectors (`at` or `vertex`, and `direction`), fixed while the rest is
+    /// averaged. Default: none (the flow along the longest axis).
+    pub keys: Vec<Anchor>,
+    /// The axis of the default field (no keys). Default: the bounding box's longest side.
+    pub axis: Option<[f32; 3]>,
+    /// A level is converged when no vector moves farther than this in a pass,
+    /// 1e-6..=0.5. Default: 1e-3.
+    pub tolerance: f32,
+    /// Cap on the averaging passes per level, 1..=100000. Default: 500.
+    pub max_passes: u32,
+}
+
+impl Default for SweepFieldParams {
+    fn default() -> Self {
+        SweepFieldParams {
+            keys: Vec::new(),
+            axis: None,
+            tolerance: 1e-3,
+            max_passes: 500,
+        }
+    }
+}
+
+impl SweepFieldParams {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range("field.tolerance", self.tolerance, 1e-6, 0.5)?;
+        check_range("field.max_passes", self.max_passes, 1, 100_000)?;
+        let fp = FieldParams {
+            anchors: self.keys.clone(),
+            axis: self.axis,
+            ..Default::default()
+        };
+        fp.validate()
+            .map_err(|e| ParamError::invalid("field", e.to_string().replace("anchors", "keys")))
+    }
+}
+
+/// Key vectors resolved to vertices of the input mesh (whose ids level 0 keeps).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct FieldKeys {
+    pub vertices: Vec<u32>,
+    pub directions: Vec<Vec3>,
+}
+
+/// Resolves the keys on the input mesh; an error names the key (`field.keys[i]`).
+pub fn resolve_keys(mesh: &Mesh, p: &SweepFieldParams) -> Result<FieldKeys, FieldError> {
+    let mut referenced = vec![false; mesh.vertex_count()];
+    for t in &mesh.triangles {
+        for &v in t {
+            referenced[v as usize] = true;
+        }
+    }
+    let mut keys = FieldKeys::default();
+    for (i, k) in p.keys.iter().enumerate() {
+        keys.vertices
+            .push(resolve_point(mesh, &referenced, "keys", i, &k.at, &k.vertex)?);
+        keys.directions.push(Vec3::from(k.direction));
+    }
+    Ok(keys)
+}
+
+/// One orientation per vertex of the finest level; the sweep of level 0's vertices.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SweepField {
+    pub orientation: Vec<Vec3>,
+    pub sweep: Vec<f32>,
+    /// Averaging passes each level took.
+    pub passes: Vec<u32>,
+}
+
+/// The field over `h`, from `keys` (see the module doc).
+pub fn sweep_field(
+    h: &Sqrt2Hierarchy,
+    keys: &FieldKeys,
+    p: &SweepFieldParams,
+) -> Result<SweepField, FieldError> {
+    let finest = *h.level_vertices.last().expect("a hierarchy has a level") as usize;
+    let mut orientation = vec![Vec3::ZERO; finest];
+    let mut defined = vec![false; finest];
+    let mut fixed = vec![false; finest];
+    let level0 = h.level(0);
+    let mut passes = Vec::new();
+    let start;
+    if keys.vertices.is_empty() {
+        let tri = level0.to_triangles();
+        let fp = FieldParams {
+            axis: p.axis,
+            ..Default::default()
+        };
+        let f = orientation_field(&tri, &fp)?;
+        for (v, d) in f.iter().enumerate() {
+            orientation[v] = *d;
+            defined[v] = *d != Vec3::ZERO;
+        }
+        passes.push(0);
+        // The default field flows from the low end of its axis: start the sweep there.
+        let axis = f
+            .iter()
+            .fold(Vec3::ZERO, |a, d| a + *d)
+            .try_normalize()
+            .unwrap_or(Vec3::X);
+        start = (0..tri.vertex_count())
+            .filter(|&v| defined[v])
+            .min_by(|&a, &b| {
+                tri.positions[a]
+                    .dot(axis)
+                    .total_cmp(&tri.positions[b].dot(axis))
+                    .then(a.cmp(&b))
+            })
+            .unwrap_or(0) as u32;
+    } else {
+        let normals = level0.vertex_normals();
+        for (&v, &d) in keys.vertices.iter().zip(&keys.directions) {
+            let t = tangent(d, normals[v as usize]);
+            if t == Vec3::ZERO {
+                return Err(FieldError::Other(format!(
+                    "keys: the direction at vertex {v} is along the surface normal there"
+                )));
+            }
+            orientation[v as usize] = t;
+            defined[v as usize] = true;
+            fixed[v as usize] = true;
+        }
+        passes.push(relax(&level0, &mut orientation, &mut defined, &fixed, p));
+        start = keys.vertices[0];
+    }
+    for l in 1..h.levels() {
+        let (lo, hi) = (
+            h.level_vertices[l - 1] as usize,
+            h.level_vertices[l] as usize,
+        );
+        for v in lo..hi {
+            let sum: Vec3 = h.parents(v).iter().map(|&u| orientation[u as usize]).sum();
+            orientation[v] = sum.try_normalize().unwrap_or(Vec3::ZERO);
+            defined[v] = orientation[v] != Vec3::ZERO;
+        }
+        let level = h.level(l);
+        passes.push(relax(&level, &mut orientation, &mut defined, &fixed, p));
+    }
+    let sweep = sweep_values(&level0, &orientation, start);
+    Ok(SweepField {
+        orientation,
+        sweep,
+        passes,
+    })
+}
+
+/// Gauss–Seidel averaging passes over one level; returns how many ran.
+fn relax(
+    mesh: &PolyMesh,
+    orientation: &mut [Vec3],
+    defined: &mut [bool],
+    fixed: &[bool],
+    p: &SweepFieldParams,
+) -> u32 {
+    let n = mesh.vertex_count();
+    let adj = mesh.vertex_neighbours();
+    let normals = mesh.vertex_normals();
+    for pass in 1..=p.max_passes {
+        let mut change = 0.0f32;
+        let mut undefined = 0usize;
+        for v in 0..n {
+            if fixed[v] || adj.of(v).is_empty() {
+                continue;
+            }
+            let sum: Vec3 = adj
+                .of(v)
+                .iter()
+                .filter(|&&u| defined[u as usize])
+                .map(|&u| orientation[u as usize])
+                .sum();
+            let t = tangent(sum, normals[v]);
+            if t == Vec3::ZERO {
+                // No defined neighbour yet, or they cancel (a singularity): keep what it has.
+                undefined += usize::from(!defined[v]);
+                continue;
+            }
+            change = change.max(if defined[v] {
+                (t - orientation[v]).length()
+            } else {
+                2.0
+            });
+            orientation[v] = t;
+            defined[v] = true;
+        }
+        if undefined == 0 && change <= p.tolerance {
+            return pass;
+        }
+    }
+    p.max_passes
+}
+
+/// Turk's sweep on one level: breadth-first initialization from `start` (and from the lowest
+/// vertex of every other connected piece), then relaxation with the starts fixed.
+fn sweep_values(mesh: &PolyMesh, orientation: &[Vec3], start: u32) -> Vec<f32> {
+    let n = mesh.vertex_count();
+    let adj = mesh.vertex_neighbours();
+    let pos = &mesh.positions;
+    let step = |u: usize, v: usize| {
+        let o = (orientation[u] + orientation[v]).normalize_or_zero();
+        (pos[v] - pos[u]).dot(o)
+    };
+    let mut s = vec![0.0f32; n];
+    let mut seen = vec![false; n];
+    let mut roots = Vec::new();
+    let mut queue = VecDeque::new();
+    let starts = std::iter::once(start as usize).chain(0..n);
+    for r in starts {
+        if seen[r] || adj.of(r).is_empty() {
+            continue;
+        }
+        seen[r] = true;
+        roots.push(r);
+        queue.push_back(r);
+        while let Some(v) = queue.pop_front() {
+            for &u in adj.of(v) {
+                let u = u as usize;
+                if !seen[u] {
+                    seen[u] = true;
+                    // Every seen vertex already has its value (set when it was seen).
+                    let (sum, cnt) = adj
+                        .of(u)
+                        .iter()
+                        .map(|&w| w as usize)
+                        .filter(|&w| seen[w] && w != u)
+                        .fold((0.0, 0), |(a, c), w| (a + s[w] + step(w, u), c + 1));
+                    s[u] = if cnt > 0 { sum / cnt as f32 } else { s[v] + step(v, u) };
+                    queue.push_back(u);
+                }
+            }
+        }
+    }
+    let is_root: Vec<bool> = {
+        let mut r = vec![false; n];
+        for &v in &roots {
+            r[v] = true;
+        }
+        r
+    };
+    for _ in 0..SWEEP_PASSES {
+        for v in 0..n {
+            if is_root[v] || adj.of(v).is_empty() {
+                continue;
+            }
+            let nb = adj.of(v);
+            s[v] = nb
+                .iter()
+                .map(|&u| s[u as usize] + step(u as usize, v))
+                .sum::<f32>()
+                / nb.len() as f32;
+        }
+    }
+    s
+}
+
+fn tangent(d: Vec3, n: Vec3) -> Vec3 {
+    let t = d - d.dot(n) * n;
+    if t.length_squared() > 1e-12 * d.length_squared().max(1e-30) {
+        t.normalize()
+    } else {
+        Vec3::ZERO
+    }
+}
+
+/// The order in which level 0 is visited: by increasing sweep, ties by vertex id; vertices of
+/// no face are left out.
+pub fn sweep_order(mesh: &PolyMesh, sweep: &[f32]) -> Vec<u32> {
+    let adj = mesh.vertex_neighbours();
+    let mut order: Vec<u32> = (0..mesh.vertex_count() as u32)
+        .filter(|&v| !adj.of(v as usize).is_empty())
+        .collect();
+    order.sort_by(|&a, &b| {
+        sweep[a as usize]
+            .total_cmp(&sweep[b as usize])
+            .then(a.cmp(&b))
+    });
+    order
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::primitives::grid;
+    use crate::parameterize::sqrt2_subdivision::{SubdivisionParams, build_hierarchy};
+
+    fn hierarchy(mesh: &Mesh, scale: f32) -> Sqrt2Hierarchy {
+        build_hierarchy(mesh, scale, &SubdivisionParams::default()).unwrap()
+    }
+
+    #[test]
+    fn one_key_on_a_plane_orients_every_vertex_of_every_level_its_way() {
+        let mesh = grid(9, 0.125); // 1×1 in the xy plane
+        let h = hierarchy(&mesh, 40.0);
+        assert!(h.levels() > 2);
+        let p = SweepFieldParams {
+            keys: vec![Anchor {
+                vertex: Some(40),
+                at: None,
+                direction: [1.0, 1.0, 0.0],
+            }],
+            ..Default::default()
+        };
+        let keys = resolve_keys(&mesh, &p).unwrap();
+        let f = sweep_field(&h, &keys, &p).unwrap();
+        let want = Vec3::new(1.0, 1.0, 0.0).normalize();
+        for (v, o) in f.orientation.iter().enumerate() {
+            assert!(o.distance(want) < 1e-3, "vertex {v}: {o}");
+        }
+        // The sweep increases along the field: the far corner (1, 1) is after the origin.
+        let (lo, hi) = (0usize, 80usize);
+        assert!(f.sweep[hi] > f.sweep[lo] + 1.0, "{:?}", (f.sweep[lo], f.sweep[hi]));
+        let order = sweep_order(&h.level(0), &f.sweep);
+        assert_eq!(order.len(), 81);
+        assert_eq!(order[0], 0);
+        assert_eq!(*order.last().unwrap(), 80);
+    }
+
+    #[test]
+    fn two_opposing_keys_meet_smoothly_and_keys_stay_fixed() {
+        let mesh = grid(11, 0.1);
+        let h = hierarchy(&mesh, 5.0);
+        let p = SweepFieldParams {
+            keys: vec![
+                Anchor {
+                    vertex: Some(0),
+                    at: None,
+                    direction: [1.0, 0.0, 0.0],
+                },
+                Anchor {
+                    vertex: None,
+                    at: Some([1.0, 1.0, 0.0]),
+                    direction: [0.0, 1.0, 0.0],
+                },
+            ],
+            ..Default::default()
+        };
+        let keys = resolve_keys(&mesh, &p).unwrap();
+        assert_eq!(keys.vertices, vec![0, 120]);
+        let f = sweep_field(&h, &keys, &p).unwrap();
+        assert_eq!(f.orientation[0], Vec3::X);
+        assert_eq!(f.orientation[120], Vec3::Y);
+        // In between, neighbours differ little (a smooth field) and every vector is a unit
+        // tangent of the plane.
+        let fine = h.level(h.levels() - 1);
+        let adj = fine.vertex_neighbours();
+        for v in 0..fine.vertex_count() {
+            let o = f.orientation[v];
+            assert!((o.length() - 1.0).abs() < 1e-4 && o.z.abs() < 1e-5);
+            for &u in adj.of(v) {
+                assert!(o.angle_between(f.orientation[u as usize]) < 0.35);
+            }
+        }
+    }
+
+    #[test]
+    fn no_keys_gives_the_default_flow_and_bad_keys_are_named() {
+        let mesh = crate::geom::primitives::torus(24, 12, 0.3);
+        let h = hierarchy(&mesh, 8.0);
+        let f = sweep_field(&h, &FieldKeys::default(), &SweepFieldParams::default()).unwrap();
+        assert!(f.orientation.iter().all(|o| (o.length() - 1.0).abs() < 1e-3));
+        let p = SweepFieldParams {
+            keys: vec![Anchor {
+                vertex: Some(100_000),
+                at: None,
+                direction: [1.0, 0.0, 0.0],
+            }],
+            ..Default::default()
+        };
+        let e = resolve_keys(&mesh, &p).unwrap_err().to_string();
+        assert!(e.contains("field.keys[0]") && e.contains("100000"), "{e}");
+    }
+}

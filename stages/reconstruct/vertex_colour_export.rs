@@ -1,0 +1,183 @@
+//! What a user gets from per-vertex synthesis (Bangay & Morkel, "Graph Matching with
+//! Subdivision Surfaces for Texture Synthesis on Surfaces", §3: "Texture synthesis is performed
+//! directly on a polygon mesh by assigning a colour directly to each vertex"; §3.5: conversion
+//! to a texture map is left to other work; Fig. 10 c/f: the values as displacement).
+//!
+//! - `textured.ply`: the finest level, triangulated (quads split along their shorter diagonal),
+//!   with a colour per vertex; vertex ids are the hierarchy's, so the input's vertices keep
+//!   theirs.
+//! - `textured.glb`: the same mesh with `COLOR_0` (converted to linear, as glTF wants). No atlas
+//!   is baked: vertex colours are what the method makes, and viewers show them directly.
+//! - `preview.png`: three views, drawn by texsyn's rasterizer.
+//! - with `displacement > 0`: `displaced.obj` and `displaced.ply`, the finest mesh moved along
+//!   its normals by `displacement · (value − 0.5)`, value = the mean of R, G and B (a grey
+//!   exemplar is a height map), and `displaced_preview.png` (lit, without colour, so the relief
+//!   shows).
+//! - with `level_previews`: `levels/level_NN.png`, every level as it was when synthesized, so a
+//!   user can see the texture grow.
+
+use crate::check::{ParamError, check_range};
+use crate::geom::Mesh;
+use crate::geom::poly_mesh::PolyMesh;
+use crate::export::encode_png;
+use crate::render::{ConstantShader, VertexColorShader, ViewOptions, render_views, srgb};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// `[reconstruct]` of the graph-matching method.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VertexColourExportParams {
+    /// Side of each preview view, 16..=4096. Default: 512.
+    pub preview_size: u32,
+    /// The mesh's up direction, for the previews. Default: [0, 1, 0].
+    pub up: [f32; 3],
+    /// Displacement along the normal for a value of 1 (relative to 0.5), in object units,
+    /// 0..=1e6; 0 writes no displaced mesh. Default: 0.
+    pub displacement: f32,
+    /// Also render every level (`levels/level_NN.png`). Default: false.
+    pub level_previews: bool,
+}
+
+impl Default for VertexColourExportParams {
+    fn default() -> Self {
+        VertexColourExportParams {
+            preview_size: 512,
+            up: [0.0, 1.0, 0.0],
+            displacement: 0.0,
+            level_previews: false,
+        }
+    }
+}
+
+impl VertexColourExportParams {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
+        check_range("reconstruct.displacement", self.displacement, 0.0, 1e6)?;
+        if !self.up.iter().all(|x| x.is_finite()) || Vec3::from(self.up).length() < 1e-12 {
+            return Err(ParamError::invalid(
+                "reconstruct.up",
+                "must be a finite, non-zero vector",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A level of the hierarchy with its colours (one per vertex of the level).
+pub struct ColouredLevel<'a> {
+    pub mesh: PolyMesh,
+    pub colours: &'a [[f32; 3]],
+}
+
+fn rgba(c: &[[f32; 3]]) -> Vec<[f32; 4]> {
+    c.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect()
+}
+
+/// The output files (see the module doc). `levels` runs coarse to fine; the last is the result.
+pub fn export_vertex_colours(
+    levels: &[ColouredLevel],
+    p: &VertexColourExportParams,
+    progress: &dyn Fn(f32),
+) -> Vec<(String, Vec<u8>)> {
+    let finest = levels.last().expect("at least one level");
+    let tri = finest.mesh.to_triangles();
+    let colours = rgba(finest.colours);
+    let opts = ViewOptions {
+        size: p.preview_size,
+        up: Vec3::from(p.up),
+        ..Default::default()
+    };
+    let mut files = vec![
+        (
+            "textured.ply".to_string(),
+            crate::geom::io::write_ply(&tri, Some(&colours)),
+        ),
+        ("textured.glb".to_string(), glb(&tri, &colours)),
+    ];
+    progress(0.2);
+    let preview = render_views(&tri, &VertexColorShader::new(&tri.triangles, &colours), &opts);
+    files.push(("preview.png".into(), encode_png(&preview, false)));
+    progress(0.5);
+    if p.displacement > 0.0 {
+        let displaced = displace(&tri, finest.colours, p.displacement);
+        files.push((
+            "displaced.obj".into(),
+            crate::export::write_obj(&displaced, None, None, "displaced").into_bytes(),
+        ));
+        files.push((
+            "displaced.ply".into(),
+            crate::geom::io::write_ply(&displaced, Some(&colours)),
+        ));
+        let shaded = render_views(&displaced, &ConstantShader(Vec3::splat(0.8)), &opts);
+        files.push(("displaced_preview.png".into(), encode_png(&shaded, false)));
+    }
+    if p.level_previews {
+        for (l, level) in levels.iter().enumerate() {
+            let t = level.mesh.to_triangles();
+            let c = rgba(level.colours);
+            let img = render_views(&t, &VertexColorShader::new(&t.triangles, &c), &opts);
+            files.push((format!("levels/level_{l:02}.png"), encode_png(&img, false)));
+            progress(0.5 + 0.5 * (l + 1) as f32 / levels.len() as f32);
+        }
+    }
+    progress(1.0);
+    files
+}
+
+/// The mesh moved along its normals by `height · (mean(RGB) − 0.5)`.
+pub fn displace(mesh: &Mesh, values: &[[f32; 3]], height: f32) -> Mesh {
+    let normals = mesh.vertex_normals();
+    let positions = mesh
+        .positions
+        .iter()
+        .zip(normals)
+        .zip(values)
+        .map(|((p, n), c)| *p + *n * (height * ((c[0] + c[1] + c[2]) / 3.0 - 0.5)))
+        .collect();
+    Mesh::new(positions, mesh.triangles.clone())
+}
+
+fn glb(mesh: &Mesh, colours: &[[f32; 4]]) -> Vec<u8> {
+    let linear = colours
+        .iter()
+        .map(|c| {
+            [
+                srgb::to_linear(c[0]),
+                srgb::to_linear(c[1]),
+                srgb::to_linear(c[2]),
+                1.0,
+            ]
+        })
+        .collect();
+    let scene = crate::export::GlbMesh {
+        name: "graph_matching".into(),
+        positions: mesh.positions.clone(),
+        normals: mesh.vertex_normals().to_vec(),
+        colors: Some(linear),
+        indices: mesh.triangles.iter().flatten().copied().collect(),
+        material: crate::export::GlbMaterial {
+            double_sided: true,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    crate::export::write_glb(&scene)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn displacement_moves_vertices_along_normals_by_their_value() {
+        let m = crate::geom::primitives::grid(3, 1.0);
+        let n = m.vertex_normals()[4];
+        let values: Vec<[f32; 3]> = (0..9)
+            .map(|v| if v == 4 { [1.0; 3] } else { [0.5; 3] })
+            .collect();
+        let d = displace(&m, &values, 2.0);
+        assert!((d.positions[4] - (m.positions[4] + n)).length() < 1e-6);
+        assert_eq!(d.positions[0], m.positions[0]);
+    }
+}
