@@ -95,12 +95,6 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     let exemplar = import::<Image>(&mut dag, "import.exemplar", &exemplar_path, "inputs.exemplar")?;
     check_region_fits(config, &exemplar_path, &c.synthesize)?;
 
-    let stack = dag.node(
-        NodeSpec::new(Stage::AnalyseExemplar, "gaussian_stack", STACK_VERSION),
-        c.analyse_exemplar.clone(),
-        exemplar,
-        |_, p, img| build_stack(img, p).map_err(NodeError::input),
-    );
     let keys = dag.node(
         NodeSpec::new(Stage::Field, "field_keys", KEYS_VERSION).named("field.keys"),
         c.field.keys.clone(),
@@ -112,6 +106,12 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             };
             resolve_keys(&mesh, &p).map_err(NodeError::input)
         },
+    );
+    let stack = dag.node(
+        NodeSpec::new(Stage::AnalyseExemplar, "gaussian_stack", STACK_VERSION),
+        c.analyse_exemplar.clone(),
+        exemplar,
+        |_, p, img| build_stack(img, p).map_err(NodeError::input),
     );
     let hierarchy = dag.node(
         NodeSpec::new(Stage::Parameterize, "sqrt2_hierarchy", HIERARCHY_VERSION),
