@@ -25,6 +25,7 @@ fn csr_ok(start: &[u32], items: &[u32], bound: usize) -> bool {
 
 #[derive(Serialize, Deserialize)]
 struct HierarchyMeta {
+    input_vertices: u32,
     level_vertices: Vec<u32>,
     level_face_start: Vec<u32>,
 }
@@ -36,6 +37,7 @@ impl Format for Sqrt2Hierarchy {
     type View<'a> = Sqrt2Hierarchy;
     fn write(&self) -> Vec<u8> {
         let meta = HierarchyMeta {
+            input_vertices: self.input_vertices,
             level_vertices: self.level_vertices.clone(),
             level_face_start: self.level_face_start.clone(),
         };
@@ -57,6 +59,7 @@ impl Format for Sqrt2Hierarchy {
         let n = positions.len();
         let faces = face_start.len().saturating_sub(1);
         let ok = !m.level_vertices.is_empty()
+            && m.input_vertices <= m.level_vertices[0]
             && m.level_vertices.windows(2).all(|w| w[0] <= w[1])
             && m.level_vertices.last().map(|&v| v as usize) == Some(n)
             && m.level_face_start.len() == m.level_vertices.len() + 1
@@ -81,6 +84,7 @@ impl Format for Sqrt2Hierarchy {
             }
         }
         Ok(Sqrt2Hierarchy {
+            input_vertices: m.input_vertices,
             positions: positions.to_vec(),
             level_vertices: m.level_vertices,
             level_face_start: m.level_face_start,

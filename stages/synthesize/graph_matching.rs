@@ -732,3 +732,184 @@ impl MatchCtx<'_, '_> {
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analyse_exemplar::gaussian_stack::{GaussianStack, StackParams, build_stack};
+    use crate::field::orientation_field::Anchor;
+    use crate::field::sweep_field::{SweepFieldParams, resolve_keys, sweep_field};
+    use crate::geom::Mesh;
+    use crate::geom::primitives::grid;
+    use crate::image::Image;
+    use crate::image::patch_score::{ScoreParams, patch_score};
+    use crate::parameterize::sqrt2_subdivision::{SubdivisionParams, build_hierarchy};
+    use crate::random::counter_unit;
+
+    /// A flat mesh, its hierarchy at `scale` and a field whose "up" is +y everywhere.
+    fn flat(mesh: &Mesh, scale: f32) -> (Sqrt2Hierarchy, SweepField) {
+        let h = build_hierarchy(mesh, scale, &SubdivisionParams::default()).unwrap();
+        let p = SweepFieldParams {
+            keys: vec![Anchor {
+                vertex: Some(0),
+                at: None,
+                direction: [0.0, 1.0, 0.0],
+            }],
+            ..Default::default()
+        };
+        let keys = resolve_keys(mesh, &p).unwrap();
+        let f = sweep_field(&h, &keys, &p).unwrap();
+        (h, f)
+    }
+
+    fn noise(w: u32, h: u32, seed: u64) -> Image {
+        Image::from_fn(w, h, |x, y| {
+            let i = (y * w + x) as u64;
+            [
+                counter_unit(seed, 0, i),
+                counter_unit(seed, 1, i),
+                counter_unit(seed, 2, i),
+                1.0,
+            ]
+        })
+    }
+
+    fn stack_of(img: &Image) -> GaussianStack {
+        build_stack(img.view(), &StackParams::default()).unwrap()
+    }
+
+    #[test]
+    fn exact_and_coherent_search_find_a_planted_match() {
+        // One texel per edge: scale 8 on a grid 1/8 apart is not subdivided.
+        let mesh = grid(9, 0.125);
+        let (h, field) = flat(&mesh, 8.0);
+        assert_eq!(h.levels(), 1);
+        let img = noise(32, 32, 7);
+        let stack = stack_of(&img);
+        let input = MatchInput {
+            hierarchy: &h,
+            field: &field,
+            stack: stack.view(),
+            scale: 8.0,
+        };
+        for search in [Search::Exact, Search::Coherent] {
+            let p = MatchParams {
+                search,
+                ..Default::default()
+            };
+            let level = Level::new(&input, 0, &p);
+            let centre = 40u32; // (0.5, 0.5)
+            assert_eq!(level.k[centre as usize], 2);
+            // Colour every vertex with the texel it has at the planted match: x right, y up
+            // on the mesh is +x, −y in the image.
+            let planted = Vec2::new(15.0, 12.0);
+            let mut state = State {
+                colours: vec![[0.0; 3]; 81],
+                coloured: vec![true; 81],
+                sources: vec![NO_SOURCE; 81],
+                stats: MatchStats::default(),
+            };
+            let at = |v: usize| {
+                let d = mesh.positions[v] - mesh.positions[centre as usize];
+                planted + Vec2::new(d.x, -d.y) * 8.0
+            };
+            for v in 0..81 {
+                let a = at(v);
+                state.colours[v] = stack.view().colour(0, a.x, a.y);
+            }
+            // Coherent search must find it from one neighbour's source.
+            state.sources[31] = at(31).to_array();
+            let ctx = MatchCtx {
+                level: &level,
+                p: &p,
+                stream: 0,
+            };
+            let mut region = RegionBuilder::new(81);
+            region.build(&ctx, &state, centre);
+            assert_eq!(region.verts.len(), 13, "(k+1)² + k² vertices for k = 2");
+            for (i, &v) in region.verts.iter().enumerate() {
+                let want = at(v as usize) - planted;
+                assert!(region.offset[i].distance(want) < 1e-3, "{search:?} {v}");
+            }
+            let q = ctx.search(&region, &mut state, 0);
+            assert_eq!(q, planted, "{search:?}");
+        }
+    }
+
+    /// The synthesized colours of a flat unit square, read back as a `side`² image (nearest
+    /// vertex per pixel, image up = +y).
+    fn as_image(h: &Sqrt2Hierarchy, colours: &[[f32; 3]], side: u32) -> Image {
+        Image::from_fn(side, side, |i, j| {
+            let p = Vec3::new(
+                (i as f32 + 0.5) / side as f32,
+                1.0 - (j as f32 + 0.5) / side as f32,
+                0.0,
+            );
+            let v = (0..colours.len())
+                .min_by(|&a, &b| {
+                    h.positions[a]
+                        .distance_squared(p)
+                        .total_cmp(&h.positions[b].distance_squared(p))
+                })
+                .unwrap();
+            let c = colours[v];
+            [c[0], c[1], c[2], 1.0]
+        })
+    }
+
+    fn exemplar(name: &str) -> Image {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../tests/data/exemplars")
+            .join(name);
+        crate::image::decode_image(&path, &std::fs::read(&path).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn a_flat_grid_is_textured_like_the_exemplar_without_one_verbatim_copy() {
+        let mesh = grid(17, 1.0 / 16.0);
+        let (h, field) = flat(&mesh, 64.0);
+        assert!(h.levels() >= 4);
+        let img = exemplar("wood1.png");
+        let stack = stack_of(&img);
+        let input = MatchInput {
+            hierarchy: &h,
+            field: &field,
+            stack: stack.view(),
+            scale: 64.0,
+        };
+        let mut ratios = Vec::new();
+        for search in [Search::Coherent, Search::Exact] {
+            let p = MatchParams {
+                search,
+                ..Default::default()
+            };
+            let out = graph_matching(&input, &p, &|_| {}).unwrap();
+            let synth = as_image(&h, &out.colours, 64);
+            let s = patch_score(synth.view(), img.view(), &ScoreParams::default()).unwrap();
+            assert!(s.ratio <= 1.0, "{search:?}: {s:?}");
+            assert!(s.largest_offset <= 0.5, "{search:?}: {s:?}");
+            ratios.push(s.ratio);
+        }
+        // The default (coherent) search stays within 15% of exact search's score.
+        assert!(ratios[0] <= ratios[1] * 1.15, "{ratios:?}");
+    }
+
+    #[test]
+    fn regions_larger_than_the_exemplar_are_refused() {
+        let img = noise(20, 30, 1);
+        let stack = stack_of(&img);
+        let p = MatchParams {
+            region: 11,
+            ..Default::default()
+        };
+        assert_eq!(
+            check_region(stack.view(), &p),
+            Err(MatchError::RegionTooLarge {
+                region: 11,
+                width: 20,
+                height: 30,
+                max: 10
+            })
+        );
+    }
+}
