@@ -11,5 +11,6 @@ pub mod export;
 pub mod geom;
 pub mod image;
 pub mod linalg;
+pub mod max_flow;
 pub mod random;
 pub mod render;
