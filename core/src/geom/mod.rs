@@ -10,6 +10,7 @@ pub mod half_edge;
 pub mod io;
 pub mod laplacian;
 pub mod mean_value;
+pub mod poly_mesh;
 pub mod primitives;
 pub mod subdivide;
 pub mod surface_distance;
