@@ -322,6 +322,9 @@ pub fn adaptive_presubdivision(
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct SubdivisionParams {
+    /// Level-0 exemplar texels per object unit (the paper's r_scale, §3.3.2): the hierarchy is
+    /// refined until an edge spans about one texel. The method requires it (0 = not given).
+    pub scale: f32,
     /// The threshold factor f of §3.2.2: faces with area > f × mean are refined. 0 turns
     /// adaptive pre-subdivision off; otherwise 1 to 100. Default: 1.5 (the paper's choice for
     /// most objects).
@@ -341,6 +344,7 @@ pub struct SubdivisionParams {
 impl Default for SubdivisionParams {
     fn default() -> Self {
         SubdivisionParams {
+            scale: 0.0,
             area_factor: 1.5,
             adaptive_rounds: 8,
             smooth: false,
@@ -364,6 +368,12 @@ impl SubdivisionParams {
                     "must be 0 (no adaptive pre-subdivision) or in 1..=100, got {}",
                     self.area_factor
                 ),
+            ));
+        }
+        if !(self.scale.is_finite() && self.scale >= 0.0) {
+            return Err(ParamError::invalid(
+                "parameterize.scale",
+                format!("must be a positive number, got {}", self.scale),
             ));
         }
         check_range("parameterize.adaptive_rounds", self.adaptive_rounds, 0, 64)?;
