@@ -46,7 +46,7 @@ fn outputs_are_the_finest_level_coloured_and_the_same_for_any_thread_count() {
         assert!(out.path().join(f).is_file(), "{f}");
     }
     for l in 0..h.levels() {
-        assert!(out.path().join(format!("levels/level_{l:02}.png")).is_file());
+        assert!(out.path().join(format!("level_{l:02}.png")).is_file());
     }
     // Every vertex of every level got a colour from the exemplar's range, and the synthesis
     // copied patches rather than single vertices (the graph cut transfers several per match).

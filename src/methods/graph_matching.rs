@@ -68,7 +68,6 @@ pub struct Inputs {
 #[derive(Serialize)]
 struct SynthParams {
     scale: f32,
-    #[serde(flatten)]
     matching: MatchParams,
 }
 

@@ -13,7 +13,7 @@
 //!   its normals by `displacement · (value − 0.5)`, value = the mean of R, G and B (a grey
 //!   exemplar is a height map), and `displaced_preview.png` (lit, without colour, so the relief
 //!   shows).
-//! - with `level_previews`: `levels/level_NN.png`, every level as it was when synthesized, so a
+//! - with `level_previews`: `level_NN.png`, every level as it was when synthesized, so a
 //!   user can see the texture grow.
 
 use crate::check::{ParamError, check_range};
@@ -35,7 +35,7 @@ pub struct VertexColourExportParams {
     /// Displacement along the normal for a value of 1 (relative to 0.5), in object units,
     /// 0..=1e6; 0 writes no displaced mesh. Default: 0.
     pub displacement: f32,
-    /// Also render every level (`levels/level_NN.png`). Default: false.
+    /// Also render every level (`level_NN.png`). Default: false.
     pub level_previews: bool,
 }
 
@@ -117,7 +117,7 @@ pub fn export_vertex_colours(
             let t = level.mesh.to_triangles();
             let c = rgba(level.colours);
             let img = render_views(&t, &VertexColorShader::new(&t.triangles, &c), &opts);
-            files.push((format!("levels/level_{l:02}.png"), encode_png(&img, false)));
+            files.push((format!("level_{l:02}.png"), encode_png(&img, false)));
             progress(0.5 + 0.5 * (l + 1) as f32 / levels.len() as f32);
         }
     }
