@@ -8,6 +8,7 @@
 
 pub mod knn;
 pub mod neighbourhood;
+pub mod patch_score;
 pub mod pca;
 pub mod pyramid;
 
