@@ -142,7 +142,7 @@ fn bad_inputs_are_named_before_any_work() {
     let cfg = dir.path().join("c.toml");
     std::fs::write(
         &cfg,
-        text.replace("scale = 200.0", "").replace("assets/", &format!("{}/configs/assets/", repo().display())),
+        text.replace("scale = 120.0", "").replace("assets/", &format!("{}/configs/assets/", repo().display())),
     )
     .unwrap();
     let e = common::plan_config(&cfg, &[], &[]).err().unwrap();

@@ -32,9 +32,9 @@ use std::path::PathBuf;
 
 const STACK_VERSION: u32 = 1;
 const KEYS_VERSION: u32 = 1;
-const HIERARCHY_VERSION: u32 = 1;
+const HIERARCHY_VERSION: u32 = 2;
 const FIELD_VERSION: u32 = 1;
-const SYNTH_VERSION: u32 = 1;
+const SYNTH_VERSION: u32 = 2;
 const EXPORT_VERSION: u32 = 1;
 
 /// A `graph_matching` config.

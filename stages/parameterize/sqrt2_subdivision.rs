@@ -489,6 +489,9 @@ impl Sqrt2Hierarchy {
     }
 }
 
+/// A pre-subdivision round is kept only if it lowers the area spread by at least this share.
+const MIN_SPREAD_GAIN: f32 = 0.1;
+
 /// Builds the hierarchy for a texture at `scale` texels per object unit: level 0 is the input
 /// after adaptive pre-subdivision (`p.area_factor`, `p.adaptive_rounds`; never smoothed),
 /// then full √2 steps follow while `scale × mean edge length > 1`, so the finest level is the
@@ -534,8 +537,15 @@ pub fn build_hierarchy(
     // mesh could take any amount of memory.
     if p.area_factor > 0.0 {
         for _ in 0..p.adaptive_rounds {
+            // Pre-subdivision evens out the vertex distribution; once a round stops doing
+            // that (the spread bottoms out at 30–40 %, §3.2.2), further rounds only refine
+            // everything, as the mean area falls with each round. Nor is it refined past the
+            // texture's resolution: the levels do that.
+            if spans_at_most_one_texel(scale, current.mean_edge_length()) {
+                break;
+            }
             let (refined, parents, spread) = adaptive_presubdivision(&current, p.area_factor, 1);
-            if parents.is_empty() {
+            if parents.is_empty() || spread[1] > (1.0 - MIN_SPREAD_GAIN) * spread[0] {
                 break;
             }
             tracing::debug!(
