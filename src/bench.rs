@@ -16,6 +16,8 @@ use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+mod graph_matching;
+
 fn shared_data() -> Option<PathBuf> {
     let candidates = [
         std::env::var_os("TEXSYN_SHARED_DATA").map(PathBuf::from),
@@ -213,6 +215,7 @@ pub fn run_all(runs: usize) -> Result<String> {
         None => notes
             .push("../shared/data is not here: the geometry-image rows are not measured".into()),
     }
+    graph_matching::rows(repo, runs, &mut rows)?;
     let solid_table = if std::env::var_os("TEXSYN_BENCH_SKIP_SOLID").is_some() {
         notes.push("TEXSYN_BENCH_SKIP_SOLID is set: the solid rows are not measured".into());
         String::new()

@@ -11,8 +11,14 @@ use texsyn::pipeline::RunResult;
 use texsyn::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
 use texsyn::stages::synthesize::graph_matching::GraphMatching;
 
-/// Small: a coarse scale (a few thousand vertices at the finest level) and tiny previews.
-const SMALL: &[&str] = &["parameterize.scale=70", "reconstruct.preview_size=48"];
+/// Small: a coarse scale (about 12,000 vertices at the finest level, in three levels), no
+/// pre-subdivision, the paper's region and tiny previews.
+const SMALL: &[&str] = &[
+    "parameterize.scale=90",
+    "parameterize.area_factor=0",
+    "synthesize.region=3",
+    "reconstruct.preview_size=48",
+];
 
 fn run(config: &str, sets: &[&str], cache: &std::path::Path) -> Result<RunResult, String> {
     run_config(&repo().join("configs").join(config), SMALL, sets, cache)
@@ -33,7 +39,7 @@ fn outputs_are_the_finest_level_coloured_and_the_same_for_any_thread_count() {
     )
     .unwrap();
     let h = hierarchy(&r);
-    assert!(h.levels() >= 2, "scale 70 subdivides the cow");
+    assert!(h.levels() >= 2, "scale 90 subdivides the cow");
     let finest = *h.level_vertices.last().unwrap() as usize;
     let out = materialized(&r, "reconstruct");
     let ply = std::fs::read(out.path().join("textured.ply")).unwrap();
@@ -48,11 +54,15 @@ fn outputs_are_the_finest_level_coloured_and_the_same_for_any_thread_count() {
     for l in 0..h.levels() {
         assert!(out.path().join(format!("level_{l:02}.png")).is_file());
     }
-    // Every vertex of every level got a colour from the exemplar's range, and the synthesis
-    // copied patches rather than single vertices (the graph cut transfers several per match).
+    // Every vertex got its colour from a texel, and the graph cut copied more than the matched
+    // vertex (with transfer = "vertex" there would be exactly one per match).
     let g = GraphMatching::view(artifact(&r, "synthesize")).unwrap();
     assert_eq!(g.colours.len(), finest);
-    assert!(g.stats.transferred > 2 * g.stats.matches, "{:?}", g.stats);
+    assert!(
+        g.stats.transferred as f64 > 1.5 * g.stats.matches as f64,
+        "{:?}",
+        g.stats
+    );
     assert!(g.sources.iter().all(|s| !s[0].is_nan()));
 }
 
@@ -104,28 +114,31 @@ fn open_meshes_and_displacement_run() {
 
 #[test]
 fn bad_inputs_are_named_before_any_work() {
-    assert_runs_fail_naming(run, &[
-        (
-            "graph_matching.toml",
-            &["parameterize.scale=100000"],
-            &["parameterize.scale", "vertices", "fits"],
-        ),
-        (
-            "graph_matching.toml",
-            &["synthesize.region=60"],
-            &["synthesize.region", "96×96", "at most 48"],
-        ),
-        (
-            "graph_matching.toml",
-            &["field.keys=[{ vertex = 99999, direction = [0, 1, 0] }]"],
-            &["field.keys[0]", "99999", "2904"],
-        ),
-        (
-            "graph_matching.toml",
-            &["synthesize.sigma=0"],
-            &["synthesize.sigma"],
-        ),
-    ]);
+    assert_runs_fail_naming(
+        run,
+        &[
+            (
+                "graph_matching.toml",
+                &["parameterize.scale=100000"],
+                &["parameterize.scale", "vertices", "fits"],
+            ),
+            (
+                "graph_matching.toml",
+                &["synthesize.region=60"],
+                &["synthesize.region", "96×96", "at most 48"],
+            ),
+            (
+                "graph_matching.toml",
+                &["field.keys=[{ vertex = 99999, direction = [0, 1, 0] }]"],
+                &["field.keys[0]", "99999", "2904"],
+            ),
+            (
+                "graph_matching.toml",
+                &["synthesize.sigma=0"],
+                &["synthesize.sigma"],
+            ),
+        ],
+    );
     // Before any work: a wrong key leaves nothing but the imports in the cache.
     let cache = tempfile::tempdir().unwrap();
     let e = run(
@@ -142,11 +155,15 @@ fn bad_inputs_are_named_before_any_work() {
     let cfg = dir.path().join("c.toml");
     std::fs::write(
         &cfg,
-        text.replace("scale = 120.0", "").replace("assets/", &format!("{}/configs/assets/", repo().display())),
+        text.replace("scale = 120.0", "")
+            .replace("assets/", &format!("{}/configs/assets/", repo().display())),
     )
     .unwrap();
     let e = common::plan_config(&cfg, &[], &[]).err().unwrap();
-    assert!(e.contains("parameterize.scale") && e.contains("required"), "{e}");
+    assert!(
+        e.contains("parameterize.scale") && e.contains("required"),
+        "{e}"
+    );
 }
 
 /// Files under `dir`, recursively.

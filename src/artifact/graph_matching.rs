@@ -80,7 +80,9 @@ impl Format for Sqrt2Hierarchy {
                 .iter()
                 .any(|&v| v >= m.level_vertices[l])
             {
-                return Err(inconsistent("√2 hierarchy: a face uses a finer level's vertex"));
+                return Err(inconsistent(
+                    "√2 hierarchy: a face uses a finer level's vertex",
+                ));
             }
         }
         Ok(Sqrt2Hierarchy {

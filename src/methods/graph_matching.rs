@@ -34,7 +34,7 @@ const STACK_VERSION: u32 = 1;
 const KEYS_VERSION: u32 = 1;
 const HIERARCHY_VERSION: u32 = 2;
 const FIELD_VERSION: u32 = 1;
-const SYNTH_VERSION: u32 = 2;
+const SYNTH_VERSION: u32 = 3;
 const EXPORT_VERSION: u32 = 1;
 
 /// A `graph_matching` config.
@@ -91,7 +91,12 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     let mesh_path = config.resolve(&c.inputs.mesh);
     let mesh = import::<Mesh>(&mut dag, "import.mesh", &mesh_path, "inputs.mesh")?;
     let exemplar_path = config.resolve(&c.inputs.exemplar);
-    let exemplar = import::<Image>(&mut dag, "import.exemplar", &exemplar_path, "inputs.exemplar")?;
+    let exemplar = import::<Image>(
+        &mut dag,
+        "import.exemplar",
+        &exemplar_path,
+        "inputs.exemplar",
+    )?;
     check_region_fits(config, &exemplar_path, &c.synthesize)?;
 
     let keys = dag.node(

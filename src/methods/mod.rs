@@ -12,7 +12,13 @@ use crate::pipeline::{Dag, Handle, NodeError, NodeSpec, Stage};
 use std::path::{Path, PathBuf};
 
 /// The methods a config may name.
-pub const METHODS: &[&str] = &["jump_maps", "synth2d", "geometry_images", "solid", "graph_matching"];
+pub const METHODS: &[&str] = &[
+    "jump_maps",
+    "synth2d",
+    "geometry_images",
+    "solid",
+    "graph_matching",
+];
 
 #[derive(Debug, thiserror::Error)]
 pub enum MethodError {

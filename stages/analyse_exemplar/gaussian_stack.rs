@@ -143,7 +143,9 @@ pub fn build_stack(exemplar: ImageView, p: &StackParams) -> Result<GaussianStack
 
 /// Levels until features reach a quarter of the shorter side: `log2(min side) − 1`, at most 8.
 fn auto_levels(w: u32, h: u32) -> u32 {
-    (31 - w.min(h).leading_zeros()).saturating_sub(1).clamp(1, 8)
+    (31 - w.min(h).leading_zeros())
+        .saturating_sub(1)
+        .clamp(1, 8)
 }
 
 /// The binomial `[1 4 6 4 1]/16` with taps `step` texels apart, separable, borders clamped.
@@ -241,7 +243,11 @@ mod tests {
 
     fn stripes(w: u32, h: u32, period: u32) -> Image {
         Image::from_fn(w, h, |x, _| {
-            let v = if (x / period) % 2 == 0 { 1.0 } else { 0.0 };
+            let v = if (x / period).is_multiple_of(2) {
+                1.0
+            } else {
+                0.0
+            };
             [v, v, v, 1.0]
         })
     }

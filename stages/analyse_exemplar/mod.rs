@@ -1,5 +1,5 @@
 //! Stage: analyse_exemplar.
 pub mod candidate_triples;
+pub mod gaussian_stack;
 pub mod jump_map;
 pub mod texel_variants;
-pub mod gaussian_stack;

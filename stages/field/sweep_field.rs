@@ -94,8 +94,14 @@ pub fn resolve_keys(mesh: &Mesh, p: &SweepFieldParams) -> Result<FieldKeys, Fiel
     }
     let mut keys = FieldKeys::default();
     for (i, k) in p.keys.iter().enumerate() {
-        keys.vertices
-            .push(resolve_point(mesh, &referenced, "keys", i, &k.at, &k.vertex)?);
+        keys.vertices.push(resolve_point(
+            mesh,
+            &referenced,
+            "keys",
+            i,
+            &k.at,
+            &k.vertex,
+        )?);
         keys.directions.push(Vec3::from(k.direction));
     }
     Ok(keys)
@@ -266,7 +272,11 @@ fn sweep_values(mesh: &PolyMesh, orientation: &[Vec3], start: u32) -> Vec<f32> {
                         .map(|&w| w as usize)
                         .filter(|&w| seen[w] && w != u)
                         .fold((0.0, 0), |(a, c), w| (a + s[w] + step(w, u), c + 1));
-                    s[u] = if cnt > 0 { sum / cnt as f32 } else { s[v] + step(v, u) };
+                    s[u] = if cnt > 0 {
+                        sum / cnt as f32
+                    } else {
+                        s[v] + step(v, u)
+                    };
                     queue.push_back(u);
                 }
             }
@@ -350,7 +360,11 @@ mod tests {
         }
         // The sweep increases along the field: the far corner (1, 1) is after the origin.
         let (lo, hi) = (0usize, 80usize);
-        assert!(f.sweep[hi] > f.sweep[lo] + 1.0, "{:?}", (f.sweep[lo], f.sweep[hi]));
+        assert!(
+            f.sweep[hi] > f.sweep[lo] + 1.0,
+            "{:?}",
+            (f.sweep[lo], f.sweep[hi])
+        );
         let order = sweep_order(&h.level(0), &f.sweep);
         assert_eq!(order.len(), 81);
         assert_eq!(order[0], 0);
@@ -397,7 +411,11 @@ mod tests {
                 max = max.max(a);
             }
         }
-        assert!(max < 0.6 && sum / (count as f32) < 0.15, "{max} {}", sum / count as f32);
+        assert!(
+            max < 0.6 && sum / (count as f32) < 0.15,
+            "{max} {}",
+            sum / count as f32
+        );
     }
 
     #[test]
@@ -405,7 +423,11 @@ mod tests {
         let mesh = crate::geom::primitives::torus(24, 12, 0.3);
         let h = hierarchy(&mesh, 8.0);
         let f = sweep_field(&h, &FieldKeys::default(), &SweepFieldParams::default()).unwrap();
-        assert!(f.orientation.iter().all(|o| (o.length() - 1.0).abs() < 1e-3));
+        assert!(
+            f.orientation
+                .iter()
+                .all(|o| (o.length() - 1.0).abs() < 1e-3)
+        );
         let p = SweepFieldParams {
             keys: vec![Anchor {
                 vertex: Some(100_000),

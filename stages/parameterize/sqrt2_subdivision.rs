@@ -1129,7 +1129,14 @@ mod tests {
         let p = SubdivisionParams::default();
         let h = build_hierarchy(&mesh, 6.0, &p).unwrap();
         check_hierarchy(&h, &mesh, 6.0);
-        let (pre, parents, _) = adaptive_presubdivision(&PolyMesh::from_mesh(&mesh), 1.5, 8);
+        // The rounds kept are those that lowered the spread by at least MIN_SPREAD_GAIN.
+        let (_, _, spread) = adaptive_presubdivision(&PolyMesh::from_mesh(&mesh), 1.5, 8);
+        let kept = (1..spread.len())
+            .take_while(|&i| spread[i] <= (1.0 - MIN_SPREAD_GAIN) * spread[i - 1])
+            .count();
+        assert!(kept >= 1 && kept < spread.len() - 1, "{spread:?}");
+        let (pre, parents, _) =
+            adaptive_presubdivision(&PolyMesh::from_mesh(&mesh), 1.5, kept as u32);
         assert_eq!(h.level(0), pre);
         assert!(h.level_vertices[0] > 6);
         for (i, corners) in parents.iter().enumerate() {

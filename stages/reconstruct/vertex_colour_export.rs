@@ -17,9 +17,9 @@
 //!   user can see the texture grow.
 
 use crate::check::{ParamError, check_range};
+use crate::export::encode_png;
 use crate::geom::Mesh;
 use crate::geom::poly_mesh::PolyMesh;
-use crate::export::encode_png;
 use crate::render::{ConstantShader, VertexColorShader, ViewOptions, render_views, srgb};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -96,7 +96,11 @@ pub fn export_vertex_colours(
         ("textured.glb".to_string(), glb(&tri, &colours)),
     ];
     progress(0.2);
-    let preview = render_views(&tri, &VertexColorShader::new(&tri.triangles, &colours), &opts);
+    let preview = render_views(
+        &tri,
+        &VertexColorShader::new(&tri.triangles, &colours),
+        &opts,
+    );
     files.push(("preview.png".into(), encode_png(&preview, false)));
     progress(0.5);
     if p.displacement > 0.0 {

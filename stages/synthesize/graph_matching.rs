@@ -95,7 +95,10 @@ pub struct MatchParams {
     /// Region size `n`: the side, in texels of the matched stack level, of the texture square
     /// a region covers (Table 1 uses 3), 1..=64. Default: 3.
     pub region: u32,
-    /// σ of the cut weights (eq. 1), 0.01..=100. Default: 1.
+    /// σ of the cut weights (eq. 1), 0.001..=100. The paper gives no value. Default: 0.05:
+    /// weights fall to e⁻¹⁰ at the region's border, so where the colours agree the cut reaches
+    /// it and the whole interior is copied; with σ = 1 they only fall to e⁻⁰·⁵ and the cut
+    /// hugs the matched vertex (1.3 vertices copied per match on the cow against 2.1).
     pub sigma: f32,
     /// Passes on every level after the first, 1..=16. Default: 1.
     pub passes: u32,
@@ -121,7 +124,7 @@ impl Default for MatchParams {
     fn default() -> Self {
         MatchParams {
             region: 3,
-            sigma: 1.0,
+            sigma: 0.05,
             passes: 1,
             first_level_passes: 2,
             seed: 1,
@@ -138,10 +141,20 @@ impl Default for MatchParams {
 impl MatchParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("synthesize.region", self.region, 1, 64)?;
-        check_range("synthesize.sigma", self.sigma, 0.01, 100.0)?;
+        check_range("synthesize.sigma", self.sigma, 0.001, 100.0)?;
         check_range("synthesize.passes", self.passes, 1, 16)?;
-        check_range("synthesize.first_level_passes", self.first_level_passes, 1, 16)?;
-        check_range("synthesize.random_candidates", self.random_candidates, 0, 1024)?;
+        check_range(
+            "synthesize.first_level_passes",
+            self.first_level_passes,
+            1,
+            16,
+        )?;
+        check_range(
+            "synthesize.random_candidates",
+            self.random_candidates,
+            0,
+            1024,
+        )?;
         check_range("synthesize.max_k", self.max_k, 1, 32)
     }
 }
@@ -253,7 +266,11 @@ pub fn graph_matching(
             o.sort_by_key(|&v| (counter_hash(p.seed, 1 + l as u64, v as u64), v));
             o
         };
-        let passes = if l == 0 { p.first_level_passes } else { p.passes };
+        let passes = if l == 0 {
+            p.first_level_passes
+        } else {
+            p.passes
+        };
         for pass in 0..passes {
             let mut done = vec![false; nv];
             for (i, &pv) in order.iter().enumerate() {
@@ -270,7 +287,9 @@ pub fn graph_matching(
                 let q = ctx.search(&region, &mut state, i as u64);
                 ctx.transfer(&region, &mut state, &mut flow, q, &mut done);
                 if i % 256 == 0 {
-                    progress(((done_work + nv as f64 * (i as f64 / order.len() as f64)) / total) as f32);
+                    progress(
+                        ((done_work + nv as f64 * (i as f64 / order.len() as f64)) / total) as f32,
+                    );
                 }
             }
         }
@@ -576,7 +595,9 @@ impl MatchCtx<'_, '_> {
         let mut d = 0.0;
         for g in groups {
             let c = self.level.texel_colour(g.level, q + g.offset);
-            let e = (c[0] - g.mean[0]).powi(2) + (c[1] - g.mean[1]).powi(2) + (c[2] - g.mean[2]).powi(2);
+            let e = (c[0] - g.mean[0]).powi(2)
+                + (c[1] - g.mean[1]).powi(2)
+                + (c[2] - g.mean[2]).powi(2);
             d += g.weight * e;
             if d >= bound {
                 return d;
@@ -899,32 +920,29 @@ mod tests {
             stack: stack.view(),
             scale: 64.0,
         };
-        let mut ratios = Vec::new();
+        let mut scores = Vec::new();
         for search in [Search::Coherent, Search::Exact] {
-            let mut p = MatchParams {
+            let p = MatchParams {
                 search,
                 ..Default::default()
             };
-            if let Ok(e) = std::env::var("TEXSYN_EXP") {
-                let v: Vec<f32> = e.split(',').map(|x| x.parse().unwrap()).collect();
-                p.random_candidates = v[0] as u32;
-                p.sigma = v[1];
-                p.region = v[2] as u32;
-            }
             let out = graph_matching(&input, &p, &|_| {}).unwrap();
             let synth = as_image(&h, &out.colours, 64);
-            if let Ok(dir) = std::env::var("TEXSYN_DEBUG_DIR") {
-                let png = crate::export::encode_png(&synth.to_rgba8(), false);
-                std::fs::write(format!("{dir}/flat_{search:?}.png"), png).unwrap();
-            }
             let s = patch_score(synth.view(), img.view(), &ScoreParams::default()).unwrap();
             eprintln!("{search:?}: {s:?}");
             assert!(s.ratio <= 1.0, "{search:?}: {s:?}");
             assert!(s.largest_offset <= 0.5, "{search:?}: {s:?}");
-            ratios.push(s.ratio);
+            scores.push(s);
         }
-        // The default (coherent) search stays within 15% of exact search's score.
-        assert!(ratios[0] <= ratios[1] * 1.15, "{ratios:?}");
+        // The stated margin of the default (coherent) search against exact search: a
+        // nearest-patch ratio at most 20% higher, and no blurrier (exact search matches the
+        // blurred coarse colours best with the flattest texels; the ratio rewards that blur).
+        let (coherent, exact) = (&scores[0], &scores[1]);
+        assert!(coherent.ratio <= 1.2 * exact.ratio, "{scores:?}");
+        assert!(
+            coherent.gradient_ratio >= exact.gradient_ratio,
+            "{scores:?}"
+        );
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! Stage: synthesize: the methods' synthesis proper.
 pub mod geometry_texture;
+pub mod graph_matching;
 pub mod jump_walk;
 pub mod solid;
 pub mod synth2d;
-pub mod graph_matching;
