@@ -71,4 +71,7 @@ lock_tests!(
     solid_elephant,
     solid_elephant_section,
     solid_elephant_bark,
+    graph_matching,
+    graph_matching_open,
+    graph_matching_displacement,
 );
