@@ -31,6 +31,15 @@ fn hierarchy(r: &RunResult) -> Sqrt2Hierarchy {
 #[test]
 fn outputs_are_the_finest_level_coloured_and_the_same_for_any_thread_count() {
     assert_same_hashes_on_any_thread_count(|cache| run("graph_matching.toml", &[], cache).unwrap());
+    // Exact search is the part that runs in parallel (the texel scan).
+    assert_same_hashes_on_any_thread_count(|cache| {
+        run(
+            "graph_matching_open.toml",
+            &["synthesize.search=\"exact\"", "parameterize.scale=40"],
+            cache,
+        )
+        .unwrap()
+    });
     let cache = tempfile::tempdir().unwrap();
     let r = run(
         "graph_matching.toml",
@@ -63,7 +72,13 @@ fn outputs_are_the_finest_level_coloured_and_the_same_for_any_thread_count() {
         "{:?}",
         g.stats
     );
-    assert!(g.sources.iter().all(|s| !s[0].is_nan()));
+    // wood1.png is 96×96: every source texel is inside it.
+    assert!(
+        g.sources
+            .iter()
+            .all(|s| (0.0..96.0).contains(&s[0]) && (0.0..96.0).contains(&s[1])),
+        "a source outside the exemplar"
+    );
 }
 
 #[test]
@@ -113,7 +128,7 @@ fn open_meshes_and_displacement_run() {
 }
 
 #[test]
-fn bad_inputs_are_named_before_any_work() {
+fn bad_inputs_are_named_before_synthesis() {
     assert_runs_fail_naming(
         run,
         &[
@@ -139,7 +154,9 @@ fn bad_inputs_are_named_before_any_work() {
             ),
         ],
     );
-    // Before any work: a wrong key leaves nothing but the imports in the cache.
+    // A wrong key is found before any other work: nothing but the imports is in the cache.
+    // (A scale that is too fine is found by the subdivision, which builds levels until the
+    // next would pass the budget, so that the scale it names is one that fits.)
     let cache = tempfile::tempdir().unwrap();
     let e = run(
         "graph_matching.toml",

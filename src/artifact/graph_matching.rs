@@ -68,7 +68,8 @@ impl Format for Sqrt2Hierarchy {
             && m.level_face_start.last().map(|&f| f as usize) == Some(faces)
             && csr_ok(face_start, face_vertices, n)
             && parent_start.len() == n + 1
-            && csr_ok(parent_start, parent_vertices, n);
+            && csr_ok(parent_start, parent_vertices, n)
+            && positions.iter().all(|p| p.is_finite());
         if !ok {
             return Err(inconsistent("√2 hierarchy arrays are inconsistent"));
         }
@@ -112,7 +113,10 @@ impl Format for FieldKeys {
         let n: u64 = a.meta()?;
         let vertices: &[u32] = a.array("vertices")?;
         let directions: &[Vec3] = a.array("directions")?;
-        if vertices.len() as u64 != n || directions.len() as u64 != n {
+        if vertices.len() as u64 != n
+            || directions.len() as u64 != n
+            || directions.iter().any(|d| !d.is_finite())
+        {
             return Err(inconsistent("field keys arrays are inconsistent"));
         }
         Ok(FieldKeys {
@@ -136,7 +140,10 @@ impl Format for SweepField {
         let passes: Vec<u32> = a.meta()?;
         let orientation: &[Vec3] = a.array("orientation")?;
         let sweep: &[f32] = a.array("sweep")?;
-        if sweep.len() > orientation.len() {
+        if sweep.len() > orientation.len()
+            || orientation.iter().any(|o| !o.is_finite())
+            || sweep.iter().any(|s| !s.is_finite())
+        {
             return Err(inconsistent("sweep field arrays are inconsistent"));
         }
         Ok(SweepField {

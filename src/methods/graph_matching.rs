@@ -33,8 +33,8 @@ use std::path::PathBuf;
 const STACK_VERSION: u32 = 1;
 const KEYS_VERSION: u32 = 1;
 const HIERARCHY_VERSION: u32 = 2;
-const FIELD_VERSION: u32 = 1;
-const SYNTH_VERSION: u32 = 3;
+const FIELD_VERSION: u32 = 2;
+const SYNTH_VERSION: u32 = 4;
 const EXPORT_VERSION: u32 = 1;
 
 /// A `graph_matching` config.
@@ -78,6 +78,14 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             .invalid(
                 "parameterize.scale",
                 "is required: level-0 exemplar texels per object unit (it sets how far the mesh is subdivided)",
+            )
+            .into());
+    }
+    if c.parameterize.scale.is_nan() || c.parameterize.scale <= 0.0 {
+        return Err(config
+            .invalid(
+                "parameterize.scale",
+                &format!("must be a positive number, got {}", c.parameterize.scale),
             )
             .into());
     }
@@ -136,7 +144,14 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         NodeSpec::new(Stage::Field, "sweep_field", FIELD_VERSION),
         c.field.clone(),
         (hierarchy, keys),
-        |_, p, (h, keys)| sweep_field(&h, &keys, p).map_err(NodeError::input),
+        |_, p, (h, keys)| {
+            if keys.vertices.iter().any(|&v| v >= h.level_vertices[0]) {
+                return Err(NodeError::internal(
+                    "a field key names a vertex level 0 lacks",
+                ));
+            }
+            sweep_field(&h, &keys, p).map_err(NodeError::input)
+        },
     );
     let params = SynthParams {
         scale: c.parameterize.scale,
@@ -147,7 +162,9 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         params,
         (hierarchy, field, stack),
         |ctx, p, (h, field, stack)| {
-            if field.orientation.len() != h.positions.len() {
+            if field.orientation.len() != h.positions.len()
+                || field.sweep.len() != h.level_vertices[0] as usize
+            {
                 return Err(NodeError::internal("the field and the hierarchy disagree"));
             }
             let input = MatchInput {
@@ -209,6 +226,17 @@ fn check_region_fits(
     let Ok((w, h)) = reader.into_dimensions() else {
         return Ok(());
     };
+    if w.min(h) < 8 {
+        return Err(config
+            .invalid(
+                "inputs.exemplar",
+                &format!(
+                    "{} is {w}×{h} texels; graph matching needs at least 8×8",
+                    path.display()
+                ),
+            )
+            .into());
+    }
     let max = w.min(h) / 2;
     if p.region > max {
         return Err(config

@@ -60,7 +60,7 @@ impl StackParams {
 /// Why an exemplar cannot be analysed.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum StackError {
-    #[error("the exemplar is {width}×{height}; graph matching needs at least 8×8 texels")]
+    #[error("inputs.exemplar is {width}×{height} texels; graph matching needs at least 8×8")]
     TooSmall { width: u32, height: u32 },
 }
 
@@ -224,18 +224,27 @@ impl<'a> GaussianStackRef<'a> {
     /// Checks the arrays against the metadata (a damaged artifact is an error, never a bad
     /// index later).
     pub fn is_consistent(&self) -> bool {
-        let n: usize = self
-            .meta
-            .sizes
-            .iter()
-            .map(|&(w, h)| w as usize * h as usize)
-            .sum();
-        !self.meta.sizes.is_empty()
+        let sizes = &self.meta.sizes;
+        let mut n = 0usize;
+        for &(w, h) in sizes {
+            match (w as usize)
+                .checked_mul(h as usize)
+                .and_then(|a| n.checked_add(a))
+            {
+                Some(total) if w > 0 && h > 0 => n = total,
+                _ => return false,
+            }
+        }
+        !sizes.is_empty()
+            && sizes.len() <= MAX_LEVELS
             && (self.meta.factor == 1 || self.meta.factor == 2)
-            && self.meta.sizes.iter().all(|&(w, h)| w > 0 && h > 0)
             && n == self.texels.len()
+            && self.texels.iter().all(|t| t.iter().all(|c| c.is_finite()))
     }
 }
+
+/// More levels than any exemplar can have (sides up to 2^30): a bound for damaged artifacts.
+const MAX_LEVELS: usize = 30;
 
 #[cfg(test)]
 mod tests {

@@ -67,13 +67,25 @@ impl SweepFieldParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("field.tolerance", self.tolerance, 1e-6, 0.5)?;
         check_range("field.max_passes", self.max_passes, 1, 100_000)?;
-        let fp = FieldParams {
-            anchors: self.keys.clone(),
-            axis: self.axis,
-            ..Default::default()
-        };
-        fp.validate()
-            .map_err(|e| ParamError::invalid("field", e.to_string().replace("anchors", "keys")))
+        let usable =
+            |v: &[f32; 3]| v.iter().all(|x| x.is_finite()) && Vec3::from(*v).length() > 1e-12;
+        for (i, k) in self.keys.iter().enumerate() {
+            if !usable(&k.direction) {
+                return Err(ParamError::invalid(
+                    format!("field.keys[{i}].direction"),
+                    "must be a finite, non-zero vector",
+                ));
+            }
+        }
+        if let Some(axis) = &self.axis
+            && !usable(axis)
+        {
+            return Err(ParamError::invalid(
+                "field.axis",
+                "must be a finite, non-zero vector",
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -92,17 +104,24 @@ pub fn resolve_keys(mesh: &Mesh, p: &SweepFieldParams) -> Result<FieldKeys, Fiel
             referenced[v as usize] = true;
         }
     }
+    let normals = mesh.vertex_normals();
     let mut keys = FieldKeys::default();
     for (i, k) in p.keys.iter().enumerate() {
-        keys.vertices.push(resolve_point(
-            mesh,
-            &referenced,
-            "keys",
-            i,
-            &k.at,
-            &k.vertex,
-        )?);
-        keys.directions.push(Vec3::from(k.direction));
+        let v = resolve_point(mesh, &referenced, "keys", i, &k.at, &k.vertex)?;
+        let d = Vec3::from(k.direction);
+        if !(d.is_finite() && d.length() > 1e-12) || tangent(d, normals[v as usize]) == Vec3::ZERO {
+            return Err(FieldError::Value {
+                what: "keys",
+                index: i,
+                message: format!(
+                    "direction {:?} does not run along the surface at vertex {v} (normal {:?})",
+                    k.direction,
+                    normals[v as usize].to_array()
+                ),
+            });
+        }
+        keys.vertices.push(v);
+        keys.directions.push(d);
     }
     Ok(keys)
 }
@@ -159,10 +178,17 @@ pub fn sweep_field(
     } else {
         let normals = level0.vertex_normals();
         for (&v, &d) in keys.vertices.iter().zip(&keys.directions) {
+            // Keys were resolved on the input mesh, whose vertices level 0 keeps; a cached
+            // key artifact that disagrees is texsyn's fault, not the user's.
+            if v as usize >= normals.len() || !d.is_finite() {
+                return Err(FieldError::Other(format!(
+                    "internal: key vertex {v} is not a vertex of level 0"
+                )));
+            }
             let t = tangent(d, normals[v as usize]);
             if t == Vec3::ZERO {
                 return Err(FieldError::Other(format!(
-                    "keys: the direction at vertex {v} is along the surface normal there"
+                    "the key direction at vertex {v} is along the surface normal there"
                 )));
             }
             orientation[v as usize] = t;
@@ -170,6 +196,29 @@ pub fn sweep_field(
             fixed[v as usize] = true;
         }
         passes.push(relax(&level0, &mut orientation, &mut defined, &fixed, p));
+        // A piece of the mesh that no key reaches gets the default field (the paper assumes
+        // every piece has a key; without this its vertices would stay undefined).
+        let adj0 = level0.vertex_neighbours();
+        let missing = (0..level0.vertex_count()).any(|v| !defined[v] && !adj0.of(v).is_empty());
+        if missing {
+            let tri = level0.to_triangles();
+            let fp = FieldParams {
+                axis: p.axis,
+                ..Default::default()
+            };
+            let f = orientation_field(&tri, &fp)?;
+            let mut filled = 0usize;
+            for v in 0..level0.vertex_count() {
+                if !defined[v] && !adj0.of(v).is_empty() && f[v] != Vec3::ZERO {
+                    orientation[v] = f[v];
+                    defined[v] = true;
+                    filled += 1;
+                }
+            }
+            tracing::warn!(
+                "field: {filled} vertices on pieces of the mesh without a key took the default field; add a key on each piece to orient it"
+            );
+        }
         start = keys.vertices[0];
     }
     for l in 1..h.levels() {
@@ -427,6 +476,31 @@ mod tests {
             f.orientation
                 .iter()
                 .all(|o| (o.length() - 1.0).abs() < 1e-3)
+        );
+        // The torus lies in the xy plane: the default flow runs along x (its longest side,
+        // tied with y; x wins), so on the outer rim at ±y the field points along ±x, and the
+        // sweep grows along x.
+        let (mut along, mut n) = (0.0, 0);
+        for (v, p) in h.positions.iter().enumerate() {
+            if p.y.abs() > 2.2 {
+                along += f.orientation[v].x.abs();
+                n += 1;
+            }
+        }
+        assert!(n > 0 && along / n as f32 > 0.9, "{}", along / n as f32);
+        let level0 = h.level(0);
+        let x = |u: usize| level0.positions[u].x;
+        let lo = (0..level0.vertex_count())
+            .min_by(|&a, &b| x(a).total_cmp(&x(b)))
+            .unwrap();
+        let hi = (0..level0.vertex_count())
+            .max_by(|&a, &b| x(a).total_cmp(&x(b)))
+            .unwrap();
+        assert!(
+            f.sweep[hi] > f.sweep[lo] + 2.0,
+            "{} {}",
+            f.sweep[lo],
+            f.sweep[hi]
         );
         let p = SweepFieldParams {
             keys: vec![Anchor {
