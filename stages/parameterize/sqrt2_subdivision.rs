@@ -30,6 +30,11 @@
 //!   place and each refined face gets a triangle on it, so such an input keeps its topology
 //!   rather than making the step fail; an edge two faces use in the same direction (an
 //!   inconsistently oriented input) still becomes one quad, oriented like its first face.
+//! - Pre-subdivision (§3.2.2) stops early: after a round that lowers the area spread by less
+//!   than [`MIN_SPREAD_GAIN`] of itself, and once edges span a texel. The paper runs a fixed
+//!   number of rounds (16 for the monarch), but each round refines a share of all faces, since
+//!   the mean area it thresholds against falls: 16 rounds took the cow from 2,904 to 114,535
+//!   vertices with the spread at 37 % after 6, which leaves no coarse level to start from.
 
 use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
@@ -329,7 +334,8 @@ pub struct SubdivisionParams {
     /// adaptive pre-subdivision off; otherwise 1 to 100. Default: 1.5 (the paper's choice for
     /// most objects).
     pub area_factor: f32,
-    /// Rounds of adaptive pre-subdivision (fewer when no face is over the threshold). Range 0
+    /// Most rounds of adaptive pre-subdivision (fewer when no face is over the threshold, a
+    /// round no longer lowers the area spread by 10 %, or edges already span a texel). Range 0
     /// to 64. Default: 8.
     pub adaptive_rounds: u32,
     /// Move old vertices at each full step (a relaxation, not Li et al.'s masks: see the module
