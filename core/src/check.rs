@@ -116,3 +116,36 @@ mod tests {
         );
     }
 }
+
+/// A number printed with four significant digits, in scientific notation when it is very
+/// small or very large, so that a message never says "0.0000" of a value that is not zero.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Significant(pub f64);
+
+impl Display for Significant {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let x = self.0;
+        if x == 0.0 || !x.is_finite() {
+            write!(f, "{x}")
+        } else if !(1e-3..1e6).contains(&x.abs()) {
+            write!(f, "{x:.3e}")
+        } else {
+            let digits = (3 - x.abs().log10().floor() as i32).max(0) as usize;
+            write!(f, "{x:.digits$}")
+        }
+    }
+}
+
+#[cfg(test)]
+mod significant_tests {
+    use super::Significant;
+
+    #[test]
+    fn four_significant_digits_and_never_a_false_zero() {
+        assert_eq!(Significant(0.0).to_string(), "0");
+        assert_eq!(Significant(123.456).to_string(), "123.5");
+        assert_eq!(Significant(0.0123456).to_string(), "0.01235");
+        assert_eq!(Significant(1.6e-35).to_string(), "1.600e-35");
+        assert_eq!(Significant(2.5e9).to_string(), "2.500e9");
+    }
+}

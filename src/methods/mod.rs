@@ -76,7 +76,23 @@ impl Import for crate::geom::Mesh {
     const READER: &'static str = "mesh_reader";
     const VERSION: u32 = 1;
     fn read(path: &Path, bytes: &[u8]) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
-        Ok(crate::geom::io::read_mesh_bytes(path, bytes)?)
+        let mesh = crate::geom::io::read_mesh_bytes(path, bytes)?;
+        // Past this, edge lengths and areas overflow f32 and every method's numbers turn to
+        // infinities and zeros; no real model needs it (a light-year in millimetres is 1e19).
+        const MAX_COORDINATE: f32 = 1e15;
+        if let Some((v, p)) = mesh
+            .positions
+            .iter()
+            .enumerate()
+            .find(|(_, p)| p.abs().max_element() > MAX_COORDINATE)
+        {
+            return Err(format!(
+                "{}: vertex {v} is at {p}: coordinates beyond ±{MAX_COORDINATE:e} overflow the geometry; scale the mesh down",
+                path.display()
+            )
+            .into());
+        }
+        Ok(mesh)
     }
 }
 

@@ -96,7 +96,8 @@ pub enum FieldError {
         index: usize,
         message: String,
     },
-    #[error("field: {0}")]
+    /// The message stands alone: the pipeline prefixes the node's name ("field: ").
+    #[error("{0}")]
     Other(String),
 }
 
@@ -135,6 +136,13 @@ impl FieldParams {
 /// belong to no triangle).
 pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>, FieldError> {
     params.validate()?;
+    let (lo, hi) = mesh.bounds();
+    let size = (hi - lo).length();
+    if !(size.is_finite() && size > 0.0) {
+        return Err(FieldError::Other(format!(
+            "the mesh is degenerate: its vertices span {size} (all coincide, or coordinates are not finite)"
+        )));
+    }
     let n = mesh.vertex_count();
     let normals = mesh.vertex_normals();
     let mut referenced = vec![false; n];

@@ -84,9 +84,10 @@ pub enum ParameterizeError {
     ExemplarTooSmall { width: u32, height: u32 },
     #[error(
         "parameterize.scale = {scale} texels per unit is too large for this mesh and a {width}×{height} exemplar: \
-         some triangles do not fit in the exemplar (§1 of the paper). They fit at scale ≤ {fit:.4}; \
-         for good results use at most {half:.4}, or refine the mesh",
-        half = 0.5 * fit
+         some triangles do not fit in the exemplar (§1 of the paper). They fit at scale ≤ {fit_s}; \
+         for good results use at most {half}, or refine the mesh",
+        fit_s = crate::check::Significant(*fit as f64),
+        half = crate::check::Significant(0.5 * *fit as f64)
     )]
     ScaleTooLarge {
         scale: f32,
