@@ -14,6 +14,6 @@ pub mod pipeline;
 // The core (meshes, images, solvers, randomness, rasterizer, writers) and the stage algorithms
 // are crates of their own (DESIGN.md, Layout); re-exported so `crate::geom::…`,
 // `texsyn::stages::…` keep their paths.
-pub use texsyn_core::{check, export, geom, image, linalg, random, render};
+pub use texsyn_core::{check, export, geom, image, linalg, memory, random, render};
 /// The stage algorithms, one file per algorithm (DESIGN.md, Layout).
 pub use texsyn_stages as stages;

@@ -24,6 +24,11 @@ struct Cli {
     /// Worker threads. Default: $RAYON_NUM_THREADS, else one per core. Results do not depend on it.
     #[arg(short = 'j', long = "jobs", global = true)]
     jobs: Option<usize>,
+    /// Memory budget (e.g. 4GiB): a parameter whose estimated need is larger is refused
+    /// before work starts, naming a value that fits. Default: half of the available memory
+    /// (within a cgroup or Slurm limit, the room left under it).
+    #[arg(long = "max-memory", global = true, value_name = "SIZE")]
+    max_memory: Option<String>,
     /// Print nothing but errors.
     #[arg(short, long, global = true)]
     quiet: bool,
@@ -148,6 +153,13 @@ fn real_main() -> Result<i32> {
         .without_time()
         .with_target(false)
         .init();
+    if let Some(m) = &cli.max_memory {
+        let bytes = parse_size(m).map_err(|e| anyhow::anyhow!("--max-memory {m}: {e}"))?;
+        if bytes == 0 {
+            bail!("--max-memory must be more than 0");
+        }
+        texsyn::memory::set_budget(bytes);
+    }
     if let Some(j) = cli.jobs {
         if j == 0 {
             bail!("-j must be at least 1");

@@ -12,5 +12,6 @@ pub mod geom;
 pub mod image;
 pub mod linalg;
 pub mod max_flow;
+pub mod memory;
 pub mod random;
 pub mod render;

@@ -78,6 +78,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     config.check("parameterize", c.parameterize.validate())?;
     config.check("synthesize", c.synthesize.validate())?;
     config.check("reconstruct", c.reconstruct.validate())?;
+    super::check_atlas_memory(config, c.reconstruct.atlas_size)?;
     for name in c.inputs.maps.keys() {
         if name.is_empty()
             || !name

@@ -119,6 +119,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     config.check("field", c.field.validate())?;
     c.parameterize.validate().map_err(param)?;
     c.reconstruct.validate().map_err(param)?;
+    super::check_atlas_memory(config, c.reconstruct.atlas_size)?;
     config.check("synthesize", c.synthesize.validate())?;
     let depths: Vec<f32> = c.regions.iter().map(|r| r.depth).collect();
     volume::validate_region_depths(&depths).map_err(param)?;
