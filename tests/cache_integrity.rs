@@ -50,7 +50,15 @@ fn s(p: &Path) -> &str {
 
 /// `texsyn run synth2d.toml` in `cache`, outputs in `out`, with `--set`s.
 fn run(cache: &Path, out: &Path, sets: &[&str]) -> Output {
-    let mut args = vec!["run", CONFIG, "--quiet", "--cache", s(cache), "--out", s(out)];
+    let mut args = vec![
+        "run",
+        CONFIG,
+        "--quiet",
+        "--cache",
+        s(cache),
+        "--out",
+        s(out),
+    ];
     for set in sets {
         args.extend(["--set", set]);
     }
@@ -70,7 +78,10 @@ fn committed_lock() -> String {
 /// Every object file of the cache (`objects-v1/ab/cdef…`).
 fn objects(cache: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
-    for shard in std::fs::read_dir(cache.join("objects-v1")).unwrap().flatten() {
+    for shard in std::fs::read_dir(cache.join("objects-v1"))
+        .unwrap()
+        .flatten()
+    {
         for f in std::fs::read_dir(shard.path()).unwrap().flatten() {
             out.push(f.path());
         }
@@ -176,12 +187,20 @@ fn a_damaged_bundle_payload_is_recomputed_and_replaced() {
         let mut v: Vec<_> = std::fs::read_dir(d)
             .unwrap()
             .flatten()
-            .map(|e| (PathBuf::from(e.file_name()), std::fs::read(e.path()).unwrap()))
+            .map(|e| {
+                (
+                    PathBuf::from(e.file_name()),
+                    std::fs::read(e.path()).unwrap(),
+                )
+            })
             .collect();
         v.sort();
         v
     };
-    assert!(files(&out2) == files(&out), "outputs differ from the undamaged run's");
+    assert!(
+        files(&out2) == files(&out),
+        "outputs differ from the undamaged run's"
+    );
 }
 
 /// Item 6: a directory where an object belongs is removed and replaced by the object, once:

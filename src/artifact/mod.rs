@@ -576,11 +576,17 @@ mod tests {
             b[offset] = value;
             Artifact::from_bytes(b)
         };
-        assert!(matches!(damaged(12, 99), Err(ArtifactError::UnknownKind(99))));
+        assert!(matches!(
+            damaged(12, 99),
+            Err(ArtifactError::UnknownKind(99))
+        ));
         assert!(matches!(damaged(100, 1), Err(ArtifactError::Reserved)));
         let meta_len = bytes[16];
         assert!(damaged(16, meta_len + 8).is_err(), "longer metadata length");
-        assert!(damaged(16, meta_len - 1).is_err(), "shorter metadata length");
+        assert!(
+            damaged(16, meta_len - 1).is_err(),
+            "shorter metadata length"
+        );
         assert!(damaged(24, bytes[24] ^ 0x40).is_err(), "payload length");
         // A known but different kind opens, and is refused by the reader expecting Mesh.
         let other = damaged(12, Kind::Image as u8).unwrap();
