@@ -65,8 +65,10 @@ enum Command {
         #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
         sets: Vec<String>,
     },
-    /// Check a config's artifacts against a lock file written by `hashes`; exits non-zero
-    /// naming each mismatch.
+    /// Check a config's artifacts against a lock file written by `hashes`, re-hashing every
+    /// cached object. Exit status: 0 all match and nothing was damaged; 1 a mismatch (each is
+    /// named); 3 all match, but damaged cache objects were found (each is named; they were
+    /// recomputed and replaced). `--json` prints the mismatches and the damaged objects.
     Verify {
         config: PathBuf,
         lockfile: PathBuf,
@@ -254,7 +256,9 @@ fn real_main() -> Result<i32> {
             let temp = fresh.then(|| TempDir::new("texsyn-verify"));
             let cache = match &temp {
                 Some(t) => Cache::open(t.path())?,
-                None => Cache::open(&cache_dir)?,
+                // Verifying a cache that is not there (a mistyped --cache) is an error, not
+                // a new cache.
+                None => Cache::open_existing(&cache_dir)?,
             };
             let result = pipeline::run(
                 &plan.dag,
@@ -265,26 +269,57 @@ fn real_main() -> Result<i32> {
                 },
             )?;
             let problems = compare_lock(&lock, &result.reports, lockfile)?;
-            if problems.is_empty() {
-                if !cli.quiet {
-                    println!(
-                        "verified: {} artifacts match {}",
-                        result.reports.len(),
-                        lockfile.display()
-                    );
-                }
-                Ok(0)
+            let code = if !problems.is_empty() {
+                VERIFY_MISMATCH
+            } else if !result.damaged.is_empty() {
+                VERIFY_DAMAGED
             } else {
-                for p in &problems {
-                    eprintln!("mismatch: {p}");
-                }
+                0
+            };
+            if cli.json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&serde_json::json!({
+                        "lockfile": lockfile,
+                        "artifacts": result.reports.len(),
+                        "mismatches": problems,
+                        "damaged": result.damaged,
+                        "exit_code": code,
+                    }))?
+                );
+            }
+            for d in &result.damaged {
+                eprintln!(
+                    "damaged: {}: {} ({}); recomputed and replaced",
+                    d.node,
+                    d.path.display(),
+                    d.problem
+                );
+            }
+            for p in &problems {
+                eprintln!("mismatch: {p}");
+            }
+            if !problems.is_empty() {
                 eprintln!(
                     "{} mismatch(es) against {}",
                     problems.len(),
                     lockfile.display()
                 );
-                Ok(1)
+            } else if !result.damaged.is_empty() {
+                eprintln!(
+                    "{} damaged cache object(s), recomputed and replaced; all {} artifacts now match {}",
+                    result.damaged.len(),
+                    result.reports.len(),
+                    lockfile.display()
+                );
+            } else if !cli.quiet && !cli.json {
+                println!(
+                    "verified: {} artifacts match {}",
+                    result.reports.len(),
+                    lockfile.display()
+                );
             }
+            Ok(code)
         }
         Command::Graph { config, sets } => {
             let plan = load_plan(config, sets)?;
@@ -314,13 +349,16 @@ fn real_main() -> Result<i32> {
         }
         Command::Gc { max_size } => {
             let budget = parse_size(max_size)?;
-            let cache = Cache::open(&cache_dir)?;
-            let (removed, bytes, kept) = cache.gc(budget);
+            // A mistyped --cache is an error, not a new empty cache; an object that cannot be
+            // removed is an error naming it.
+            let cache = Cache::open_existing(&cache_dir)?;
+            let report = cache.gc(budget)?;
             if !cli.quiet {
                 println!(
-                    "removed {removed} objects ({}), {} kept in {}",
-                    human_bytes(bytes),
-                    human_bytes(kept),
+                    "removed {} objects ({}), {} kept in {}",
+                    report.removed,
+                    human_bytes(report.removed_bytes),
+                    human_bytes(report.kept_bytes),
                     cache.root().display()
                 );
             }
@@ -336,6 +374,12 @@ fn real_main() -> Result<i32> {
         }
     }
 }
+
+/// `verify`'s exit status when an artifact differs from the lock file.
+const VERIFY_MISMATCH: i32 = 1;
+/// `verify`'s exit status when every artifact matches but damaged cache objects were found
+/// (and recomputed and replaced).
+const VERIFY_DAMAGED: i32 = 3;
 
 /// Loads `config` with the `--set` overrides and plans its DAG.
 fn load_plan(config: &Path, sets: &[String]) -> Result<Plan> {

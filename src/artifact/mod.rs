@@ -130,6 +130,12 @@ pub enum ArtifactError {
     Version { found: u32 },
     #[error("artifact holds kind code {found}, expected {expected:?}")]
     WrongKind { found: u32, expected: Kind },
+    #[error("artifact holds kind code {0}, which is no known kind")]
+    UnknownKind(u32),
+    #[error("artifact header's reserved bytes are not zero (corrupted)")]
+    Reserved,
+    #[error("cache object is not a regular file")]
+    NotAFile,
     #[error("artifact length {actual} does not match its header ({expected})")]
     Length { actual: usize, expected: usize },
     #[error("artifact payload hash does not match its header (corrupted)")]
@@ -173,7 +179,10 @@ pub struct Header {
 }
 
 impl Header {
-    /// Checks magic, version and (when known) the file length. Cheap: reads 128 bytes.
+    /// Checks magic, version, that the kind code is a known [`Kind`], that the reserved bytes
+    /// are zero, and (when known) the file length. Cheap: reads 128 bytes. The payload hash
+    /// does not cover the header, so these checks are what catch a damaged header byte (the
+    /// metadata length is checked against the metadata by [`Artifact::open`]).
     pub fn parse(bytes: &[u8], file_len: Option<usize>) -> Result<Header, ArtifactError> {
         if bytes.len() < HEADER_LEN {
             return Err(ArtifactError::Truncated(bytes.len()));
@@ -193,6 +202,12 @@ impl Header {
             payload_len: u64_at(24),
             content_hash: ContentHash(bytes[32..64].try_into().unwrap()),
         };
+        if Kind::from_code(header.kind).is_none() {
+            return Err(ArtifactError::UnknownKind(header.kind));
+        }
+        if bytes[64..HEADER_LEN].iter().any(|&b| b != 0) {
+            return Err(ArtifactError::Reserved);
+        }
         if let Some(len) = file_len {
             let expected = HEADER_LEN as u64 + header.payload_len;
             if len as u64 != expected {
@@ -374,18 +389,27 @@ impl fmt::Debug for Artifact {
 
 impl Artifact {
     /// Opens artifact bytes, checking header and lengths (not the payload hash: see
-    /// [`Artifact::verify`]).
+    /// [`Artifact::verify`]): the metadata must decode to exactly the header's metadata
+    /// length, and every array must lie after it, aligned, inside the payload.
     pub fn open(backing: Backing) -> Result<Artifact, ArtifactError> {
         let bytes = backing.bytes();
         let header = Header::parse(bytes, Some(bytes.len()))?;
         let meta_end = HEADER_LEN + header.meta_len as usize;
-        let env: Envelope =
+        let (env, used): (Envelope, usize) =
             bincode::serde::decode_from_slice(&bytes[HEADER_LEN..meta_end], bincode_config())
-                .map_err(|e| ArtifactError::Meta(e.to_string()))?
-                .0;
+                .map_err(|e| ArtifactError::Meta(e.to_string()))?;
+        if used as u64 != header.meta_len {
+            return Err(ArtifactError::Meta(format!(
+                "metadata is {used} bytes, its header says {}",
+                header.meta_len
+            )));
+        }
         for a in &env.arrays {
             let end = a.offset.checked_add(a.len);
-            if a.offset % ALIGN as u64 != 0 || end.is_none_or(|e| e > header.payload_len) {
+            if a.offset % ALIGN as u64 != 0
+                || a.offset < header.meta_len
+                || end.is_none_or(|e| e > header.payload_len)
+            {
                 return Err(ArtifactError::ArrayBounds {
                     name: a.name.clone(),
                 });
@@ -540,6 +564,33 @@ mod tests {
             Artifact::from_bytes(bad_magic),
             Err(ArtifactError::BadMagic)
         ));
+    }
+
+    /// Every header field outside the payload hash is checked on open (issue 11, item 1):
+    /// the kind code, the reserved bytes, the metadata length, the payload length.
+    #[test]
+    fn damaged_header_fields_are_detected_on_open() {
+        let bytes = sample();
+        let damaged = |offset: usize, value: u8| {
+            let mut b = bytes.clone();
+            b[offset] = value;
+            Artifact::from_bytes(b)
+        };
+        assert!(matches!(
+            damaged(12, 99),
+            Err(ArtifactError::UnknownKind(99))
+        ));
+        assert!(matches!(damaged(100, 1), Err(ArtifactError::Reserved)));
+        let meta_len = bytes[16];
+        assert!(damaged(16, meta_len + 8).is_err(), "longer metadata length");
+        assert!(
+            damaged(16, meta_len - 1).is_err(),
+            "shorter metadata length"
+        );
+        assert!(damaged(24, bytes[24] ^ 0x40).is_err(), "payload length");
+        // A known but different kind opens, and is refused by the reader expecting Mesh.
+        let other = damaged(12, Kind::Image as u8).unwrap();
+        assert!(other.expect_kind(Kind::Mesh).is_err());
     }
 
     #[test]

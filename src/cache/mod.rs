@@ -4,11 +4,13 @@
 //! Writes go to a temporary file in the same directory, are fsynced, renamed into place, and
 //! the directory is fsynced: an artifact is whole or absent, after a crash too. A rename that
 //! finds the target already present is success (two processes computed the same key; by
-//! determinism they wrote the same bytes). Reads map the file; a header or length that does
-//! not check out is a miss with a warning, never an error. Least-recently-used order for `gc`
-//! is kept in file modification times, refreshed on every hit.
+//! determinism they wrote the same bytes); anything else at the path (a directory, a damaged
+//! file) is replaced, or the write is an error naming the path. Reads map the file; a header
+//! that does not check out (magic, version, kind code, reserved bytes, lengths, metadata) is
+//! a miss with a warning, never an error, and the object is removed. Least-recently-used order
+//! for `gc` is kept in file modification times, refreshed on every hit.
 
-use crate::artifact::{Artifact, ArtifactError, Backing, ContentHash, HEADER_LEN, Header};
+use crate::artifact::{Artifact, ArtifactError, Backing, ContentHash, HEADER_LEN, Header, Kind};
 use std::fs::{self, File};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -31,6 +33,21 @@ pub enum CacheError {
         path: PathBuf,
         source: std::io::Error,
     },
+    #[error("cache {path} does not exist (or is not a directory)")]
+    Missing { path: PathBuf },
+    #[error("cache {path}: cannot replace what is there with the new object: {source}")]
+    Replace {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// What `gc` did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GcReport {
+    pub removed: usize,
+    pub removed_bytes: u64,
+    pub kept_bytes: u64,
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> CacheError + '_ {
@@ -65,6 +82,21 @@ impl Cache {
         Ok(cache)
     }
 
+    /// Opens a cache that must already exist (`gc`, `verify`): a mistyped path is an error
+    /// naming it, not a new empty cache. Creates nothing.
+    pub fn open_existing(root: &Path) -> Result<Cache, CacheError> {
+        if !root.is_dir() {
+            return Err(CacheError::Missing {
+                path: root.to_owned(),
+            });
+        }
+        let cache = Cache {
+            root: root.to_owned(),
+        };
+        cache.remove_stale_temporaries();
+        Ok(cache)
+    }
+
     pub fn root(&self) -> &Path {
         &self.root
     }
@@ -74,10 +106,26 @@ impl Cache {
         self.root.join(OBJECTS_DIR).join(&hex[..2]).join(&hex[2..])
     }
 
-    /// Reads only the header of the object for `key`: enough to learn its content hash
-    /// without touching the payload (what a rerun with nothing changed needs).
+    /// Reads only the header and metadata of the object for `key`: enough to learn its
+    /// content hash without touching the payload (what a rerun with nothing changed needs).
+    /// Any kind is accepted; see [`Cache::peek_kind`].
     pub fn peek(&self, key: &Key) -> Lookup {
+        self.peek_kind(key, None)
+    }
+
+    /// [`Cache::peek`] for an object that must hold `expected` (the node's output kind). An
+    /// object that fails any check (not a regular file, header, lengths, metadata, kind) is
+    /// removed and reported as [`Lookup::Invalid`].
+    pub fn peek_kind(&self, key: &Key, expected: Option<Kind>) -> Lookup {
         let path = self.object_path(key);
+        let meta = match fs::symlink_metadata(&path) {
+            Ok(m) => m,
+            Err(_) => return Lookup::Miss,
+        };
+        if !meta.is_file() {
+            self.remove(key);
+            return Lookup::Invalid(ArtifactError::NotAFile);
+        }
         let mut file = match File::open(&path) {
             Ok(f) => f,
             Err(_) => return Lookup::Miss,
@@ -88,13 +136,20 @@ impl Cache {
         };
         let mut head = [0u8; HEADER_LEN];
         let read = read_up_to(&mut file, &mut head);
-        match Header::parse(&head[..read], Some(len)) {
+        let checked = Header::parse(&head[..read], Some(len)).and_then(|h| match expected {
+            Some(kind) if h.kind != kind as u32 => Err(ArtifactError::WrongKind {
+                found: h.kind,
+                expected: kind,
+            }),
+            _ => Ok(h),
+        });
+        match checked {
             Ok(_) => {
                 touch(&file);
                 self.get_mapped(key, file)
             }
             Err(e) => {
-                let _ = fs::remove_file(&path);
+                self.remove(key);
                 Lookup::Invalid(e)
             }
         }
@@ -111,15 +166,16 @@ impl Cache {
         match Artifact::open(Backing::Mapped(map)) {
             Ok(a) => Lookup::Hit(a),
             Err(e) => {
-                let _ = fs::remove_file(self.object_path(key));
+                self.remove(key);
                 Lookup::Invalid(e)
             }
         }
     }
 
-    /// Removes an object (found corrupted by a full verification).
+    /// Removes an object (found damaged), whatever is at its path. Best effort: a path that
+    /// cannot be cleared is reported by the [`Cache::put`] that replaces it.
     pub fn remove(&self, key: &Key) {
-        let _ = fs::remove_file(self.object_path(key));
+        let _ = remove_any(&self.object_path(key));
     }
 
     /// Stores artifact bytes under `key` atomically and returns the mapped artifact.
@@ -143,9 +199,24 @@ impl Cache {
             return Err(io_err(&tmp)(e));
         }
         if let Err(e) = fs::rename(&tmp, &path) {
-            let _ = fs::remove_file(&tmp);
-            if !path.exists() {
-                return Err(io_err(&path)(e));
+            // Another process may have stored the same key (same bytes, by determinism):
+            // success. Anything else there (a directory, other bytes) is cleared and the
+            // rename retried; if that fails too, the error names the path.
+            let same = fs::symlink_metadata(&path).is_ok_and(|m| m.is_file())
+                && fs::read(&path).is_ok_and(|b| b == bytes);
+            if !same {
+                let retried = remove_any(&path).and_then(|()| fs::rename(&tmp, &path));
+                if let Err(again) = retried {
+                    let _ = fs::remove_file(&tmp);
+                    let source = if again.kind() == std::io::ErrorKind::NotFound {
+                        e
+                    } else {
+                        again
+                    };
+                    return Err(CacheError::Replace { path, source });
+                }
+            } else {
+                let _ = fs::remove_file(&tmp);
             }
         }
         if let Ok(d) = File::open(dir) {
@@ -154,17 +225,24 @@ impl Cache {
         Ok(())
     }
 
-    /// All objects with their sizes and last-use times.
-    pub fn objects(&self) -> Vec<(PathBuf, u64, SystemTime)> {
+    /// All objects with their sizes and last-use times (none if the store was never
+    /// written); a store that cannot be listed is an error naming the directory.
+    pub fn objects(&self) -> Result<Vec<(PathBuf, u64, SystemTime)>, CacheError> {
         let mut out = Vec::new();
-        let Ok(shards) = fs::read_dir(self.root.join(OBJECTS_DIR)) else {
-            return out;
+        let dir = self.root.join(OBJECTS_DIR);
+        let shards = match fs::read_dir(&dir) {
+            Ok(s) => s,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(out),
+            Err(e) => return Err(io_err(&dir)(e)),
         };
-        for shard in shards.flatten() {
-            let Ok(files) = fs::read_dir(shard.path()) else {
+        for shard in shards {
+            let shard = shard.map_err(io_err(&dir))?.path();
+            if !shard.is_dir() {
                 continue;
-            };
-            for f in files.flatten() {
+            }
+            let files = fs::read_dir(&shard).map_err(io_err(&shard))?;
+            for f in files {
+                let f = f.map_err(io_err(&shard))?;
                 let name = f.file_name();
                 if name.to_string_lossy().starts_with(TMP_PREFIX) {
                     continue;
@@ -176,13 +254,13 @@ impl Cache {
             }
         }
         out.sort();
-        out
+        Ok(out)
     }
 
-    /// Deletes least recently used objects until the store is within `max_bytes`.
-    /// Returns (objects removed, bytes removed, bytes kept).
-    pub fn gc(&self, max_bytes: u64) -> (usize, u64, u64) {
-        let mut objects = self.objects();
+    /// Deletes least recently used objects until the store is within `max_bytes`. An object
+    /// that cannot be removed is an error naming it (a read-only cache cannot be trimmed).
+    pub fn gc(&self, max_bytes: u64) -> Result<GcReport, CacheError> {
+        let mut objects = self.objects()?;
         // Oldest first; ties by path so the choice is deterministic.
         objects.sort_by(|a, b| a.2.cmp(&b.2).then_with(|| a.0.cmp(&b.0)));
         let mut total: u64 = objects.iter().map(|o| o.1).sum();
@@ -191,13 +269,16 @@ impl Cache {
             if total <= max_bytes {
                 break;
             }
-            if fs::remove_file(&path).is_ok() {
-                total -= size;
-                removed += 1;
-                removed_bytes += size;
-            }
+            remove_any(&path).map_err(io_err(&path))?;
+            total -= size;
+            removed += 1;
+            removed_bytes += size;
         }
-        (removed, removed_bytes, total)
+        Ok(GcReport {
+            removed,
+            removed_bytes,
+            kept_bytes: total,
+        })
     }
 
     fn remove_stale_temporaries(&self) {
@@ -223,6 +304,19 @@ impl Cache {
                 }
             }
         }
+    }
+}
+
+/// Removes whatever is at `path` (a file, a link, a directory tree); absent is success.
+fn remove_any(path: &Path) -> std::io::Result<()> {
+    let result = match fs::symlink_metadata(path) {
+        Ok(m) if m.is_dir() => fs::remove_dir_all(path),
+        Ok(_) => fs::remove_file(path),
+        Err(e) => Err(e),
+    };
+    match result {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        other => other,
     }
 }
 
@@ -348,11 +442,57 @@ mod tests {
         // Use the oldest one: it becomes the newest.
         assert!(matches!(cache.peek(&keys[0]), Lookup::Hit(_)));
         let one = fs::metadata(cache.object_path(&keys[0])).unwrap().len();
-        let (removed, _, kept) = cache.gc(one);
-        assert_eq!(removed, 2);
-        assert_eq!(kept, one);
+        let report = cache.gc(one).unwrap();
+        assert_eq!(report.removed, 2);
+        assert_eq!(report.kept_bytes, one);
         assert!(cache.object_path(&keys[0]).exists());
         assert!(!cache.object_path(&keys[1]).exists());
+    }
+
+    /// Issue 11, item 6: a directory where an object belongs is a miss (not "shorter than
+    /// its header"), and storing the object replaces it.
+    #[test]
+    fn a_directory_at_an_object_path_is_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(dir.path()).unwrap();
+        let key = ContentHash::of(b"k");
+        let path = cache.object_path(&key);
+        fs::create_dir_all(path.join("inside")).unwrap();
+        fs::write(path.join("inside/file"), b"x").unwrap();
+        assert!(matches!(
+            cache.peek(&key),
+            Lookup::Invalid(ArtifactError::NotAFile)
+        ));
+        fs::create_dir_all(path.join("inside")).unwrap();
+        let bytes = art(3.0);
+        cache.put(&key, &bytes).unwrap();
+        assert_eq!(fs::read(&path).unwrap(), bytes);
+    }
+
+    /// Issue 11, item 1: a known kind code that is not the one expected is a miss.
+    #[test]
+    fn an_object_of_another_kind_is_a_miss_and_is_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(dir.path()).unwrap();
+        let key = ContentHash::of(b"k");
+        cache.put(&key, &art(4.0)).unwrap();
+        assert!(matches!(
+            cache.peek_kind(&key, Some(Kind::Mesh)),
+            Lookup::Invalid(ArtifactError::WrongKind { .. })
+        ));
+        assert!(!cache.object_path(&key).exists());
+    }
+
+    /// Issue 11, item 7: gc and verify do not create a cache that is not there.
+    #[test]
+    fn open_existing_refuses_a_missing_cache_and_creates_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("typo");
+        assert!(matches!(
+            Cache::open_existing(&missing),
+            Err(CacheError::Missing { .. })
+        ));
+        assert!(!missing.exists());
     }
 
     #[test]

@@ -3,8 +3,13 @@
 //!
 //! Nodes run one after another in topological order; each node parallelizes its own work
 //! with rayon. (With two cores, node-level parallelism would only compete with that.)
-//! Payloads are re-hashed before a node reads them, so a corrupted object is caught where it
-//! would do harm, while a rerun with nothing changed reads nothing but headers.
+//! Payloads are re-hashed before a node reads them, and the artifacts a run hands out (the
+//! exported bundles and the nodes nothing else reads) are re-hashed before they are returned,
+//! so a corrupted object is caught where it would do harm, while a rerun with nothing changed
+//! reads nothing but headers and the outputs' payloads. Headers are checked on every lookup
+//! (see [`Cache::peek_kind`]), including that the kind is the node's output kind. Any object
+//! that fails a check is removed, recomputed and stored again, and listed in
+//! [`RunResult::damaged`]; it is never an error.
 
 use super::{Dag, InputData, InputRef, NodeContext, NodeError, Progress, ProgressMode};
 use crate::artifact::{Artifact, ContentHash};
@@ -64,6 +69,17 @@ pub struct RunResult {
     pub artifacts: Vec<Artifact>,
     /// Cache problems met and repaired on the way (corrupted or truncated objects).
     pub warnings: Vec<String>,
+    /// The damaged objects among them, each recomputed and replaced.
+    pub damaged: Vec<Damage>,
+}
+
+/// A cache object found damaged (and recomputed, and replaced).
+#[derive(Clone, Debug, Serialize, PartialEq, Eq)]
+pub struct Damage {
+    pub node: String,
+    pub key: String,
+    pub path: std::path::PathBuf,
+    pub problem: String,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -91,6 +107,7 @@ struct Executor<'a> {
     opts: RunOptions,
     states: Vec<Option<State>>,
     warnings: Vec<String>,
+    damaged: Vec<Damage>,
     /// While set, computed artifacts are kept in memory instead of stored (see [`run`]).
     deferred: Option<Vec<(Key, usize)>>,
 }
@@ -106,6 +123,7 @@ pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, Pipe
         opts,
         states: (0..dag.nodes.len()).map(|_| None).collect(),
         warnings: Vec::new(),
+        damaged: Vec::new(),
         deferred: Some(Vec::new()),
     };
     for (i, node) in dag.nodes.iter().enumerate() {
@@ -117,9 +135,23 @@ pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, Pipe
         let state = ex.states[i].as_ref().expect("resolved above");
         cache.put(&key, state.artifact.file_bytes())?;
     }
+    // What the run hands out is read by the caller (the bundles are written to the output
+    // directory): re-hash it like a node's input, as soon as it is resolved, so a repair that
+    // changes its content hash comes before anything downstream is keyed on it.
+    let mut read = vec![false; dag.nodes.len()];
+    for node in &dag.nodes {
+        for input in &node.inputs {
+            if let InputRef::Node(j) = *input {
+                read[j] = true;
+            }
+        }
+    }
     for i in 0..dag.nodes.len() {
         if ex.states[i].is_none() {
             ex.resolve(i)?;
+        }
+        if dag.nodes[i].exports || !read[i] {
+            ex.ensure_verified(i)?;
         }
     }
     let mut reports = Vec::new();
@@ -143,6 +175,7 @@ pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, Pipe
         reports,
         artifacts,
         warnings: ex.warnings,
+        damaged: ex.damaged,
     })
 }
 
@@ -167,22 +200,36 @@ impl Executor<'_> {
         self.warnings.push(msg);
     }
 
+    /// Records and warns about node `i`'s damaged object (already removed by the cache, or
+    /// removed here), which the caller recomputes.
+    fn damaged(&mut self, i: usize, key: &Key, problem: String) {
+        let node = self.dag.nodes[i].name.clone();
+        let path = self.cache.object_path(key);
+        self.cache.remove(key);
+        self.warn(format!(
+            "{node}: cached artifact {} is damaged ({problem}); recomputing",
+            path.display()
+        ));
+        self.damaged.push(Damage {
+            node,
+            key: key.to_hex(),
+            path,
+            problem,
+        });
+    }
+
     fn resolve(&mut self, i: usize) -> Result<(), PipelineError> {
         let dag = self.dag;
         let node = &dag.nodes[i];
         let key = self.dag.key(node, &self.input_hashes(i));
         let start = Instant::now();
-        match self.cache.peek(&key) {
+        match self.cache.peek_kind(&key, Some(node.kind)) {
             Lookup::Hit(artifact) => {
                 let mut verified = false;
                 if self.opts.verify_all {
                     if let Err(e) = artifact.verify() {
-                        self.warn(format!(
-                            "{}: cached artifact {} is corrupted ({e}); recomputing",
-                            node.name,
-                            key.to_hex()
-                        ));
-                        self.cache.remove(&key);
+                        drop(artifact);
+                        self.damaged(i, &key, e.to_string());
                         return self.compute(i, key);
                     }
                     verified = true;
@@ -198,11 +245,7 @@ impl Executor<'_> {
                 Ok(())
             }
             Lookup::Invalid(e) => {
-                self.warn(format!(
-                    "{}: cached artifact {} is unreadable ({e}); recomputing",
-                    node.name,
-                    key.to_hex()
-                ));
+                self.damaged(i, &key, e.to_string());
                 self.compute(i, key)
             }
             Lookup::Miss => self.compute(i, key),
@@ -223,12 +266,7 @@ impl Executor<'_> {
             }
             Err(e) => {
                 let (key, old) = (state.key, state.artifact.content_hash());
-                self.warn(format!(
-                    "{}: cached artifact {} is corrupted ({e}); recomputing",
-                    self.dag.nodes[j].name,
-                    key.to_hex()
-                ));
-                self.cache.remove(&key);
+                self.damaged(j, &key, e.to_string());
                 self.compute(j, key)?;
                 let new = self.states[j].as_ref().unwrap().artifact.content_hash();
                 Ok(new != old)
@@ -332,7 +370,7 @@ pub fn status(dag: &Dag, cache: &Cache) -> Vec<StatusLine> {
             None => ("maybe", None),
             Some(h) => {
                 let key = dag.key(node, &h);
-                match cache.peek(&key) {
+                match cache.peek_kind(&key, Some(node.kind)) {
                     Lookup::Hit(a) => {
                         hashes[i] = Some(a.content_hash());
                         ("cached", Some(key))

@@ -186,6 +186,9 @@ pub struct Node {
     pub(crate) pieces: Option<node::PieceDecl>,
     /// The output is a file bundle to write into the run's output directory.
     pub exports: bool,
+    /// The kind of artifact the node's output format writes: a cached object of any other
+    /// kind is damaged (the header's kind code is outside the payload hash).
+    pub(crate) kind: crate::artifact::Kind,
     pub(crate) compute: ComputeFn,
 }
 

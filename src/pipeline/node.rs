@@ -366,6 +366,7 @@ impl Dag {
             keyed: declared.iter().map(|d| d.keyed).collect(),
             pieces: spec.pieces,
             exports: F::KIND == crate::artifact::Kind::FileBundle,
+            kind: F::KIND,
             compute: Box::new(move |ctx| {
                 let mut cursor = InputCursor {
                     data: ctx.inputs.iter(),
