@@ -297,7 +297,11 @@ fn assert_refused(config: &str, key: &str, path: &Path) {
     ]);
     assert!(!o.ok, "{key} = {}: must fail", path.display());
     for word in [key, &path.display().to_string(), "not a regular file"] {
-        assert!(o.stderr.contains(word), "expected {word:?} in: {}", o.stderr);
+        assert!(
+            o.stderr.contains(word),
+            "expected {word:?} in: {}",
+            o.stderr
+        );
     }
 }
 

@@ -310,7 +310,12 @@ struct Planned {
     had_old: bool,
 }
 
-fn write_journal(dir: &Path, journal: &Path, old: &Path, plan: &[Planned]) -> Result<(), OutputError> {
+fn write_journal(
+    dir: &Path,
+    journal: &Path,
+    old: &Path,
+    plan: &[Planned],
+) -> Result<(), OutputError> {
     fs::create_dir(old).map_err(io(old))?;
     let mut text = format!("{JOURNAL_HEAD}\n");
     for p in plan {

@@ -174,10 +174,11 @@ pub fn render_mesh_file(
     }
     let image = match texture {
         Some(p) => {
-            let bytes = crate::geom::io::read_regular_file(p).map_err(|source| RenderError::Io {
-                path: p.to_owned(),
-                source,
-            })?;
+            let bytes =
+                crate::geom::io::read_regular_file(p).map_err(|source| RenderError::Io {
+                    path: p.to_owned(),
+                    source,
+                })?;
             Some(decode_image(p, &bytes)?)
         }
         None => None,
