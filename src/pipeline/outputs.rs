@@ -8,8 +8,10 @@
 //! # Protocol
 //!
 //! With `P` the writing process's id, everything below happens inside the output directory
-//! `D` (one filesystem, so renames are atomic), under an exclusive `flock` of `D` on Unix so
-//! two texsyn processes do not interleave their swaps:
+//! `D` (one filesystem, so renames are atomic). Writers within one process take turns; two
+//! texsyn processes writing the same `D` at once each keep their own staging folder, journal
+//! and old folder (named by their ids) and never remove each other's, but their swaps are not
+//! ordered (the last to swap a file wins it):
 //!
 //! 1. **Recover** (see [`recover`]): a journal `.texsyn-swap-Q` whose owner `Q` is dead is
 //!    finished first (below); then leftovers of dead owners are removed: staging and old
@@ -97,7 +99,6 @@ pub fn materialize_all(
 ) -> Result<Vec<(PathBuf, bool)>, OutputError> {
     let _writer = WRITER.lock().unwrap_or_else(|e| e.into_inner());
     fs::create_dir_all(dir).map_err(io(dir))?;
-    let _lock = lock_dir(dir);
     recover_locked(dir)?;
 
     // The set: each name once, the last bundle's entry winning.
@@ -220,7 +221,6 @@ pub fn recover(dir: &Path) -> Result<(), OutputError> {
         return Ok(());
     }
     let _writer = WRITER.lock().unwrap_or_else(|e| e.into_inner());
-    let _lock = lock_dir(dir);
     recover_locked(dir)
 }
 
@@ -444,20 +444,4 @@ fn sync_dir(dir: &Path) -> std::io::Result<()> {
     #[cfg(not(unix))]
     let _ = dir;
     Ok(())
-}
-
-/// An exclusive lock on `dir` held while the returned file lives, so texsyn processes writing
-/// the same output directory take turns. Best effort: where locking fails, nothing is locked.
-fn lock_dir(dir: &Path) -> Option<fs::File> {
-    #[cfg(unix)]
-    {
-        let f = fs::File::open(dir).ok()?;
-        f.lock().ok()?;
-        Some(f)
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = dir;
-        None
-    }
 }
