@@ -7,7 +7,7 @@ use std::time::Instant;
 use texsyn::cache::{Cache, parse_size};
 use texsyn::config::Config;
 use texsyn::methods::Plan;
-use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, outputs::materialize};
+use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, outputs};
 
 #[derive(Parser)]
 #[command(
@@ -184,14 +184,26 @@ fn real_main() -> Result<i32> {
     match &cli.command {
         Command::Run { config, sets, out } => {
             let start = Instant::now();
-            let (plan, result) = run_config(config, sets, &cache_dir, progress)?;
+            let plan = load_plan(config, sets)?;
             let out_dir = out.clone().unwrap_or(plan.default_out.clone());
-            let mut written = Vec::new();
-            for (i, node) in plan.dag.nodes.iter().enumerate() {
-                if node.exports {
-                    written.extend(materialize(&result.artifacts[i], &out_dir)?);
-                }
-            }
+            // A swap a killed run left half done is finished (or undone) before anything else.
+            outputs::recover(&out_dir).context("recovering the output directory")?;
+            let result = run_plan(&plan, &cache_dir, progress)?;
+            // One run's exports are written as one set: all of them, or none on an error.
+            let bundles: Vec<_> = plan
+                .dag
+                .nodes
+                .iter()
+                .zip(&result.artifacts)
+                .filter(|(node, _)| node.exports)
+                .map(|(_, a)| a)
+                .collect();
+            let written = outputs::materialize_all(&bundles, &out_dir).with_context(|| {
+                format!(
+                    "writing the outputs into {} (it still holds the previous run's outputs)",
+                    out_dir.display()
+                )
+            })?;
             let seconds = start.elapsed().as_secs_f64();
             if cli.json {
                 let outputs: Vec<_> = written
@@ -396,16 +408,21 @@ fn run_config(
     progress: ProgressMode,
 ) -> Result<(Plan, RunResult)> {
     let plan = load_plan(config, sets)?;
+    let result = run_plan(&plan, cache_dir, progress)?;
+    Ok((plan, result))
+}
+
+/// Runs a planned DAG in the cache at `cache_dir`, computing what is not cached.
+fn run_plan(plan: &Plan, cache_dir: &Path, progress: ProgressMode) -> Result<RunResult> {
     let cache = Cache::open(cache_dir)?;
-    let result = pipeline::run(
+    Ok(pipeline::run(
         &plan.dag,
         &cache,
         RunOptions {
             progress,
             verify_all: false,
         },
-    )?;
-    Ok((plan, result))
+    )?)
 }
 
 fn parse_axis(s: &str) -> Result<glam::Vec3> {
@@ -433,9 +450,15 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
             .unwrap_or_default(),
         std::process::id()
     ));
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    let written = std::fs::write(&tmp, bytes)
+        .with_context(|| format!("writing {}", tmp.display()))
+        .and_then(|()| {
+            std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
+        });
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }
 
 fn human_bytes(b: u64) -> String {
@@ -551,16 +574,36 @@ fn compare_lock(lock: &str, reports: &[pipeline::NodeReport], path: &Path) -> Re
     Ok(problems)
 }
 
-/// A directory removed when dropped.
+/// A directory removed when dropped. Named `PREFIX-PID-NANOS`; creating one removes those a
+/// killed texsyn left behind (their process is gone), never those of a live one.
 struct TempDir(PathBuf);
 
 impl TempDir {
     fn new(prefix: &str) -> TempDir {
+        let base = std::env::temp_dir();
+        if let Ok(entries) = std::fs::read_dir(&base) {
+            for e in entries.flatten() {
+                let name = e.file_name();
+                let Some(pid) = name
+                    .to_str()
+                    .and_then(|n| n.strip_prefix(prefix)?.strip_prefix('-')?.split_once('-'))
+                    .and_then(|(pid, nanos)| {
+                        nanos.bytes().all(|b| b.is_ascii_digit()).then_some(pid)
+                    })
+                    .and_then(|pid| pid.parse::<u32>().ok())
+                else {
+                    continue;
+                };
+                if outputs::owner_is_dead(pid, &e.path()) {
+                    let _ = std::fs::remove_dir_all(e.path());
+                }
+            }
+        }
         let nanos = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.as_nanos())
             .unwrap_or(0);
-        TempDir(std::env::temp_dir().join(format!("{prefix}-{}-{nanos}", std::process::id())))
+        TempDir(base.join(format!("{prefix}-{}-{nanos}", std::process::id())))
     }
     fn path(&self) -> &Path {
         &self.0

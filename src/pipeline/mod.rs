@@ -206,7 +206,8 @@ impl Dag {
         if let Some(i) = self.files.iter().position(|f| f.path == path) {
             return Ok(InputRef::File(i));
         }
-        let bytes = std::fs::read(path).map_err(|e| {
+        // Not a FIFO or device: those would block or never end.
+        let bytes = crate::geom::io::read_regular_file(path).map_err(|e| {
             std::io::Error::new(e.kind(), format!("{} ({role}): {e}", path.display()))
         })?;
         let hash = ContentHash::of(&bytes);

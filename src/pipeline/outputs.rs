@@ -1,12 +1,52 @@
-//! Writes exported file bundles into the run's output directory.
+//! Writes exported file bundles into the run's output directory, as one set.
 //!
-//! Only files whose bytes differ from what is on disk are written, each through a temporary
-//! file and a rename, so a failed or interrupted run leaves earlier outputs whole.
+//! The files one run exports are a set: after any failure or kill, the output directory holds
+//! either every output of the previous run or every output of the new one, never a mix. Only
+//! files whose bytes differ from what is on disk are written. Files that are not texsyn's
+//! outputs are never touched.
+//!
+//! # Protocol
+//!
+//! With `P` the writing process's id, everything below happens inside the output directory
+//! `D` (one filesystem, so renames are atomic). Writers within one process take turns; two
+//! texsyn processes writing the same `D` at once each keep their own staging folder, journal
+//! and old folder (named by their ids) and never remove each other's, but their swaps are not
+//! ordered (the last to swap a file wins it):
+//!
+//! 1. **Recover** (see [`recover`]): a journal `.texsyn-swap-Q` whose owner `Q` is dead is
+//!    finished first (below); then leftovers of dead owners are removed: staging and old
+//!    folders without a journal, unfinished journals `.texsyn-swap-Q.tmp`, and temporary
+//!    files `.NAME.tmp-Q` (written by earlier versions, and by `render`/`bench`).
+//! 2. **Check**: every output name must be a plain file name, and what is at `D/NAME` must be
+//!    a regular file (or a symlink, which is replaced) or nothing; a directory, FIFO or device
+//!    there fails the run before anything is written.
+//! 3. **Stage**: each changed file is written to `D/.texsyn-staging-P/NAME` and fsynced, then
+//!    the staging folder is fsynced. A failure here (full disk…) removes the staging folder;
+//!    the outputs were not touched.
+//! 4. **Journal**: `D/.texsyn-old-P/` is created, then the journal is written to
+//!    `D/.texsyn-swap-P.tmp`, fsynced and renamed to `D/.texsyn-swap-P` (the commit point),
+//!    and `D` is fsynced. The journal lists each changed file as `replace NAME` (an older
+//!    version is in `D`) or `add NAME` (none is), and ends with `end`.
+//! 5. **Swap**: per file, `D/NAME` (if `replace`) is renamed to `D/.texsyn-old-P/NAME`, then
+//!    `D/.texsyn-staging-P/NAME` is renamed to `D/NAME`; `D` is fsynced.
+//! 6. **Clean**: the journal is removed, `D` fsynced, then the staging and old folders.
+//!
+//! Finishing a journal (after a kill, or when a rename fails in step 5): if every listed file
+//! is either still staged or already moved in (`D/NAME` present and, for `replace`, the old
+//! copy aside), the swap is completed forward; otherwise it is rolled back (old copies renamed
+//! back, files added by the swap removed). Then step 6.
+//!
+//! An owner is dead when no process has its id (`/proc/Q` is missing on Linux; elsewhere, when
+//! the leftover is more than a day old). Leftovers with this process's own id are stale too,
+//! since writers within one process are serialized and a writer cleans up before returning.
 
 use crate::artifact::Artifact;
 use crate::artifact::ContentHash;
 use crate::artifact::{Bundle, Format};
+use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::{Duration, SystemTime};
 
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
@@ -15,31 +55,393 @@ pub enum OutputError {
         path: PathBuf,
         source: std::io::Error,
     },
+    #[error(
+        "output {path} is {what}, not a regular file: texsyn will not replace it (remove or \
+         rename it); no output was changed"
+    )]
+    NotAFile { path: PathBuf, what: &'static str },
+    #[error("exported bundle names an invalid output file {0:?}")]
+    BadName(String),
+    #[error("{path}: damaged output swap journal ({message}); fix or remove it by hand")]
+    Journal { path: PathBuf, message: String },
     #[error("exported bundle is damaged: {0}")]
     Bundle(#[from] crate::artifact::ArtifactError),
 }
 
-/// What happened to each file: (path, written?).
+const STAGING: &str = ".texsyn-staging-";
+const OLD: &str = ".texsyn-old-";
+const JOURNAL: &str = ".texsyn-swap-";
+const JOURNAL_HEAD: &str = "texsyn output swap 1";
+/// On systems without /proc, how old a leftover must be before its owner counts as dead.
+const STALE_AGE: Duration = Duration::from_secs(24 * 3600);
+
+/// Serializes the writers of one process (the leftovers of this process's id are then stale).
+static WRITER: Mutex<()> = Mutex::new(());
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError {
+    let path = path.to_owned();
+    move |source| OutputError::Io { path, source }
+}
+
+/// Writes one bundle's files into `dir` as a set (see the module doc). What happened to each
+/// file: (path, written?).
 pub fn materialize(bundle: &Artifact, dir: &Path) -> Result<Vec<(PathBuf, bool)>, OutputError> {
-    let io = |path: &Path| {
-        let path = path.to_owned();
-        move |source| OutputError::Io { path, source }
-    };
-    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    materialize_all(&[bundle], dir)
+}
+
+/// Writes the files of all `bundles` (one run's exports) into `dir` as one set: afterwards
+/// `dir` holds all of them, or, after an error, still exactly what it held before. When two
+/// bundles name the same file, the later one's is written. What happened to each file:
+/// (path, written?), in bundle order.
+pub fn materialize_all(
+    bundles: &[&Artifact],
+    dir: &Path,
+) -> Result<Vec<(PathBuf, bool)>, OutputError> {
+    let _writer = WRITER.lock().unwrap_or_else(|e| e.into_inner());
+    fs::create_dir_all(dir).map_err(io(dir))?;
+    recover_locked(dir)?;
+
+    // The set: each name once, the last bundle's entry winning.
+    let views = bundles
+        .iter()
+        .map(|b| Bundle::view(b))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut files = Vec::new(); // (view, entry index)
+    for (v, view) in views.iter().enumerate() {
+        for (e, entry) in view.entries.iter().enumerate() {
+            check_name(&entry.name)?;
+            match files
+                .iter()
+                .position(|&(w, f): &(usize, usize)| views[w].entries[f].name == entry.name)
+            {
+                Some(i) => files[i] = (v, e),
+                None => files.push((v, e)),
+            }
+        }
+    }
+
+    // Check what is on disk; collect the changed files.
     let mut out = Vec::new();
-    let bundle = Bundle::view(bundle)?;
-    for entry in &bundle.entries {
+    let mut changed = Vec::new(); // (view, entry, had_old)
+    for &(v, e) in &files {
+        let entry = &views[v].entries[e];
         let path = dir.join(&entry.name);
-        let same = std::fs::read(&path)
-            .map(|b| b.len() as u64 == entry.len && ContentHash::of(&b) == entry.hash)
-            .unwrap_or(false);
+        let had_old = match fs::symlink_metadata(&path) {
+            Err(err) if err.kind() == std::io::ErrorKind::NotFound => false,
+            Err(err) => return Err(io(&path)(err)),
+            Ok(m) if m.is_dir() => {
+                return Err(OutputError::NotAFile {
+                    path,
+                    what: "a directory",
+                });
+            }
+            Ok(m) if !m.is_file() && !m.file_type().is_symlink() => {
+                return Err(OutputError::NotAFile {
+                    path,
+                    what: "a special file (FIFO, socket or device)",
+                });
+            }
+            Ok(_) => true,
+        };
+        // Read only a regular file of the right length (a symlink may point anywhere).
+        let same = had_old
+            && fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == entry.len)
+            && fs::read(&path).is_ok_and(|b| ContentHash::of(&b) == entry.hash);
         if !same {
-            let bytes = bundle.file(entry)?;
-            let tmp = dir.join(format!(".{}.tmp-{}", entry.name, std::process::id()));
-            std::fs::write(&tmp, &bytes).map_err(io(&tmp))?;
-            std::fs::rename(&tmp, &path).map_err(io(&path))?;
+            changed.push((v, e, had_old));
         }
         out.push((path, !same));
     }
+    if changed.is_empty() {
+        return Ok(out);
+    }
+
+    // Stage.
+    let pid = std::process::id();
+    let staging = dir.join(format!("{STAGING}{pid}"));
+    let stage = || -> Result<(), OutputError> {
+        fs::create_dir(&staging).map_err(io(&staging))?;
+        for &(v, e, _) in &changed {
+            let entry = &views[v].entries[e];
+            let bytes = views[v].file(entry)?;
+            let path = staging.join(&entry.name);
+            write_synced(&path, &bytes).map_err(io(&path))?;
+        }
+        sync_dir(&staging).map_err(io(&staging))
+    };
+    if let Err(e) = stage() {
+        let _ = fs::remove_dir_all(&staging);
+        return Err(e);
+    }
+
+    // Journal (the commit point), then the swap.
+    let old = dir.join(format!("{OLD}{pid}"));
+    let journal = dir.join(format!("{JOURNAL}{pid}"));
+    let plan: Vec<Planned> = changed
+        .iter()
+        .map(|&(v, e, had_old)| Planned {
+            name: views[v].entries[e].name.clone(),
+            had_old,
+        })
+        .collect();
+    if let Err(e) = write_journal(dir, &journal, &old, &plan) {
+        let _ = fs::remove_dir_all(&staging);
+        let _ = fs::remove_dir(&old);
+        let _ = fs::remove_file(journal.with_extension("tmp"));
+        let _ = fs::remove_file(&journal);
+        return Err(e);
+    }
+    let swap = || -> Result<(), OutputError> {
+        for p in &plan {
+            let path = dir.join(&p.name);
+            if p.had_old {
+                fs::rename(&path, old.join(&p.name)).map_err(io(&path))?;
+            }
+            fs::rename(staging.join(&p.name), &path).map_err(io(&path))?;
+        }
+        sync_dir(dir).map_err(io(dir))
+    };
+    match swap() {
+        Ok(()) => finish(dir, &journal, &staging, &old)?,
+        Err(e) => {
+            // Put the previous outputs back (best effort: the next run retries from the journal).
+            let _ = roll_back(dir, &staging, &old, &plan)
+                .and_then(|()| finish(dir, &journal, &staging, &old));
+            return Err(e);
+        }
+    }
     Ok(out)
+}
+
+/// Finishes or rolls back a swap that a killed texsyn left in `dir` and removes the leftovers
+/// of dead texsyn processes (see the module doc). Run before anything else by every command
+/// that writes into an output directory; a missing `dir` is fine.
+pub fn recover(dir: &Path) -> Result<(), OutputError> {
+    if !dir.is_dir() {
+        return Ok(());
+    }
+    let _writer = WRITER.lock().unwrap_or_else(|e| e.into_inner());
+    recover_locked(dir)
+}
+
+fn recover_locked(dir: &Path) -> Result<(), OutputError> {
+    let names = || -> Result<Vec<String>, OutputError> {
+        Ok(fs::read_dir(dir)
+            .map_err(io(dir))?
+            .flatten()
+            .filter_map(|e| e.file_name().into_string().ok())
+            .collect())
+    };
+    // Journals first: they decide what the staging and old folders hold.
+    for name in names()? {
+        let Some(pid) = name.strip_prefix(JOURNAL).and_then(parse_pid) else {
+            continue;
+        };
+        let journal = dir.join(&name);
+        if !owner_is_dead(pid, &journal) {
+            continue;
+        }
+        let plan = read_journal(&journal)?;
+        let staging = dir.join(format!("{STAGING}{pid}"));
+        let old = dir.join(format!("{OLD}{pid}"));
+        let complete = plan.iter().all(|p| {
+            staging.join(&p.name).is_file()
+                || (dir.join(&p.name).exists() && (!p.had_old || old.join(&p.name).exists()))
+        });
+        if complete {
+            tracing::warn!(journal = %journal.display(), "completing an interrupted output swap");
+            for p in &plan {
+                let staged = staging.join(&p.name);
+                if !staged.is_file() {
+                    continue; // already moved in
+                }
+                let path = dir.join(&p.name);
+                let aside = old.join(&p.name);
+                if p.had_old && !aside.exists() && fs::symlink_metadata(&path).is_ok() {
+                    fs::create_dir_all(&old).map_err(io(&old))?;
+                    fs::rename(&path, &aside).map_err(io(&path))?;
+                }
+                fs::rename(&staged, &path).map_err(io(&path))?;
+            }
+            sync_dir(dir).map_err(io(dir))?;
+        } else {
+            tracing::warn!(journal = %journal.display(), "rolling back an interrupted output swap");
+            roll_back(dir, &staging, &old, &plan)?;
+        }
+        finish(dir, &journal, &staging, &old)?;
+    }
+    // Leftovers of dead owners without a journal (or whose journal was just finished).
+    for name in names()? {
+        let pid = if let Some(rest) = name
+            .strip_prefix(STAGING)
+            .or_else(|| name.strip_prefix(OLD))
+        {
+            parse_pid(rest)
+        } else if let Some(rest) = name.strip_prefix(JOURNAL) {
+            rest.strip_suffix(".tmp").and_then(parse_pid)
+        } else if let Some((_, rest)) = name.rsplit_once(".tmp-")
+            && name.starts_with('.')
+        {
+            parse_pid(rest)
+        } else {
+            None
+        };
+        let Some(pid) = pid else { continue };
+        let path = dir.join(&name);
+        if name.starts_with(STAGING) || name.starts_with(OLD) {
+            if dir.join(format!("{JOURNAL}{pid}")).exists() {
+                continue; // a live owner's swap
+            }
+            if owner_is_dead(pid, &path) {
+                let _ = fs::remove_dir_all(&path);
+            }
+        } else if fs::symlink_metadata(&path).is_ok_and(|m| m.is_file())
+            && owner_is_dead(pid, &path)
+        {
+            let _ = fs::remove_file(&path);
+        }
+    }
+    Ok(())
+}
+
+/// One changed file of a swap.
+struct Planned {
+    name: String,
+    had_old: bool,
+}
+
+fn write_journal(
+    dir: &Path,
+    journal: &Path,
+    old: &Path,
+    plan: &[Planned],
+) -> Result<(), OutputError> {
+    fs::create_dir(old).map_err(io(old))?;
+    let mut text = format!("{JOURNAL_HEAD}\n");
+    for p in plan {
+        text += if p.had_old { "replace " } else { "add " };
+        text += &p.name;
+        text += "\n";
+    }
+    text += "end\n";
+    let tmp = journal.with_extension("tmp");
+    write_synced(&tmp, text.as_bytes()).map_err(io(&tmp))?;
+    fs::rename(&tmp, journal).map_err(io(journal))?;
+    sync_dir(dir).map_err(io(dir))
+}
+
+fn read_journal(journal: &Path) -> Result<Vec<Planned>, OutputError> {
+    let text = fs::read_to_string(journal).map_err(io(journal))?;
+    let bad = |message: &str| OutputError::Journal {
+        path: journal.to_owned(),
+        message: message.into(),
+    };
+    let mut lines = text.lines();
+    if lines.next() != Some(JOURNAL_HEAD) {
+        return Err(bad("unknown header"));
+    }
+    let mut plan = Vec::new();
+    for line in lines {
+        if line == "end" {
+            return Ok(plan);
+        }
+        let (had_old, name) = match line.split_once(' ') {
+            Some(("replace", name)) => (true, name),
+            Some(("add", name)) => (false, name),
+            _ => return Err(bad("expected `replace NAME`, `add NAME` or `end`")),
+        };
+        check_name(name).map_err(|_| bad("invalid file name"))?;
+        plan.push(Planned {
+            name: name.to_owned(),
+            had_old,
+        });
+    }
+    Err(bad("no `end` line"))
+}
+
+/// Puts every file the swap moved back where it was.
+fn roll_back(dir: &Path, staging: &Path, old: &Path, plan: &[Planned]) -> Result<(), OutputError> {
+    for p in plan {
+        let path = dir.join(&p.name);
+        if p.had_old {
+            let aside = old.join(&p.name);
+            if fs::symlink_metadata(&aside).is_ok() {
+                fs::rename(&aside, &path).map_err(io(&path))?;
+            }
+        } else if !staging.join(&p.name).exists() && fs::symlink_metadata(&path).is_ok() {
+            // The new file had been moved in.
+            fs::remove_file(&path).map_err(io(&path))?;
+        }
+    }
+    sync_dir(dir).map_err(io(dir))
+}
+
+/// Step 6: the journal goes first, then the folders it described.
+fn finish(dir: &Path, journal: &Path, staging: &Path, old: &Path) -> Result<(), OutputError> {
+    fs::remove_file(journal).map_err(io(journal))?;
+    sync_dir(dir).map_err(io(dir))?;
+    for d in [staging, old] {
+        match fs::remove_dir_all(d) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(d)(e)),
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// An output name is one plain file name (the bundle's files are flat).
+fn check_name(name: &str) -> Result<(), OutputError> {
+    let ok = !name.is_empty()
+        && name != "."
+        && name != ".."
+        && !name.contains(['/', '\\', '\n', '\r', '\0'])
+        && !name.starts_with(".texsyn-");
+    if ok {
+        Ok(())
+    } else {
+        Err(OutputError::BadName(name.to_owned()))
+    }
+}
+
+/// A process id as written after a leftover's prefix.
+fn parse_pid(s: &str) -> Option<u32> {
+    if s.is_empty() || !s.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    s.parse().ok()
+}
+
+/// Whether the process `pid` that left `path` behind is gone, so the leftover may be removed.
+/// This process's own id counts as dead: its writers are serialized and clean up after
+/// themselves, so what carries its id was left by an earlier process that had the same id.
+pub fn owner_is_dead(pid: u32, path: &Path) -> bool {
+    if pid == std::process::id() {
+        return true;
+    }
+    if cfg!(target_os = "linux") {
+        return !Path::new("/proc").join(pid.to_string()).exists();
+    }
+    fs::symlink_metadata(path)
+        .and_then(|m| m.modified())
+        .is_ok_and(|t| {
+            SystemTime::now()
+                .duration_since(t)
+                .is_ok_and(|age| age > STALE_AGE)
+        })
+}
+
+fn write_synced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut f = fs::File::create(path)?;
+    f.write_all(bytes)?;
+    f.sync_all()
+}
+
+/// Makes renames and removals in `dir` durable (a no-op where directories cannot be opened).
+fn sync_dir(dir: &Path) -> std::io::Result<()> {
+    #[cfg(unix)]
+    fs::File::open(dir)?.sync_all()?;
+    #[cfg(not(unix))]
+    let _ = dir;
+    Ok(())
 }

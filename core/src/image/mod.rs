@@ -217,6 +217,28 @@ pub fn decode_image(path: &Path, bytes: &[u8]) -> Result<Image, ImageError> {
 
 fn decode_exr(path: &Path, bytes: &[u8]) -> Result<Image, ImageError> {
     use exr::prelude::{ReadChannels, ReadLayers};
+    // The pixels are allocated from the header's size before any are read: a header must not
+    // claim more than the file could hold (deflate packs at most about 1032 bytes into one,
+    // and a pixel takes at least 2 bytes, so 1024 pixels per byte is beyond any real file).
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
+        .map_err(|e| ImageError::Decode {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+    for h in &meta.headers {
+        let pixels = h.layer_size.width().saturating_mul(h.layer_size.height());
+        if pixels > bytes.len().saturating_mul(1024) {
+            return Err(ImageError::Invalid {
+                path: path.to_owned(),
+                message: format!(
+                    "the header declares {}×{} pixels, more than a file of {} bytes can hold",
+                    h.layer_size.width(),
+                    h.layer_size.height(),
+                    bytes.len()
+                ),
+            });
+        }
+    }
     let reader = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -265,6 +287,22 @@ mod tests {
         assert_eq!(uv, Vec2::new(0.125, 0.875));
         let uv = texel_to_uv(Vec2::new(3.0, 3.0), 4, 4);
         assert_eq!(uv, Vec2::new(0.875, 0.125));
+    }
+
+    #[test]
+    fn an_exr_header_claiming_more_pixels_than_the_file_holds_is_refused_before_allocating() {
+        let mut bytes = crate::export::exr::write_exr_rgb(2, 2, &[glam::Vec3::ONE; 4]).unwrap();
+        assert!(decode_image(Path::new("x.exr"), &bytes).is_ok());
+        // The data window (box2i: xmin, ymin, xmax, ymax) made 10⁶ × 10⁶ pixels.
+        let key = b"dataWindow\0box2i\0";
+        let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len() + 4;
+        bytes[at + 8..at + 12].copy_from_slice(&999_999i32.to_le_bytes());
+        bytes[at + 12..at + 16].copy_from_slice(&999_999i32.to_le_bytes());
+        let e = decode_image(Path::new("x.exr"), &bytes).unwrap_err();
+        assert!(
+            e.to_string().starts_with("x.exr: ") && e.to_string().contains("1000000×1000000"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -48,7 +48,7 @@ fn obj_error(path: &Path, e: tobj::LoadError) -> RenderError {
 /// Reads an OBJ with tobj, keeping its per-corner texture coordinates and vertex colours.
 /// Groups and objects are merged into one mesh; materials are ignored.
 fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
-    let bytes = std::fs::read(path).map_err(|source| RenderError::Io {
+    let bytes = crate::geom::io::read_regular_file(path).map_err(|source| RenderError::Io {
         path: path.to_owned(),
         source,
     })?;
@@ -174,10 +174,11 @@ pub fn render_mesh_file(
     }
     let image = match texture {
         Some(p) => {
-            let bytes = std::fs::read(p).map_err(|source| RenderError::Io {
-                path: p.to_owned(),
-                source,
-            })?;
+            let bytes =
+                crate::geom::io::read_regular_file(p).map_err(|source| RenderError::Io {
+                    path: p.to_owned(),
+                    source,
+                })?;
             Some(decode_image(p, &bytes)?)
         }
         None => None,

@@ -67,9 +67,63 @@ impl fmt::Display for Location {
     }
 }
 
+/// Reads an input file whole, refusing what is not a regular file (a FIFO would block
+/// forever, a device such as `/dev/zero` never ends) before reading from it. The error's
+/// message says what the path is instead.
+pub fn read_regular_file(path: &Path) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let not_regular = |ty: std::fs::FileType| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("not a regular file (it is {})", file_type_name(ty)),
+        )
+    };
+    // stat first, so a FIFO is never opened (opening one for reading blocks until a writer
+    // comes); then check the opened file again, in case the path changed in between.
+    let ty = std::fs::metadata(path)?.file_type();
+    if !ty.is_file() {
+        return Err(not_regular(ty));
+    }
+    let mut file = std::fs::File::open(path)?;
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(not_regular(meta.file_type()));
+    }
+    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
+    file.read_to_end(&mut bytes)?;
+    Ok(bytes)
+}
+
+/// What a file type is, for messages ("a directory").
+fn file_type_name(ty: std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if ty.is_fifo() {
+            return "a FIFO";
+        }
+        if ty.is_char_device() {
+            return "a character device";
+        }
+        if ty.is_block_device() {
+            return "a block device";
+        }
+        if ty.is_socket() {
+            return "a socket";
+        }
+    }
+    if ty.is_dir() {
+        "a directory"
+    } else if ty.is_file() {
+        "a regular file"
+    } else {
+        "a special file"
+    }
+}
+
 /// Reads a mesh, choosing the reader by the file's extension.
 pub fn read_mesh(path: &Path) -> Result<Mesh, MeshError> {
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+    let bytes = read_regular_file(path).map_err(|source| MeshError::Io {
         path: path.to_path_buf(),
         source,
     })?;

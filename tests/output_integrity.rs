@@ -1,0 +1,341 @@
+//! The output folder after failures and kills (issue 11, items 4, 5, 8): a run's outputs are
+//! written as a set, a swap a killed run left half done is finished or undone by the next
+//! command, dead processes' temporaries are removed (and nothing that is not texsyn's), and
+//! input files that are not regular files, or whose header claims more than they hold, fail
+//! fast. Everything runs the real binary on configs/synth2d.toml (fast).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const CONFIG: &str = "configs/synth2d.toml";
+/// synth2d's exports.
+const OUTPUTS: [&str; 2] = ["coordinates.png", "synthesized.png"];
+
+struct Output {
+    ok: bool,
+    stderr: String,
+}
+
+/// Runs texsyn with `args` (and `env`), killing it and failing the test if it takes longer
+/// than a minute (a FIFO input would otherwise hang the test forever).
+fn texsyn_env(args: &[&str], env: &[(&str, &Path)]) -> Output {
+    let logs = tempfile::tempdir().unwrap();
+    let (out, err) = (logs.path().join("out"), logs.path().join("err"));
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_texsyn"));
+    cmd.current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(std::fs::File::create(&out).unwrap())
+        .stderr(std::fs::File::create(&err).unwrap());
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let mut child = cmd.spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "texsyn {args:?} still running after 60 s (killed); stderr: {}",
+                std::fs::read_to_string(&err).unwrap_or_default()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    Output {
+        ok: status.success(),
+        stderr: std::fs::read_to_string(&err).unwrap(),
+    }
+}
+
+fn texsyn(args: &[&str]) -> Output {
+    texsyn_env(args, &[])
+}
+
+/// `texsyn run` of synth2d with `seed` into `out`, with the cache at `cache`.
+fn run(cache: &Path, out: &Path, seed: u32) -> Output {
+    texsyn(&[
+        "run",
+        CONFIG,
+        "-q",
+        "--cache",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        &format!("synthesize.seed={seed}"),
+    ])
+}
+
+fn run_ok(cache: &Path, out: &Path, seed: u32) {
+    let o = run(cache, out, seed);
+    assert!(o.ok, "run failed: {}", o.stderr);
+}
+
+/// Every entry of `dir` (recursively), files with their bytes, folders as `None`.
+fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
+    let mut all = BTreeMap::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let e = e.unwrap();
+        let p = e.path();
+        let rel = PathBuf::from(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            all.insert(rel.clone(), None);
+            for (k, v) in snapshot(&p) {
+                all.insert(rel.join(k), v);
+            }
+        } else {
+            all.insert(rel, Some(std::fs::read(&p).unwrap()));
+        }
+    }
+    all
+}
+
+/// The id of a process that has exited (a finished child).
+fn dead_pid() -> u32 {
+    let mut child = Command::new("true").spawn().unwrap();
+    let pid = child.id();
+    child.wait().unwrap();
+    pid
+}
+
+/// The outputs of seed 1 and of seed 2, each written by a run into its own folder.
+fn two_runs(cache: &Path, root: &Path) -> (PathBuf, PathBuf) {
+    let (a, b) = (root.join("a"), root.join("b"));
+    run_ok(cache, &a, 1);
+    run_ok(cache, &b, 2);
+    for name in OUTPUTS {
+        assert_ne!(
+            std::fs::read(a.join(name)).unwrap(),
+            std::fs::read(b.join(name)).unwrap(),
+            "{name}: seeds 1 and 2 must give other files for these tests to mean anything"
+        );
+    }
+    (a, b)
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+    }
+}
+
+#[test]
+fn a_failed_export_leaves_the_previous_outputs_whole() {
+    let root = tempfile::tempdir().unwrap();
+    let cache = root.path().join("cache");
+    // Each output in turn is the one that cannot be written, so the failure falls both
+    // before and after the other file in the bundle's order.
+    for blocked in OUTPUTS {
+        let out = root.path().join(format!("out-{blocked}"));
+        run_ok(&cache, &out, 1);
+        std::fs::remove_file(out.join(blocked)).unwrap();
+        std::fs::create_dir(out.join(blocked)).unwrap();
+        std::fs::write(out.join(blocked).join("mine.txt"), b"not texsyn's").unwrap();
+        std::fs::write(out.join("notes.txt"), b"mine").unwrap();
+        let before = snapshot(&out);
+
+        let o = run(&cache, &out, 2);
+        assert!(!o.ok, "the run must fail when {blocked} is a directory");
+        assert!(
+            o.stderr.contains(blocked) && o.stderr.contains("is a directory"),
+            "the message must name the output and the problem: {}",
+            o.stderr
+        );
+        assert_eq!(
+            snapshot(&out),
+            before,
+            "{blocked} blocked: the folder must hold exactly the previous run's outputs, \
+             with no temporary files or staging folder left"
+        );
+    }
+}
+
+#[test]
+fn an_interrupted_swap_is_completed_or_rolled_back_by_the_next_command() {
+    let root = tempfile::tempdir().unwrap();
+    let cache = root.path().join("cache");
+    let (a, b) = two_runs(&cache, root.path());
+    // A command that recovers the output folder and then fails (its cache is a file): what
+    // it leaves is the recovery alone.
+    let not_a_cache = root.path().join("not-a-cache");
+    std::fs::write(&not_a_cache, b"").unwrap();
+    let recover = |out: &Path| {
+        texsyn(&[
+            "run",
+            CONFIG,
+            "-q",
+            "--cache",
+            not_a_cache.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+
+    for (case, staged_complete) in [("complete", true), ("incomplete", false)] {
+        // A run with seed 2, killed after the journal was written and the first file swapped:
+        // coordinates.png is new (old copy aside), synthesized.png still old (new one staged).
+        let out = root.path().join(case);
+        copy_dir(&a, &out);
+        std::fs::write(out.join("notes.txt"), b"mine").unwrap();
+        let pid = dead_pid();
+        let staging = out.join(format!(".texsyn-staging-{pid}"));
+        let old = out.join(format!(".texsyn-old-{pid}"));
+        std::fs::create_dir(&staging).unwrap();
+        std::fs::create_dir(&old).unwrap();
+        std::fs::rename(out.join(OUTPUTS[0]), old.join(OUTPUTS[0])).unwrap();
+        std::fs::copy(b.join(OUTPUTS[0]), out.join(OUTPUTS[0])).unwrap();
+        if staged_complete {
+            std::fs::copy(b.join(OUTPUTS[1]), staging.join(OUTPUTS[1])).unwrap();
+        }
+        std::fs::write(
+            out.join(format!(".texsyn-swap-{pid}")),
+            format!(
+                "texsyn output swap 1\nreplace {}\nreplace {}\nend\n",
+                OUTPUTS[0], OUTPUTS[1]
+            ),
+        )
+        .unwrap();
+
+        let o = recover(&out);
+        assert!(!o.ok, "{case}: the cache is a file, the run must fail");
+        let mut expected = snapshot(if staged_complete { &b } else { &a });
+        expected.insert("notes.txt".into(), Some(b"mine".to_vec()));
+        assert_eq!(
+            snapshot(&out),
+            expected,
+            "{case}: the folder must hold all of the {} run's outputs and nothing else of texsyn's",
+            if staged_complete { "new" } else { "old" }
+        );
+    }
+}
+
+#[test]
+fn stale_temporaries_of_dead_processes_are_removed_and_nothing_else() {
+    let root = tempfile::tempdir().unwrap();
+    let cache = root.path().join("cache");
+    let out = root.path().join("out");
+    run_ok(&cache, &out, 1);
+    let dead = dead_pid();
+    let alive = std::process::id(); // this test process, running
+    let stale = [
+        format!(".{}.tmp-{dead}", OUTPUTS[0]),
+        format!(".{}.tmp-{dead}", OUTPUTS[1]),
+    ];
+    for s in &stale {
+        std::fs::write(out.join(s), b"half written").unwrap();
+    }
+    std::fs::create_dir(out.join(format!(".texsyn-staging-{dead}"))).unwrap();
+    std::fs::write(out.join(format!(".texsyn-staging-{dead}/x.png")), b"x").unwrap();
+    let live = format!(".{}.tmp-{alive}", OUTPUTS[0]);
+    std::fs::write(out.join(&live), b"being written").unwrap();
+    std::fs::write(out.join("notes.txt"), b"mine").unwrap();
+    std::fs::write(out.join(".notes.tmp-x"), b"mine too").unwrap();
+
+    run_ok(&cache, &out, 2);
+    let names: Vec<String> = snapshot(&out)
+        .keys()
+        .map(|k| k.to_string_lossy().into_owned())
+        .collect();
+    let mut expected: Vec<String> = OUTPUTS.iter().map(|s| s.to_string()).collect();
+    expected.extend([live, "notes.txt".into(), ".notes.tmp-x".into()]);
+    expected.sort();
+    assert_eq!(names, expected);
+    assert_eq!(std::fs::read(out.join("notes.txt")).unwrap(), b"mine");
+}
+
+#[test]
+fn verify_fresh_removes_the_temporary_caches_of_killed_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dead = tmp.path().join(format!("texsyn-verify-{}-123", dead_pid()));
+    let live = tmp
+        .path()
+        .join(format!("texsyn-verify-{}-456", std::process::id()));
+    for d in [&dead, &live] {
+        std::fs::create_dir(d).unwrap();
+        std::fs::write(d.join("object"), b"cached").unwrap();
+    }
+    let o = texsyn_env(
+        &["verify", "--fresh", "-q", CONFIG, "configs/synth2d.lock"],
+        &[("TMPDIR", tmp.path())],
+    );
+    assert!(o.ok, "verify failed: {}", o.stderr);
+    let left: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(
+        left,
+        vec![live],
+        "only the live process's temporary cache may stay"
+    );
+}
+
+/// Runs `config` with `key` set to `path` and asserts a quick failure naming the key, the
+/// path and that it is not a regular file.
+fn assert_refused(config: &str, key: &str, path: &Path) {
+    let cache = tempfile::tempdir().unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let o = texsyn(&[
+        "run",
+        config,
+        "-q",
+        "--cache",
+        cache.path().to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+        "--set",
+        &format!("{key}=\"{}\"", path.display()),
+    ]);
+    assert!(!o.ok, "{key} = {}: must fail", path.display());
+    for word in [key, &path.display().to_string(), "not a regular file"] {
+        assert!(
+            o.stderr.contains(word),
+            "expected {word:?} in: {}",
+            o.stderr
+        );
+    }
+}
+
+#[test]
+fn a_fifo_or_device_as_an_input_fails_fast_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    // /dev/zero behind a mesh extension, so the mesh reader would be chosen for it.
+    let zero = dir.path().join("zero.off");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    assert_refused("configs/demo.toml", "inputs.mesh", &zero);
+    assert_refused(CONFIG, "inputs.exemplar", Path::new("/dev/zero"));
+
+    let fifo = dir.path().join("exemplar.png");
+    match Command::new("mkfifo").arg(&fifo).status() {
+        Ok(s) if s.success() => assert_refused(CONFIG, "inputs.exemplar", &fifo),
+        _ => eprintln!("mkfifo is missing: FIFO case skipped"),
+    }
+}
+
+#[test]
+fn an_off_header_claiming_billions_of_vertices_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("huge.off");
+    std::fs::write(&mesh, "OFF\n2000000000 1 0\n0 0 0\n1 0 0\n0 1 0\n").unwrap();
+    let o = texsyn(&[
+        "render",
+        mesh.to_str().unwrap(),
+        "-o",
+        dir.path().join("x.png").to_str().unwrap(),
+    ]);
+    assert!(!o.ok);
+    assert!(
+        o.stderr.contains("huge.off") && o.stderr.contains("end of file after 3 of 2000000000"),
+        "{}",
+        o.stderr
+    );
+}
