@@ -95,7 +95,10 @@ fn mutated(seed: Vec<u8>) -> impl Strategy<Value = Vec<u8>> {
 /// Small valid files of every mesh format (tetrahedra and cubes from tests/data).
 fn mesh_seeds() -> Vec<(&'static str, Vec<u8>)> {
     vec![
-        ("m.off", data("tests/data/meshes/cactus.off")[..4000].to_vec()),
+        (
+            "m.off",
+            data("tests/data/meshes/cactus.off")[..4000].to_vec(),
+        ),
         ("m.ply", data("tests/data/meshes/cube_ascii.ply")),
         ("m.ply", data("tests/data/meshes/cube_le.ply")),
         ("m.ply", data("tests/data/meshes/cube_be.ply")),

@@ -299,7 +299,18 @@ impl Cache {
                     .and_then(|m| m.modified())
                     .map(|t| now.duration_since(t).unwrap_or_default() > STALE_TMP_AGE)
                     .unwrap_or(false);
-                if old {
+                // `.tmp-<pid>-<n>`: a writer that was killed is known dead at once on Linux,
+                // without waiting for the age limit (never this process's own files).
+                let owner = f.file_name().to_string_lossy()[TMP_PREFIX.len()..]
+                    .split('-')
+                    .next()
+                    .and_then(|p| p.parse::<u32>().ok());
+                let dead = owner.is_some_and(|pid| {
+                    pid != std::process::id()
+                        && cfg!(target_os = "linux")
+                        && !Path::new("/proc").join(pid.to_string()).exists()
+                });
+                if old || dead {
                     let _ = fs::remove_file(f.path());
                 }
             }
