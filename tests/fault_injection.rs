@@ -180,3 +180,49 @@ fn a_full_disk_fails_clearly_and_keeps_the_outputs_and_the_cache() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(files(&tmp.path().join("out2")), before);
 }
+
+/// Concurrent runs of overlapping configs on one cache, with `gc` trimming it to nothing at
+/// the same time: every run succeeds, and runs of one config agree byte for byte.
+#[test]
+fn concurrent_runs_and_gc_on_one_cache_agree() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cache = tmp.path().join("cache");
+    let mut children = Vec::new();
+    for (i, seed) in [1, 1, 2, 1, 2].into_iter().enumerate() {
+        let out = tmp.path().join(format!("out{i}"));
+        children.push((
+            seed,
+            out.clone(),
+            texsyn(&cache, &out, &settings(seed, 512)).spawn().unwrap(),
+        ));
+    }
+    let mut gcs = Vec::new();
+    for _ in 0..3 {
+        std::thread::sleep(Duration::from_millis(100));
+        gcs.push(
+            Command::new(env!("CARGO_BIN_EXE_texsyn"))
+                .args(["gc", "--max-size", "0", "--quiet", "--cache"])
+                .arg(&cache)
+                .stderr(Stdio::piped())
+                .output()
+                .unwrap(),
+        );
+    }
+    let mut sets: BTreeMap<u32, BTreeMap<String, Vec<u8>>> = BTreeMap::new();
+    for (seed, out, child) in children {
+        let o = child.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let f = files(&out);
+        assert!(!f.is_empty());
+        if let Some(first) = sets.get(&seed) {
+            assert_eq!(first, &f, "two runs of seed {seed} disagree");
+        } else {
+            sets.insert(seed, f);
+        }
+    }
+    for g in gcs {
+        assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
+    }
+    assert_ne!(sets[&1], sets[&2]);
+    assert!(leftovers(&cache).is_empty(), "{:?}", leftovers(&cache));
+}
