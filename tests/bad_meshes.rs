@@ -39,3 +39,39 @@ fn coordinates_that_overflow_are_named_with_the_vertex() {
     );
     assert!(!e.contains("0.0000"), "{e}");
 }
+
+/// A mesh a method can work with despite its defects is textured, with a warning naming them
+/// (one check for every method; geometry_images refuses such meshes precisely).
+#[test]
+fn defects_a_method_can_live_with_are_named_in_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("dup.off");
+    // A tetrahedron with one face repeated in the other orientation.
+    std::fs::write(
+        &mesh,
+        format!("OFF\n4 5 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n{TETRA_FACES}3 2 1 0\n"),
+    )
+    .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_texsyn"))
+        .args(["run", "configs/demo.toml", "--set"])
+        .arg(format!("inputs.mesh=\"{}\"", mesh.display()))
+        .args([
+            "--set",
+            "parameterize.scale=20",
+            "--set",
+            "reconstruct.atlas_size=256",
+        ])
+        .args(["--set", "reconstruct.preview_size=32", "--cache"])
+        .arg(dir.path().join("cache"))
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .current_dir(repo())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("1 duplicate triangle") && err.contains("non-manifold edge"),
+        "{err}"
+    );
+}

@@ -130,6 +130,9 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         c.parameterize.clone(),
         mesh,
         |_, p, mesh| {
+            if let Some(w) = crate::geom::mesh_check::mesh_health(&mesh).warning("graph_matching") {
+                tracing::warn!("{w}");
+            }
             let h = build_hierarchy(&mesh, p.scale, p).map_err(NodeError::input)?;
             tracing::info!(
                 "parameterize: {} levels, {} → {} vertices",

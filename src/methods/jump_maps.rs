@@ -116,6 +116,9 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         c.field.clone(),
         mesh,
         |_, p, mesh| {
+            if let Some(w) = crate::geom::mesh_check::mesh_health(&mesh).warning("jump_maps") {
+                tracing::warn!("{w}");
+            }
             Ok(OrientationField(
                 orientation_field(&mesh, p).map_err(NodeError::input)?,
             ))

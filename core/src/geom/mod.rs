@@ -10,6 +10,7 @@ pub mod half_edge;
 pub mod io;
 pub mod laplacian;
 pub mod mean_value;
+pub mod mesh_check;
 pub mod poly_mesh;
 pub mod primitives;
 pub mod subdivide;
