@@ -17,6 +17,7 @@
 //! (what the synthesis and the displacement expect).
 
 pub mod bilateral_difference;
+pub mod crease_lines;
 pub mod height_field;
 pub mod planar_ransac;
 pub mod sample_region;
