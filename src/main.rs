@@ -369,8 +369,8 @@ fn real_main() -> Result<i32> {
                 println!(
                     "removed {} objects ({}), {} kept in {}",
                     report.removed,
-                    human_bytes(report.removed_bytes),
-                    human_bytes(report.kept_bytes),
+                    texsyn::memory::human(report.removed_bytes),
+                    texsyn::memory::human(report.kept_bytes),
                     cache.root().display()
                 );
             }
@@ -461,21 +461,6 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     written
 }
 
-fn human_bytes(b: u64) -> String {
-    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
-    let mut v = b as f64;
-    let mut u = 0;
-    while v >= 1024.0 && u < UNITS.len() - 1 {
-        v /= 1024.0;
-        u += 1;
-    }
-    if u == 0 {
-        format!("{b} B")
-    } else {
-        format!("{v:.1} {}", UNITS[u])
-    }
-}
-
 fn print_table(reports: &[pipeline::NodeReport]) {
     // The pieces column appears only when a node caches pieces (the solid's bricks).
     let pieces = reports.iter().any(|r| r.pieces.is_some());
@@ -507,7 +492,7 @@ fn print_table(reports: &[pipeline::NodeReport]) {
             r.stage,
             status,
             r.seconds,
-            human_bytes(r.bytes)
+            texsyn::memory::human(r.bytes)
         );
     }
 }

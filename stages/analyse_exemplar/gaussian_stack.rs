@@ -16,8 +16,7 @@
 //! Only RGB is kept: the paper's "colour" (or a grey displacement value, which is R = G = B).
 
 use crate::check::{ParamError, check_range};
-use crate::image::{Image, ImageView};
-use rayon::prelude::*;
+use crate::image::ImageView;
 use serde::{Deserialize, Serialize};
 
 /// Stack or pyramid (the paper's `a`).
@@ -114,7 +113,7 @@ pub fn build_stack(exemplar: ImageView, p: &StackParams) -> Result<GaussianStack
     for m in 1..levels {
         let prev = images.last().expect("level 0").view();
         let next = match p.kind {
-            StackKind::Stack => blur_a_trous(prev, 1 << (m - 1)),
+            StackKind::Stack => crate::image::pyramid::blur_binomial5_dilated(prev, 1 << (m - 1)),
             StackKind::Pyramid => {
                 if prev.width.min(prev.height) < 4 {
                     break;
@@ -146,40 +145,6 @@ fn auto_levels(w: u32, h: u32) -> u32 {
     (31 - w.min(h).leading_zeros())
         .saturating_sub(1)
         .clamp(1, 8)
-}
-
-/// The binomial `[1 4 6 4 1]/16` with taps `step` texels apart, separable, borders clamped.
-fn blur_a_trous(img: ImageView, step: i64) -> Image {
-    const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
-    let (w, h) = (img.width as usize, img.height as usize);
-    let pass = |src: ImageView, dx: i64, dy: i64| -> Vec<[f32; 4]> {
-        let mut out = vec![[0.0f32; 4]; w * h];
-        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            for (x, o) in row.iter_mut().enumerate() {
-                let mut acc = [0.0f32; 4];
-                for (t, &k) in K.iter().enumerate() {
-                    let d = (t as i64 - 2) * step;
-                    let p = src.get_clamped(x as i64 + d * dx, y as i64 + d * dy);
-                    for c in 0..4 {
-                        acc[c] += k * p[c];
-                    }
-                }
-                *o = acc;
-            }
-        });
-        out
-    };
-    let tmp = pass(img, 1, 0);
-    let tmp_view = ImageView {
-        width: img.width,
-        height: img.height,
-        pixels: &tmp,
-    };
-    Image {
-        width: img.width,
-        height: img.height,
-        pixels: pass(tmp_view, 0, 1),
-    }
 }
 
 impl<'a> GaussianStackRef<'a> {
@@ -249,6 +214,7 @@ const MAX_LEVELS: usize = 30;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::image::Image;
 
     fn stripes(w: u32, h: u32, period: u32) -> Image {
         Image::from_fn(w, h, |x, _| {

@@ -255,7 +255,9 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
 }
 
 /// The unit projection of `d` into the plane with normal `n`, or zero if it vanishes.
-fn tangent(d: Vec3, n: Vec3) -> Vec3 {
+/// `d` projected into the tangent plane of normal `n` and normalized; zero when `d` is
+/// (almost) along `n`.
+pub(crate) fn tangent(d: Vec3, n: Vec3) -> Vec3 {
     let t = d - d.dot(n) * n;
     if t.length_squared() > 1e-12 * d.length_squared().max(1e-30) {
         t.normalize()

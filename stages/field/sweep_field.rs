@@ -24,7 +24,9 @@
 //!   sweep is a relaxation of the same relation. Only level 0 needs it (later levels are
 //!   visited in random order, §3.1.2), so only level 0's values are stored.
 
-use super::orientation_field::{Anchor, FieldError, FieldParams, orientation_field, resolve_point};
+use super::orientation_field::{
+    Anchor, FieldError, FieldParams, orientation_field, resolve_point, tangent,
+};
 use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use crate::geom::poly_mesh::PolyMesh;
@@ -352,15 +354,6 @@ fn sweep_values(mesh: &PolyMesh, orientation: &[Vec3], start: u32) -> Vec<f32> {
         }
     }
     s
-}
-
-fn tangent(d: Vec3, n: Vec3) -> Vec3 {
-    let t = d - d.dot(n) * n;
-    if t.length_squared() > 1e-12 * d.length_squared().max(1e-30) {
-        t.normalize()
-    } else {
-        Vec3::ZERO
-    }
 }
 
 /// The order in which level 0 is visited: by increasing sweep, ties by vertex id; vertices of

@@ -726,23 +726,7 @@ fn check_mesh(mesh: &Mesh) -> Result<(), SubdivisionError> {
 mod tests {
     use super::*;
     use crate::geom::poly_mesh::Adjacency;
-    use crate::geom::primitives::{cube, grid, octahedron, torus};
-
-    /// An n×n grid of unit quads in the z = 0 plane, counter-clockwise seen from +z; vertex
-    /// (x, y) has id y(n + 1) + x, cell (x, y) is face yn + x.
-    fn quad_grid(n: u32) -> PolyMesh {
-        let w = n + 1;
-        let positions = (0..w * w)
-            .map(|i| Vec3::new((i % w) as f32, (i / w) as f32, 0.0))
-            .collect();
-        let faces: Vec<Vec<u32>> = (0..n * n)
-            .map(|c| {
-                let i = (c / n) * w + c % n;
-                vec![i, i + 1, i + w + 1, i + w]
-            })
-            .collect();
-        PolyMesh::from_faces(positions, &faces)
-    }
+    use crate::geom::primitives::{cube, grid, octahedron, quad_grid, torus};
 
     /// The octahedron with its top pulled up to z = 30: four large faces over four small ones.
     fn tall_octahedron() -> Mesh {

@@ -287,22 +287,7 @@ fn undirected_key(a: u32, b: u32) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geom::primitives::{cube, grid, octahedron, torus};
-
-    /// An n×n grid of unit quads in the z = 0 plane, counter-clockwise seen from +z.
-    fn quad_grid(n: u32) -> PolyMesh {
-        let w = n + 1;
-        let positions = (0..w * w)
-            .map(|i| Vec3::new((i % w) as f32, (i / w) as f32, 0.0))
-            .collect();
-        let faces: Vec<Vec<u32>> = (0..n * n)
-            .map(|c| {
-                let i = (c / n) * w + c % n;
-                vec![i, i + 1, i + w + 1, i + w]
-            })
-            .collect();
-        PolyMesh::from_faces(positions, &faces)
-    }
+    use crate::geom::primitives::{cube, grid, octahedron, quad_grid, torus};
 
     #[test]
     fn from_mesh_keeps_every_vertex_and_the_triangles() {

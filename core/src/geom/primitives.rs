@@ -112,3 +112,19 @@ pub fn torus(n: u32, m: u32, tube: f32) -> Mesh {
     }
     Mesh::new(p, t)
 }
+
+/// An n×n grid of unit quads in the z = 0 plane, counter-clockwise seen from +z: vertex
+/// (x, y) has id y(n + 1) + x, cell (x, y) is face yn + x.
+pub fn quad_grid(n: u32) -> super::poly_mesh::PolyMesh {
+    let w = n + 1;
+    let positions = (0..w * w)
+        .map(|i| Vec3::new((i % w) as f32, (i / w) as f32, 0.0))
+        .collect();
+    let faces: Vec<Vec<u32>> = (0..n * n)
+        .map(|c| {
+            let i = (c / n) * w + c % n;
+            vec![i, i + 1, i + w + 1, i + w]
+        })
+        .collect();
+    super::poly_mesh::PolyMesh::from_faces(positions, &faces)
+}

@@ -53,6 +53,12 @@ impl Pyramid {
 
 /// Separable 5-tap binomial blur with clamped borders, all four channels.
 pub fn blur_binomial5(img: ImageView) -> Image {
+    blur_binomial5_dilated(img, 1)
+}
+
+/// The same blur with its taps `step` texels apart (à trous): applied with steps 1, 2, 4, …
+/// it gives a Gaussian stack's levels at full size.
+pub fn blur_binomial5_dilated(img: ImageView, step: i64) -> Image {
     let (w, h) = (img.width as usize, img.height as usize);
     if w == 0 || h == 0 {
         return img.to_owned();
@@ -63,7 +69,7 @@ pub fn blur_binomial5(img: ImageView) -> Image {
         for (x, out) in row.iter_mut().enumerate() {
             let mut acc = [0.0f32; 4];
             for (t, &k) in BINOMIAL5.iter().enumerate() {
-                let p = img.get_clamped(x as i64 + t as i64 - 2, y as i64);
+                let p = img.get_clamped(x as i64 + (t as i64 - 2) * step, y as i64);
                 for c in 0..4 {
                     acc[c] += k * p[c];
                 }
@@ -82,7 +88,7 @@ pub fn blur_binomial5(img: ImageView) -> Image {
         for (x, o) in row.iter_mut().enumerate() {
             let mut acc = [0.0f32; 4];
             for (t, &k) in BINOMIAL5.iter().enumerate() {
-                let p = tmp_view.get_clamped(x as i64, y as i64 + t as i64 - 2);
+                let p = tmp_view.get_clamped(x as i64, y as i64 + (t as i64 - 2) * step);
                 for c in 0..4 {
                     acc[c] += k * p[c];
                 }
