@@ -5,6 +5,7 @@
 //! geometry-central does, so an algorithm asks for what it needs and pays for it once.
 
 pub mod cut_graph;
+pub mod edge_refine;
 pub mod geometry_image;
 pub mod half_edge;
 pub mod io;
