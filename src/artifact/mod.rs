@@ -16,6 +16,7 @@
 //! The content hash covers the whole payload, so it changes exactly when the bytes a reader
 //! could see change. It is what downstream node keys are built from (early cutoff).
 
+pub mod feature_aligned;
 pub mod format;
 pub mod geometry_images;
 pub mod graph_matching;
@@ -61,6 +62,11 @@ pub enum Kind {
     SweepField = 20,
     GaussianStack = 21,
     VertexColours = 22,
+    ShapeFeatures = 23,
+    TextureFeatures = 24,
+    FeatureField = 25,
+    RefinedMesh = 26,
+    SurfaceColours = 27,
 }
 
 impl Kind {
@@ -89,6 +95,11 @@ impl Kind {
             SweepField,
             GaussianStack,
             VertexColours,
+            ShapeFeatures,
+            TextureFeatures,
+            FeatureField,
+            RefinedMesh,
+            SurfaceColours,
         ]
         .into_iter()
         .find(|k| *k as u32 == code)

@@ -1,5 +1,6 @@
 //! Methods: each expands its config section into a DAG of pipeline nodes (DESIGN.md, "A run").
 
+pub mod feature_aligned;
 pub mod geometry_images;
 pub mod graph_matching;
 pub mod jump_maps;
@@ -18,6 +19,7 @@ pub const METHODS: &[&str] = &[
     "geometry_images",
     "solid",
     "graph_matching",
+    "feature_aligned",
 ];
 
 #[derive(Debug, thiserror::Error)]
@@ -49,6 +51,7 @@ pub fn plan(config: &Config) -> Result<Plan, MethodError> {
         "geometry_images" => geometry_images::build(config)?,
         "solid" => solid::build(config)?,
         "graph_matching" => graph_matching::build(config)?,
+        "feature_aligned" => feature_aligned::build(config)?,
         other => {
             return Err(MethodError::UnknownMethod {
                 path: config.path.clone(),

@@ -1,6 +1,7 @@
 //! Stage: reconstruct: what users open (textured meshes, baked textures, images, previews).
 pub mod blend2d;
 pub mod displacement;
+pub mod feature_aligned_export;
 pub mod jump_blend;
 pub mod jump_export;
 pub mod relief_export;

@@ -1,0 +1,357 @@
+//! What a user gets from feature-aligned texturing (Xu et al., "Feature-Aligned Shape
+//! Texturing"), and what lets them check each step before trusting the result:
+//!
+//! - `textured.ply`: the refined mesh with a colour per vertex (what §5 optimizes);
+//! - `textured.glb`: the same with the colours also baked into a texture atlas (`COLOR_0` and
+//!   a base-colour texture), for tools that ignore vertex colours;
+//! - `preview.png`: three views; with the unaligned comparison, `unaligned_preview.png` and
+//!   `comparison.png` (aligned above, unaligned below: the paper's Fig. 7 pairs);
+//! - `lines.obj`: the shape's feature curves as OBJ polylines (`l`), in groups `ridge`,
+//!   `valley`, `crease`, `user`, oriented as the field follows them; it can be edited and given
+//!   back as `extract.curves_file`;
+//! - `lines_preview.png`: the mesh with its curves drawn (red ridges and creases, blue
+//!   valleys, green user curves);
+//! - `field.png`: the vector field as a line-integral convolution (streaks along the field;
+//!   singularities show as points where streaks swirl or end), with the curves drawn;
+//! - `texture_features.png`: the exemplar with its feature lines (from the analysis stage).
+
+use crate::check::{ParamError, check_range};
+use crate::export::encode_png;
+use crate::geom::Mesh;
+use crate::geom::edge_refine::Refined;
+use crate::render::{VertexColorShader, ViewOptions, render_views, srgb};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// `[reconstruct]` of the feature-aligned method.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FeatureAlignedExportParams {
+    /// Side of each preview view, 16..=4096. Default: 512.
+    pub preview_size: u32,
+    /// The mesh's up direction, for the previews. Default: [0, 1, 0].
+    pub up: [f32; 3],
+    /// Side of the baked atlas in `textured.glb`, 64..=8192; 0 writes vertex colours only.
+    /// Default: 2048.
+    pub atlas_size: u32,
+    /// Length of the field picture's streaks, in vertex steps each way, 1..=200. Default: 12.
+    pub streak_length: u32,
+}
+
+impl Default for FeatureAlignedExportParams {
+    fn default() -> Self {
+        FeatureAlignedExportParams {
+            preview_size: 512,
+            up: [0.0, 1.0, 0.0],
+            atlas_size: 2048,
+            streak_length: 12,
+        }
+    }
+}
+
+impl FeatureAlignedExportParams {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
+        if self.atlas_size != 0 {
+            check_range("reconstruct.atlas_size", self.atlas_size, 64, 8192)?;
+        }
+        check_range("reconstruct.streak_length", self.streak_length, 1, 200)?;
+        if !self.up.iter().all(|x| x.is_finite()) || Vec3::from(self.up).length() < 1e-12 {
+            return Err(ParamError::invalid(
+                "reconstruct.up",
+                "must be a finite, non-zero vector",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A feature curve to draw and export: a vertex path of the input mesh, its kind (0 ridge,
+/// 1 valley, 2 crease, 3 user) and its orientation (+1: along its vertex order).
+pub struct DrawnCurve<'a> {
+    pub vertices: &'a [u32],
+    pub closed: bool,
+    pub kind: u8,
+    pub sign: i8,
+}
+
+/// Everything the export draws on.
+pub struct FeatureAlignedResult<'a> {
+    pub input: &'a Mesh,
+    pub refined: &'a Refined,
+    /// Per refined vertex.
+    pub colours: &'a [[f32; 3]],
+    pub unaligned: Option<&'a [[f32; 3]]>,
+    /// Per refined vertex, unit tangent (or zero).
+    pub field: &'a [Vec3],
+    pub curves: Vec<DrawnCurve<'a>>,
+    pub texture_features_png: Vec<u8>,
+    /// `report.json`: the run's numbers, written by the method.
+    pub report: String,
+}
+
+const KIND_NAMES: [&str; 4] = ["ridge", "valley", "crease", "user"];
+const KIND_COLOURS: [[f32; 3]; 4] = [
+    [0.85, 0.1, 0.1],
+    [0.1, 0.3, 0.9],
+    [0.85, 0.1, 0.1],
+    [0.1, 0.7, 0.2],
+];
+
+fn rgba(c: &[[f32; 3]]) -> Vec<[f32; 4]> {
+    c.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect()
+}
+
+/// The output files (see the module doc).
+pub fn export_feature_aligned(
+    r: &FeatureAlignedResult,
+    p: &FeatureAlignedExportParams,
+    progress: &dyn Fn(f32),
+) -> Result<Vec<(String, Vec<u8>)>, crate::render::AtlasError> {
+    let mesh = &r.refined.mesh;
+    let opts = ViewOptions {
+        size: p.preview_size,
+        up: Vec3::from(p.up),
+        ..Default::default()
+    };
+    let colours = rgba(r.colours);
+    let mut files = vec![(
+        "textured.ply".to_string(),
+        crate::geom::io::write_ply(mesh, Some(&colours)),
+    )];
+    files.push(("textured.glb".into(), glb(mesh, &colours, p.atlas_size)?));
+    progress(0.3);
+    let view = |c: &[[f32; 4]]| render_views(mesh, &VertexColorShader::new(&mesh.triangles, c), &opts);
+    let preview = view(&colours);
+    files.push(("preview.png".into(), encode_png(&preview, false)));
+    if let Some(u) = r.unaligned {
+        let unaligned = view(&rgba(u));
+        files.push(("unaligned_preview.png".into(), encode_png(&unaligned, false)));
+        files.push((
+            "comparison.png".into(),
+            encode_png(&stack(&preview, &unaligned), false),
+        ));
+    }
+    progress(0.6);
+    // Curves on the refined mesh, for drawing.
+    let refined_curves: Vec<(Vec<u32>, u8)> = r
+        .curves
+        .iter()
+        .map(|c| (r.refined.refine_path(c.vertices, c.closed), c.kind))
+        .collect();
+    let grey = vec![[0.78, 0.78, 0.78, 1.0]; mesh.vertex_count()];
+    files.push((
+        "lines_preview.png".into(),
+        encode_png(&view(&draw_curves(mesh, grey, &refined_curves)), false),
+    ));
+    let lic = streaks(mesh, r.field, p.streak_length as usize);
+    files.push((
+        "field.png".into(),
+        encode_png(&view(&draw_curves(mesh, lic, &refined_curves)), false),
+    ));
+    files.push(("lines.obj".into(), lines_obj(r.input, &r.curves).into_bytes()));
+    files.push(("texture_features.png".into(), r.texture_features_png.clone()));
+    files.push(("report.json".into(), r.report.clone().into_bytes()));
+    progress(1.0);
+    Ok(files)
+}
+
+/// Two images one above the other.
+fn stack(a: &image::RgbaImage, b: &image::RgbaImage) -> image::RgbaImage {
+    let w = a.width().max(b.width());
+    let mut out = image::RgbaImage::from_pixel(w, a.height() + b.height(), image::Rgba([255; 4]));
+    image::imageops::replace(&mut out, a, 0, 0);
+    image::imageops::replace(&mut out, b, 0, a.height() as i64);
+    out
+}
+
+/// The curves' vertices and their one-ring painted in the curves' colours (a line one
+/// vertex wide is thinner than a preview pixel on a texel-fine mesh).
+fn draw_curves(mesh: &Mesh, mut colours: Vec<[f32; 4]>, curves: &[(Vec<u32>, u8)]) -> Vec<[f32; 4]> {
+    let adj = mesh.adjacency();
+    for (path, kind) in curves {
+        let c = KIND_COLOURS[(*kind as usize).min(3)];
+        for &v in path {
+            colours[v as usize] = [c[0], c[1], c[2], 1.0];
+            for &w in adj.neighbors(v as usize) {
+                colours[w as usize] = [c[0], c[1], c[2], 1.0];
+            }
+        }
+    }
+    colours
+}
+
+/// Line-integral convolution over the vertices: every vertex averages a fixed per-vertex
+/// noise along the streamline through it, followed `steps` vertices each way by always moving
+/// to the neighbour best aligned with the field (the field's sign is kept continuous along
+/// the walk). Streaks along the field appear; where the field turns fast or vanishes, they
+/// break up.
+pub fn streaks(mesh: &Mesh, field: &[Vec3], steps: usize) -> Vec<[f32; 4]> {
+    use rayon::prelude::*;
+    let n = mesh.vertex_count();
+    let adj = mesh.adjacency();
+    let noise: Vec<f32> = (0..n as u64)
+        .map(|v| crate::random::counter_unit(0x11c, 0, v))
+        .collect();
+    let walk = |start: usize, sign: f32, sum: &mut f32, count: &mut u32| {
+        let mut cur = start;
+        let mut dir = field[start] * sign;
+        for _ in 0..steps {
+            if dir.length_squared() < 1e-12 {
+                break;
+            }
+            let pc = mesh.positions[cur];
+            let mut best = (0.5f32, usize::MAX);
+            for &w in adj.neighbors(cur) {
+                let e = mesh.positions[w as usize] - pc;
+                let len = e.length();
+                if len > 0.0 {
+                    let c = e.dot(dir) / (len * dir.length());
+                    if c > best.0 {
+                        best = (c, w as usize);
+                    }
+                }
+            }
+            if best.1 == usize::MAX {
+                break;
+            }
+            let f = field[best.1];
+            dir = if f.dot(dir) >= 0.0 { f } else { -f };
+            cur = best.1;
+            *sum += noise[cur];
+            *count += 1;
+        }
+    };
+    (0..n)
+        .into_par_iter()
+        .map(|v| {
+            let (mut sum, mut count) = (noise[v], 1u32);
+            walk(v, 1.0, &mut sum, &mut count);
+            walk(v, -1.0, &mut sum, &mut count);
+            // The mean of m uniform values has a spread of 0.29/√m: stretch it back so short
+            // and long streaks show the same contrast.
+            let g = 0.5 + (sum / count as f32 - 0.5) * (count as f32).sqrt() * 0.7;
+            let g = g.clamp(0.05, 0.95);
+            [g, g, g, 1.0]
+        })
+        .collect()
+}
+
+/// The curves as OBJ polylines on the input mesh's vertices, grouped by kind, each written in
+/// the direction the field follows it.
+fn lines_obj(mesh: &Mesh, curves: &[DrawnCurve]) -> String {
+    use std::fmt::Write;
+    let mut s = String::from(
+        "# Feature curves of a texsyn feature_aligned run, oriented as the field follows them.\n\
+         # Edit and give back as extract.curves_file (with extract.features = \"curves\").\n",
+    );
+    let mut used: Vec<u32> = curves.iter().flat_map(|c| c.vertices.iter().copied()).collect();
+    used.sort_unstable();
+    used.dedup();
+    for &v in &used {
+        let q = mesh.positions[v as usize];
+        let _ = writeln!(s, "v {} {} {}", q.x, q.y, q.z);
+    }
+    let index = |v: u32| used.binary_search(&v).expect("listed") + 1;
+    for (k, name) in KIND_NAMES.iter().enumerate() {
+        let mut group = curves.iter().filter(|c| c.kind as usize == k).peekable();
+        if group.peek().is_none() {
+            continue;
+        }
+        let _ = writeln!(s, "g {name}");
+        for c in group {
+            let mut ids: Vec<usize> = c.vertices.iter().map(|&v| index(v)).collect();
+            if c.sign < 0 {
+                ids.reverse();
+            }
+            if c.closed && ids.len() > 2 {
+                ids.push(ids[0]);
+            }
+            s.push('l');
+            for i in ids {
+                let _ = write!(s, " {i}");
+            }
+            s.push('\n');
+        }
+    }
+    s
+}
+
+fn glb(mesh: &Mesh, colours: &[[f32; 4]], atlas_size: u32) -> Result<Vec<u8>, crate::render::AtlasError> {
+    let normals = mesh.vertex_normals();
+    let mut scene = crate::export::GlbMesh {
+        name: "feature_aligned".into(),
+        material: crate::export::GlbMaterial {
+            double_sided: true,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    if atlas_size == 0 {
+        scene.positions = mesh.positions.clone();
+        scene.normals = normals.to_vec();
+        scene.colors = Some(
+            colours
+                .iter()
+                .map(|c| [srgb::to_linear(c[0]), srgb::to_linear(c[1]), srgb::to_linear(c[2]), 1.0])
+                .collect(),
+        );
+        scene.indices = mesh.triangles.iter().flatten().copied().collect();
+        return Ok(crate::export::write_glb(&scene));
+    }
+    // The atlas has one region per triangle, so corners are unshared.
+    let atlas = crate::render::build_atlas(mesh, atlas_size)?;
+    let baked = crate::render::bake(&atlas, mesh, &VertexColorShader::new(&mesh.triangles, colours));
+    scene.material.base_color_png = Some(encode_png(&baked, false));
+    // No COLOR_0 here: glTF multiplies it with the base colour texture, which would square
+    // the colours. `textured.ply` carries the vertex colours.
+    for t in &mesh.triangles {
+        for &v in t {
+            scene.positions.push(mesh.positions[v as usize]);
+            scene.normals.push(normals[v as usize]);
+            scene.indices.push(scene.indices.len() as u32);
+        }
+    }
+    scene.texcoords = vec![atlas.corner_uv.iter().flatten().copied().collect()];
+    Ok(crate::export::write_glb(&scene))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::primitives;
+
+    #[test]
+    fn streaks_run_along_the_field_not_across_it() {
+        // On a grid with the field along x, a vertex's streak value is shared with its x
+        // neighbours far more than with its y neighbours.
+        let n = 60;
+        let mesh = primitives::grid(n, 1.0);
+        let field = vec![Vec3::X; mesh.vertex_count()];
+        let g: Vec<f32> = streaks(&mesh, &field, 10).iter().map(|c| c[0]).collect();
+        let (mut along, mut across) = (0.0f32, 0.0f32);
+        for y in 15..45 {
+            for x in 15..45 {
+                let i = y * n + x;
+                along += (g[i] - g[i + 1]).abs();
+                across += (g[i] - g[i + n]).abs();
+            }
+        }
+        assert!(along * 3.0 < across, "along {along}, across {across}");
+    }
+
+    #[test]
+    fn lines_obj_reverses_curves_the_field_runs_against_and_reads_back() {
+        let mesh = primitives::grid(3, 1.0);
+        let curves = [
+            DrawnCurve { vertices: &[0, 1, 2], closed: false, kind: 2, sign: -1 },
+            DrawnCurve { vertices: &[3, 4], closed: false, kind: 1, sign: 1 },
+        ];
+        let s = lines_obj(&mesh, &curves);
+        let read = crate::extract::shape_features::read_curves_file("l.obj", s.as_bytes()).unwrap();
+        assert_eq!(read.len(), 2);
+        // Kinds are written in order ridge, valley, crease, user: the valley first.
+        assert_eq!(read[0].points, vec![[0.0, 1.0, 0.0], [1.0, 1.0, 0.0]]);
+        assert_eq!(read[1].points, vec![[2.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]);
+    }
+}
