@@ -18,10 +18,12 @@
 
 pub mod bilateral_difference;
 pub mod crease_lines;
+pub mod crest_lines;
 pub mod height_field;
 pub mod planar_ransac;
 pub mod sample_region;
 pub mod square_domain;
+pub mod vertex_paths;
 
 use crate::geom::Mesh;
 use crate::geom::geometry_image::{Frame, TexelImage};
