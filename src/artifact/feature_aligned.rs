@@ -67,7 +67,8 @@ impl Format for ShapeFeatures {
         let vertices: &[u32] = a.array("vertices")?;
         let closed: &[u8] = a.array("closed")?;
         let kinds: &[u8] = a.array("kinds")?;
-        let kinds: Option<Vec<CurveKind>> = kinds.iter().map(|&k| CurveKind::from_code(k)).collect();
+        let kinds: Option<Vec<CurveKind>> =
+            kinds.iter().map(|&k| CurveKind::from_code(k)).collect();
         match kinds {
             Some(kinds)
                 if curves_ok(start, vertices, None)
@@ -229,9 +230,10 @@ impl Format for Refined {
         let n = positions.len();
         let ok = input_vertices as usize + parents.len() == n
             && triangles.iter().flatten().all(|&v| (v as usize) < n)
-            && parents.iter().enumerate().all(|(i, p)| {
-                p.iter().all(|&v| v < input_vertices + i as u32)
-            })
+            && parents
+                .iter()
+                .enumerate()
+                .all(|(i, p)| p.iter().all(|&v| v < input_vertices + i as u32))
             && positions.iter().all(|p| p.is_finite());
         if !ok {
             return Err(inconsistent("refined mesh arrays are inconsistent"));

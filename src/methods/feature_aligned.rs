@@ -139,8 +139,13 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     }
     crate::check::check_range("parameterize.edge", r.edge, 0.25, 8.0)
         .map_err(|e| config.param(e))?;
-    crate::check::check_range("parameterize.max_vertices", r.max_vertices, 1000, 20_000_000)
-        .map_err(|e| config.param(e))?;
+    crate::check::check_range(
+        "parameterize.max_vertices",
+        r.max_vertices,
+        1000,
+        20_000_000,
+    )
+    .map_err(|e| config.param(e))?;
     c.extract.validate().map_err(|e| config.param(e))?;
     c.analyse_exemplar.validate().map_err(|e| config.param(e))?;
     c.field.validate().map_err(|e| config.param(e))?;
@@ -260,14 +265,13 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         c.parameterize.clone(),
         mesh,
         |_, p, mesh| {
-            let r = refine_edges(&mesh, p.edge / p.scale, p.max_vertices as usize).map_err(
-                |e| {
+            let r =
+                refine_edges(&mesh, p.edge / p.scale, p.max_vertices as usize).map_err(|e| {
                     NodeError::input(format!(
                         "parameterize: {e}; lower parameterize.scale or raise parameterize.edge \
                          or parameterize.max_vertices"
                     ))
-                },
-            )?;
+                })?;
             tracing::info!(
                 "parameterize: {} → {} vertices",
                 mesh.vertex_count(),
@@ -328,15 +332,17 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         )
     };
     let aligned = synthesis(&mut dag, true);
-    let unaligned: Option<Handle<SurfaceSynthesis>> =
-        c.compare.then(|| synthesis(&mut dag, false));
+    let unaligned: Option<Handle<SurfaceSynthesis>> = c.compare.then(|| synthesis(&mut dag, false));
     dag.node(
         NodeSpec::new(Stage::Reconstruct, "feature_aligned_export", EXPORT_VERSION),
         c.reconstruct.clone(),
-        (mesh, shape, refined, field, aligned, unaligned, exemplar, features),
+        (
+            mesh, shape, refined, field, aligned, unaligned, exemplar, features,
+        ),
         |ctx, p, (mesh, shape, refined, field, aligned, unaligned, img, tf)| {
             let n = refined.mesh.vertex_count();
-            if aligned.colours.len() != n || unaligned.as_ref().is_some_and(|u| u.colours.len() != n)
+            if aligned.colours.len() != n
+                || unaligned.as_ref().is_some_and(|u| u.colours.len() != n)
             {
                 return Err(NodeError::internal("colours and refined mesh disagree"));
             }

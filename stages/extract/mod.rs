@@ -22,6 +22,7 @@ pub mod crest_lines;
 pub mod height_field;
 pub mod planar_ransac;
 pub mod sample_region;
+pub mod shape_features;
 pub mod square_domain;
 pub mod vertex_paths;
 

@@ -115,7 +115,11 @@ impl ShapeFeatureParams {
                     format!("needs at least 2 points, got {}", c.points.len()),
                 ));
             }
-            if let Some(j) = c.points.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
+            if let Some(j) = c
+                .points
+                .iter()
+                .position(|p| p.iter().any(|x| !x.is_finite()))
+            {
                 return Err(ParamError::invalid(
                     format!("extract.curves[{i}].points[{j}]"),
                     "must be finite numbers",
@@ -147,10 +151,13 @@ pub struct ShapeFeatures {
 #[derive(Debug, thiserror::Error)]
 pub enum ShapeFeatureError {
     #[error(
-        "no feature lines found on the mesh by {source} detection: lower {hint}, or give \
+        "no feature lines found on the mesh by {detector} detection: lower {hint}, or give \
          curves (extract.features = \"curves\" with extract.curves or extract.curves_file)"
     )]
-    NoneFound { source: &'static str, hint: &'static str },
+    NoneFound {
+        detector: &'static str,
+        hint: &'static str,
+    },
     #[error("{key}: {source}")]
     Snap {
         key: String,
@@ -173,9 +180,8 @@ pub fn read_curves_file(name: &str, bytes: &[u8]) -> Result<Vec<UserCurve>, Shap
     struct File {
         curves: Vec<UserCurve>,
     }
-    let f: File = toml::from_str(text).map_err(|e| {
-        ShapeFeatureError::File(format!("{name}: {}", e.to_string().trim_end()))
-    })?;
+    let f: File = toml::from_str(text)
+        .map_err(|e| ShapeFeatureError::File(format!("{name}: {}", e.to_string().trim_end())))?;
     Ok(f.curves)
 }
 
@@ -187,7 +193,10 @@ fn read_obj_lines(name: &str, text: &str) -> Result<Vec<UserCurve>, ShapeFeature
         let mut it = line.split_whitespace();
         match it.next() {
             Some("v") => {
-                let xyz: Vec<f32> = it.take(3).map(|s| s.parse::<f32>()).collect::<Result<_, _>>()
+                let xyz: Vec<f32> = it
+                    .take(3)
+                    .map(|s| s.parse::<f32>())
+                    .collect::<Result<_, _>>()
                     .map_err(|_| bad("a vertex needs three numbers"))?;
                 if xyz.len() != 3 || xyz.iter().any(|x| !x.is_finite()) {
                     return Err(bad("a vertex needs three finite numbers"));
@@ -266,7 +275,7 @@ pub fn shape_features(
             let c = crease_lines(mesh, &p.crease);
             if c.is_empty() {
                 return Err(ShapeFeatureError::NoneFound {
-                    source: "crease",
+                    detector: "crease",
                     hint: "extract.crease.angle or extract.crease.min_length",
                 });
             }
@@ -277,13 +286,19 @@ pub fn shape_features(
             let c = crest_polylines(mesh, &p.crest);
             if c.is_empty() {
                 return Err(ShapeFeatureError::NoneFound {
-                    source: "crest-line",
+                    detector: "crest-line",
                     hint: "extract.crest.threshold or extract.crest.min_length",
                 });
             }
             let kinds = c
                 .iter()
-                .map(|(_, ridge)| if *ridge { CurveKind::Ridge } else { CurveKind::Valley })
+                .map(|(_, ridge)| {
+                    if *ridge {
+                        CurveKind::Ridge
+                    } else {
+                        CurveKind::Valley
+                    }
+                })
                 .collect();
             (c.into_iter().map(|(l, _)| l).collect(), kinds)
         }
@@ -304,7 +319,7 @@ pub fn shape_features(
             }
             if out.is_empty() {
                 return Err(ShapeFeatureError::NoneFound {
-                    source: "user",
+                    detector: "user",
                     hint: "nothing (no curves were given)",
                 });
             }
@@ -385,10 +400,13 @@ mod tests {
     fn obj_and_toml_curve_files_read_the_same_curves() {
         let obj = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nl 1 2 3\nl 3 -3\n";
         let a = read_curves_file("lines.obj", obj).unwrap();
-        let toml = b"curves = [{ points = [[0,0,0],[1,0,0],[1,1,0]] }, { points = [[1,1,0],[0,0,0]] }]";
+        let toml =
+            b"curves = [{ points = [[0,0,0],[1,0,0],[1,1,0]] }, { points = [[1,1,0],[0,0,0]] }]";
         let b = read_curves_file("lines.toml", toml).unwrap();
         assert_eq!(a, b);
-        let e = read_curves_file("x.obj", b"v 0 0 0\nl 1 5\n").unwrap_err().to_string();
+        let e = read_curves_file("x.obj", b"v 0 0 0\nl 1 5\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("line 2") && e.contains("vertex 5"), "{e}");
         assert!(read_curves_file("x.obj", b"v 0 0 0\n").is_err());
     }

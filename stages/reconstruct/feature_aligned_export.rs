@@ -121,12 +121,16 @@ pub fn export_feature_aligned(
     )];
     files.push(("textured.glb".into(), glb(mesh, &colours, p.atlas_size)?));
     progress(0.3);
-    let view = |c: &[[f32; 4]]| render_views(mesh, &VertexColorShader::new(&mesh.triangles, c), &opts);
+    let view =
+        |c: &[[f32; 4]]| render_views(mesh, &VertexColorShader::new(&mesh.triangles, c), &opts);
     let preview = view(&colours);
     files.push(("preview.png".into(), encode_png(&preview, false)));
     if let Some(u) = r.unaligned {
         let unaligned = view(&rgba(u));
-        files.push(("unaligned_preview.png".into(), encode_png(&unaligned, false)));
+        files.push((
+            "unaligned_preview.png".into(),
+            encode_png(&unaligned, false),
+        ));
         files.push((
             "comparison.png".into(),
             encode_png(&stack(&preview, &unaligned), false),
@@ -149,8 +153,14 @@ pub fn export_feature_aligned(
         "field.png".into(),
         encode_png(&view(&draw_curves(mesh, lic, &refined_curves)), false),
     ));
-    files.push(("lines.obj".into(), lines_obj(r.input, &r.curves).into_bytes()));
-    files.push(("texture_features.png".into(), r.texture_features_png.clone()));
+    files.push((
+        "lines.obj".into(),
+        lines_obj(r.input, &r.curves).into_bytes(),
+    ));
+    files.push((
+        "texture_features.png".into(),
+        r.texture_features_png.clone(),
+    ));
     files.push(("report.json".into(), r.report.clone().into_bytes()));
     progress(1.0);
     Ok(files)
@@ -167,7 +177,11 @@ fn stack(a: &image::RgbaImage, b: &image::RgbaImage) -> image::RgbaImage {
 
 /// The curves' vertices and their one-ring painted in the curves' colours (a line one
 /// vertex wide is thinner than a preview pixel on a texel-fine mesh).
-fn draw_curves(mesh: &Mesh, mut colours: Vec<[f32; 4]>, curves: &[(Vec<u32>, u8)]) -> Vec<[f32; 4]> {
+fn draw_curves(
+    mesh: &Mesh,
+    mut colours: Vec<[f32; 4]>,
+    curves: &[(Vec<u32>, u8)],
+) -> Vec<[f32; 4]> {
     let adj = mesh.adjacency();
     for (path, kind) in curves {
         let c = KIND_COLOURS[(*kind as usize).min(3)];
@@ -245,7 +259,10 @@ fn lines_obj(mesh: &Mesh, curves: &[DrawnCurve]) -> String {
         "# Feature curves of a texsyn feature_aligned run, oriented as the field follows them.\n\
          # Edit and give back as extract.curves_file (with extract.features = \"curves\").\n",
     );
-    let mut used: Vec<u32> = curves.iter().flat_map(|c| c.vertices.iter().copied()).collect();
+    let mut used: Vec<u32> = curves
+        .iter()
+        .flat_map(|c| c.vertices.iter().copied())
+        .collect();
     used.sort_unstable();
     used.dedup();
     for &v in &used {
@@ -277,7 +294,11 @@ fn lines_obj(mesh: &Mesh, curves: &[DrawnCurve]) -> String {
     s
 }
 
-fn glb(mesh: &Mesh, colours: &[[f32; 4]], atlas_size: u32) -> Result<Vec<u8>, crate::render::AtlasError> {
+fn glb(
+    mesh: &Mesh,
+    colours: &[[f32; 4]],
+    atlas_size: u32,
+) -> Result<Vec<u8>, crate::render::AtlasError> {
     let normals = mesh.vertex_normals();
     let mut scene = crate::export::GlbMesh {
         name: "feature_aligned".into(),
@@ -293,7 +314,14 @@ fn glb(mesh: &Mesh, colours: &[[f32; 4]], atlas_size: u32) -> Result<Vec<u8>, cr
         scene.colors = Some(
             colours
                 .iter()
-                .map(|c| [srgb::to_linear(c[0]), srgb::to_linear(c[1]), srgb::to_linear(c[2]), 1.0])
+                .map(|c| {
+                    [
+                        srgb::to_linear(c[0]),
+                        srgb::to_linear(c[1]),
+                        srgb::to_linear(c[2]),
+                        1.0,
+                    ]
+                })
                 .collect(),
         );
         scene.indices = mesh.triangles.iter().flatten().copied().collect();
@@ -301,7 +329,11 @@ fn glb(mesh: &Mesh, colours: &[[f32; 4]], atlas_size: u32) -> Result<Vec<u8>, cr
     }
     // The atlas has one region per triangle, so corners are unshared.
     let atlas = crate::render::build_atlas(mesh, atlas_size)?;
-    let baked = crate::render::bake(&atlas, mesh, &VertexColorShader::new(&mesh.triangles, colours));
+    let baked = crate::render::bake(
+        &atlas,
+        mesh,
+        &VertexColorShader::new(&mesh.triangles, colours),
+    );
     scene.material.base_color_png = Some(encode_png(&baked, false));
     // No COLOR_0 here: glTF multiplies it with the base colour texture, which would square
     // the colours. `textured.ply` carries the vertex colours.
@@ -344,14 +376,27 @@ mod tests {
     fn lines_obj_reverses_curves_the_field_runs_against_and_reads_back() {
         let mesh = primitives::grid(3, 1.0);
         let curves = [
-            DrawnCurve { vertices: &[0, 1, 2], closed: false, kind: 2, sign: -1 },
-            DrawnCurve { vertices: &[3, 4], closed: false, kind: 1, sign: 1 },
+            DrawnCurve {
+                vertices: &[0, 1, 2],
+                closed: false,
+                kind: 2,
+                sign: -1,
+            },
+            DrawnCurve {
+                vertices: &[3, 4],
+                closed: false,
+                kind: 1,
+                sign: 1,
+            },
         ];
         let s = lines_obj(&mesh, &curves);
         let read = crate::extract::shape_features::read_curves_file("l.obj", s.as_bytes()).unwrap();
         assert_eq!(read.len(), 2);
         // Kinds are written in order ridge, valley, crease, user: the valley first.
         assert_eq!(read[0].points, vec![[0.0, 1.0, 0.0], [1.0, 1.0, 0.0]]);
-        assert_eq!(read[1].points, vec![[2.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]);
+        assert_eq!(
+            read[1].points,
+            vec![[2.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+        );
     }
 }
