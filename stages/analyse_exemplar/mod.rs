@@ -3,3 +3,4 @@ pub mod candidate_triples;
 pub mod gaussian_stack;
 pub mod jump_map;
 pub mod texel_variants;
+pub mod texture_feature_lines;
