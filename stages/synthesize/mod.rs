@@ -4,3 +4,4 @@ pub mod graph_matching;
 pub mod jump_walk;
 pub mod solid;
 pub mod synth2d;
+pub mod texture_optimization;
