@@ -1,4 +1,6 @@
 //! Stage: field.
+pub mod curve_grouping;
+pub mod feature_field;
 pub mod orientation_field;
 pub mod param_field;
 pub mod quaternion_field;

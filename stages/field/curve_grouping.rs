@@ -1,0 +1,335 @@
+//! Feature-curve preprocessing for curve orientation (Xu et al., "Feature-Aligned Shape
+//! Texturing", §4.1): "we pre-process the salient curves given on the input surface to group
+//! close-by, disconnected curve segments along a smooth salient feature and break long curves
+//! at high curvature points. Grouping and breaking are controlled by user-specified distance
+//! and curvature thresholds". The orientation algorithm then gives each resulting curve one
+//! sign, so a curve must be a piece that can sensibly carry one direction.
+//!
+//! The paper gives no procedure; this one is:
+//!
+//! 1. **Joining.** Two open curve ends `a`, `b` are joined when they are at most
+//!    `join_distance` apart (straight-line distance) and the feature continues smoothly across
+//!    the gap: the outward end tangents point at each other within `break_angle`
+//!    (angle(t_a, −t_b) ≤ break_angle) and, when the gap is not empty, each end tangent points
+//!    along the gap within `break_angle`. The gap is bridged by the shortest edge path between
+//!    the two end vertices (Dijkstra on edge lengths, searched only up to
+//!    3·gap + 3·mean edge length: a longer detour is not "close-by"). The two ends of one curve
+//!    may join too, closing it into a loop. Candidates are taken shortest gap first (ties by
+//!    curve index and end), one join at a time, so the result does not depend on input order
+//!    beyond those ties.
+//! 2. **Breaking.** A curve is broken at vertices where it turns by more than `break_angle`.
+//!    Vertex paths along mesh edges zig-zag (on a grid whose cells have one diagonal, a line
+//!    at −45° is a staircase of 90° turns), so the turn at vertex i is measured between the
+//!    chords p(i) − p(i−4) and p(i+4) − p(i) ([`SPAN`] = 4 edges, clamped at open ends): a
+//!    regular staircase then measures 0°, and a feature traced one edge off here and there
+//!    (a quantized wave) stays below ~50°, while a real corner keeps its full angle. A corner
+//!    exceeds the threshold at up to 2·SPAN − 1 consecutive vertices; the curve is broken only
+//!    at the sharpest vertex of each such run (two corners closer than SPAN edges count as
+//!    one), and never within two edges of an open end (no piece shorter than two edges). The
+//!    break vertex is kept in both pieces, so the pieces still meet (the field constraint
+//!    there is the average of the two pieces' tangents, see `feature_field`). A loop with a
+//!    single break vertex is
+//!    left whole: one piece would get one sign anyway.
+//!
+//! Joining runs before breaking, so a join whose bridging path makes a kink is broken again.
+//! Curves with fewer than two vertices (no tangent) and curves naming vertices outside the mesh
+//! are dropped.
+
+use crate::extract::crease_lines::Polyline;
+use crate::geom::Mesh;
+use glam::Vec3;
+use std::cmp::Ordering;
+use std::collections::{BinaryHeap, HashMap};
+
+/// Number of edges over which incoming/outgoing directions are measured (see module doc).
+pub const SPAN: usize = 4;
+
+/// Joins and breaks `curves` (see the module doc). `join_distance` is in object units,
+/// `break_angle` in degrees.
+pub fn group_and_break(
+    mesh: &Mesh,
+    curves: &[Polyline],
+    join_distance: f32,
+    break_angle: f32,
+) -> Vec<Polyline> {
+    let n = mesh.vertex_count();
+    let mut work: Vec<Polyline> = curves
+        .iter()
+        .filter(|c| c.vertices.len() >= 2 && c.vertices.iter().all(|&v| (v as usize) < n))
+        .cloned()
+        .collect();
+    let cos_limit = break_angle.to_radians().cos();
+    join_all(mesh, &mut work, join_distance, cos_limit);
+    work.iter()
+        .flat_map(|c| break_curve(mesh, c, cos_limit))
+        .filter(|c| c.vertices.len() >= 2)
+        .collect()
+}
+
+fn pos(mesh: &Mesh, v: u32) -> Vec3 {
+    mesh.positions[v as usize]
+}
+
+/// Outward tangent at one end of an open curve (end 0: first vertex, end 1: last).
+fn end_tangent(mesh: &Mesh, c: &Polyline, end: usize) -> Vec3 {
+    let m = c.vertices.len();
+    let s = SPAN.min(m - 1);
+    let (at, inner) = if end == 0 {
+        (c.vertices[0], c.vertices[s])
+    } else {
+        (c.vertices[m - 1], c.vertices[m - 1 - s])
+    };
+    (pos(mesh, at) - pos(mesh, inner)).normalize_or_zero()
+}
+
+fn end_vertex(c: &Polyline, end: usize) -> u32 {
+    if end == 0 {
+        c.vertices[0]
+    } else {
+        *c.vertices
+            .last()
+            .expect("curves have at least two vertices")
+    }
+}
+
+/// Joins curve ends one pair at a time, smallest gap first, until no pair qualifies.
+fn join_all(mesh: &Mesh, curves: &mut Vec<Polyline>, join_distance: f32, cos_limit: f32) {
+    let mean_edge = mesh.mean_edge_length();
+    loop {
+        // (gap, curve i, end of i, curve j, end of j) with (i, ei) < (j, ej).
+        let mut cand: Vec<(f32, usize, usize, usize, usize)> = Vec::new();
+        for i in 0..curves.len() {
+            if curves[i].closed {
+                continue;
+            }
+            for ei in 0..2 {
+                for j in i..curves.len() {
+                    if curves[j].closed {
+                        continue;
+                    }
+                    for ej in 0..2 {
+                        if (j, ej) <= (i, ei) {
+                            continue;
+                        }
+                        // Closing a curve into a loop needs enough vertices for a loop.
+                        if i == j && curves[i].vertices.len() < 2 * SPAN + 1 {
+                            continue;
+                        }
+                        let (a, b) = (end_vertex(&curves[i], ei), end_vertex(&curves[j], ej));
+                        let gap = pos(mesh, b) - pos(mesh, a);
+                        let d = gap.length();
+                        if d > join_distance {
+                            continue;
+                        }
+                        let (ta, tb) = (
+                            end_tangent(mesh, &curves[i], ei),
+                            end_tangent(mesh, &curves[j], ej),
+                        );
+                        if ta.dot(-tb) < cos_limit {
+                            continue;
+                        }
+                        if d > 0.0 {
+                            let g = gap / d;
+                            if ta.dot(g) < cos_limit || tb.dot(-g) < cos_limit {
+                                continue;
+                            }
+                        }
+                        cand.push((d, i, ei, j, ej));
+                    }
+                }
+            }
+        }
+        cand.sort_by(|x, y| {
+            x.0.total_cmp(&y.0)
+                .then((x.1, x.2, x.3, x.4).cmp(&(y.1, y.2, y.3, y.4)))
+        });
+        let mut joined = false;
+        for &(d, i, ei, j, ej) in &cand {
+            let (a, b) = (end_vertex(&curves[i], ei), end_vertex(&curves[j], ej));
+            let limit = 3.0 * d as f64 + 3.0 * mean_edge as f64;
+            let Some(path) = shortest_path(mesh, a, b, limit) else {
+                continue;
+            };
+            // Curve i oriented to end at a.
+            let mut seq = curves[i].vertices.clone();
+            if ei == 0 {
+                seq.reverse();
+            }
+            if i == j {
+                // Closing into a loop: the path's last vertex b is seq[0].
+                seq.extend(path.iter().skip(1).take(path.len().saturating_sub(2)));
+                if a == b {
+                    seq.pop();
+                }
+                curves[i] = Polyline {
+                    vertices: seq,
+                    closed: true,
+                };
+            } else {
+                let mut other = curves[j].vertices.clone();
+                if ej == 1 {
+                    other.reverse();
+                }
+                seq.extend(path.iter().skip(1));
+                seq.extend(other.iter().skip(1));
+                curves[i] = Polyline {
+                    vertices: seq,
+                    closed: false,
+                };
+                curves.remove(j);
+            }
+            joined = true;
+            break;
+        }
+        if !joined {
+            return;
+        }
+    }
+}
+
+#[derive(PartialEq)]
+struct Item(f64, u32);
+impl Eq for Item {}
+impl Ord for Item {
+    fn cmp(&self, o: &Self) -> Ordering {
+        // Min-heap on distance, ties by vertex: a total, deterministic order.
+        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
+    }
+}
+impl PartialOrd for Item {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+/// Shortest edge path from `a` to `b` (both included), or None when it is longer than
+/// `limit` (object units). The map is only looked up, never iterated, so its order cannot
+/// leak into the result.
+pub fn shortest_path(mesh: &Mesh, a: u32, b: u32, limit: f64) -> Option<Vec<u32>> {
+    if a == b {
+        return Some(vec![a]);
+    }
+    let adj = mesh.adjacency();
+    let mut dist: HashMap<u32, (f64, u32)> = HashMap::new();
+    let mut heap = BinaryHeap::new();
+    dist.insert(a, (0.0, a));
+    heap.push(Item(0.0, a));
+    while let Some(Item(d, v)) = heap.pop() {
+        if d > dist[&v].0 {
+            continue;
+        }
+        if v == b {
+            let mut path = vec![b];
+            let mut cur = b;
+            while cur != a {
+                cur = dist[&cur].1;
+                path.push(cur);
+            }
+            path.reverse();
+            return Some(path);
+        }
+        for &w in adj.neighbors(v as usize) {
+            let nd = d + pos(mesh, v).as_dvec3().distance(pos(mesh, w).as_dvec3());
+            if nd > limit {
+                continue;
+            }
+            let better = match dist.get(&w) {
+                Some(&(old, _)) => nd < old,
+                None => true,
+            };
+            if better {
+                dist.insert(w, (nd, v));
+                heap.push(Item(nd, w));
+            }
+        }
+    }
+    None
+}
+
+/// Turning angle cosine at index i (see the module doc): between the chords over SPAN edges
+/// before and after i; 1 (no turn) where a chord is empty.
+fn turn_cos(mesh: &Mesh, c: &Polyline, i: usize) -> f32 {
+    let m = c.vertices.len();
+    let (prev, next) = if c.closed {
+        let s = SPAN.min((m - 1) / 2).max(1);
+        (c.vertices[(i + m - s) % m], c.vertices[(i + s) % m])
+    } else {
+        (
+            c.vertices[i.saturating_sub(SPAN)],
+            c.vertices[(i + SPAN).min(m - 1)],
+        )
+    };
+    let p = pos(mesh, c.vertices[i]);
+    let (din, dout) = (
+        (p - pos(mesh, prev)).normalize_or_zero(),
+        (pos(mesh, next) - p).normalize_or_zero(),
+    );
+    if din == Vec3::ZERO || dout == Vec3::ZERO {
+        1.0
+    } else {
+        din.dot(dout)
+    }
+}
+
+/// Splits `c` at the sharpest vertex of every run of vertices turning more than the limit.
+fn break_curve(mesh: &Mesh, c: &Polyline, cos_limit: f32) -> Vec<Polyline> {
+    let m = c.vertices.len();
+    if m < 3 {
+        return vec![c.clone()];
+    }
+    let cos: Vec<f32> = (0..m).map(|i| turn_cos(mesh, c, i)).collect();
+    let sharp = |i: usize| {
+        let interior = c.closed || (i >= 2 && i + 2 < m);
+        interior && cos[i] < cos_limit
+    };
+    // Walk runs of sharp vertices; for a loop start just after a non-sharp vertex so no run
+    // wraps around the start.
+    let start = if c.closed {
+        match (0..m).find(|&i| !sharp(i)) {
+            Some(i) => i + 1,
+            None => return vec![c.clone()], // turns everywhere: a tiny loop, keep it
+        }
+    } else {
+        0
+    };
+    let mut breaks: Vec<usize> = Vec::new();
+    let mut k = 0;
+    while k < m {
+        let i = (start + k) % m;
+        if !sharp(i) {
+            k += 1;
+            continue;
+        }
+        let mut best = i;
+        while k < m && sharp((start + k) % m) {
+            let j = (start + k) % m;
+            if cos[j] < cos[best] {
+                best = j;
+            }
+            k += 1;
+        }
+        breaks.push(best);
+    }
+    breaks.sort_unstable();
+    let piece = |from: usize, to: usize| -> Polyline {
+        // Indices from..=to, wrapping for loops.
+        let len = (to + m - from) % m + 1;
+        Polyline {
+            vertices: (0..len).map(|k| c.vertices[(from + k) % m]).collect(),
+            closed: false,
+        }
+    };
+    if c.closed {
+        if breaks.len() < 2 {
+            return vec![c.clone()];
+        }
+        (0..breaks.len())
+            .map(|k| piece(breaks[k], breaks[(k + 1) % breaks.len()]))
+            .collect()
+    } else {
+        let mut cuts = vec![0];
+        cuts.extend(&breaks);
+        cuts.push(m - 1);
+        cuts.windows(2).map(|w| piece(w[0], w[1])).collect()
+    }
+}
