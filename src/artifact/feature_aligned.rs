@@ -205,6 +205,7 @@ impl Format for OrientedField {
                 vectors: vectors.to_vec(),
                 curves,
                 singularities: m.singularities,
+                zero_vectors: 0,
             },
             arbitrary_singularities: m.arbitrary_singularities,
         })

@@ -215,8 +215,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         (exemplar, mask),
         |_, p, (img, mask)| {
             let f = match mask {
-                Some(m) => features_from_mask(&img, &m, p),
-                None => detect_texture_features(&img, p),
+                Some(m) => features_from_mask(&img.to_owned(), &m.to_owned(), p),
+                None => detect_texture_features(&img.to_owned(), p),
             }
             .map_err(NodeError::input)?;
             tracing::info!(
@@ -304,6 +304,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                     .flat_map(|(c, _)| refined.refine_path(&c.vertices, c.closed))
                     .collect();
                 let distance = curve_distance(&refined.mesh, &sources);
+                let img = img.to_owned();
                 let input = SurfaceSynthesisInput {
                     mesh: &refined.mesh,
                     field: &vectors,
@@ -349,7 +350,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             let vectors = carry_field(&refined, &field.field.vectors)?;
             let curves = drawn_curves(&shape, &field.field);
             let report = report(&shape, &field, &refined, &aligned, unaligned.as_ref(), &tf);
-            let overlay = crate::export::encode_png(&feature_overlay(&img, &tf), false);
+            let overlay = crate::export::encode_png(&feature_overlay(&img.to_owned(), &tf), false);
             let result = FeatureAlignedResult {
                 input: &mesh,
                 refined: &refined,

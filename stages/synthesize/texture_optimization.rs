@@ -245,7 +245,7 @@ pub struct SurfaceSynthesis {
 }
 
 /// Counters of a run (of its finest level where per level).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct SynthesisStats {
     /// Samples (|X†|) at the finest level.
     pub samples: u32,
