@@ -29,7 +29,9 @@ fn run(config: &str, sets: &[&str], cache: &std::path::Path) -> Result<RunResult
 
 #[test]
 fn outputs_are_written_and_the_same_for_any_thread_count() {
-    assert_same_hashes_on_any_thread_count(|cache| run("feature_aligned.toml", &[], cache).unwrap());
+    assert_same_hashes_on_any_thread_count(|cache| {
+        run("feature_aligned.toml", &[], cache).unwrap()
+    });
     let cache = tempfile::tempdir().unwrap();
     let r = run("feature_aligned.toml", &[], cache.path()).unwrap();
     let out = materialized(&r, "reconstruct");
@@ -55,10 +57,8 @@ fn outputs_are_written_and_the_same_for_any_thread_count() {
         "{header}"
     );
     // The refined mesh's edges are at most one texel (1/60 object units) long.
-    let longest = texsyn::geom::edge_refine::longest_edge(
-        &refined.mesh.positions,
-        &refined.mesh.triangles,
-    );
+    let longest =
+        texsyn::geom::edge_refine::longest_edge(&refined.mesh.positions, &refined.mesh.triangles);
     assert!(longest <= 1.0 / 60.0 + 1e-6, "{longest}");
     // The report carries the field's singularities with both orientations.
     let report: serde_json::Value =
@@ -91,7 +91,9 @@ fn the_feature_constraint_puts_texture_lines_on_shape_lines() {
         .collect();
     let texel = 1.0 / 60.0;
     let d = curve_distance(&refined.mesh, &sources);
-    let patch = texsyn::stages::synthesize::texture_optimization::TextureOptimizationParams::default().patch;
+    let patch =
+        texsyn::stages::synthesize::texture_optimization::TextureOptimizationParams::default()
+            .patch;
     let mismatch = |node: &str| {
         let s = SurfaceSynthesis::view(artifact(&r, node)).unwrap();
         let (mut sum, mut n) = (0.0f64, 0usize);
@@ -124,7 +126,12 @@ fn a_rerun_recomputes_only_what_changed() {
         ["synthesize", "synthesize.unaligned", "reconstruct"],
         "a new seed reruns synthesis and export only"
     );
-    let r = run("feature_aligned.toml", &["reconstruct.streak_length=5"], cache.path()).unwrap();
+    let r = run(
+        "feature_aligned.toml",
+        &["reconstruct.streak_length=5"],
+        cache.path(),
+    )
+    .unwrap();
     assert_eq!(ran(&r), ["reconstruct"]);
     let r = run("feature_aligned.toml", &["compare=false"], cache.path()).unwrap();
     assert_eq!(ran(&r), ["reconstruct"], "the aligned synthesis is reused");
@@ -177,7 +184,11 @@ fn bad_inputs_are_clear_errors_naming_the_key() {
         b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n",
     );
     let grey = write(dir.path(), "grey.png", &png(64, 64, |_, _| 128));
-    let small_mask = write(dir.path(), "mask.png", &png(10, 10, |x, _| (x == 5) as u8 * 255));
+    let small_mask = write(
+        dir.path(),
+        "mask.png",
+        &png(10, 10, |x, _| (x == 5) as u8 * 255),
+    );
     let mesh = format!("inputs.mesh=\"{flat}\"");
     let exemplar = format!("inputs.exemplar=\"{grey}\"");
     let mask = format!("inputs.feature_mask=\"{small_mask}\"");

@@ -162,6 +162,11 @@ pub struct TextureOptimizationParams {
     /// Smallest curve distance in texels used in `λ_p = 1/d`, 1e-6..=64 (see the module doc:
     /// it caps the weight of on-curve samples). Default: 0.25.
     pub min_curve_distance: f32,
+    /// Weight of the occurrence penalty (Kopf et al. 2007, "Solid texture synthesis from 2D
+    /// exemplars", §3.3), 0..=10; 0 is plain texture optimization. Default: 1 (see the
+    /// module doc: without it the optimization settles on the exemplar's most common content
+    /// and drops its rarer features, the mortar of a brick wall).
+    pub histogram: f32,
 }
 
 impl Default for TextureOptimizationParams {
@@ -177,6 +182,7 @@ impl Default for TextureOptimizationParams {
             components: 24,
             search_eps: 1.0,
             min_curve_distance: 0.25,
+            histogram: 1.0,
         }
     }
 }
@@ -202,7 +208,8 @@ impl TextureOptimizationParams {
             self.min_curve_distance,
             1e-6,
             64.0,
-        )
+        )?;
+        check_range("synthesize.histogram", self.histogram, 0.0, 10.0)
     }
 }
 
@@ -1061,19 +1068,25 @@ pub fn texture_optimization(
             first = false;
         }
         for it in 0..p.iterations {
-            let new_z = search(&patches, &info, &colours, &z, &cands, level, p);
+            let penalty = occurrence_penalty(&z, &cands, p.histogram);
+            let new_z = search(&patches, &info, &colours, &z, &cands, level, p, &penalty);
             let changed = new_z != z;
             if it > 0 && !changed {
                 break;
             }
             z = new_z;
             refresh_lookups(&mut lookups, &patches, &z, &cands, &rgb, rot);
+            // Kopf et al. §3.3: samples matched to over-used exemplar content count less in
+            // the colour solve.
+            let penalty = occurrence_penalty(&z, &cands, p.histogram);
             let omega: Vec<f32> = patch_errors(&patches, &colours, &lookups)
                 .iter()
-                .map(|&e| {
+                .zip(&z)
+                .map(|(&e, &zi)| {
                     (e.sqrt() as f32)
                         .max(MIN_PATCH_DISTANCE)
                         .powf(p.robust_exponent - 2.0)
+                        / penalty[zi as usize]
                 })
                 .collect();
             solve_colours(
@@ -1261,6 +1274,46 @@ fn paste_nearest(
 
 /// The nearest-neighbour step: every sample's best exemplar patch for the current colours.
 #[allow(clippy::too_many_arguments)]
+/// Side, in texels, of the exemplar blocks whose use is counted by [`occurrence_penalty`]:
+/// single positions are used too rarely (there are more candidates than samples) for a count
+/// to mean anything.
+const HISTOGRAM_BLOCK: usize = 8;
+
+/// Per candidate, `1 + weight · max(0, use/fair − 1)`: how much more than its fair share the
+/// exemplar block around the candidate's centre is used by the current matches (Kopf et al.
+/// 2007 §3.3 re-weight by the same excess). Counts come from `z` alone, so the result does not
+/// depend on the thread count.
+fn occurrence_penalty(z: &[u32], cands: &Candidates, weight: f32) -> Vec<f32> {
+    let n = cands.len();
+    if weight == 0.0 || n == 0 {
+        return vec![1.0; n];
+    }
+    let ny = n / cands.nx;
+    let (bx, by) = (
+        cands.nx.div_ceil(HISTOGRAM_BLOCK),
+        ny.div_ceil(HISTOGRAM_BLOCK),
+    );
+    let block = |c: usize| (c / cands.nx / HISTOGRAM_BLOCK) * bx + (c % cands.nx) / HISTOGRAM_BLOCK;
+    let mut used = vec![0u32; bx * by];
+    for &c in z {
+        used[block(c as usize)] += 1;
+    }
+    // A block's fair share is proportional to the candidates it holds.
+    let mut size = vec![0u32; bx * by];
+    for c in 0..n {
+        size[block(c)] += 1;
+    }
+    let per_candidate = z.len() as f32 / n as f32;
+    (0..n)
+        .map(|c| {
+            let b = block(c);
+            let fair = (size[b] as f32 * per_candidate).max(1.0);
+            1.0 + weight * (used[b] as f32 / fair - 1.0).max(0.0)
+        })
+        .collect()
+}
+
+#[allow(clippy::too_many_arguments)]
 fn search(
     patches: &Patches,
     info: &SampleInfo,
@@ -1269,6 +1322,7 @@ fn search(
     cands: &Candidates,
     level: Level,
     p: &TextureOptimizationParams,
+    penalty: &[f32],
 ) -> Vec<u32> {
     let dim = level.dim();
     let cells_per = level.w * level.w;
@@ -1327,7 +1381,8 @@ fn search(
                         query[c * 3..c * 3 + 3].copy_from_slice(&cur_vec[c * 3..c * 3 + 3]);
                     }
                 }
-                let search_k = if missing * 10 > cells_per {
+                // The occurrence penalty needs alternatives to choose from.
+                let search_k = if missing * 10 > cells_per || p.histogram > 0.0 {
                     SEARCH_K_PARTIAL
                 } else {
                     SEARCH_K
@@ -1365,11 +1420,11 @@ fn search(
                 };
                 let mut best = (f32::INFINITY, u32::MAX);
                 if current_allowed {
-                    best = (masked(cur_vec), current as u32);
+                    best = (masked(cur_vec) * penalty[current], current as u32);
                 }
                 for (c, _) in found {
                     let cu = c as usize;
-                    let d = masked(&cands.full[cu * dim..(cu + 1) * dim]);
+                    let d = masked(&cands.full[cu * dim..(cu + 1) * dim]) * penalty[cu];
                     if d < best.0 || (d == best.0 && c < best.1) {
                         best = (d, c);
                     }
