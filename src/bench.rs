@@ -16,6 +16,7 @@ use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+mod feature_aligned;
 mod graph_matching;
 
 fn shared_data() -> Option<PathBuf> {
@@ -216,6 +217,7 @@ pub fn run_all(runs: usize) -> Result<String> {
             .push("../shared/data is not here: the geometry-image rows are not measured".into()),
     }
     graph_matching::rows(repo, runs, &mut rows)?;
+    feature_aligned::rows(repo, runs, &mut rows)?;
     let solid_table = if std::env::var_os("TEXSYN_BENCH_SKIP_SOLID").is_some() {
         notes.push("TEXSYN_BENCH_SKIP_SOLID is set: the solid rows are not measured".into());
         String::new()

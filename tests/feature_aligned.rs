@@ -219,9 +219,9 @@ fn bad_inputs_are_clear_errors_naming_the_key() {
                 &["extract.curves[0]"],
             ),
             (
-                "feature_aligned.toml",
-                &["synthesize.patch=64"],
-                &["synthesize.patch", "96×96"],
+                "feature_aligned_curves.toml",
+                &["synthesize.patch=48"],
+                &["synthesize.patch", "64×64", "every rotation"],
             ),
             (
                 "feature_aligned.toml",

@@ -74,4 +74,7 @@ lock_tests!(
     graph_matching,
     graph_matching_open,
     graph_matching_displacement,
+    feature_aligned,
+    feature_aligned_crest,
+    feature_aligned_curves,
 );

@@ -2,8 +2,9 @@
 //! Texturing"), and what lets them check each step before trusting the result:
 //!
 //! - `textured.ply`: the refined mesh with a colour per vertex (what §5 optimizes);
-//! - `textured.glb`: the same with the colours also baked into a texture atlas (`COLOR_0` and
-//!   a base-colour texture), for tools that ignore vertex colours;
+//! - `textured.glb`: the same with the colours baked into a texture atlas (a base-colour
+//!   texture), for tools that ignore vertex colours; when the refined mesh has more triangles
+//!   than `atlas_size` holds, with vertex colours (`COLOR_0`) instead, and a warning;
 //! - `preview.png`: three views; with the unaligned comparison, `unaligned_preview.png` and
 //!   `comparison.png` (aligned above, unaligned below: the paper's Fig. 7 pairs);
 //! - `lines.obj`: the shape's feature curves as OBJ polylines (`l`), in groups `ridge`,
@@ -327,8 +328,18 @@ fn glb(
         scene.indices = mesh.triangles.iter().flatten().copied().collect();
         return Ok(crate::export::write_glb(&scene));
     }
-    // The atlas has one region per triangle, so corners are unshared.
-    let atlas = crate::render::build_atlas(mesh, atlas_size)?;
+    // The atlas has one region per triangle, so corners are unshared. A refined mesh can
+    // have more triangles than the atlas holds: then the colours go into COLOR_0 instead,
+    // which every glTF viewer shows too, and the run says so.
+    let atlas = match crate::render::build_atlas(mesh, atlas_size) {
+        Ok(a) => a,
+        Err(e) => {
+            tracing::warn!(
+                "reconstruct.atlas_size: {e}; textured.glb carries vertex colours (COLOR_0) instead of a baked atlas"
+            );
+            return glb(mesh, colours, 0);
+        }
+    };
     let baked = crate::render::bake(
         &atlas,
         mesh,

@@ -1682,6 +1682,7 @@ mod tests {
             components: 2 => "synthesize.components must be in 4..=64, got 2",
             search_eps: f32::NAN => "synthesize.search_eps must be in 0..=10, got NaN",
             min_curve_distance: 0.0 => "synthesize.min_curve_distance must be in 0.000001..=64, got 0",
+            histogram: -1.0 => "synthesize.histogram must be in 0..=10, got -1",
         });
     }
 
@@ -1690,7 +1691,12 @@ mod tests {
         let side = 64;
         let mesh = grid(side, 1.0);
         let ex = striped(64, 3);
-        let p = TextureOptimizationParams::default();
+        // Plain texture optimization (no occurrence penalty): the scores below were measured
+        // for it; the penalty is tested on its own below.
+        let p = TextureOptimizationParams {
+            histogram: 0.0,
+            ..Default::default()
+        };
         let out = synth(&mesh, &constant_field(side * side, Vec3::X), &ex, None, &p);
         let img = as_image(&out.colours, side);
         preview("stripes-x", &img);
@@ -1734,6 +1740,56 @@ mod tests {
         assert!(
             along_y < 0.3 * along_x,
             "stripes do not run along u = y: along y {along_y:.4}, along x {along_x:.4}"
+        );
+    }
+
+    /// A synthetic brick wall: light bricks 24×12 texels with a little noise, dark mortar rows
+    /// and joints two texels wide (joints offset by half a brick every row).
+    fn bricks(size: u32) -> Image {
+        let mut img = Image::new(size, size);
+        for y in 0..size {
+            for x in 0..size {
+                let row = y / 12;
+                let xs = x + if row % 2 == 1 { 12 } else { 0 };
+                let mortar = y % 12 < 2 || xs % 24 < 2;
+                let n = crate::random::counter_unit(5, 0, (y * size + x) as u64) * 0.1;
+                let v = if mortar { 0.1 + n * 0.5 } else { 0.7 + n };
+                img.pixels[(y * size + x) as usize] = [v, v * 0.8, v * 0.6, 1.0];
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn the_occurrence_penalty_keeps_rare_features() {
+        // Mortar covers about a quarter of the wall. Plain texture optimization may settle on
+        // brick interior (every 15-texel window of a brick is a perfect match for itself), and
+        // the mortar fraction of the result drops; the penalty keeps it near the exemplar's.
+        let side = 96;
+        let mesh = grid(side, 1.0);
+        let ex = bricks(96);
+        let dark = |c: &[[f32; 3]]| c.iter().filter(|c| c[0] < 0.4).count() as f64 / c.len() as f64;
+        let ex_rgb: Vec<[f32; 3]> = ex.pixels.iter().map(|p| [p[0], p[1], p[2]]).collect();
+        let target = dark(&ex_rgb);
+        let error = |histogram: f32| {
+            (0..3)
+                .map(|seed| {
+                    let p = TextureOptimizationParams {
+                        histogram,
+                        seed,
+                        ..Default::default()
+                    };
+                    let out = synth(&mesh, &constant_field(side * side, Vec3::X), &ex, None, &p);
+                    preview(&format!("bricks-h{histogram}-{seed}"), &as_image(&out.colours, side));
+                    (dark(&out.colours) - target).abs()
+                })
+                .sum::<f64>()
+                / 3.0
+        };
+        let (plain, penalized) = (error(0.0), error(1.0));
+        assert!(
+            penalized < plain,
+            "mortar fraction off by {penalized:.3} with the penalty, {plain:.3} without (exemplar {target:.3})"
         );
     }
 
