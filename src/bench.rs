@@ -129,6 +129,12 @@ pub fn run_all(runs: usize) -> Result<String> {
     let mut notes = Vec::new();
     let data = shared_data();
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // One method's rows alone, for work on that method (the full table takes most of an hour).
+    if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("feature_aligned") {
+        feature_aligned::rows(repo, runs, &mut rows)?;
+        notes.push("TEXSYN_BENCH_ONLY=feature_aligned: only the feature-aligned rows".into());
+        return Ok(table(runs, &rows, "", &notes));
+    }
 
     let load_image = |p: &Path| -> Result<crate::image::Image> {
         let bytes = std::fs::read(p).with_context(|| p.display().to_string())?;
@@ -224,7 +230,11 @@ pub fn run_all(runs: usize) -> Result<String> {
     } else {
         solid_rows(&mut rows)?
     };
+    Ok(table(runs, &rows, &solid_table, &notes))
+}
 
+/// The report: a Markdown table of the rows, the solid table, the notes.
+fn table(runs: usize, rows: &[Row], solid_table: &str, notes: &[String]) -> String {
     let threads = rayon::current_num_threads();
     let cores = std::thread::available_parallelism()
         .map(|n| n.get())
@@ -236,20 +246,20 @@ pub fn run_all(runs: usize) -> Result<String> {
         "{runs} runs; at most 3 for the largest inputs). Machine: {cores} cores, {threads} worker threads.\n\n"
     );
     s += "| what | measured | goal | verdict |\n|---|---|---|---|\n";
-    for r in &rows {
+    for r in rows {
         s += &format!(
             "| {} | {} | {} | {} |\n",
             r.what, r.measured, r.goal, r.verdict
         );
     }
-    s += &solid_table;
+    s += solid_table;
     if !notes.is_empty() {
         s += "\n";
         for n in notes {
             s += &format!("- {n}\n");
         }
     }
-    Ok(s)
+    s
 }
 
 /// `texsyn run <config> <args>` by this executable, in the repository (which `config` is

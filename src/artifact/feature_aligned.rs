@@ -3,8 +3,9 @@
 //! vertex colours.
 //!
 //! All are read as owned copies (none is large next to the work done on it). Readers check
-//! every index against the arrays it points into, so a damaged artifact is an error here,
-//! never an out-of-bounds index later.
+//! every index against the arrays of the same artifact, so a damaged artifact is an error
+//! here; indices into another artifact (shape curves into the mesh, the refined mesh against
+//! the input) are checked by the node that joins them, as an internal error.
 
 use super::format::inconsistent;
 use super::{Artifact, ArtifactError, ArtifactWriter, Format, Kind};
@@ -191,7 +192,7 @@ impl Format for OrientedField {
         let ok = curves_ok(start, vertices, Some(vectors.len()))
             && closed.len() + 1 == start.len()
             && signs.len() == closed.len()
-            && signs.iter().all(|s| s.abs() == 1)
+            && signs.iter().all(|s| matches!(s, 1 | -1))
             && vectors.iter().all(|v| v.is_finite());
         if !ok {
             return Err(inconsistent("feature field arrays are inconsistent"));

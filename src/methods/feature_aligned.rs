@@ -114,6 +114,13 @@ impl Default for RefineParams {
     }
 }
 
+/// What the shape-feature node reads besides its inputs.
+#[derive(Serialize)]
+struct ExtractParams {
+    features: ShapeFeatureParams,
+    curves_format: Option<String>,
+}
+
 /// What synthesis reads besides its inputs.
 #[derive(Serialize)]
 struct SynthParams {
@@ -162,7 +169,10 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         &exemplar_path,
         "inputs.exemplar",
     )?;
-    check_patch_fits(config, &exemplar_path, c.synthesize.patch)?;
+    check_patch_fits(config, &exemplar_path, &c.synthesize)?;
+    if c.reconstruct.atlas_size > 0 {
+        super::check_atlas_memory(config, c.reconstruct.atlas_size)?;
+    }
     let mask = match &c.inputs.feature_mask {
         Some(m) => Some(import::<Image>(
             &mut dag,
@@ -177,16 +187,20 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         None => None,
     };
 
-    // The file's path is not a parameter: its bytes are the input.
-    let extract_params = ShapeFeatureParams {
-        curves_file: None,
-        ..c.extract.clone()
+    // The file's path is not a parameter (its bytes are the input), but its format is: the
+    // same bytes read as OBJ or TOML mean different curves.
+    let extract_params = ExtractParams {
+        features: ShapeFeatureParams {
+            curves_file: None,
+            ..c.extract.clone()
+        },
+        curves_format: c.extract.curves_file.as_deref().map(super::extension),
     };
     let shape = dag.node(
         NodeSpec::new(Stage::Extract, "shape_features", EXTRACT_VERSION),
         extract_params,
         (mesh, curves_file),
-        |_, p, (mesh, file)| {
+        |_, ExtractParams { features: p, .. }, (mesh, file)| {
             if let Some(w) = crate::geom::mesh_check::mesh_health(&mesh).warning("feature_aligned")
             {
                 tracing::warn!("{w}");
@@ -237,26 +251,34 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             steps.sort_by(f64::total_cmp);
             let median = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
             // The paper's comparison (Fig. 3, Fig. 6): the same curves, arbitrarily oriented.
-            let arbitrary = FeatureFieldParams {
-                orientation: Orientation::Arbitrary,
-                ..p.clone()
+            let other = match p.orientation {
+                Orientation::Arbitrary => field.singularities,
+                Orientation::Greedy => {
+                    let arbitrary = FeatureFieldParams {
+                        orientation: Orientation::Arbitrary,
+                        ..p.clone()
+                    };
+                    feature_field(&mesh, &shape.curves, &arbitrary)
+                        .map_err(NodeError::input)?
+                        .0
+                        .singularities
+                }
             };
-            let (other, _) =
-                feature_field(&mesh, &shape.curves, &arbitrary).map_err(NodeError::input)?;
             tracing::info!(
-                "field: {} curves oriented ({:?}); factorization {:.2} s, {} steps, median {:.3} s; \
+                "field: {} curves oriented ({:?}); setup (Laplacian, symbolic analysis) {:.2} s, first factorization {:.2} s, {} steps, median {:.3} s; \
                  {} singular triangles ({} with arbitrary orientation)",
                 field.curves.len(),
                 p.orientation,
+                t.setup_secs,
                 t.factorization_secs,
                 t.step_secs.len(),
                 median,
                 field.singularities,
-                other.singularities
+                other
             );
             Ok(OrientedField {
                 field,
-                arbitrary_singularities: other.singularities,
+                arbitrary_singularities: other,
             })
         },
     );
@@ -296,14 +318,20 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             params,
             (refined, field, exemplar, features),
             |ctx, p, (refined, field, img, tf)| {
+                if tf.width != img.width || tf.height != img.height {
+                    return Err(NodeError::internal("texture features and exemplar disagree"));
+                }
                 let vectors = carry_field(&refined, &field.field.vectors)?;
-                let sources: Vec<u32> = field
-                    .field
-                    .curves
-                    .iter()
-                    .flat_map(|(c, _)| refined.refine_path(&c.vertices, c.closed))
-                    .collect();
-                let distance = curve_distance(&refined.mesh, &sources);
+                // The constraint's d(p, C) of §5.2, on the refined mesh.
+                let distance = if p.aligned {
+                    let paths = refined.refine_paths(
+                        field.field.curves.iter().map(|(c, _)| (c.vertices.as_slice(), c.closed)),
+                    );
+                    let sources: Vec<u32> = paths.into_iter().flatten().collect();
+                    curve_distance(&refined.mesh, &sources)
+                } else {
+                    Vec::new()
+                };
                 let img = img.to_owned();
                 let input = SurfaceSynthesisInput {
                     mesh: &refined.mesh,
@@ -342,6 +370,9 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         ),
         |ctx, p, (mesh, shape, refined, field, aligned, unaligned, img, tf)| {
             let n = refined.mesh.vertex_count();
+            if refined.input_vertices as usize != mesh.vertex_count() {
+                return Err(NodeError::internal("refined and input mesh disagree"));
+            }
             if aligned.colours.len() != n
                 || unaligned.as_ref().is_some_and(|u| u.colours.len() != n)
             {
@@ -375,7 +406,7 @@ fn carry_field(refined: &Refined, vectors: &[Vec3]) -> Result<Vec<Vec3>, NodeErr
     if vectors.len() != refined.input_vertices as usize {
         return Err(NodeError::internal("the field and the mesh disagree"));
     }
-    let carried = refined.carry(vectors, |a, b| a + b);
+    let carried = refined.carry(vectors, |a, b| (a + b) * 0.5);
     let normals = refined.mesh.vertex_normals();
     Ok(carried
         .iter()
@@ -456,8 +487,9 @@ fn report(
 fn check_patch_fits(
     config: &Config,
     path: &std::path::Path,
-    patch: u32,
+    p: &TextureOptimizationParams,
 ) -> Result<(), MethodError> {
+    let patch = p.patch;
     let Ok(reader) = image::ImageReader::open(path).and_then(|r| r.with_guessed_format()) else {
         return Ok(());
     };
@@ -473,5 +505,14 @@ fn check_patch_fits(
         );
         return Err(config.invalid("synthesize.patch", &msg).into());
     }
-    Ok(())
+    // Synthesis keeps every candidate patch of the exemplar in full (w² RGB floats per texel,
+    // per level), plus the mesh's share (measured: under 200 MB at 200,000 vertices).
+    let texels = w as u64 * h as u64;
+    super::check_memory(
+        config,
+        "synthesize.patch",
+        patch as u64,
+        |w| texels * w * w * 12 * p.levels.max(1) as u64 + (200 << 20),
+        |w| w.to_string(),
+    )
 }

@@ -182,6 +182,18 @@ pub fn read_curves_file(name: &str, bytes: &[u8]) -> Result<Vec<UserCurve>, Shap
     }
     let f: File = toml::from_str(text)
         .map_err(|e| ShapeFeatureError::File(format!("{name}: {}", e.to_string().trim_end())))?;
+    for (i, c) in f.curves.iter().enumerate() {
+        let bad = |what: &str| ShapeFeatureError::File(format!("{name}, curve {i}: {what}"));
+        if c.points.len() < 2 {
+            return Err(bad(&format!(
+                "needs at least 2 points, got {}",
+                c.points.len()
+            )));
+        }
+        if c.points.iter().flatten().any(|x| !x.is_finite()) {
+            return Err(bad("points must be finite numbers"));
+        }
+    }
     Ok(f.curves)
 }
 
@@ -315,7 +327,10 @@ pub fn shape_features(
                 let points: Vec<Vec3> = c.points.iter().map(|&q| Vec3::from(q)).collect();
                 let line = snap_to_vertex_path(mesh, &points, c.closed, Some(max))
                     .map_err(|source| ShapeFeatureError::Snap { key, source })?;
-                out.push(line);
+                // All points on one vertex: nothing to align to.
+                if line.vertices.len() >= 2 {
+                    out.push(line);
+                }
             }
             if out.is_empty() {
                 return Err(ShapeFeatureError::NoneFound {
@@ -403,6 +418,13 @@ mod tests {
         let toml =
             b"curves = [{ points = [[0,0,0],[1,0,0],[1,1,0]] }, { points = [[1,1,0],[0,0,0]] }]";
         let b = read_curves_file("lines.toml", toml).unwrap();
+        let short = read_curves_file("c.toml", b"curves = [{ points = [[0,0,0]] }]");
+        assert!(
+            short
+                .unwrap_err()
+                .to_string()
+                .contains("curve 0: needs at least 2 points")
+        );
         assert_eq!(a, b);
         let e = read_curves_file("x.obj", b"v 0 0 0\nl 1 5\n")
             .unwrap_err()

@@ -28,8 +28,8 @@
 //! Measured (ignored test `timing_on_a_400k_triangle_torus`, release, faer sequential, on a
 //! shared 2-core machine; two runs, the first under load from other jobs): twice-subdivided
 //! torus, 409,600 triangles / 204,800 vertices, 30 curves with 5,726 vertices. Laplacian
-//! assembly 0.25–0.48 s; first factorization (symbolic + numeric) 0.28–0.56 s (goal < 3 s:
-//! met); each greedy step 0.34–0.68 s mean (goal < 0.1 s: missed), of which the numeric
+//! assembly with the symbolic analysis 0.25–0.48 s; first numeric factorization 0.28–0.56 s
+//! (goal < 3 s for both: met); each greedy step 0.34–0.68 s mean (goal < 0.1 s: missed), of which the numeric
 //! refactorization is 0.28–0.42 s and the three-column solve 0.06–0.09 s. A fresh
 //! factorization (`SpdSolver`) takes 0.42–0.71 s, so keeping the symbolic analysis saves about
 //! a third per step; Woodbury for the mean curve (190 vertices) needs a 190-column solve,
@@ -150,9 +150,10 @@ pub struct FeatureField {
 /// Wall-clock times; not part of the result (times are not deterministic).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FieldTimings {
-    /// Assembling the cotangent Laplacian and the components.
+    /// Assembling the cotangent Laplacian and the components, and the symbolic analysis
+    /// (ordering, elimination tree).
     pub setup_secs: f64,
-    /// Symbolic analysis (ordering, elimination tree) plus the first numeric factorization.
+    /// The first numeric factorization.
     pub factorization_secs: f64,
     /// Each later greedy step: numeric refactorization, three-column solve, projection and
     /// scoring of the remaining curves.
@@ -163,7 +164,7 @@ pub struct FieldTimings {
 pub enum FeatureFieldError {
     #[error(
         "no feature curves to align to: none is left after preprocessing (each needs two \
-         vertices); extract more feature lines (e.g. lower extract.angle or extract.min_length)"
+         vertices); extract more feature lines (e.g. lower extract.crease.angle, extract.crest.threshold or the min_length of either)"
     )]
     NoCurves,
     #[error("feature curve {curve} names vertex {vertex}, but the mesh has {count} vertices")]
@@ -1144,7 +1145,7 @@ mod tests {
         let mean_step = times.step_secs.iter().sum::<f64>() / times.step_secs.len() as f64;
         let max_step = times.step_secs.iter().fold(0.0f64, |m, &s| m.max(s));
         eprintln!(
-            "greedy: setup {:.3}s, first factorization (symbolic+numeric) {:.3}s, {} steps: \
+            "greedy: setup {:.3}s, first numeric factorization {:.3}s, {} steps: \
              mean {:.3}s max {:.3}s, total {:.2}s; {} curves after preprocessing",
             times.setup_secs,
             times.factorization_secs,

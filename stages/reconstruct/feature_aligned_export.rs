@@ -139,10 +139,13 @@ pub fn export_feature_aligned(
     }
     progress(0.6);
     // Curves on the refined mesh, for drawing.
-    let refined_curves: Vec<(Vec<u32>, u8)> = r
-        .curves
-        .iter()
-        .map(|c| (r.refined.refine_path(c.vertices, c.closed), c.kind))
+    let paths = r
+        .refined
+        .refine_paths(r.curves.iter().map(|c| (c.vertices, c.closed)));
+    let refined_curves: Vec<(Vec<u32>, u8)> = paths
+        .into_iter()
+        .zip(&r.curves)
+        .map(|(p, c)| (p, c.kind))
         .collect();
     let grey = vec![[0.78, 0.78, 0.78, 1.0]; mesh.vertex_count()];
     files.push((

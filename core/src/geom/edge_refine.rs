@@ -151,12 +151,35 @@ impl Refined {
     /// A vertex path of the input mesh (consecutive vertices share an edge) as a path of the
     /// refined mesh: every split edge on the way is replaced by its halves.
     pub fn refine_path(&self, path: &[u32], closed: bool) -> Vec<u32> {
-        let mid: BTreeMap<(u32, u32), u32> = self
-            .parents
+        self.refine_path_with(&self.midpoints(), path, closed)
+    }
+
+    /// Several paths: the midpoint map is built once.
+    pub fn refine_paths<'p>(
+        &self,
+        paths: impl IntoIterator<Item = (&'p [u32], bool)>,
+    ) -> Vec<Vec<u32>> {
+        let mid = self.midpoints();
+        paths
+            .into_iter()
+            .map(|(p, closed)| self.refine_path_with(&mid, p, closed))
+            .collect()
+    }
+
+    fn midpoints(&self) -> BTreeMap<(u32, u32), u32> {
+        self.parents
             .iter()
             .enumerate()
             .map(|(i, &[a, b])| ((a.min(b), a.max(b)), self.input_vertices + i as u32))
-            .collect();
+            .collect()
+    }
+
+    fn refine_path_with(
+        &self,
+        mid: &BTreeMap<(u32, u32), u32>,
+        path: &[u32],
+        closed: bool,
+    ) -> Vec<u32> {
         let mut out = Vec::with_capacity(path.len() * 2);
         let n = path.len();
         let edges = if closed { n } else { n.saturating_sub(1) };

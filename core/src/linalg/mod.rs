@@ -107,7 +107,7 @@ impl SpdPattern {
     }
 
     /// Factorizes the matrix plus `diag(extra_diagonal)` (length n), reusing the symbolic
-    /// analysis. Bit-identical to factorizing the same matrix afresh with this pattern.
+    /// analysis: the numeric phase a fresh factorization with this pattern would run.
     pub fn factorize(&self, extra_diagonal: &[f64]) -> Result<SpdFactor, SolveError> {
         assert_eq!(
             extra_diagonal.len(),
