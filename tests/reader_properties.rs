@@ -166,7 +166,31 @@ proptest! {
             let _ = texsyn::stages::field::quaternion_field::CurvesFile::read(b, 0);
         });
     }
+
+    #[test]
+    fn feature_curve_files_survive_mutations(
+        toml in mutated(data("configs/feature_aligned_cow_curves.toml")),
+        obj in mutated(OBJ_LINES.to_vec()),
+        config in mutated(data("configs/feature_aligned_curves.toml")),
+    ) {
+        use texsyn::stages::extract::shape_features::read_curves_file;
+        check(&toml, |b| {
+            let _ = read_curves_file("curves.toml", b);
+        });
+        check(&obj, |b| {
+            let _ = read_curves_file("lines.obj", b);
+        });
+        check(&config, |b| {
+            let text = String::from_utf8_lossy(b);
+            if let Ok(cfg) = texsyn::config::Config::from_str(Path::new("configs/x.toml"), &text, &[]) {
+                let _ = texsyn::methods::plan(&cfg);
+            }
+        });
+    }
 }
+
+/// A `lines.obj` as a feature-aligned run writes it.
+const OBJ_LINES: &[u8] = b"# feature curves\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\ng crease\nl 1 2 3\nl 3 4 1 3\ng user\nl -1 -2\n";
 
 /// The cases the issue lists, kept as a corpus: each must be a clear error, quickly.
 #[test]
