@@ -213,7 +213,8 @@ impl Format for OrientedField {
     }
 }
 
-/// Metadata: the input's vertex count; arrays `positions`, `triangles`, `parents`.
+/// Metadata: the input's vertex count; arrays `positions`, `triangles`, `parents`,
+/// `face_origin`.
 impl Format for Refined {
     const KIND: Kind = Kind::RefinedMesh;
     type View<'a> = Refined;
@@ -222,6 +223,7 @@ impl Format for Refined {
             .array("positions", &self.mesh.positions)
             .array("triangles", &self.mesh.triangles)
             .array("parents", &self.parents)
+            .array("face_origin", &self.face_origin)
             .finish()
     }
     fn decode(a: &Artifact) -> Result<Refined, ArtifactError> {
@@ -229,8 +231,11 @@ impl Format for Refined {
         let positions: &[Vec3] = a.array("positions")?;
         let triangles: &[[u32; 3]] = a.array("triangles")?;
         let parents: &[[u32; 2]] = a.array("parents")?;
+        let face_origin: &[u32] = a.array("face_origin")?;
         let n = positions.len();
+        // Origins index the input mesh's triangles: checked against it where they are used.
         let ok = input_vertices as usize + parents.len() == n
+            && face_origin.len() == triangles.len()
             && triangles.iter().flatten().all(|&v| (v as usize) < n)
             && parents
                 .iter()
@@ -244,6 +249,7 @@ impl Format for Refined {
             mesh: Mesh::new(positions.to_vec(), triangles.to_vec()),
             input_vertices,
             parents: parents.to_vec(),
+            face_origin: face_origin.to_vec(),
         })
     }
 }

@@ -47,9 +47,9 @@ use std::path::PathBuf;
 const EXTRACT_VERSION: u32 = 1;
 const FEATURES_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 1;
-const REFINE_VERSION: u32 = 1;
+const REFINE_VERSION: u32 = 2;
 const SYNTH_VERSION: u32 = 1;
-const EXPORT_VERSION: u32 = 1;
+const EXPORT_VERSION: u32 = 2;
 
 /// A `feature_aligned` config.
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -370,7 +370,12 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         ),
         |ctx, p, (mesh, shape, refined, field, aligned, unaligned, img, tf)| {
             let n = refined.mesh.vertex_count();
-            if refined.input_vertices as usize != mesh.vertex_count() {
+            if refined.input_vertices as usize != mesh.vertex_count()
+                || refined
+                    .face_origin
+                    .iter()
+                    .any(|&o| o as usize >= mesh.face_count())
+            {
                 return Err(NodeError::internal("refined and input mesh disagree"));
             }
             if aligned.colours.len() != n

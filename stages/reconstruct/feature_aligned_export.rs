@@ -2,9 +2,11 @@
 //! Texturing"), and what lets them check each step before trusting the result:
 //!
 //! - `textured.ply`: the refined mesh with a colour per vertex (what §5 optimizes);
-//! - `textured.glb`: the same with the colours baked into a texture atlas (a base-colour
-//!   texture), for tools that ignore vertex colours; when the refined mesh has more triangles
-//!   than `atlas_size` holds, with vertex colours (`COLOR_0`) instead, and a warning;
+//! - `textured.glb`: the input mesh with the refined mesh's colours baked into a texture atlas
+//!   of the input's triangles (a base-colour texture), for tools that ignore vertex colours;
+//!   with `atlas_size = 0`, or an input mesh with more triangles than the atlas holds, the
+//!   refined mesh with vertex colours (`COLOR_0`) instead (the latter with a warning);
+//! - `textured_atlas.png`: that atlas;
 //! - `preview.png`: three views; with the unaligned comparison, `unaligned_preview.png` and
 //!   `comparison.png` (aligned above, unaligned below: the paper's Fig. 7 pairs);
 //! - `lines.obj`: the shape's feature curves as OBJ polylines (`l`), in groups `ridge`,
@@ -120,7 +122,11 @@ pub fn export_feature_aligned(
         "textured.ply".to_string(),
         crate::geom::io::write_ply(mesh, Some(&colours)),
     )];
-    files.push(("textured.glb".into(), glb(mesh, &colours, p.atlas_size)?));
+    let (glb, atlas_png) = glb(r.input, r.refined, &colours, p.atlas_size)?;
+    files.push(("textured.glb".into(), glb));
+    if let Some(png) = atlas_png {
+        files.push(("textured_atlas.png".into(), png));
+    }
     progress(0.3);
     let view =
         |c: &[[f32; 4]]| render_views(mesh, &VertexColorShader::new(&mesh.triangles, c), &opts);
@@ -298,12 +304,30 @@ fn lines_obj(mesh: &Mesh, curves: &[DrawnCurve]) -> String {
     s
 }
 
+/// `textured.glb`: the input mesh with the refined mesh's colours baked into an atlas of the
+/// input's triangles (the refined mesh can have millions of triangles, too many for one region
+/// each, while the input's few thousand get many texels each: fandisk's 12,946 at 2048² hold
+/// about five atlas texels per exemplar texel at the shipped scale). Without an atlas
+/// (`atlas_size = 0`, or an input mesh the atlas cannot hold): the refined mesh with
+/// `COLOR_0`.
 fn glb(
-    mesh: &Mesh,
+    input: &Mesh,
+    refined: &Refined,
     colours: &[[f32; 4]],
     atlas_size: u32,
-) -> Result<Vec<u8>, crate::render::AtlasError> {
-    let normals = mesh.vertex_normals();
+) -> Result<(Vec<u8>, Option<Vec<u8>>), crate::render::AtlasError> {
+    let atlas = match atlas_size {
+        0 => None,
+        size => match crate::render::build_atlas(input, size) {
+            Ok(a) => Some(a),
+            Err(e) => {
+                tracing::warn!(
+                    "reconstruct.atlas_size: {e}; textured.glb carries vertex colours (COLOR_0) of the refined mesh instead of a baked atlas"
+                );
+                None
+            }
+        },
+    };
     let mut scene = crate::export::GlbMesh {
         name: "feature_aligned".into(),
         material: crate::export::GlbMaterial {
@@ -312,9 +336,10 @@ fn glb(
         },
         ..Default::default()
     };
-    if atlas_size == 0 {
+    let Some(atlas) = atlas else {
+        let mesh = &refined.mesh;
         scene.positions = mesh.positions.clone();
-        scene.normals = normals.to_vec();
+        scene.normals = mesh.vertex_normals().to_vec();
         scene.colors = Some(
             colours
                 .iter()
@@ -329,37 +354,148 @@ fn glb(
                 .collect(),
         );
         scene.indices = mesh.triangles.iter().flatten().copied().collect();
-        return Ok(crate::export::write_glb(&scene));
-    }
-    // The atlas has one region per triangle, so corners are unshared. A refined mesh can
-    // have more triangles than the atlas holds: then the colours go into COLOR_0 instead,
-    // which every glTF viewer shows too, and the run says so.
-    let atlas = match crate::render::build_atlas(mesh, atlas_size) {
-        Ok(a) => a,
-        Err(e) => {
-            tracing::warn!(
-                "reconstruct.atlas_size: {e}; textured.glb carries vertex colours (COLOR_0) instead of a baked atlas"
-            );
-            return glb(mesh, colours, 0);
-        }
+        return Ok((crate::export::write_glb(&scene), None));
     };
-    let baked = crate::render::bake(
-        &atlas,
-        mesh,
-        &VertexColorShader::new(&mesh.triangles, colours),
-    );
-    scene.material.base_color_png = Some(encode_png(&baked, false));
-    // No COLOR_0 here: glTF multiplies it with the base colour texture, which would square
-    // the colours. `textured.ply` carries the vertex colours.
-    for t in &mesh.triangles {
+    let shader = RefinedColours::new(input, refined, colours);
+    let baked = crate::render::bake(&atlas, input, &shader);
+    let png = encode_png(&baked, false);
+    scene.material.base_color_png = Some(png.clone());
+    // One region per triangle: corners are unshared.
+    let normals = input.vertex_normals();
+    for t in &input.triangles {
         for &v in t {
-            scene.positions.push(mesh.positions[v as usize]);
+            scene.positions.push(input.positions[v as usize]);
             scene.normals.push(normals[v as usize]);
             scene.indices.push(scene.indices.len() as u32);
         }
     }
     scene.texcoords = vec![atlas.corner_uv.iter().flatten().copied().collect()];
-    Ok(crate::export::write_glb(&scene))
+    Ok((crate::export::write_glb(&scene), Some(png)))
+}
+
+/// The refined mesh's vertex colours seen from the input mesh: a point of input triangle `f`,
+/// given by its barycentrics, is looked up among the refined triangles that lie in `f`
+/// (`Refined::face_origin`) through a grid over `f`'s barycentric domain, and takes the colours
+/// interpolated there.
+struct RefinedColours<'a> {
+    refined: &'a Refined,
+    colours: &'a [[f32; 4]],
+    /// Per input face: its first cell in `cell_start`, and the grid's side.
+    face_cells: Vec<(u32, u32)>,
+    cell_start: Vec<u32>,
+    /// Refined triangle ids, by cell.
+    items: Vec<u32>,
+    /// Per refined triangle: its corners in its origin's barycentric (b1, b2) coordinates.
+    uv: Vec<[glam::Vec2; 3]>,
+}
+
+impl<'a> RefinedColours<'a> {
+    fn new(input: &Mesh, refined: &'a Refined, colours: &'a [[f32; 4]]) -> Self {
+        use glam::Vec2;
+        let m = &refined.mesh;
+        let faces = input.triangles.len();
+        let uv: Vec<[Vec2; 3]> = m
+            .triangles
+            .iter()
+            .zip(&refined.face_origin)
+            .map(|(t, &o)| {
+                let [a, b, c] = input.triangles[o as usize].map(|v| input.positions[v as usize]);
+                t.map(|v| barycentric_uv(a, b, c, m.positions[v as usize]))
+            })
+            .collect();
+        let mut by_face: Vec<Vec<u32>> = vec![Vec::new(); faces];
+        for (t, &o) in refined.face_origin.iter().enumerate() {
+            by_face[o as usize].push(t as u32);
+        }
+        let mut face_cells = Vec::with_capacity(faces);
+        let mut cell_start = vec![0u32];
+        let mut items = Vec::new();
+        for list in &by_face {
+            let side = ((list.len() as f32).sqrt().ceil() as u32).clamp(1, 64);
+            face_cells.push((cell_start.len() as u32 - 1, side));
+            let mut cells: Vec<Vec<u32>> = vec![Vec::new(); (side * side) as usize];
+            let cell = |x: f32| ((x * side as f32).floor() as i64).clamp(0, side as i64 - 1) as u32;
+            for &t in list {
+                let c = uv[t as usize];
+                let lo = c[0].min(c[1]).min(c[2]);
+                let hi = c[0].max(c[1]).max(c[2]);
+                for y in cell(lo.y)..=cell(hi.y) {
+                    for x in cell(lo.x)..=cell(hi.x) {
+                        cells[(y * side + x) as usize].push(t);
+                    }
+                }
+            }
+            for c in cells {
+                items.extend(c);
+                cell_start.push(items.len() as u32);
+            }
+        }
+        RefinedColours {
+            refined,
+            colours,
+            face_cells,
+            cell_start,
+            items,
+            uv,
+        }
+    }
+}
+
+/// Barycentric (b1, b2) of `p` in triangle (a, b, c); (0, 0) for a degenerate triangle.
+fn barycentric_uv(a: Vec3, b: Vec3, c: Vec3, p: Vec3) -> glam::Vec2 {
+    let (e0, e1, e2) = ((b - a).as_dvec3(), (c - a).as_dvec3(), (p - a).as_dvec3());
+    let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+    let (d20, d21) = (e2.dot(e0), e2.dot(e1));
+    let den = d00 * d11 - d01 * d01;
+    if den.abs() < 1e-30 {
+        return glam::Vec2::ZERO;
+    }
+    glam::Vec2::new(
+        ((d11 * d20 - d01 * d21) / den) as f32,
+        ((d00 * d21 - d01 * d20) / den) as f32,
+    )
+}
+
+impl crate::render::SurfaceShader for RefinedColours<'_> {
+    fn albedo(&self, face: usize, bary: Vec3) -> Vec3 {
+        let Some(&(first, side)) = self.face_cells.get(face) else {
+            return Vec3::splat(0.5);
+        };
+        let q = glam::Vec2::new(bary.y, bary.z);
+        let cell = |x: f32| ((x * side as f32).floor() as i64).clamp(0, side as i64 - 1) as u32;
+        let c = (first + cell(q.y) * side + cell(q.x)) as usize;
+        let list = &self.items[self.cell_start[c] as usize..self.cell_start[c + 1] as usize];
+        // The refined triangle holding q (its smallest barycentric is the largest; a point on
+        // a shared edge or just outside, as gutter texels are, takes the nearest).
+        let mut best: Option<(f32, u32, [f32; 3])> = None;
+        for &t in list {
+            let [a, b, cc] = self.uv[t as usize];
+            let (v0, v1, v2) = (b - a, cc - a, q - a);
+            let den = v0.perp_dot(v1);
+            if den.abs() < 1e-20 {
+                continue;
+            }
+            let l1 = v2.perp_dot(v1) / den;
+            let l2 = v0.perp_dot(v2) / den;
+            let l = [1.0 - l1 - l2, l1, l2];
+            let score = l[0].min(l[1]).min(l[2]);
+            if best.is_none_or(|(s, _, _)| score > s) {
+                best = Some((score, t, l));
+            }
+        }
+        let Some((_, t, l)) = best else {
+            return Vec3::splat(0.5);
+        };
+        let l = l.map(|x| x.max(0.0));
+        let sum = (l[0] + l[1] + l[2]).max(1e-12);
+        let tri = self.refined.mesh.triangles[t as usize];
+        let mut out = Vec3::ZERO;
+        for k in 0..3 {
+            let c = self.colours[tri[k] as usize];
+            out += Vec3::new(c[0], c[1], c[2]) * (l[k] / sum);
+        }
+        out
+    }
 }
 
 #[cfg(test)]
@@ -384,6 +520,47 @@ mod tests {
             }
         }
         assert!(along * 3.0 < across, "along {along}, across {across}");
+    }
+
+    #[test]
+    fn the_input_mesh_sees_the_refined_colours_where_they_are() {
+        // Colours linear in position are reproduced exactly by linear interpolation on the
+        // refined triangles, so the shader must return them at any point of the input mesh.
+        use crate::render::SurfaceShader;
+        let input = Mesh::new(
+            vec![
+                Vec3::ZERO,
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(1.0, 1.0, 0.3),
+                Vec3::new(0.0, 1.0, 0.3),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        let refined = crate::geom::edge_refine::refine_edges(&input, 0.07, 100_000).unwrap();
+        let colour = |p: Vec3| [p.x, p.y, 0.5, 1.0];
+        let colours: Vec<[f32; 4]> = refined.mesh.positions.iter().map(|&p| colour(p)).collect();
+        let shader = RefinedColours::new(&input, &refined, &colours);
+        for i in 0..400u64 {
+            let (u, v) = (
+                crate::random::counter_unit(3, 0, i),
+                crate::random::counter_unit(3, 1, i),
+            );
+            let (u, v) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
+            let bary = Vec3::new(1.0 - u - v, u, v);
+            let f = (i % 2) as usize;
+            let t = input.triangles[f].map(|k| input.positions[k as usize]);
+            let p = t[0] * bary.x + t[1] * bary.y + t[2] * bary.z;
+            let got = shader.albedo(f, bary);
+            let want = colour(p);
+            assert!(
+                (got.x - want[0]).abs() < 1e-4 && (got.y - want[1]).abs() < 1e-4,
+                "face {f} at {bary}: {got} instead of {want:?}"
+            );
+        }
     }
 
     #[test]

@@ -26,6 +26,10 @@ pub struct Refined {
     pub input_vertices: u32,
     /// For every vertex from `input_vertices` on, in order: the ends of the edge it splits.
     pub parents: Vec<[u32; 2]>,
+    /// For every refined triangle: the input triangle it lies in (so a point of the input
+    /// mesh can be found on the refined one, e.g. to bake refined colours into an atlas of the
+    /// input mesh).
+    pub face_origin: Vec<u32>,
 }
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -55,6 +59,7 @@ pub fn refine_edges(
 ) -> Result<Refined, RefineError> {
     let mut positions = mesh.positions.clone();
     let mut triangles = mesh.triangles.clone();
+    let mut origin: Vec<u32> = (0..triangles.len() as u32).collect();
     let mut parents: Vec<[u32; 2]> = Vec::new();
     let limit2 = max_edge * max_edge;
     for round in 1..=MAX_ROUNDS {
@@ -75,6 +80,7 @@ pub fn refine_edges(
                 mesh: Mesh::new(positions, triangles),
                 input_vertices: mesh.positions.len() as u32,
                 parents,
+                face_origin: origin,
             });
         }
         if positions.len() + long.len() > max_vertices {
@@ -94,7 +100,9 @@ pub fn refine_edges(
         }
         let split = |a: u32, b: u32| mid.get(&(a.min(b), a.max(b))).copied();
         let mut next = Vec::with_capacity(triangles.len() * 2);
-        for t in &triangles {
+        let mut next_origin = Vec::with_capacity(triangles.len() * 2);
+        for (t, &o) in triangles.iter().zip(&origin) {
+            let before = next.len();
             let m: [Option<u32>; 3] = std::array::from_fn(|k| split(t[k], t[(k + 1) % 3]));
             match m.iter().filter(|x| x.is_some()).count() {
                 0 => next.push(*t),
@@ -130,8 +138,11 @@ pub fn refine_edges(
                     next.push([ab, bc, ca]);
                 }
             }
+            next_origin.resize(next.len(), o);
+            debug_assert!(next.len() > before);
         }
         triangles = next;
+        origin = next_origin;
     }
     Err(RefineError::NoConvergence(MAX_ROUNDS))
 }
@@ -274,6 +285,29 @@ mod tests {
                 r.mesh.face_normal_unnormalized(f).z > 0.0,
                 "triangle {f} flipped"
             );
+        }
+        // Origins: every refined triangle lies in the plane of its input triangle.
+        assert_eq!(r.face_origin.len(), r.mesh.face_count());
+        for (f, &o) in r.face_origin.iter().enumerate() {
+            let n = m.face_normal_unnormalized(o as usize).normalize();
+            let p0 = m.positions[m.triangles[o as usize][0] as usize];
+            for &v in &r.mesh.triangles[f] {
+                assert!((r.mesh.positions[v as usize] - p0).dot(n).abs() < 1e-6);
+            }
+            // The centroid is inside the origin (both input triangles are in z = 0).
+            let c = r.mesh.triangles[f]
+                .iter()
+                .map(|&v| r.mesh.positions[v as usize])
+                .sum::<Vec3>()
+                / 3.0;
+            let t = m.triangles[o as usize].map(|v| m.positions[v as usize]);
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                assert!(
+                    (b - a).cross(c - a).z >= -1e-6,
+                    "triangle {f} is outside its origin {o}"
+                );
+            }
         }
         // Parents: every new vertex is the midpoint of its parents.
         for (i, &[a, b]) in r.parents.iter().enumerate() {
