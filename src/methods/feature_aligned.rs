@@ -44,7 +44,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-const EXTRACT_VERSION: u32 = 1;
+const EXTRACT_VERSION: u32 = 2;
 const FEATURES_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 1;
 const REFINE_VERSION: u32 = 2;
