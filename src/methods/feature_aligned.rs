@@ -49,7 +49,7 @@ const FEATURES_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 1;
 const REFINE_VERSION: u32 = 2;
 const SYNTH_VERSION: u32 = 1;
-const EXPORT_VERSION: u32 = 2;
+const EXPORT_VERSION: u32 = 3;
 
 /// A `feature_aligned` config.
 #[derive(Debug, Clone, Deserialize, Serialize)]

@@ -385,6 +385,9 @@ struct RefinedColours<'a> {
     cell_start: Vec<u32>,
     /// Refined triangle ids, by cell.
     items: Vec<u32>,
+    /// Every refined triangle of each input face (CSR), for points whose cell is empty.
+    face_start: Vec<u32>,
+    face_items: Vec<u32>,
     /// Per refined triangle: its corners in its origin's barycentric (b1, b2) coordinates.
     uv: Vec<[glam::Vec2; 3]>,
 }
@@ -411,7 +414,8 @@ impl<'a> RefinedColours<'a> {
         let mut cell_start = vec![0u32];
         let mut items = Vec::new();
         for list in &by_face {
-            let side = ((list.len() as f32).sqrt().ceil() as u32).clamp(1, 64);
+            // About one triangle per cell, whatever the refinement.
+            let side = ((list.len() as f32).sqrt().ceil() as u32).clamp(1, 4096);
             face_cells.push((cell_start.len() as u32 - 1, side));
             let mut cells: Vec<Vec<u32>> = vec![Vec::new(); (side * side) as usize];
             let cell = |x: f32| ((x * side as f32).floor() as i64).clamp(0, side as i64 - 1) as u32;
@@ -430,12 +434,20 @@ impl<'a> RefinedColours<'a> {
                 cell_start.push(items.len() as u32);
             }
         }
+        let mut face_start = vec![0u32];
+        let mut face_items = Vec::with_capacity(refined.face_origin.len());
+        for list in by_face {
+            face_items.extend(list);
+            face_start.push(face_items.len() as u32);
+        }
         RefinedColours {
             refined,
             colours,
             face_cells,
             cell_start,
             items,
+            face_start,
+            face_items,
             uv,
         }
     }
@@ -447,7 +459,7 @@ fn barycentric_uv(a: Vec3, b: Vec3, c: Vec3, p: Vec3) -> glam::Vec2 {
     let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
     let (d20, d21) = (e2.dot(e0), e2.dot(e1));
     let den = d00 * d11 - d01 * d01;
-    if den.abs() < 1e-30 {
+    if den.abs() <= 1e-12 * d00 * d11 || den == 0.0 {
         return glam::Vec2::ZERO;
     }
     glam::Vec2::new(
@@ -464,7 +476,11 @@ impl crate::render::SurfaceShader for RefinedColours<'_> {
         let q = glam::Vec2::new(bary.y, bary.z);
         let cell = |x: f32| ((x * side as f32).floor() as i64).clamp(0, side as i64 - 1) as u32;
         let c = (first + cell(q.y) * side + cell(q.x)) as usize;
-        let list = &self.items[self.cell_start[c] as usize..self.cell_start[c + 1] as usize];
+        let mut list = &self.items[self.cell_start[c] as usize..self.cell_start[c + 1] as usize];
+        if list.is_empty() {
+            list = &self.face_items
+                [self.face_start[face] as usize..self.face_start[face + 1] as usize];
+        }
         // The refined triangle holding q (its smallest barycentric is the largest; a point on
         // a shared edge or just outside, as gutter texels are, takes the nearest).
         let mut best: Option<(f32, u32, [f32; 3])> = None;
