@@ -29,7 +29,7 @@ fn children_peak() -> u64 {
 fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     // Runs in order of increasing peak, so the children's maximum is each run's own.
-    let cases: [(&[&str], u64); 2] = [
+    let cases: [(&[&str], u64); 3] = [
         (
             &[
                 "run",
@@ -49,6 +49,16 @@ fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused()
                 "synthesize.height=2048",
             ],
             52 * 2048 * 2048 + (32 << 20),
+        ),
+        (
+            // Geometry-image texel variants: 8 orientations, 3 scales (4^-1 + 1 + 4).
+            &[
+                "run",
+                "configs/dragon_knot.toml",
+                "--set",
+                "analyse_exemplar.scales=3",
+            ],
+            (580.0 * 8.0 * 5.25) as u64 * 128 * 128 + (64 << 20),
         ),
     ];
     for (args, estimate) in cases {
@@ -99,6 +109,26 @@ fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused()
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("reconstruct.atlas_size = 8192") && err.contains("fits"),
+        "{err}"
+    );
+    // And for a geometry-image sample's variants (5.9 GB measured at 256² with 5 scales).
+    let out = texsyn(
+        &[
+            "run",
+            "configs/dragon_knot.toml",
+            "--max-memory",
+            "1GiB",
+            "--set",
+            "extract.size=256",
+            "--set",
+            "analyse_exemplar.scales=5",
+        ],
+        dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("extract.size = 256") && err.contains("fits"),
         "{err}"
     );
 }

@@ -180,6 +180,7 @@ fn checked(config: &Config) -> Result<GeometryImagesConfig, MethodError> {
                 ),
             )
         })?;
+        super::check_variant_memory(config, size, &c.analyse_exemplar)?;
     }
     Ok(c)
 }

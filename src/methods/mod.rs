@@ -189,6 +189,30 @@ pub(crate) fn check_memory(
         .map_err(|e| MethodError::Config(config.invalid(key, &e.to_string())))
 }
 
+/// The texel variants of a geometry-image sample of `extract.size`² texels (issue 11, item 9):
+/// `orientations × scales` resampled copies, scale `j` steps from the middle holding `4^j`
+/// times the sample's texels, with their pyramids, feature vectors and trees. Measured on
+/// `configs/dragon_knot.toml` (a geometry-only sample; 8 orientations): peak 0.42 GB at
+/// 128² with 3 scales, 1.62 GB at 128² with 5, 5.93 GB at 256² with 5; about 580 bytes per
+/// texel of the unscaled variants' total. A sample with colour has twice the channels and up
+/// to twice the need.
+pub(crate) fn check_variant_memory(
+    config: &Config,
+    size: u32,
+    p: &crate::stages::analyse_exemplar::texel_variants::TexelVariantParams,
+) -> Result<(), MethodError> {
+    let mid = (p.scales as i32 - 1) / 2;
+    let spread: f64 = (-mid..=mid).map(|j| 4f64.powi(j)).sum();
+    let per_texel = (580.0 * p.orientations as f64 * spread) as u64;
+    check_memory(
+        config,
+        "extract.size",
+        size as u64,
+        |s| per_texel * s * s + (64 << 20),
+        |s| s.to_string(),
+    )
+}
+
 /// The baked atlas of `reconstruct.atlas_size` texels per side: about 9 bytes per texel
 /// (the float image, its 8-bit copy and the PNG) and the mesh besides (measured: 152 MB at
 /// 4096², 547 MB at 8192² for the demo).
