@@ -82,7 +82,6 @@
 use crate::check::{ParamError, check_range};
 use crate::image::Image;
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeSet;
 
 /// Below this scale-normalised strength (σ²·λ, in luminance units: about the Hessian answer to
 /// a line of 1.5/255 contrast) nothing is a line, whatever `threshold` says: 8-bit
@@ -685,47 +684,26 @@ fn links(m: &[bool], w: usize, h: usize, i: usize) -> Vec<usize> {
 
 /// Texel chains from ends and junctions to the next, then closed loops (module doc, step 5).
 fn trace(m: &[bool], w: usize, h: usize) -> Vec<Vec<usize>> {
-    let nbrs: Vec<Vec<usize>> = (0..w * h)
-        .map(|i| if m[i] { links(m, w, h, i) } else { Vec::new() })
+    let graph: std::collections::BTreeMap<u32, Vec<u32>> = (0..w * h)
+        .filter(|&i| m[i])
+        .map(|i| {
+            (
+                i as u32,
+                links(m, w, h, i).into_iter().map(|n| n as u32).collect(),
+            )
+        })
         .collect();
-    let key = |a: usize, b: usize| (a.min(b), a.max(b));
-    let mut used: BTreeSet<(usize, usize)> = BTreeSet::new();
-    let walk = |start: usize, first: usize, used: &mut BTreeSet<(usize, usize)>| {
-        let mut line = vec![start, first];
-        used.insert(key(start, first));
-        let (mut prev, mut cur) = (start, first);
-        while nbrs[cur].len() == 2 {
-            let Some(&next) = nbrs[cur].iter().find(|&&n| n != prev) else {
-                break;
-            };
-            if !used.insert(key(cur, next)) {
-                break;
+    crate::geom::chains::trace_chains(&graph)
+        .into_iter()
+        .map(|(chain, closed)| {
+            let mut c: Vec<usize> = chain.into_iter().map(|i| i as usize).collect();
+            // A loop repeats its first texel (module doc: lines as traced).
+            if closed {
+                c.push(c[0]);
             }
-            line.push(next);
-            prev = cur;
-            cur = next;
-        }
-        line
-    };
-    let mut lines = Vec::new();
-    for i in 0..w * h {
-        if m[i] && nbrs[i].len() != 2 {
-            for &n in &nbrs[i] {
-                if !used.contains(&key(i, n)) {
-                    lines.push(walk(i, n, &mut used));
-                }
-            }
-        }
-    }
-    for i in 0..w * h {
-        if m[i]
-            && nbrs[i].len() == 2
-            && let Some(&n) = nbrs[i].iter().find(|&&n| !used.contains(&key(i, n)))
-        {
-            lines.push(walk(i, n, &mut used));
-        }
-    }
-    lines
+            c
+        })
+        .collect()
 }
 
 fn chain_length(c: &[usize], w: usize) -> f32 {

@@ -79,53 +79,11 @@ pub fn crease_lines(mesh: &Mesh, p: &CreaseParams) -> Vec<Polyline> {
             crease.entry(b).or_default().push(a);
         }
     }
-    let mut used: BTreeMap<(u32, u32), bool> = BTreeMap::new();
-    let key = |a: u32, b: u32| (a.min(b), a.max(b));
-    let mut lines = Vec::new();
-    let walk = |start: u32, first: u32, used: &mut BTreeMap<(u32, u32), bool>| {
-        let mut line = vec![start, first];
-        used.insert(key(start, first), true);
-        let (mut prev, mut cur) = (start, first);
-        while crease[&cur].len() == 2 {
-            let next = crease[&cur].iter().copied().find(|&n| n != prev);
-            let Some(next) = next else { break };
-            if used.contains_key(&key(cur, next)) {
-                break;
-            }
-            used.insert(key(cur, next), true);
-            line.push(next);
-            prev = cur;
-            cur = next;
-        }
-        line
-    };
-    // Open polylines: from every end or junction, along each unused crease edge.
-    for (&v, nbrs) in &crease {
-        if nbrs.len() == 2 {
-            continue;
-        }
-        for &n in nbrs {
-            if !used.contains_key(&key(v, n)) {
-                lines.push(Polyline {
-                    vertices: walk(v, n, &mut used),
-                    closed: false,
-                });
-            }
-        }
-    }
-    // Loops: what is left runs through vertices of two crease edges only.
-    for (&v, nbrs) in &crease {
-        if let Some(&n) = nbrs.iter().find(|&&n| !used.contains_key(&key(v, n))) {
-            let mut l = walk(v, n, &mut used);
-            if l.last() == Some(&v) {
-                l.pop();
-            }
-            lines.push(Polyline {
-                vertices: l,
-                closed: true,
-            });
-        }
-    }
+    // Open polylines from every end or junction, then the loops that are left.
+    let mut lines: Vec<Polyline> = crate::geom::chains::trace_chains(&crease)
+        .into_iter()
+        .map(|(vertices, closed)| Polyline { vertices, closed })
+        .collect();
     let (lo, hi) = mesh.bounds();
     let min = p.min_length * (hi - lo).length();
     lines.retain(|l| polyline_length(mesh, l) >= min);

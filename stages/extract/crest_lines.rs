@@ -591,7 +591,7 @@ fn trace(mesh: &Mesh, field: &Field) -> Vec<(CrestLine, f32, f32)> {
             _ => {}
         }
     }
-    let paths = trace_graph(&graph);
+    let paths = crate::geom::chains::trace_chains(&graph);
     paths
         .into_iter()
         .map(|(ids, closed)| {
@@ -616,51 +616,6 @@ fn trace(mesh: &Mesh, field: &Field) -> Vec<(CrestLine, f32, f32)> {
             (line, length, excess)
         })
         .collect()
-}
-
-/// Paths of an undirected graph from every node whose degree is not two to the next such
-/// node, then the loops that remain (as in `crease_lines`).
-fn trace_graph(graph: &BTreeMap<u32, Vec<u32>>) -> Vec<(Vec<u32>, bool)> {
-    let key = |a: u32, b: u32| (a.min(b), a.max(b));
-    let mut used: std::collections::BTreeSet<(u32, u32)> = Default::default();
-    let walk = |start: u32, first: u32, used: &mut std::collections::BTreeSet<(u32, u32)>| {
-        let mut line = vec![start, first];
-        used.insert(key(start, first));
-        let (mut prev, mut cur) = (start, first);
-        while graph[&cur].len() == 2 {
-            let Some(next) = graph[&cur].iter().copied().find(|&n| n != prev) else {
-                break;
-            };
-            if !used.insert(key(cur, next)) {
-                break;
-            }
-            line.push(next);
-            prev = cur;
-            cur = next;
-        }
-        line
-    };
-    let mut out = Vec::new();
-    for (&v, nbrs) in graph {
-        if nbrs.len() == 2 {
-            continue;
-        }
-        for &n in nbrs {
-            if !used.contains(&key(v, n)) {
-                out.push((walk(v, n, &mut used), false));
-            }
-        }
-    }
-    for (&v, nbrs) in graph {
-        if let Some(&n) = nbrs.iter().find(|&&n| !used.contains(&key(v, n))) {
-            let mut l = walk(v, n, &mut used);
-            if l.last() == Some(&v) {
-                l.pop();
-            }
-            out.push((l, true));
-        }
-    }
-    out
 }
 
 /// The same lines snapped to vertex paths (see vertex_paths.rs), ready for the field: in

@@ -4,6 +4,7 @@
 //! quantities (adjacency, normals) are computed on first request and kept with the mesh, as
 //! geometry-central does, so an algorithm asks for what it needs and pays for it once.
 
+pub mod chains;
 pub mod cut_graph;
 pub mod edge_refine;
 pub mod geometry_image;

@@ -12,6 +12,24 @@ pub enum SolveError {
     NotPositiveDefinite(String),
 }
 
+/// The lower triangle (row ≥ col) of the n×n matrix given by triplets, duplicates summed;
+/// with `full_diagonal`, every diagonal entry is in the pattern even when no triplet names it.
+fn lower_matrix(
+    n: usize,
+    triplets: &[(usize, usize, f64)],
+    full_diagonal: bool,
+) -> Result<SparseColMat<usize, f64>, SolveError> {
+    let diagonal = (0..if full_diagonal { n } else { 0 }).map(|i| Triplet::new(i, i, 0.0));
+    let lower: Vec<Triplet<usize, usize, f64>> = triplets
+        .iter()
+        .filter(|t| t.0 >= t.1)
+        .map(|&(row, col, val)| Triplet::new(row, col, val))
+        .chain(diagonal)
+        .collect();
+    SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &lower)
+        .map_err(|e| SolveError::Build(format!("{e:?}")))
+}
+
 /// A factorized sparse SPD matrix.
 pub struct SpdSolver {
     n: usize,
@@ -25,13 +43,7 @@ impl SpdSolver {
         // Sequential: faer's parallel factorization is fast but texsyn's outputs must be
         // bit-identical for any thread count, and these systems are small.
         faer::set_global_parallelism(faer::Par::Seq);
-        let lower: Vec<Triplet<usize, usize, f64>> = triplets
-            .iter()
-            .filter(|t| t.0 >= t.1)
-            .map(|&(row, col, val)| Triplet::new(row, col, val))
-            .collect();
-        let m = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &lower)
-            .map_err(|e| SolveError::Build(format!("{e:?}")))?;
+        let m = lower_matrix(n, triplets, false)?;
         let llt = m
             .sp_cholesky(faer::Side::Lower)
             .map_err(|e| SolveError::NotPositiveDefinite(format!("{e:?}")))?;
@@ -71,14 +83,7 @@ impl SpdPattern {
     /// no triplet names it.
     pub fn new(n: usize, triplets: &[(usize, usize, f64)]) -> Result<Self, SolveError> {
         faer::set_global_parallelism(faer::Par::Seq);
-        let lower: Vec<Triplet<usize, usize, f64>> = triplets
-            .iter()
-            .filter(|t| t.0 >= t.1)
-            .map(|&(row, col, val)| Triplet::new(row, col, val))
-            .chain((0..n).map(|i| Triplet::new(i, i, 0.0)))
-            .collect();
-        let m = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &lower)
-            .map_err(|e| SolveError::Build(format!("{e:?}")))?;
+        let m = lower_matrix(n, triplets, true)?;
         let mut diag_pos = vec![usize::MAX; n];
         {
             let col_ptr = m.symbolic().col_ptr();
