@@ -339,3 +339,48 @@ fn an_off_header_claiming_billions_of_vertices_is_a_clear_error() {
         o.stderr
     );
 }
+
+/// Two processes writing one output folder take turns (the folder's advisory lock): a run
+/// waits while another holds the folder, and writes its whole set once it is released. Here
+/// the test process plays the other writer. Without the lock, the run would swap its files in
+/// while the other writer is mid-swap, and the folder could end with a mix of both.
+#[test]
+fn a_second_writer_waits_for_the_folder_lock() {
+    let root = tempfile::tempdir().unwrap();
+    let cache = root.path().join("cache");
+    let out = root.path().join("out");
+    run_ok(&cache, &out, 1);
+    let before = snapshot(&out);
+    // Cache the seed-2 result first, so the locked run below only has to write its outputs.
+    let other = root.path().join("other");
+    run_ok(&cache, &other, 2);
+
+    let held = std::fs::File::open(&out).unwrap();
+    held.lock().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_texsyn"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["run", CONFIG, "-q", "--cache"])
+        .arg(&cache)
+        .arg("--out")
+        .arg(&out)
+        .args(["--set", "synthesize.seed=2"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // A cached run writes its outputs in well under a second; give it three.
+    std::thread::sleep(Duration::from_secs(3));
+    let waiting = child.try_wait().unwrap().is_none();
+    let untouched = snapshot(&out) == before;
+    held.unlock().unwrap();
+    let status = child.wait().unwrap();
+    assert!(waiting, "the run did not wait for the folder's lock");
+    assert!(untouched, "the run wrote into a folder another writer held");
+    assert!(status.success());
+    assert_eq!(
+        snapshot(&out),
+        snapshot(&other),
+        "the released run wrote its whole set"
+    );
+}

@@ -8,10 +8,14 @@
 //! # Protocol
 //!
 //! With `P` the writing process's id, everything below happens inside the output directory
-//! `D` (one filesystem, so renames are atomic). Writers within one process take turns; two
-//! texsyn processes writing the same `D` at once each keep their own staging folder, journal
-//! and old folder (named by their ids) and never remove each other's, but their swaps are not
-//! ordered (the last to swap a file wins it):
+//! `D` (one filesystem, so renames are atomic). Writers take turns: within one process through
+//! a mutex, across processes through an exclusive advisory lock on `D` itself
+//! ([`std::fs::File::lock`], `flock` on Unix), held from recovery to cleanup, so the second of two runs writing one folder finds the first's set complete and
+//! swaps its own whole set after it. The kernel drops the lock when its holder dies, so a killed
+//! run never leaves the folder locked. Where the filesystem has no such locks, writers go on
+//! without it, each in its own staging folder, journal and old folder (named by their ids),
+//! never removing each other's; their swaps are then not ordered (the last to swap a file wins
+//! it).
 //!
 //! 1. **Recover** (see [`recover`]): a journal `.texsyn-swap-Q` whose owner `Q` is dead is
 //!    finished first (below); then leftovers of dead owners are removed: staging and old
@@ -78,6 +82,21 @@ const STALE_AGE: Duration = Duration::from_secs(24 * 3600);
 /// Serializes the writers of one process (the leftovers of this process's id are then stale).
 static WRITER: Mutex<()> = Mutex::new(());
 
+/// Takes `dir`'s writer lock, waiting for another process that holds it: an exclusive
+/// advisory lock on the folder itself (so no lock file is added to the user's folder).
+/// `None` where the platform cannot open or lock a folder (Windows, some network
+/// filesystems): writers then go on unordered, as before the lock existed.
+fn lock_folder(dir: &Path) -> Result<Option<fs::File>, OutputError> {
+    let Ok(handle) = fs::File::open(dir) else {
+        return Ok(None);
+    };
+    match handle.lock() {
+        Ok(()) => Ok(Some(handle)),
+        Err(e) if e.kind() == std::io::ErrorKind::Unsupported => Ok(None),
+        Err(e) => Err(io(dir)(e)),
+    }
+}
+
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError {
     let path = path.to_owned();
     move |source| OutputError::Io { path, source }
@@ -99,6 +118,7 @@ pub fn materialize_all(
 ) -> Result<Vec<(PathBuf, bool)>, OutputError> {
     let _writer = WRITER.lock().unwrap_or_else(|e| e.into_inner());
     fs::create_dir_all(dir).map_err(io(dir))?;
+    let _folder = lock_folder(dir)?;
     recover_locked(dir)?;
 
     // The set: each name once, the last bundle's entry winning.
@@ -221,6 +241,7 @@ pub fn recover(dir: &Path) -> Result<(), OutputError> {
         return Ok(());
     }
     let _writer = WRITER.lock().unwrap_or_else(|e| e.into_inner());
+    let _folder = lock_folder(dir)?;
     recover_locked(dir)
 }
 
