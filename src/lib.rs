@@ -8,6 +8,7 @@ pub mod artifact;
 pub mod bench;
 pub mod cache;
 pub mod config;
+pub mod lockfile;
 pub mod methods;
 pub mod pipeline;
 

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use texsyn::cache::{Cache, parse_size};
 use texsyn::config::Config;
+use texsyn::lockfile::LockFile;
 use texsyn::methods::Plan;
 use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, outputs};
 
@@ -59,11 +60,19 @@ enum Command {
         sets: Vec<String>,
     },
     /// Print one line per artifact: node, key, content hash (computing what is missing).
-    /// Redirect it into a lock file for `verify`.
+    /// Redirect it into a lock file for `verify`, or write it with `-o`.
     Hashes {
         config: PathBuf,
         #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
         sets: Vec<String>,
+        /// Write the lock file here (atomically) instead of printing it. An existing lock whose
+        /// line for a node has the same key but another content hash (a code change without
+        /// a version bump) is not overwritten unless `--accept-unbumped` is given.
+        #[arg(short, long, value_name = "LOCKFILE")]
+        output: Option<PathBuf>,
+        /// With `-o`: overwrite lines whose content changed under an unchanged key.
+        #[arg(long, requires = "output")]
+        accept_unbumped: bool,
     },
     /// Check a config's artifacts against a lock file written by `hashes`, re-hashing every
     /// cached object. Exit status: 0 all match and nothing was damaged; 1 a mismatch (each is
@@ -251,9 +260,39 @@ fn real_main() -> Result<i32> {
             }
             Ok(0)
         }
-        Command::Hashes { config, sets } => {
+        Command::Hashes {
+            config,
+            sets,
+            output,
+            accept_unbumped,
+        } => {
             let (_, result) = run_config(config, sets, &cache_dir, progress)?;
-            print!("{}", lock_text(&result.reports));
+            let now = LockFile::of_reports(&result.reports);
+            let Some(output) = output else {
+                print!("{}", now.to_text());
+                return Ok(0);
+            };
+            if output.exists() {
+                let unbumped: Vec<_> = LockFile::read(output)?
+                    .compare(&now)
+                    .into_iter()
+                    .filter(|d| d.is_unbumped())
+                    .collect();
+                for d in &unbumped {
+                    eprintln!("unbumped: {d}");
+                }
+                if !unbumped.is_empty() && !accept_unbumped {
+                    bail!(
+                        "{} line(s) of {} would change content under an unchanged key; bump the \
+                         version of each node's algorithm (README, \"When to bump a version\"), \
+                         or pass --accept-unbumped if the change is meant (the lock was not \
+                         written)",
+                        unbumped.len(),
+                        output.display()
+                    );
+                }
+            }
+            write_atomic(output, now.to_text().as_bytes())?;
             Ok(0)
         }
         Command::Verify {
@@ -263,8 +302,7 @@ fn real_main() -> Result<i32> {
             fresh,
         } => {
             let plan = load_plan(config, sets)?;
-            let lock = std::fs::read_to_string(lockfile)
-                .with_context(|| format!("reading lock file {}", lockfile.display()))?;
+            let lock = LockFile::read(lockfile)?;
             let temp = fresh.then(|| TempDir::new("texsyn-verify"));
             let cache = match &temp {
                 Some(t) => Cache::open(t.path())?,
@@ -280,7 +318,18 @@ fn real_main() -> Result<i32> {
                     verify_all: true,
                 },
             )?;
-            let problems = compare_lock(&lock, &result.reports, lockfile)?;
+            let differences = lock.compare(&LockFile::of_reports(&result.reports));
+            // Nodes whose content changed under an unchanged key (a missing version bump).
+            let unbumped: Vec<&str> = differences
+                .iter()
+                .filter_map(|d| match d {
+                    texsyn::lockfile::Difference::ContentChangedUnderSameKey { node, .. } => {
+                        Some(node.as_str())
+                    }
+                    _ => None,
+                })
+                .collect();
+            let problems: Vec<String> = differences.iter().map(|d| d.to_string()).collect();
             let code = if !problems.is_empty() {
                 VERIFY_MISMATCH
             } else if !result.damaged.is_empty() {
@@ -295,6 +344,7 @@ fn real_main() -> Result<i32> {
                         "lockfile": lockfile,
                         "artifacts": result.reports.len(),
                         "mismatches": problems,
+                        "unbumped": unbumped,
                         "damaged": result.damaged,
                         "exit_code": code,
                     }))?
@@ -495,68 +545,6 @@ fn print_table(reports: &[pipeline::NodeReport]) {
             texsyn::memory::human(r.bytes)
         );
     }
-}
-
-const LOCK_HEADER: &str =
-    "# texsyn lock file: node, key, content hash (written by `texsyn hashes`)\n";
-
-fn lock_text(reports: &[pipeline::NodeReport]) -> String {
-    let mut s = String::from(LOCK_HEADER);
-    for r in reports {
-        s += &format!("{} {} {}\n", r.node, r.key, r.content_hash);
-    }
-    s
-}
-
-/// Each difference between a lock file and a run, named.
-fn compare_lock(lock: &str, reports: &[pipeline::NodeReport], path: &Path) -> Result<Vec<String>> {
-    let mut expected = Vec::new();
-    for (i, line) in lock.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let f: Vec<&str> = line.split_whitespace().collect();
-        if f.len() != 3 || f[1].len() != 64 || f[2].len() != 64 {
-            bail!(
-                "{}:{}: expected `node key content-hash`, found {line:?}",
-                path.display(),
-                i + 1
-            );
-        }
-        expected.push((f[0], f[1], f[2]));
-    }
-    let mut problems = Vec::new();
-    for (node, key, hash) in &expected {
-        match reports.iter().find(|r| r.node == *node) {
-            None => problems.push(format!(
-                "{node}: in the lock file but not produced by this config"
-            )),
-            Some(r) => {
-                if r.content_hash != *hash {
-                    problems.push(format!(
-                        "{node}: content hash {} differs from the locked {hash}",
-                        r.content_hash
-                    ));
-                }
-                if r.key != *key {
-                    problems.push(format!(
-                        "{node}: key {} differs from the locked {key} (parameters, inputs or code version changed)",
-                        r.key
-                    ));
-                }
-            }
-        }
-    }
-    for r in reports {
-        if !expected.iter().any(|e| e.0 == r.node) {
-            problems.push(format!(
-                "{}: produced by this config but missing from the lock file",
-                r.node
-            ));
-        }
-    }
-    Ok(problems)
 }
 
 /// A directory removed when dropped. Named `PREFIX-PID-NANOS`; creating one removes those a

@@ -117,12 +117,65 @@ fn a_lock_file_that_disagrees_names_each_mismatching_node() {
         })
         .collect::<Vec<_>>()
         .join("\n");
-    std::fs::write(d.join("bad.lock"), tampered).unwrap();
+    std::fs::write(d.join("bad.lock"), &tampered).unwrap();
     let o = verify("bad.lock");
     assert_eq!(o.status.code(), Some(1));
     let e = stderr(&o);
-    assert!(e.contains("mismatch: synthesize: content hash"), "{e}");
+    // Same key, other content: named as the missing version bump it is.
+    assert!(
+        e.contains("mismatch: synthesize: key unchanged, content changed: version not bumped"),
+        "{e}"
+    );
     assert!(!e.contains("mismatch: reconstruct"), "{e}");
+
+    // `hashes -o` will not overwrite that line without being asked.
+    let hashes_to = |extra: &[&str]| {
+        texsyn(
+            &[
+                &["hashes", "demo.toml", "--cache", cache.to_str().unwrap()][..],
+                extra,
+            ]
+            .concat(),
+            d,
+        )
+    };
+    let o = hashes_to(&["-o", "bad.lock"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("unbumped: synthesize:"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.join("bad.lock")).unwrap(),
+        tampered
+    );
+    succeeded(hashes_to(&["-o", "bad.lock", "--accept-unbumped"]));
+    assert_eq!(std::fs::read_to_string(d.join("bad.lock")).unwrap(), lock);
+
+    // A changed key is an ordinary mismatch, and `hashes -o` replaces it.
+    let rekeyed = lock.lines().map(|l| {
+        if l.starts_with("synthesize ") {
+            let mut f: Vec<String> = l.split(' ').map(String::from).collect();
+            f[1] = "1".repeat(64);
+            f.join(" ")
+        } else {
+            l.to_owned()
+        }
+    });
+    std::fs::write(
+        d.join("rekeyed.lock"),
+        rekeyed.collect::<Vec<_>>().join("\n"),
+    )
+    .unwrap();
+    let e = stderr(&verify("rekeyed.lock"));
+    assert!(e.contains("mismatch: synthesize: key "), "{e}");
+    assert!(!e.contains("version not bumped"), "{e}");
+    succeeded(hashes_to(&["-o", "rekeyed.lock"]));
+    assert_eq!(
+        std::fs::read_to_string(d.join("rekeyed.lock")).unwrap(),
+        lock
+    );
 }
 
 #[test]

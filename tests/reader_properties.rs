@@ -1,6 +1,6 @@
 //! Property tests of every reader of user files (issue 11, "Beyond the found cases"): meshes
-//! (OBJ, OFF, PLY ascii and binary, STL ascii and binary), images (PNG, JPEG, EXR), configs
-//! and curve files. Arbitrary bytes, and valid files with bytes flipped, cut or inserted,
+//! (OBJ, OFF, PLY ascii and binary, STL ascii and binary), images (PNG, JPEG, EXR), configs,
+//! curve files and lock files. Arbitrary bytes, and valid files with bytes flipped, cut or inserted,
 //! must give `Ok` or an error: never a panic, and never an allocation beyond the input's size
 //! times a small factor (a header may claim a billion vertices; the reader must not believe
 //! it). The allocation bound is checked with a counting allocator, for this test binary only.
@@ -186,6 +186,30 @@ proptest! {
                 let _ = texsyn::methods::plan(&cfg);
             }
         });
+    }
+
+    #[test]
+    fn lock_files_survive_mutations_and_round_trip(
+        mutated_lock in mutated(data("configs/demo.lock")),
+        arbitrary in prop::collection::vec(any::<u8>(), 0..1024),
+    ) {
+        use texsyn::lockfile::LockFile;
+        let reference = LockFile::parse(
+            &String::from_utf8(data("configs/demo.lock")).unwrap(),
+            Path::new("demo.lock"),
+        )
+        .unwrap();
+        for bytes in [&mutated_lock, &arbitrary] {
+            check(bytes, |b| {
+                let text = String::from_utf8_lossy(b);
+                if let Ok(lock) = LockFile::parse(&text, Path::new("x.lock")) {
+                    // What parses is what `hashes` would write back, and compares cleanly.
+                    let again = LockFile::parse(&lock.to_text(), Path::new("y.lock")).unwrap();
+                    assert_eq!(again, lock);
+                    let _ = reference.compare(&lock);
+                }
+            });
+        }
     }
 }
 
