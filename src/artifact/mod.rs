@@ -9,9 +9,16 @@
 //!       16    metadata length (u64)
 //!       24    payload length (u64)        everything after the header
 //!       32    payload blake3 hash         32 bytes: the artifact's content hash
-//!       64    reserved (zero)             up to HEADER_LEN = 128
+//!       64    byte-order mark (u32)       0x01020304 in the writer's byte order
+//!       68    reserved (zero)             up to HEADER_LEN = 128
 //!      128    payload: bincode(Meta), zero padding to 64, arrays (each padded to 64)
 //! ```
+//!
+//! The header's own fields are little-endian everywhere; the arrays are in the writing
+//! machine's byte order (they are viewed in place), which the byte-order mark records. A
+//! machine of the other order refuses the object ([`ArtifactError::ByteOrder`]) instead of
+//! misreading it; the cache then recomputes it. Every machine texsyn is tested on is
+//! little-endian.
 //!
 //! The content hash covers the whole payload, so it changes exactly when the bytes a reader
 //! could see change. It is what downstream node keys are built from (early cutoff).
@@ -31,7 +38,11 @@ use serde::{Deserialize, Serialize, de::DeserializeOwned};
 use std::fmt;
 
 pub const MAGIC: &[u8; 8] = b"TXSYNART";
-pub const FORMAT_VERSION: u32 = 1;
+/// 2: the byte-order mark at offset 64 (version 1 objects are recomputed).
+pub const FORMAT_VERSION: u32 = 2;
+/// Written in the writer's native order; read back as [`BYTE_ORDER_MARK`] only by a machine
+/// of the same order.
+pub const BYTE_ORDER_MARK: u32 = 0x0102_0304;
 pub const HEADER_LEN: usize = 128;
 const ALIGN: usize = 64;
 
@@ -145,6 +156,13 @@ pub enum ArtifactError {
     UnknownKind(u32),
     #[error("artifact header's reserved bytes are not zero (corrupted)")]
     Reserved,
+    #[error(
+        "artifact was written on a {written} machine; this {here} machine cannot read its arrays"
+    )]
+    ByteOrder {
+        written: &'static str,
+        here: &'static str,
+    },
     #[error("cache object is not a regular file")]
     NotAFile,
     #[error("artifact length {actual} does not match its header ({expected})")]
@@ -216,7 +234,20 @@ impl Header {
         if Kind::from_code(header.kind).is_none() {
             return Err(ArtifactError::UnknownKind(header.kind));
         }
-        if bytes[64..HEADER_LEN].iter().any(|&b| b != 0) {
+        let mark = u32::from_ne_bytes(bytes[64..68].try_into().unwrap());
+        if mark != BYTE_ORDER_MARK {
+            let order = |big: bool| if big { "big-endian" } else { "little-endian" };
+            let here_big = cfg!(target_endian = "big");
+            return Err(if mark == BYTE_ORDER_MARK.swap_bytes() {
+                ArtifactError::ByteOrder {
+                    written: order(!here_big),
+                    here: order(here_big),
+                }
+            } else {
+                ArtifactError::Reserved
+            });
+        }
+        if bytes[68..HEADER_LEN].iter().any(|&b| b != 0) {
             return Err(ArtifactError::Reserved);
         }
         if let Some(len) = file_len {
@@ -335,6 +366,7 @@ impl ArtifactWriter {
         out[16..24].copy_from_slice(&(env.len() as u64).to_le_bytes());
         out[24..32].copy_from_slice(&(payload_len as u64).to_le_bytes());
         out[32..64].copy_from_slice(&hash.0);
+        out[64..68].copy_from_slice(&BYTE_ORDER_MARK.to_ne_bytes());
         out
     }
 }
@@ -602,6 +634,32 @@ mod tests {
         // A known but different kind opens, and is refused by the reader expecting Mesh.
         let other = damaged(12, Kind::Image as u8).unwrap();
         assert!(other.expect_kind(Kind::Mesh).is_err());
+    }
+
+    /// An object from a machine of the other byte order is refused by name (issue 14, item 5):
+    /// flipping the mark plays that machine, no big-endian machine needed.
+    #[test]
+    fn an_object_of_the_other_byte_order_is_refused() {
+        let mut b = sample();
+        b[64..68].reverse();
+        let e = Artifact::from_bytes(b).err().unwrap();
+        assert!(matches!(e, ArtifactError::ByteOrder { .. }), "{e}");
+        let here = if cfg!(target_endian = "big") {
+            "big"
+        } else {
+            "little"
+        };
+        assert!(
+            e.to_string()
+                .contains(&format!("this {here}-endian machine")),
+            "{e}"
+        );
+        let mut zero = sample();
+        zero[64..68].fill(0);
+        assert!(matches!(
+            Artifact::from_bytes(zero),
+            Err(ArtifactError::Reserved)
+        ));
     }
 
     #[test]
