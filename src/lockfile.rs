@@ -25,10 +25,17 @@ pub struct LockEntry {
 }
 
 /// A parsed lock file, entries in file order.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, Default)]
 pub struct LockFile {
+    /// The `--set` overrides the hashes were made with (`# set: KEY=VALUE` lines): `verify`
+    /// applies them before the command line's own, so a companion lock of a config at small
+    /// settings (`configs/cpu/`) verifies with no flags beyond the config and the lock.
+    pub sets: Vec<String>,
     pub entries: Vec<LockEntry>,
 }
+
+/// The comment prefix of a recorded `--set` override.
+const SET_PREFIX: &str = "# set: ";
 
 #[derive(Debug, thiserror::Error)]
 pub enum LockError {
@@ -140,6 +147,7 @@ impl LockFile {
     /// comments are skipped; every other line is `node key content-hash`, each node once.
     pub fn parse(text: &str, path: &Path) -> Result<LockFile, LockError> {
         let mut entries: Vec<LockEntry> = Vec::new();
+        let mut sets = Vec::new();
         for (i, line) in text.lines().enumerate() {
             let bad = |what: String| LockError::Line {
                 path: path.to_owned(),
@@ -147,6 +155,16 @@ impl LockFile {
                 what,
             };
             let line = line.trim();
+            if let Some(set) = line.strip_prefix(SET_PREFIX) {
+                let set = set.trim();
+                if !set.contains('=') {
+                    return Err(bad(format!(
+                        "recorded override {set:?} is not STAGE.KEY=VALUE"
+                    )));
+                }
+                sets.push(set.to_owned());
+                continue;
+            }
             if line.is_empty() || line.starts_with('#') {
                 continue;
             }
@@ -166,12 +184,13 @@ impl LockFile {
                 content_hash: f[2].to_owned(),
             });
         }
-        Ok(LockFile { entries })
+        Ok(LockFile { sets, entries })
     }
 
-    /// The lock file of a run's reports.
-    pub fn of_reports(reports: &[NodeReport]) -> LockFile {
+    /// The lock file of a run's reports, made with the `sets` overrides.
+    pub fn of_reports(reports: &[NodeReport], sets: &[String]) -> LockFile {
         LockFile {
+            sets: sets.to_vec(),
             entries: reports
                 .iter()
                 .map(|r| LockEntry {
@@ -186,6 +205,9 @@ impl LockFile {
     /// The text `hashes` writes.
     pub fn to_text(&self) -> String {
         let mut s = String::from(HEADER);
+        for set in &self.sets {
+            s += &format!("{SET_PREFIX}{set}\n");
+        }
         for e in &self.entries {
             s += &format!("{} {} {}\n", e.node, e.key, e.content_hash);
         }
@@ -237,6 +259,7 @@ mod tests {
 
     fn lock(lines: &[(&str, char, char)]) -> LockFile {
         LockFile {
+            sets: vec![],
             entries: lines
                 .iter()
                 .map(|&(n, k, c)| LockEntry {
@@ -250,8 +273,14 @@ mod tests {
 
     #[test]
     fn text_round_trips() {
-        let l = lock(&[("a", '1', '2'), ("b.c", '3', '4')]);
+        let mut l = lock(&[("a", '1', '2'), ("b.c", '3', '4')]);
         assert_eq!(LockFile::parse(&l.to_text(), Path::new("x")).unwrap(), l);
+        l.sets = vec!["parameterize.size=65".into(), "inputs.mesh=a b.off".into()];
+        let text = l.to_text();
+        assert!(text.contains("# set: parameterize.size=65\n"), "{text}");
+        assert_eq!(LockFile::parse(&text, Path::new("x")).unwrap(), l);
+        let e = LockFile::parse("# set: nothing\n", Path::new("x")).unwrap_err();
+        assert!(e.to_string().contains("not STAGE.KEY=VALUE"), "{e}");
     }
 
     #[test]

@@ -60,7 +60,8 @@ enum Command {
         sets: Vec<String>,
     },
     /// Print one line per artifact: node, key, content hash (computing what is missing).
-    /// Redirect it into a lock file for `verify`, or write it with `-o`.
+    /// Redirect it into a lock file for `verify`, or write it with `-o`. The `--set`
+    /// overrides are recorded in the lock (`# set:` lines), and `verify` applies them.
     Hashes {
         config: PathBuf,
         #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
@@ -78,6 +79,7 @@ enum Command {
     /// cached object. Exit status: 0 all match and nothing was damaged; 1 a mismatch (each is
     /// named); 3 all match, but damaged cache objects were found (each is named; they were
     /// recomputed and replaced). `--json` prints the mismatches and the damaged objects.
+    /// The lock's recorded `--set` overrides apply first, then the command line's.
     Verify {
         config: PathBuf,
         lockfile: PathBuf,
@@ -267,7 +269,7 @@ fn real_main() -> Result<i32> {
             accept_unbumped,
         } => {
             let (_, result) = run_config(config, sets, &cache_dir, progress)?;
-            let now = LockFile::of_reports(&result.reports);
+            let now = LockFile::of_reports(&result.reports, sets);
             let Some(output) = output else {
                 print!("{}", now.to_text());
                 return Ok(0);
@@ -301,8 +303,10 @@ fn real_main() -> Result<i32> {
             sets,
             fresh,
         } => {
-            let plan = load_plan(config, sets)?;
             let lock = LockFile::read(lockfile)?;
+            // The lock's recorded overrides first, so the command line's own win.
+            let sets: Vec<String> = lock.sets.iter().chain(sets.iter()).cloned().collect();
+            let plan = load_plan(config, &sets)?;
             let temp = fresh.then(|| TempDir::new("texsyn-verify"));
             let cache = match &temp {
                 Some(t) => Cache::open(t.path())?,
@@ -318,7 +322,7 @@ fn real_main() -> Result<i32> {
                     verify_all: true,
                 },
             )?;
-            let differences = lock.compare(&LockFile::of_reports(&result.reports));
+            let differences = lock.compare(&LockFile::of_reports(&result.reports, &sets));
             // Nodes whose content changed under an unchanged key (a missing version bump).
             let unbumped: Vec<&str> = differences
                 .iter()

@@ -40,7 +40,7 @@ use std::path::{Path, PathBuf};
 
 const GEOMETRY_IMAGE_VERSION: u32 = 1;
 const EXTRACT_VERSION: u32 = 1;
-const FIELD_VERSION: u32 = 2;
+const FIELD_VERSION: u32 = 3;
 const RECONSTRUCT_VERSION: u32 = 5;
 const VARIANTS_VERSION: u32 = 1;
 const SYNTH_VERSION: u32 = 1;

@@ -39,7 +39,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 const ANALYSIS_VERSION: u32 = 1;
-const FIELD_VERSION: u32 = 1;
+const FIELD_VERSION: u32 = 2;
 const REQUEST_VERSION: u32 = 4;
 const SYNTH_VERSION: u32 = 2;
 const RECONSTRUCT_VERSION: u32 = 1;

@@ -14,8 +14,7 @@
 //! adjacency index of `w` in `v`'s neighbour list (`adj.half_edge(v, w)`).
 
 use super::Mesh;
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
+use crate::linalg::LuPattern;
 use faer::sparse::{SparseColMat, Triplet};
 use glam::{DVec2, DVec3, Vec2};
 
@@ -144,7 +143,7 @@ pub struct ConvexCombinationSolver {
     fixed_pos: Vec<DVec2>,
     /// The free vertices in unknown order.
     free: Vec<u32>,
-    symbolic: Option<SymbolicLu<usize>>,
+    symbolic: Option<LuPattern>,
 }
 
 const FIXED: u32 = u32::MAX;
@@ -272,15 +271,15 @@ impl ConvexCombinationSolver {
         let symbolic = match &self.symbolic {
             Some(s) => s.clone(),
             None => {
-                let s = SymbolicLu::try_new(mat.symbolic())
-                    .map_err(|e| MeanValueError::Solve(format!("{e:?}")))?;
+                let s = LuPattern::new(mat.symbolic())
+                    .map_err(|e| MeanValueError::Solve(e.to_string()))?;
                 self.symbolic = Some(s.clone());
                 s
             }
         };
-        let lu = Lu::try_new_with_symbolic(symbolic, mat.as_ref())
-            .map_err(|e| MeanValueError::Solve(format!("{e:?}")))?;
-        lu.solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut rhs, nf, 2));
+        symbolic
+            .solve(&mat, &mut rhs, 2)
+            .map_err(|e| MeanValueError::Solve(e.to_string()))?;
         for (u, &v) in self.free.iter().enumerate() {
             let p = DVec2::new(rhs[u], rhs[nf + u]);
             if !p.is_finite() {

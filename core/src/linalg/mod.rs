@@ -1,8 +1,20 @@
 //! Sparse linear algebra: a symmetric positive definite solver that keeps its factorization
 //! (faer's sparse Cholesky), so several right-hand sides reuse one factorization.
+//!
+//! Always faer's *simplicial* factorization, never its supernodal one: the supernodal
+//! kernels pick SIMD code (AVX2 with FMA, or not) by the CPU at run time, so the last bits
+//! of a solution, and every artifact hash downstream, depended on the machine (issue 14: the
+//! solid's field hashed differently under an emulated pre-AVX CPU). The simplicial kernels
+//! are plain scalar loops, which Rust compiles without fused multiply-adds, so they round the
+//! same on every x86-64 (and every IEEE 754) machine. Sequential too, for the thread count.
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::{SparseColMat, Triplet};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, factorize_symbolic_cholesky,
+};
+use faer::sparse::{SparseColMat, SymbolicSparseColMatRef, Triplet};
+use std::sync::Arc;
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveError {
@@ -10,6 +22,8 @@ pub enum SolveError {
     Build(String),
     #[error("matrix is not positive definite (a mesh component with no constraint?): {0}")]
     NotPositiveDefinite(String),
+    #[error("matrix is singular: {0}")]
+    Singular(String),
 }
 
 /// The lower triangle (row ≥ col) of the n×n matrix given by triplets, duplicates summed;
@@ -30,48 +44,98 @@ fn lower_matrix(
         .map_err(|e| SolveError::Build(format!("{e:?}")))
 }
 
+/// The symbolic analysis (fill-reducing ordering, elimination tree), forced simplicial.
+fn analyse(
+    pattern: SymbolicSparseColMatRef<'_, usize>,
+) -> Result<SymbolicCholesky<usize>, SolveError> {
+    factorize_symbolic_cholesky(
+        pattern,
+        faer::Side::Lower,
+        Default::default(),
+        CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| SolveError::Build(format!("{e:?}")))
+}
+
+/// A numeric factorization: the shared symbolic part and the factor's values.
+struct Factor {
+    symbolic: Arc<SymbolicCholesky<usize>>,
+    values: Vec<f64>,
+}
+
+impl Factor {
+    /// Factorizes `lower` (the lower triangle of an SPD matrix with `symbolic`'s pattern).
+    fn new(
+        symbolic: Arc<SymbolicCholesky<usize>>,
+        lower: &SparseColMat<usize, f64>,
+    ) -> Result<Factor, SolveError> {
+        let par = faer::Par::Seq;
+        let mut values = vec![0.0; symbolic.len_val()];
+        let mut buf =
+            MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()));
+        symbolic
+            .factorize_numeric_llt(
+                &mut values,
+                lower.as_ref(),
+                faer::Side::Lower,
+                Default::default(),
+                par,
+                MemStack::new(&mut buf),
+                Default::default(),
+            )
+            .map_err(|e| SolveError::NotPositiveDefinite(format!("{e:?}")))?;
+        Ok(Factor { symbolic, values })
+    }
+
+    /// Solves A X = B in place for `k` right-hand sides stored column-major in `rhs`.
+    fn solve(&self, rhs: &mut [f64], k: usize) {
+        let n = self.symbolic.nrows();
+        assert_eq!(rhs.len(), n * k, "right-hand side has the wrong length");
+        let par = faer::Par::Seq;
+        let mut buf = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(k, par));
+        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+            faer::Conj::No,
+            faer::MatMut::from_column_major_slice_mut(rhs, n, k),
+            par,
+            MemStack::new(&mut buf),
+        );
+    }
+}
+
 /// A factorized sparse SPD matrix.
 pub struct SpdSolver {
-    n: usize,
-    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+    factor: Factor,
 }
 
 impl SpdSolver {
     /// Factorizes the n×n matrix given by (row, col, value) triplets; duplicates are summed.
     /// Only the lower triangle (row ≥ col) is read, so callers may pass either half or both.
     pub fn new(n: usize, triplets: &[(usize, usize, f64)]) -> Result<Self, SolveError> {
-        // Sequential: faer's parallel factorization is fast but texsyn's outputs must be
-        // bit-identical for any thread count, and these systems are small.
-        faer::set_global_parallelism(faer::Par::Seq);
         let m = lower_matrix(n, triplets, false)?;
-        let llt = m
-            .sp_cholesky(faer::Side::Lower)
-            .map_err(|e| SolveError::NotPositiveDefinite(format!("{e:?}")))?;
-        Ok(SpdSolver { n, llt })
+        let symbolic = Arc::new(analyse(m.symbolic())?);
+        Ok(SpdSolver {
+            factor: Factor::new(symbolic, &m)?,
+        })
     }
 
     /// Solves A X = B in place for `k` right-hand sides stored column-major in `rhs`
     /// (length n·k).
     pub fn solve(&self, rhs: &mut [f64], k: usize) {
-        assert_eq!(
-            rhs.len(),
-            self.n * k,
-            "right-hand side has the wrong length"
-        );
-        faer::set_global_parallelism(faer::Par::Seq);
-        let mat = faer::MatMut::from_column_major_slice_mut(rhs, self.n, k);
-        self.llt.solve_in_place(mat);
+        self.factor.solve(rhs, k)
     }
 }
 
 /// A sparse symmetric positive definite matrix whose off-diagonal entries are fixed and
 /// whose diagonal may change between factorizations: the fill-reducing ordering and the
-/// symbolic factorization (elimination tree, supernodes) are computed once in [`SpdPattern::new`],
+/// symbolic factorization (elimination tree) are computed once in [`SpdPattern::new`],
 /// each [`SpdPattern::factorize`] only redoes the numeric part. Used where a sequence of
 /// systems differs by diagonal penalty terms (constraints added one group at a time).
 pub struct SpdPattern {
     n: usize,
-    symbolic: faer::sparse::linalg::solvers::SymbolicLlt<usize>,
+    symbolic: Arc<SymbolicCholesky<usize>>,
     lower: SparseColMat<usize, f64>,
     /// Position of entry (i, i) in `lower`'s value array.
     diag_pos: Vec<usize>,
@@ -82,7 +146,6 @@ impl SpdPattern {
     /// read, as in [`SpdSolver::new`]). Every diagonal entry is part of the pattern even when
     /// no triplet names it.
     pub fn new(n: usize, triplets: &[(usize, usize, f64)]) -> Result<Self, SolveError> {
-        faer::set_global_parallelism(faer::Par::Seq);
         let m = lower_matrix(n, triplets, true)?;
         let mut diag_pos = vec![usize::MAX; n];
         {
@@ -96,9 +159,7 @@ impl SpdPattern {
                 }
             }
         }
-        let symbolic =
-            faer::sparse::linalg::solvers::SymbolicLlt::try_new(m.symbolic(), faer::Side::Lower)
-                .map_err(|e| SolveError::Build(format!("{e:?}")))?;
+        let symbolic = Arc::new(analyse(m.symbolic())?);
         Ok(SpdPattern {
             n,
             symbolic,
@@ -119,7 +180,6 @@ impl SpdPattern {
             self.n,
             "diagonal has the wrong length"
         );
-        faer::set_global_parallelism(faer::Par::Seq);
         let mut m = self.lower.clone();
         {
             let val = m.val_mut();
@@ -127,34 +187,84 @@ impl SpdPattern {
                 val[self.diag_pos[i]] += d;
             }
         }
-        let llt = faer::sparse::linalg::solvers::Llt::try_new_with_symbolic(
-            self.symbolic.clone(),
-            m.as_ref(),
-            faer::Side::Lower,
-        )
-        .map_err(|e| SolveError::NotPositiveDefinite(format!("{e:?}")))?;
-        Ok(SpdFactor { n: self.n, llt })
+        Ok(SpdFactor {
+            factor: Factor::new(self.symbolic.clone(), &m)?,
+        })
     }
 }
 
 /// A numeric factorization made by [`SpdPattern::factorize`].
 pub struct SpdFactor {
-    n: usize,
-    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+    factor: Factor,
 }
 
 impl SpdFactor {
     /// Solves A X = B in place for `k` right-hand sides stored column-major in `rhs`
     /// (length n·k).
     pub fn solve(&self, rhs: &mut [f64], k: usize) {
-        assert_eq!(
-            rhs.len(),
-            self.n * k,
-            "right-hand side has the wrong length"
+        self.factor.solve(rhs, k)
+    }
+}
+
+/// The symbolic LU analysis (column ordering, fill pattern) of a square sparse matrix, forced
+/// simplicial like the Cholesky above, so that solutions do not depend on the CPU. Numeric
+/// factorizations of matrices with the same pattern reuse it.
+#[derive(Clone)]
+pub struct LuPattern {
+    symbolic: Arc<faer::sparse::linalg::lu::SymbolicLu<usize>>,
+}
+
+impl LuPattern {
+    pub fn new(pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<Self, SolveError> {
+        use faer::sparse::linalg::lu::{LuSymbolicParams, factorize_symbolic_lu};
+        let symbolic = factorize_symbolic_lu(
+            pattern,
+            LuSymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
+                ..Default::default()
+            },
+        )
+        .map_err(|e| SolveError::Build(format!("{e:?}")))?;
+        Ok(LuPattern {
+            symbolic: Arc::new(symbolic),
+        })
+    }
+
+    /// Factorizes `mat` (this pattern's matrix) and solves `mat · X = B` in place for `k`
+    /// right-hand sides stored column-major in `rhs`.
+    pub fn solve(
+        &self,
+        mat: &SparseColMat<usize, f64>,
+        rhs: &mut [f64],
+        k: usize,
+    ) -> Result<(), SolveError> {
+        use faer::sparse::linalg::lu::NumericLu;
+        let n = mat.nrows();
+        assert_eq!(rhs.len(), n * k, "right-hand side has the wrong length");
+        let par = faer::Par::Seq;
+        let mut numeric = NumericLu::<usize, f64>::new();
+        let mut buf = MemBuffer::new(
+            self.symbolic
+                .factorize_numeric_lu_scratch::<f64>(par, Default::default())
+                .or(self.symbolic.solve_in_place_scratch::<f64>(k, par)),
         );
-        faer::set_global_parallelism(faer::Par::Seq);
-        let mat = faer::MatMut::from_column_major_slice_mut(rhs, self.n, k);
-        self.llt.solve_in_place(mat);
+        let lu = self
+            .symbolic
+            .factorize_numeric_lu(
+                &mut numeric,
+                mat.as_ref(),
+                par,
+                MemStack::new(&mut buf),
+                Default::default(),
+            )
+            .map_err(|e| SolveError::Singular(format!("{e:?}")))?;
+        lu.solve_in_place_with_conj(
+            faer::Conj::No,
+            faer::MatMut::from_column_major_slice_mut(rhs, n, k),
+            par,
+            MemStack::new(&mut buf),
+        );
+        Ok(())
     }
 }
 
@@ -191,6 +301,45 @@ mod tests {
                 assert!((ax - b[c * n + i]).abs() < 1e-10);
             }
         }
+    }
+
+    /// The CPU-independence above rests on the simplicial kernels: on a grid Laplacian big
+    /// enough that faer's default analysis goes supernodal, ours must not.
+    #[test]
+    fn factorizations_are_simplicial_where_faer_would_go_supernodal() {
+        use faer::sparse::linalg::cholesky::SymbolicCholeskyRaw;
+        // A 3D grid: enough fill for faer's flop-ratio rule to choose supernodes.
+        let side = 16;
+        let id = |x: usize, y: usize, z: usize| (z * side + y) * side + x;
+        let mut t = Vec::new();
+        for z in 0..side {
+            for y in 0..side {
+                for x in 0..side {
+                    let i = id(x, y, z);
+                    t.push((i, i, 6.01));
+                    if x + 1 < side {
+                        t.push((id(x + 1, y, z), i, -1.0));
+                    }
+                    if y + 1 < side {
+                        t.push((id(x, y + 1, z), i, -1.0));
+                    }
+                    if z + 1 < side {
+                        t.push((id(x, y, z + 1), i, -1.0));
+                    }
+                }
+            }
+        }
+        let m = lower_matrix(side * side * side, &t, false).unwrap();
+        let default = factorize_symbolic_cholesky(
+            m.symbolic(),
+            faer::Side::Lower,
+            Default::default(),
+            Default::default(),
+        )
+        .unwrap();
+        assert!(matches!(default.raw(), SymbolicCholeskyRaw::Supernodal(_)));
+        let ours = analyse(m.symbolic()).unwrap();
+        assert!(matches!(ours.raw(), SymbolicCholeskyRaw::Simplicial(_)));
     }
 
     #[test]
