@@ -38,10 +38,10 @@ use crate::stages::synthesize::geometry_texture::{
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-const GEOMETRY_IMAGE_VERSION: u32 = 1;
+const GEOMETRY_IMAGE_VERSION: u32 = 2;
 const EXTRACT_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 2;
-const RECONSTRUCT_VERSION: u32 = 5;
+const RECONSTRUCT_VERSION: u32 = 6;
 const VARIANTS_VERSION: u32 = 1;
 const SYNTH_VERSION: u32 = 1;
 
