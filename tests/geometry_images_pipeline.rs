@@ -172,10 +172,10 @@ fn bad_inputs_are_named() {
     assert_runs_fail_naming(
         run,
         &[
-            // A colour image is not a height field.
+            // A colour image is read by its luma, unless only grey ones are allowed.
             (
                 "relief_cow.toml",
-                &["inputs.sample=assets/wood1.png"],
+                &["inputs.sample=assets/wood1.png", "extract.strict_grey=true"],
                 &["wood1.png", "not grey"],
             ),
             // A sample region that misses the sample mesh.
