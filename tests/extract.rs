@@ -595,7 +595,11 @@ fn a_coloured_image_is_read_by_its_luma_with_a_warning_or_refused_when_strict() 
     for (x, weight) in [(3, 0.2126f32), (4, 0.7152), (5, 0.0722)] {
         // Height difference to a 0.5 grey pixel: 2 × (0.9 weight − 0.5).
         let want = 2.0 * (0.9 * weight - 0.5);
-        assert!((dn(x) - grey - want).abs() < 1e-5, "{x}: {} vs {want}", dn(x) - grey);
+        assert!(
+            (dn(x) - grey - want).abs() < 1e-5,
+            "{x}: {} vs {want}",
+            dn(x) - grey
+        );
     }
     // The old refusal, kept as an option.
     let e = height_field_image(Path::new("leather.png"), img.view(), 1.0, 8, true).unwrap_err();
@@ -608,7 +612,11 @@ fn a_coloured_image_is_read_by_its_luma_with_a_warning_or_refused_when_strict() 
     img.pixels[7] = [f32::NAN, 0.5, 0.5, 1.0];
     for strict in [false, true] {
         let e = height_field_image(Path::new("l.png"), img.view(), 1.0, 8, strict).unwrap_err();
-        assert!(e.to_string().contains("pixel (7, 0) is not a finite number"), "{e}");
+        assert!(
+            e.to_string()
+                .contains("pixel (7, 0) is not a finite number"),
+            "{e}"
+        );
     }
 }
 

@@ -8,10 +8,10 @@ use texsyn::geom::Mesh;
 use texsyn::geom::half_edge::{HalfEdgeMesh, TopologyError};
 use texsyn::geom::mesh_check::{MeshHealth, mesh_health};
 use texsyn::geom::primitives;
-use texsyn::stages::reconstruct::displacement::grid_mesh;
 use texsyn::stages::parameterize::geometry_image::{
     GeometryImageBuild, GeometryImageError, GeometryImageParams, build_geometry_image,
 };
+use texsyn::stages::reconstruct::displacement::grid_mesh;
 
 /// The corpus: (path, genus, closed). The last entry is derived from the knot (see
 /// `holed_knot` in tests/common/geometry_image.rs).
@@ -516,7 +516,9 @@ fn a_closed_input_gives_a_closed_manifold_of_its_genus_without_stray_vertices() 
         .iter()
         .zip(corpus())
         .filter(|((_, _, closed), _)| *closed)
-        .map(|((path, genus, _), (_, m, b))| (path.to_string(), m.clone(), *genus as i64, b.clone()))
+        .map(|((path, genus, _), (_, m, b))| {
+            (path.to_string(), m.clone(), *genus as i64, b.clone())
+        })
         .collect();
     let small = [
         ("tetrahedron", primitives::tetrahedron(), 0),
@@ -542,7 +544,12 @@ fn a_closed_input_gives_a_closed_manifold_of_its_genus_without_stray_vertices() 
         extremity_cuts: 3,
         ..params65()
     };
-    cases.push(("cow with 3 extremity cuts".into(), cow.clone(), 0, build(cow, &p)));
+    cases.push((
+        "cow with 3 extremity cuts".into(),
+        cow.clone(),
+        0,
+        build(cow, &p),
+    ));
     for (name, _, genus, b) in &cases {
         let (h, g, vertices, groups) = grid_mesh_report(b);
         assert!(
@@ -556,13 +563,34 @@ fn a_closed_input_gives_a_closed_manifold_of_its_genus_without_stray_vertices() 
 }
 
 #[test]
+fn an_open_input_gives_a_manifold_open_only_along_its_own_boundary() {
+    for ((path, genus, closed), (_, mesh, b)) in CORPUS.iter().zip(corpus()) {
+        if *closed {
+            continue;
+        }
+        let (h, g, vertices, groups) = grid_mesh_report(b);
+        assert!(h.is_clean(), "{path}: {}", h.summary());
+        assert!(h.boundary_edges > 0, "{path}");
+        assert_eq!(g, Some(*genus as i64), "{path}: genus");
+        assert_eq!(vertices, groups, "{path}: samples left out");
+        let (m, _) = grid_mesh(&b.image, &b.image.positions);
+        let loops = HalfEdgeMesh::new(&m).unwrap().boundary_loops().len();
+        let input_loops = HalfEdgeMesh::new(mesh).unwrap().boundary_loops().len();
+        assert_eq!(loops, input_loops, "{path}: boundary loops");
+    }
+}
+
+#[test]
 fn a_mesh_without_area_is_an_error_saying_so() {
     let mut m = primitives::tetrahedron();
     for p in &mut m.positions {
         *p = Vec3::splat(0.5);
     }
     let err = build_geometry_image(&m, &params65(), &|_| {}).unwrap_err();
-    assert!(matches!(err, GeometryImageError::NoArea { triangles: 4 }), "{err:?}");
+    assert!(
+        matches!(err, GeometryImageError::NoArea { triangles: 4 }),
+        "{err:?}"
+    );
     assert!(err.to_string().contains("no area"), "{err}");
     // On one line: no area either.
     for (k, p) in m.positions.iter_mut().enumerate() {

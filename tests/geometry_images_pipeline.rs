@@ -121,7 +121,10 @@ fn genus_zero_inputs_and_the_tetrahedron_give_closed_manifold_reliefs() {
         let cache = tempfile::tempdir().unwrap();
         let r = run(
             "relief_cow.toml",
-            &[&format!("inputs.mesh={mesh:?}"), "analyse_exemplar.scales=3"],
+            &[
+                &format!("inputs.mesh={mesh:?}"),
+                "analyse_exemplar.scales=3",
+            ],
             cache.path(),
         )
         .unwrap_or_else(|e| panic!("{mesh}: {e}"));

@@ -203,8 +203,10 @@ pub fn displace(
 /// vertices (a folded pair, the tip held by nothing else). Triangles that merging collapses
 /// are dropped, and so are triangles that come out more than once on the same three vertices
 /// (a fold at a corner of the square, where one cell folds onto itself), all copies of them:
-/// keeping one would leave its edges with one or three triangles. Samples no triangle uses
-/// then are not output, so a closed input gives a closed manifold without stray vertices.
+/// keeping one would leave its edges with one or three triangles; the cells next to such a
+/// corner take the diagonal through its border neighbours, where the fold turns instead.
+/// Samples no triangle uses (a tip at a corner) are not output, so a closed input gives a
+/// closed manifold without stray vertices.
 pub fn grid_mesh(gi: &GeometryImage, positions: &[Vec3]) -> (Mesh, Vec<u32>) {
     let n = gi.n as usize;
     let rep = |k: usize| gi.mate_rep[k];
@@ -223,12 +225,22 @@ pub fn grid_mesh(gi: &GeometryImage, positions: &[Vec3]) -> (Mesh, Vec<u32>) {
         if rep(before) != rep(after) || rep(k) == rep(before) {
             continue;
         }
-        let (i, j) = (k / n, k % n);
-        for ci in i.saturating_sub(1)..=i.min(n - 2) {
-            for cj in j.saturating_sub(1)..=j.min(n - 2) {
-                let c = &mut through[ci * (n - 1) + cj];
-                if *c == u32::MAX {
-                    *c = k as u32;
+        // A tip at a corner has one cell, which folds onto itself and holds nothing; the
+        // fold then turns at the corner's two (mated) border neighbours instead.
+        let corner = |s: usize| (s / n == 0 || s / n == n - 1) && (s % n == 0 || s % n == n - 1);
+        let pivots = if corner(k) {
+            vec![before, after]
+        } else {
+            vec![k]
+        };
+        for s in pivots {
+            let (i, j) = (s / n, s % n);
+            for ci in i.saturating_sub(1)..=i.min(n - 2) {
+                for cj in j.saturating_sub(1)..=j.min(n - 2) {
+                    let c = &mut through[ci * (n - 1) + cj];
+                    if *c == u32::MAX {
+                        *c = s as u32;
+                    }
                 }
             }
         }
@@ -365,6 +377,59 @@ mod tests {
             },
         );
         assert_eq!(unchecked.held_back, 0);
+    }
+
+    /// A sphere's layout with both cut tips at corners: the border folded in half at (0, 0)
+    /// and at (n − 1, n − 1), border position t mated with 4(n − 1) − t.
+    fn folded_at_two_corners(n: u32) -> GeometryImage {
+        let mut gi = plane(n);
+        let nn = n as usize;
+        let border: Vec<usize> = (0..nn - 1)
+            .chain((0..nn - 1).map(|i| i * nn + nn - 1))
+            .chain((0..nn - 1).map(|j| (nn - 1) * nn + (nn - 1 - j)))
+            .chain((0..nn - 1).map(|i| (nn - 1 - i) * nn))
+            .collect();
+        let p = border.len();
+        for t in 1..p / 2 {
+            let (a, b) = (border[t], border[p - t]);
+            let r = a.min(b);
+            gi.mate_rep[a] = r as u32;
+            gi.mate_rep[b] = r as u32;
+        }
+        // Jittered off the plane so that no triangle is flat by accident.
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut jitter = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        for k in 0..nn * nn {
+            gi.positions[k] += Vec3::new(0.2 * jitter(), 0.2 * jitter(), jitter());
+        }
+        for k in 0..nn * nn {
+            gi.positions[k] = gi.positions[gi.mate_rep[k] as usize];
+        }
+        gi
+    }
+
+    #[test]
+    fn a_fold_at_a_corner_leaves_a_closed_manifold_without_its_tip() {
+        let n = 9u32;
+        let gi = folded_at_two_corners(n);
+        let (mesh, samples) = grid_mesh(&gi, &gi.positions);
+        let h = crate::geom::mesh_check::mesh_health(&mesh);
+        assert!(h.is_closed_manifold(), "{}", h.summary());
+        let he = crate::geom::half_edge::HalfEdgeMesh::new(&mesh).unwrap();
+        assert_eq!(he.components()[0].genus, 0);
+        // The two corner tips have no triangle of their own (their one cell folds onto
+        // itself) and are left out; every other mate group is a vertex.
+        let groups = (0..(n * n) as usize)
+            .filter(|&k| gi.mate_rep[k] as usize == k)
+            .count();
+        assert_eq!(mesh.vertex_count(), groups - 2);
+        let last = (n * n - 1) as u32;
+        assert!(!samples.contains(&0) && !samples.contains(&last));
     }
 
     #[test]

@@ -128,7 +128,10 @@ mod tests {
     #[test]
     fn a_clean_mesh_is_clean_and_each_oddity_is_counted() {
         let closed = mesh_health(&crate::geom::primitives::octahedron());
-        assert!(closed.is_clean() && closed.is_closed_manifold(), "{closed:?}");
+        assert!(
+            closed.is_clean() && closed.is_closed_manifold(),
+            "{closed:?}"
+        );
         let open = mesh_health(&crate::geom::primitives::grid(3, 1.0));
         assert!(open.is_clean() && !open.is_closed_manifold());
         assert_eq!(open.boundary_edges, 8, "a 3 × 3 grid has 8 border edges");
