@@ -8,7 +8,7 @@
 //! Steps:
 //! 1. Cut ([`crate::geom::cut_graph`]): tree-cotree with Erickson–Whittlesey's greedy dual
 //!    tree, boundary loops joined by shortest paths, closed spheres cut along a path between
-//!    two far-apart vertices; the cut is then straightened path by path, and optional cuts to
+//!    two far-apart vertices (at least two edges); a mesh without area is refused; the cut is then straightened path by path, and optional cuts to
 //!    extremities are added. Cutting splits every cut vertex into wedges; the disk boundary
 //!    alternates between the two sides of *cut paths* (paths of the cut graph between
 //!    *cut-nodes*: cut-graph vertices of degree ≠ 2 and vertices where the cut meets the mesh
@@ -17,8 +17,11 @@
 //!    2^(coarse_levels − 1); each cut path gets the same whole number of coarse units on both
 //!    of its sides, proportional to its length (at least one unit; largest remainder so the
 //!    total is the perimeter 4(size − 1)); boundary vertices inside a path are placed by arc
-//!    length. A boundary vertex is inserted at any corner of the square that falls inside a
-//!    boundary edge, so the disk covers the whole square.
+//!    length. The whole layout is then turned along the perimeter by whole coarse units so
+//!    that the tips of cut paths that end inside the surface sit as far from the square's
+//!    corners as possible (a tip at a corner folds its one grid cell onto itself; no turn when
+//!    the cut has no tip). A boundary vertex is inserted at any corner of the square that
+//!    falls inside a boundary edge, so the disk covers the whole square.
 //! 3. Interior: every chord (an interior edge with both ends on the boundary) is split at its
 //!    midpoint so no triangle lies flat on a side of the square; then the mean value
 //!    convex-combination map (Floater 2003) with the boundary fixed, and stretch reduction by

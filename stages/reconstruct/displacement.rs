@@ -212,7 +212,6 @@ pub fn grid_mesh(gi: &GeometryImage, positions: &[Vec3]) -> (Mesh, Vec<u32>) {
     let rep = |k: usize| gi.mate_rep[k];
     // The border in perimeter order (counter-clockwise in (u = j, v = i)).
     let border: Vec<usize> = (0..n - 1)
-        .map(|j| j)
         .chain((0..n - 1).map(|i| i * n + n - 1))
         .chain((0..n - 1).map(|j| (n - 1) * n + (n - 1 - j)))
         .chain((0..n - 1).map(|i| (n - 1 - i) * n))
@@ -227,7 +226,8 @@ pub fn grid_mesh(gi: &GeometryImage, positions: &[Vec3]) -> (Mesh, Vec<u32>) {
         }
         // A tip at a corner has one cell, which folds onto itself and holds nothing; the
         // fold then turns at the corner's two (mated) border neighbours instead.
-        let corner = |s: usize| (s / n == 0 || s / n == n - 1) && (s % n == 0 || s % n == n - 1);
+        let corner =
+            |s: usize| (s / n == 0 || s / n == n - 1) && (s.is_multiple_of(n) || s % n == n - 1);
         let pivots = if corner(k) {
             vec![before, after]
         } else {
@@ -428,7 +428,7 @@ mod tests {
             .filter(|&k| gi.mate_rep[k] as usize == k)
             .count();
         assert_eq!(mesh.vertex_count(), groups - 2);
-        let last = (n * n - 1) as u32;
+        let last = n * n - 1;
         assert!(!samples.contains(&0) && !samples.contains(&last));
     }
 
