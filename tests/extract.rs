@@ -550,7 +550,9 @@ fn grey_image(w: u32, h: u32, f: &dyn Fn(u32, u32) -> f32) -> Image {
 #[test]
 fn a_grey_image_becomes_heights_around_its_mean() {
     let img = grey_image(20, 16, &|x, y| (x + 2 * y) as f32 / 60.0);
-    let t = height_field_image(Path::new("leather.png"), img.view(), 0.5, 8).unwrap();
+    let h = height_field_image(Path::new("leather.png"), img.view(), 0.5, 8, true).unwrap();
+    assert!(h.warning.is_none());
+    let t = h.texels;
     assert_eq!((t.width, t.height, t.channels), (20, 16, 3));
     // Mean grey: mean x = 9.5, mean y = 7.5 → (9.5 + 15) / 60.
     let mean_grey = (9.5 + 15.0) / 60.0;
@@ -569,30 +571,65 @@ fn a_grey_image_becomes_heights_around_its_mean() {
 }
 
 #[test]
-fn a_coloured_image_is_an_error_naming_the_pixel() {
+fn a_coloured_image_is_read_by_its_luma_with_a_warning_or_refused_when_strict() {
     let mut img = grey_image(20, 16, &|_, _| 0.5);
-    // Within the 2/255 tolerance: still grey.
+    // Within the 2/255 tolerance: still grey, either way, and no warning.
     img.pixels[5] = [0.5, 0.5 + 1.5 / 255.0, 0.5, 1.0];
-    assert!(height_field_image(Path::new("a.png"), img.view(), 1.0, 8).is_ok());
-    img.pixels[(2 * 20 + 3) as usize] = [0.5, 0.6, 0.5, 1.0];
-    let e = height_field_image(Path::new("leather.png"), img.view(), 1.0, 8).unwrap_err();
+    for strict in [false, true] {
+        let h = height_field_image(Path::new("a.png"), img.view(), 1.0, 8, strict).unwrap();
+        assert!(h.warning.is_none());
+    }
+    // Pure red, green and blue pixels of the same encoded value: their heights follow the
+    // luma weights (green brightest, blue darkest), not their mean.
+    img.pixels[(2 * 20 + 3) as usize] = [0.9, 0.0, 0.0, 1.0];
+    img.pixels[(2 * 20 + 4) as usize] = [0.0, 0.9, 0.0, 1.0];
+    img.pixels[(2 * 20 + 5) as usize] = [0.0, 0.0, 0.9, 1.0];
+    let h = height_field_image(Path::new("leather.png"), img.view(), 2.0, 8, false).unwrap();
+    let w = h.warning.expect("a warning");
+    assert!(
+        w.starts_with("leather.png: a colour image (pixel (3, 2)") && w.contains("strict_grey"),
+        "{w}"
+    );
+    let dn = |x: u32| h.texels.texel(x, 2)[2];
+    let grey = h.texels.texel(0, 0)[2];
+    for (x, weight) in [(3, 0.2126f32), (4, 0.7152), (5, 0.0722)] {
+        // Height difference to a 0.5 grey pixel: 2 × (0.9 weight − 0.5).
+        let want = 2.0 * (0.9 * weight - 0.5);
+        assert!(
+            (dn(x) - grey - want).abs() < 1e-5,
+            "{x}: {} vs {want}",
+            dn(x) - grey
+        );
+    }
+    // The old refusal, kept as an option.
+    let e = height_field_image(Path::new("leather.png"), img.view(), 1.0, 8, true).unwrap_err();
     let msg = e.to_string();
     assert!(
         msg.starts_with("leather.png: pixel (3, 2) is not grey"),
         "{msg}"
     );
+    // A pixel that is not a number is refused either way.
+    img.pixels[7] = [f32::NAN, 0.5, 0.5, 1.0];
+    for strict in [false, true] {
+        let e = height_field_image(Path::new("l.png"), img.view(), 1.0, 8, strict).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("pixel (7, 0) is not a finite number"),
+            "{e}"
+        );
+    }
 }
 
 #[test]
 fn a_too_small_image_is_an_error_naming_the_size_needed() {
     let img = grey_image(20, 12, &|_, _| 0.5);
-    let e = height_field_image(Path::new("leather.png"), img.view(), 1.0, 16).unwrap_err();
+    let e = height_field_image(Path::new("leather.png"), img.view(), 1.0, 16, false).unwrap_err();
     let msg = e.to_string();
     assert!(msg.contains("leather.png"), "{msg}");
     assert!(msg.contains("20×12"), "{msg}");
     assert!(msg.contains("a sample too small for the template"), "{msg}");
     assert!(msg.contains("at least 16×16"), "{msg}");
-    assert!(height_field_image(Path::new("l.png"), img.view(), 1.0, 12).is_ok());
+    assert!(height_field_image(Path::new("l.png"), img.view(), 1.0, 12, false).is_ok());
 }
 
 #[test]

@@ -6,9 +6,12 @@ use common::geometry_image::{holed_knot, load_mesh as load};
 use glam::{DVec2, DVec3, Vec3};
 use texsyn::geom::Mesh;
 use texsyn::geom::half_edge::{HalfEdgeMesh, TopologyError};
+use texsyn::geom::mesh_check::{MeshHealth, mesh_health};
+use texsyn::geom::primitives;
 use texsyn::stages::parameterize::geometry_image::{
     GeometryImageBuild, GeometryImageError, GeometryImageParams, build_geometry_image,
 };
+use texsyn::stages::reconstruct::displacement::grid_mesh;
 
 /// The corpus: (path, genus, closed). The last entry is derived from the knot (see
 /// `holed_knot` in tests/common/geometry_image.rs).
@@ -482,4 +485,117 @@ fn the_image_is_byte_identical_for_one_and_two_threads() {
         v
     };
     assert!(bytes(&a) == bytes(&b));
+}
+
+/// The output mesh of a geometry image (its grid triangulated, mates merged, as the relief is
+/// written): (mesh health, genus or `None` when not a manifold surface, output vertices,
+/// mate groups).
+fn grid_mesh_report(b: &GeometryImageBuild) -> (MeshHealth, Option<i64>, usize, usize) {
+    let (m, samples) = grid_mesh(&b.image, &b.image.positions);
+    let h = mesh_health(&m);
+    let genus = HalfEdgeMesh::new(&m)
+        .ok()
+        .filter(|he| he.components().len() == 1)
+        .map(|he| he.components()[0].genus);
+    // Every output vertex is its own mate group's representative.
+    for &s in &samples {
+        assert_eq!(b.image.mate_rep[s as usize], s);
+    }
+    let groups = (0..b.image.mate_rep.len())
+        .filter(|&k| b.image.mate_rep[k] as usize == k)
+        .count();
+    (h, genus, m.vertex_count(), groups)
+}
+
+#[test]
+fn a_closed_input_gives_a_closed_manifold_of_its_genus_without_stray_vertices() {
+    // Genus 0 (the cow, whose cut is a path: the square's border folds back at both of its
+    // tips), 1 and 3, then the smallest closed meshes; every sample is used (no tip or
+    // corner sample is left out).
+    let mut cases: Vec<(String, Mesh, i64, GeometryImageBuild)> = CORPUS
+        .iter()
+        .zip(corpus())
+        .filter(|((_, _, closed), _)| *closed)
+        .map(|((path, genus, _), (_, m, b))| {
+            (path.to_string(), m.clone(), *genus as i64, b.clone())
+        })
+        .collect();
+    let small = [
+        ("tetrahedron", primitives::tetrahedron(), 0),
+        ("octahedron", primitives::octahedron(), 0),
+        ("icosphere", primitives::icosphere(2), 0),
+        ("seven-vertex torus", primitives::seven_vertex_torus(), 1),
+    ];
+    for (name, m, genus) in small {
+        for size in [9, 17, 65] {
+            let p = GeometryImageParams {
+                size,
+                coarse_levels: 2,
+                ..Default::default()
+            };
+            let b = build_geometry_image(&m, &p, &|_| {})
+                .unwrap_or_else(|e| panic!("{name} at size {size}: {e}"));
+            cases.push((format!("{name} at size {size}"), m.clone(), genus, b));
+        }
+    }
+    // Tips anywhere on the border: the cow with extremity cuts.
+    let cow = &corpus()[0].1;
+    let p = GeometryImageParams {
+        extremity_cuts: 3,
+        ..params65()
+    };
+    cases.push((
+        "cow with 3 extremity cuts".into(),
+        cow.clone(),
+        0,
+        build(cow, &p),
+    ));
+    for (name, _, genus, b) in &cases {
+        let (h, g, vertices, groups) = grid_mesh_report(b);
+        assert!(
+            h.is_closed_manifold(),
+            "{name}: the output has {}",
+            h.summary()
+        );
+        assert_eq!(g, Some(*genus), "{name}: genus");
+        assert_eq!(vertices, groups, "{name}: samples left out");
+    }
+}
+
+#[test]
+fn an_open_input_gives_a_manifold_open_only_along_its_own_boundary() {
+    for ((path, genus, closed), (_, mesh, b)) in CORPUS.iter().zip(corpus()) {
+        if *closed {
+            continue;
+        }
+        let (h, g, vertices, groups) = grid_mesh_report(b);
+        assert!(h.is_clean(), "{path}: {}", h.summary());
+        assert!(h.boundary_edges > 0, "{path}");
+        assert_eq!(g, Some(*genus as i64), "{path}: genus");
+        assert_eq!(vertices, groups, "{path}: samples left out");
+        let (m, _) = grid_mesh(&b.image, &b.image.positions);
+        let loops = HalfEdgeMesh::new(&m).unwrap().boundary_loops().len();
+        let input_loops = HalfEdgeMesh::new(mesh).unwrap().boundary_loops().len();
+        assert_eq!(loops, input_loops, "{path}: boundary loops");
+    }
+}
+
+#[test]
+fn a_mesh_without_area_is_an_error_saying_so() {
+    let mut m = primitives::tetrahedron();
+    for p in &mut m.positions {
+        *p = Vec3::splat(0.5);
+    }
+    let err = build_geometry_image(&m, &params65(), &|_| {}).unwrap_err();
+    assert!(
+        matches!(err, GeometryImageError::NoArea { triangles: 4 }),
+        "{err:?}"
+    );
+    assert!(err.to_string().contains("no area"), "{err}");
+    // On one line: no area either.
+    for (k, p) in m.positions.iter_mut().enumerate() {
+        *p = Vec3::new(k as f32, 0.0, 0.0);
+    }
+    let err = build_geometry_image(&m, &params65(), &|_| {}).unwrap_err();
+    assert!(matches!(err, GeometryImageError::NoArea { .. }), "{err:?}");
 }

@@ -105,6 +105,54 @@ fn a_genus_one_input_gives_a_closed_manifold_relief_with_mates_identical_and_no_
 }
 
 #[test]
+fn genus_zero_inputs_and_the_tetrahedron_give_closed_manifold_reliefs() {
+    // A sphere's cut is a path: the square's border folds back on itself at both of its tips,
+    // where the relief mesh used to get a folded pair of triangles (a non-manifold edge, two
+    // boundary edges) and unused tip samples. The tetrahedron's cut used to be one edge,
+    // which opens nothing.
+    let dir = tempfile::tempdir().unwrap();
+    let tet = dir.path().join("tetrahedron.off");
+    std::fs::write(
+        &tet,
+        "OFF\n4 4 0\n1 1 1\n1 -1 -1\n-1 1 -1\n-1 -1 1\n3 0 1 2\n3 0 3 1\n3 0 2 3\n3 1 3 2\n",
+    )
+    .unwrap();
+    for mesh in ["assets/cow.obj".to_string(), tet.display().to_string()] {
+        let cache = tempfile::tempdir().unwrap();
+        let r = run(
+            "relief_cow.toml",
+            &[
+                &format!("inputs.mesh={mesh:?}"),
+                "analyse_exemplar.scales=3",
+            ],
+            cache.path(),
+        )
+        .unwrap_or_else(|e| panic!("{mesh}: {e}"));
+        let out = materialized(&r, "reconstruct");
+        let m = read_ply(&std::fs::read(out.path().join("relief.ply")).unwrap());
+        let h = texsyn::geom::mesh_check::mesh_health(&m);
+        assert!(h.is_closed_manifold(), "{mesh}: {}", h.summary());
+        let he = texsyn::geom::half_edge::HalfEdgeMesh::new(&m).expect("manifold");
+        assert_eq!(he.components().len(), 1, "{mesh}");
+        assert_eq!(he.components()[0].genus, 0, "{mesh}");
+    }
+    // A mesh whose corners all coincide has nothing to map: a clear error, not a cut bug.
+    let flat = dir.path().join("point.off");
+    std::fs::write(
+        &flat,
+        "OFF\n4 4 0\n1 1 1\n1 1 1\n1 1 1\n1 1 1\n3 0 1 2\n3 0 3 1\n3 0 2 3\n3 1 3 2\n",
+    )
+    .unwrap();
+    let cache = tempfile::tempdir().unwrap();
+    let e = err(run(
+        "relief_cow.toml",
+        &[&format!("inputs.mesh={:?}", flat.display().to_string())],
+        cache.path(),
+    ));
+    assert!(e.contains("no area") && !e.contains("internal"), "{e}");
+}
+
+#[test]
 fn results_do_not_depend_on_the_thread_count() {
     assert_same_hashes_on_any_thread_count(|cache| run("relief_cow.toml", &[], cache).unwrap());
 }
@@ -127,10 +175,10 @@ fn bad_inputs_are_named() {
     assert_runs_fail_naming(
         run,
         &[
-            // A colour image is not a height field.
+            // A colour image is read by its luma, unless only grey ones are allowed.
             (
                 "relief_cow.toml",
-                &["inputs.sample=assets/wood1.png"],
+                &["inputs.sample=assets/wood1.png", "extract.strict_grey=true"],
                 &["wood1.png", "not grey"],
             ),
             // A sample region that misses the sample mesh.

@@ -7,10 +7,10 @@
 //! inputs.sample ─ import.sample ─ extract (texels) ─ analyse_exemplar (8 × 3 variants) ─┘
 //! ```
 //!
-//! The sample is a mesh (a region of it is cut out and its relief extracted, §4.1) or a
-//! greyscale image read as a height field (§5). Texel values are stored in units of the
-//! sample's texel spacing, so a relief keeps its proportions when it moves to a mesh of
-//! another size (see `stages::reconstruct::displacement`).
+//! The sample is a mesh (a region of it is cut out and its relief extracted, §4.1) or an
+//! image read as a height field (§5; a colour photograph by its luma). Texel values are
+//! stored in units of the sample's texel spacing, so a relief keeps its proportions when it
+//! moves to a mesh of another size (see `stages::reconstruct::displacement`).
 //!
 //! The geometry image's cut-nodes sit on the grid of the coarsest synthesis level (§4.2.2), so
 //! the parameterization's `coarse_levels` is `analyse_exemplar.levels`, not a setting of its
@@ -38,10 +38,10 @@ use crate::stages::synthesize::geometry_texture::{
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-const GEOMETRY_IMAGE_VERSION: u32 = 1;
+const GEOMETRY_IMAGE_VERSION: u32 = 2;
 const EXTRACT_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 3;
-const RECONSTRUCT_VERSION: u32 = 5;
+const RECONSTRUCT_VERSION: u32 = 6;
 const VARIANTS_VERSION: u32 = 1;
 const SYNTH_VERSION: u32 = 1;
 
@@ -69,8 +69,8 @@ pub struct GeometryImagesConfig {
 pub struct Inputs {
     /// The model that gets the texture (.obj, .off, .ply, .stl).
     pub mesh: PathBuf,
-    /// Where the texture comes from: a mesh (a region of it is used, see `[extract]`) or a
-    /// greyscale image read as a height field (.png, .jpg, .exr).
+    /// Where the texture comes from: a mesh (a region of it is used, see `[extract]`) or an
+    /// image read as a height field, a colour one by its luma (.png, .jpg, .exr).
     pub sample: PathBuf,
 }
 
@@ -113,6 +113,9 @@ impl ParameterizeSection {
 #[derive(Serialize)]
 struct HeightFieldImageParams {
     height_scale: f32,
+    /// Left out when false: configs that do not set it keep their keys.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    strict_grey: bool,
 }
 
 /// Parses the config and checks every value, and the values that must agree with each other,
@@ -267,7 +270,8 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     Ok(dag)
 }
 
-/// A greyscale image sample read as a height field (§5). Its size is only known once it is
+/// An image sample read as a height field (§5; a colour image by its luma, with a warning,
+/// unless `extract.strict_grey`). Its size is only known once it is
 /// read, so it is checked against the variants here, where the error can name the sample.
 fn image_sample(
     dag: &mut Dag,
@@ -278,6 +282,7 @@ fn image_sample(
     let (path, variants) = (path.to_owned(), c.analyse_exemplar.clone());
     let params = HeightFieldImageParams {
         height_scale: c.extract.height_scale,
+        strict_grey: c.extract.strict_grey,
     };
     Ok(dag.node(
         NodeSpec::new(Stage::Extract, "height_field_image", EXTRACT_VERSION),
@@ -285,7 +290,12 @@ fn image_sample(
         img,
         move |_, p, img| {
             // Image heights are in units of the texel spacing (one pixel).
-            let t = height_field_image(&path, img, p.height_scale, 1).map_err(NodeError::input)?;
+            let h = height_field_image(&path, img, p.height_scale, 1, p.strict_grey)
+                .map_err(NodeError::input)?;
+            if let Some(w) = &h.warning {
+                tracing::warn!("{w}");
+            }
+            let t = h.texels;
             check_sample_size(t.width, t.height, &variants)
                 .map_err(|e| NodeError::input(format!("the sample: {e}")))?;
             Ok(t)

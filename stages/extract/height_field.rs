@@ -10,7 +10,7 @@
 //! triangles overlap where the relief overhangs). Texels are (0, 0, h − mean h).
 //!
 //! Images: every pixel becomes a texel (0, 0, (grey − mean grey) × height_scale), row y of the
-//! image being texel row y.
+//! image being texel row y; a colour image's grey is its luma (see [`height_field_image`]).
 
 use super::planar_ransac::{
     PlanarExtraction, Plane, RansacParams, fit_sampling_plane, largest_square_on_plane,
@@ -104,16 +104,34 @@ pub fn is_image_path(path: &Path) -> bool {
 /// Largest difference between an image's r, g and b that still counts as grey.
 const GREY_TOLERANCE: f32 = 2.0 / 255.0;
 
-/// A greyscale image as a height field (§5): texels (0, 0, (grey − mean grey) ×
-/// `height_scale`), as many as the image has pixels. `path` names the image in errors; the
-/// image must be greyscale (r, g, b within 2/255 of each other) and at least `min_size`
-/// pixels on each side (the synthesis template's size).
+/// Rec. 709 luma weights of r, g and b.
+const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+/// An image read as a height field, and the warning to give about it (`Some` when it was a
+/// colour image and its luma was used).
+#[derive(Debug)]
+pub struct HeightFieldImage {
+    pub texels: TexelImage,
+    pub warning: Option<String>,
+}
+
+/// An image as a height field (§5): texels (0, 0, (grey − mean grey) × `height_scale`), as
+/// many as the image has pixels. `path` names the image in errors; the image must be at least
+/// `min_size` pixels on each side (the synthesis template's size).
+///
+/// Grey is the mean of r, g and b when every pixel is grey (within 2/255). A colour image (a
+/// photograph of a relief) is read by its luma, Rec. 709 weights of the sRGB-encoded r, g and
+/// b as image tools convert to greyscale (no decoding to linear light: brightness as it looks,
+/// and no transcendental function in the hashed path), with a warning naming the first colour
+/// pixel; with `strict_grey` it is refused instead, naming that pixel. The paper's leather
+/// example only says "intensity".
 pub fn height_field_image(
     path: &Path,
     img: ImageView,
     height_scale: f32,
     min_size: u32,
-) -> Result<TexelImage, ExtractError> {
+    strict_grey: bool,
+) -> Result<HeightFieldImage, ExtractError> {
     if !height_scale.is_finite() {
         return Err(ParamError::invalid(
             "height_scale",
@@ -139,24 +157,50 @@ pub fn height_field_image(
             height: img.height,
         });
     }
+    let mut warning = None;
     for (i, p) in img.pixels.iter().enumerate() {
-        let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-        if (hi - lo).is_nan() || hi - lo > GREY_TOLERANCE {
-            return Err(ExtractError::NotGreyscale {
+        if p[..3].iter().any(|c| !c.is_finite()) {
+            return Err(ExtractError::NotFinite {
                 path: path.to_owned(),
                 x: i as u32 % img.width,
                 y: i as u32 / img.width,
-                r: p[0],
-                g: p[1],
-                b: p[2],
             });
         }
+        let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        if hi - lo > GREY_TOLERANCE && warning.is_none() {
+            let (x, y) = (i as u32 % img.width, i as u32 / img.width);
+            if strict_grey {
+                return Err(ExtractError::NotGreyscale {
+                    path: path.to_owned(),
+                    x,
+                    y,
+                    r: p[0],
+                    g: p[1],
+                    b: p[2],
+                });
+            }
+            warning = Some(format!(
+                "{}: a colour image (pixel ({x}, {y}) is r, g, b = {:.3}, {:.3}, {:.3}); its \
+                 heights are its luma (0.2126 r + 0.7152 g + 0.0722 b). Set \
+                 extract.strict_grey = true to refuse colour images",
+                path.display(),
+                p[0],
+                p[1],
+                p[2]
+            ));
+        }
     }
-    let grey = |p: &[f32; 4]| (p[0] as f64 + p[1] as f64 + p[2] as f64) / 3.0;
+    let grey = |p: &[f32; 4]| {
+        if warning.is_some() {
+            LUMA[0] * p[0] as f64 + LUMA[1] * p[1] as f64 + LUMA[2] * p[2] as f64
+        } else {
+            (p[0] as f64 + p[1] as f64 + p[2] as f64) / 3.0
+        }
+    };
     let mean = img.pixels.iter().map(grey).sum::<f64>() / expected as f64;
     let mut texels = TexelImage::new(img.width, img.height, 3);
     for (t, p) in texels.data.chunks_mut(3).zip(img.pixels) {
         t[2] = ((grey(p) - mean) * height_scale as f64) as f32;
     }
-    Ok(texels)
+    Ok(HeightFieldImage { texels, warning })
 }

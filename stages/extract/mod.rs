@@ -73,9 +73,12 @@ pub enum ExtractError {
     Parameterize { faces: usize, message: String },
     #[error("the sample patch's geometry image: {0}")]
     GeometryImage(String),
+    #[error("{path}: pixel ({x}, {y}) is not a finite number")]
+    NotFinite { path: PathBuf, x: u32, y: u32 },
     #[error(
-        "{path}: pixel ({x}, {y}) is not grey (r, g, b = {r:.3}, {g:.3}, {b:.3}): a height-field \
-         image must be greyscale (channels equal within 2/255)"
+        "{path}: pixel ({x}, {y}) is not grey (r, g, b = {r:.3}, {g:.3}, {b:.3}): with \
+         extract.strict_grey = true a height-field image must be greyscale (channels equal \
+         within 2/255); without it, a colour image is read by its luma"
     )]
     NotGreyscale {
         path: PathBuf,
@@ -155,6 +158,11 @@ pub struct ExtractParams {
     /// Image height fields (§5): object units of height per unit of grey (black 0, white 1),
     /// finite, may be negative to invert the relief. Default: 0.02.
     pub height_scale: f32,
+    /// Image height fields: refuse a colour image (naming a colour pixel) instead of reading
+    /// it by its luma with a warning. Default: false. (Left out of the parameters' key when
+    /// false, so configs without it keep their keys.)
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub strict_grey: bool,
 }
 
 impl Default for ExtractParams {
@@ -171,6 +179,7 @@ impl Default for ExtractParams {
             inlier_distance: r.inlier_distance,
             surface_samples: r.samples,
             height_scale: 0.02,
+            strict_grey: false,
         }
     }
 }

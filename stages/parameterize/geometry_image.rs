@@ -8,7 +8,7 @@
 //! Steps:
 //! 1. Cut ([`crate::geom::cut_graph`]): tree-cotree with Erickson–Whittlesey's greedy dual
 //!    tree, boundary loops joined by shortest paths, closed spheres cut along a path between
-//!    two far-apart vertices; the cut is then straightened path by path, and optional cuts to
+//!    two far-apart vertices (at least two edges); a mesh without area is refused; the cut is then straightened path by path, and optional cuts to
 //!    extremities are added. Cutting splits every cut vertex into wedges; the disk boundary
 //!    alternates between the two sides of *cut paths* (paths of the cut graph between
 //!    *cut-nodes*: cut-graph vertices of degree ≠ 2 and vertices where the cut meets the mesh
@@ -17,8 +17,11 @@
 //!    2^(coarse_levels − 1); each cut path gets the same whole number of coarse units on both
 //!    of its sides, proportional to its length (at least one unit; largest remainder so the
 //!    total is the perimeter 4(size − 1)); boundary vertices inside a path are placed by arc
-//!    length. A boundary vertex is inserted at any corner of the square that falls inside a
-//!    boundary edge, so the disk covers the whole square.
+//!    length. The whole layout is then turned along the perimeter by whole coarse units so
+//!    that the tips of cut paths that end inside the surface sit as far from the square's
+//!    corners as possible (a tip at a corner folds its one grid cell onto itself; no turn when
+//!    the cut has no tip). A boundary vertex is inserted at any corner of the square that
+//!    falls inside a boundary edge, so the disk covers the whole square.
 //! 3. Interior: every chord (an interior edge with both ends on the boundary) is split at its
 //!    midpoint so no triangle lies flat on a side of the square; then the mean value
 //!    convex-combination map (Floater 2003) with the boundary fixed, and stretch reduction by
@@ -69,6 +72,7 @@ use crate::geom::mean_value::{
     ConvexCombinationSolver, MeanValueError, mean_value_weights, reduce_stretch,
 };
 use glam::{DVec2, DVec3, Vec2, Vec3};
+use std::cmp::Reverse;
 use std::collections::HashMap;
 
 /// Parameters of [`build_geometry_image`].
@@ -146,6 +150,11 @@ pub enum GeometryImageError {
     Topology(#[from] TopologyError),
     #[error("cutting the mesh to a disk failed: {0}")]
     Cut(#[from] CutError),
+    #[error(
+        "the mesh has no area: all of its {triangles} triangles are degenerate (their corners \
+         coincide or lie on one line), so there is no surface to map to the square"
+    )]
+    NoArea { triangles: usize },
     #[error(
         "size {size} is too small for this cut: its perimeter has {available} coarse units of \
          {spacing} samples (coarse_levels = {coarse_levels}), but the cut's {paths} paths and \
@@ -227,6 +236,23 @@ pub fn build_geometry_image(
 
     // 1. Cut to a disk.
     let he = HalfEdgeMesh::new(mesh)?;
+    let zero_area = (0..mesh.face_count())
+        .filter(|&f| {
+            let t = mesh.triangles[f].map(|v| mesh.positions[v as usize].as_dvec3());
+            (t[1] - t[0]).cross(t[2] - t[0]) == DVec3::ZERO
+        })
+        .count();
+    if zero_area == mesh.face_count() {
+        return Err(GeometryImageError::NoArea {
+            triangles: zero_area,
+        });
+    }
+    if zero_area > 0 {
+        tracing::warn!(
+            "the mesh has {zero_area} triangles of zero area (corners that coincide or lie \
+             on one line)"
+        );
+    }
     let cut = cut_graph(&he, &mesh.positions, p.extremity_cuts)?;
     let dc = cut_to_disk(mesh, &he, &cut.is_cut)?;
     progress(0.15);
@@ -340,12 +366,45 @@ pub fn build_geometry_image(
             runs[m].steps = u * spacing;
         }
     }
+    // The tip of a cut path that ends inside the surface (a cut-node of degree 1) is a fold:
+    // the perimeter turns back on itself there, so the half-plane around a tip on a side maps
+    // to the whole disk around it on the surface. At a corner only a quarter-plane would, and
+    // the corner's one grid cell would fold onto itself (no triangle of the output can hold
+    // the tip). The whole layout is turned along the perimeter, by whole coarse units, to
+    // keep the tips as far from the corners as possible (no turn when there are no tips).
+    let tip = |k: usize| {
+        let v = orig(bv[k]);
+        cut_degree[v as usize] == 1 && !he.is_boundary_vertex(v)
+    };
+    let mut offsets_t: Vec<u64> = Vec::new();
     let mut t = 0u64;
+    for run in &runs {
+        if tip(run.start) {
+            offsets_t.push(t);
+        }
+        t += run.steps;
+    }
+    let corner_distance = |x: u64| {
+        let x = x % side;
+        x.min(side - x)
+    };
+    let turn = (0..side / spacing)
+        .map(|u| u * spacing)
+        .max_by_key(|&o| {
+            let worst = offsets_t
+                .iter()
+                .map(|&t| corner_distance(t + o))
+                .min()
+                .unwrap_or(0);
+            (worst, Reverse(o))
+        })
+        .unwrap_or(0);
+    let mut t = turn;
     for run in &mut runs {
         run.t0 = t;
         t += run.steps;
     }
-    if t != perimeter {
+    if t != turn + perimeter {
         return Err(GeometryImageError::Internal(format!(
             "perimeter steps {t} != {perimeter}"
         )));
@@ -420,8 +479,10 @@ pub fn build_geometry_image(
     };
     let mut ring: Vec<(u32, f64)> = (0..nb).map(|k| (bv[k], tpos[k])).collect();
     let mut directed = disk.directed_edges();
-    for c in 1..4u64 {
-        let tc = (c * side) as f64;
+    // Perimeter parameters run from `turn` (the first node) to `turn + perimeter`.
+    let first_corner = turn.div_ceil(side) * side;
+    for c in 0..4u64 {
+        let tc = (first_corner + c * side) as f64;
         let k = ring.partition_point(|&(_, t)| t <= tc) - 1;
         if ring[k].1 == tc {
             continue;
@@ -429,7 +490,7 @@ pub fn build_geometry_image(
         let (t_next, k_next) = if k + 1 < ring.len() {
             (ring[k + 1].1, k + 1)
         } else {
-            (perimeter as f64, 0)
+            ((turn + perimeter) as f64, 0)
         };
         const SNAP: f64 = 1e-3;
         if tc - ring[k].1 < SNAP {
@@ -463,6 +524,7 @@ pub fn build_geometry_image(
     let disk_mesh = Mesh::new(disk.positions.clone(), disk.triangles.clone());
     let square = |t: f64| -> DVec2 {
         let s = side as f64;
+        let t = t.rem_euclid(perimeter as f64);
         let (q, f) = ((t / s).floor(), t - (t / s).floor() * s);
         match q as i64 {
             0 => DVec2::new(f, 0.0),

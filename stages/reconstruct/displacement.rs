@@ -7,9 +7,10 @@
 //! in `steps` increasing steps; after each, a sample whose surface normal has turned by more
 //! than `flip_angle` from the input's is put back to its previous step and frozen there.
 //!
-//! The output mesh triangulates the grid (the shorter diagonal of each cell), merges mated
-//! samples into one vertex so a closed input gives a closed, watertight mesh, and drops the
-//! triangles that merging collapses (they sit where a cut folds back on itself, at its ends).
+//! The output mesh triangulates the grid (the shorter diagonal of each cell, the one through
+//! the tip next to a cut's tip), merges mated samples into one vertex so a closed input gives
+//! a closed, watertight manifold, and drops the triangles that merging collapses or folds
+//! onto each other (see [`grid_mesh`]).
 //!
 //! Texel amplitudes are in units of the sample's texel spacing (see the extraction stage);
 //! they are scaled here by the input's typical sample spacing S̄ (the median, as for R) times
@@ -192,51 +193,128 @@ pub fn displace(
 }
 
 /// Triangulates a grid of positions into a mesh, merging mated samples (one vertex per mate
-/// group, at the representative's position) and dropping collapsed or duplicated triangles.
-/// Returns the mesh and, per output vertex, its representative sample.
+/// group, at the representative's position). Returns the mesh and, per output vertex, its
+/// representative sample.
+///
+/// Each cell is split along its shorter diagonal, except next to a *fold*: a border sample
+/// whose two border neighbours are mates is the tip of a cut path that ends inside the
+/// surface, and the border turns back on itself there. Its two cells take the diagonal
+/// through the tip; the other diagonal would give both cells a triangle on the same three
+/// vertices (a folded pair, the tip held by nothing else). Triangles that merging collapses
+/// are dropped, and so are triangles that come out more than once on the same three vertices
+/// (a fold at a corner of the square, where one cell folds onto itself), all copies of them:
+/// keeping one would leave its edges with one or three triangles; the cells next to such a
+/// corner take the diagonal through its border neighbours, where the fold turns instead.
+/// Samples no triangle uses (a tip at a corner) are not output, so a closed input gives a
+/// closed manifold without stray vertices.
 pub fn grid_mesh(gi: &GeometryImage, positions: &[Vec3]) -> (Mesh, Vec<u32>) {
     let n = gi.n as usize;
+    let rep = |k: usize| gi.mate_rep[k];
+    // The border in perimeter order (counter-clockwise in (u = j, v = i)).
+    let border: Vec<usize> = (0..n - 1)
+        .chain((0..n - 1).map(|i| i * n + n - 1))
+        .chain((0..n - 1).map(|j| (n - 1) * n + (n - 1 - j)))
+        .chain((0..n - 1).map(|i| (n - 1 - i) * n))
+        .collect();
+    // Per cell (i, j) → i·(n − 1) + j, the sample its diagonal must pass through.
+    let mut through = vec![u32::MAX; (n - 1) * (n - 1)];
+    let nb = border.len();
+    for t in 0..nb {
+        let (k, before, after) = (border[t], border[(t + nb - 1) % nb], border[(t + 1) % nb]);
+        if rep(before) != rep(after) || rep(k) == rep(before) {
+            continue;
+        }
+        // A tip at a corner has one cell, which folds onto itself and holds nothing; the
+        // fold then turns at the corner's two (mated) border neighbours instead.
+        let corner =
+            |s: usize| (s / n == 0 || s / n == n - 1) && (s.is_multiple_of(n) || s % n == n - 1);
+        let pivots = if corner(k) {
+            vec![before, after]
+        } else {
+            vec![k]
+        };
+        for s in pivots {
+            let (i, j) = (s / n, s % n);
+            for ci in i.saturating_sub(1)..=i.min(n - 2) {
+                for cj in j.saturating_sub(1)..=j.min(n - 2) {
+                    let c = &mut through[ci * (n - 1) + cj];
+                    if *c == u32::MAX {
+                        *c = s as u32;
+                    }
+                }
+            }
+        }
+    }
     let mut vertex_of = vec![u32::MAX; n * n];
     let mut samples = Vec::new();
     for k in 0..n * n {
-        let r = gi.mate_rep[k] as usize;
+        let r = rep(k) as usize;
         if vertex_of[r] == u32::MAX {
             vertex_of[r] = samples.len() as u32;
             samples.push(r as u32);
         }
         vertex_of[k] = vertex_of[r];
     }
-    let verts: Vec<Vec3> = samples.iter().map(|&s| positions[s as usize]).collect();
     let mut tris = Vec::with_capacity(2 * (n - 1) * (n - 1));
-    let mut seen = std::collections::HashSet::new();
     for i in 0..n - 1 {
         for j in 0..n - 1 {
             let a = i * n + j; // (i, j)
             let b = a + 1; // (i, j+1)
             let c = a + n; // (i+1, j)
             let d = c + 1; // (i+1, j+1)
+            let forced = through[i * (n - 1) + j] as usize;
+            let along_ad = if forced != u32::MAX as usize {
+                forced == a || forced == d
+            } else {
+                positions[a].distance_squared(positions[d])
+                    <= positions[b].distance_squared(positions[c])
+            };
             // Counter-clockwise in (u = j, v = i) keeps the parameterization's orientation.
-            let cells = if positions[a].distance_squared(positions[d])
-                <= positions[b].distance_squared(positions[c])
-            {
+            let cells = if along_ad {
                 [[a, b, d], [a, d, c]]
             } else {
                 [[a, b, c], [b, d, c]]
             };
             for t in cells {
                 let v = t.map(|s| vertex_of[s]);
-                if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
-                    continue;
-                }
-                let mut key = v;
-                key.sort_unstable();
-                if seen.insert(key) {
+                if v[0] != v[1] && v[1] != v[2] && v[0] != v[2] {
                     tris.push(v);
                 }
             }
         }
     }
-    (Mesh::new(verts, tris), samples)
+    let mut count: std::collections::HashMap<[u32; 3], u32> = Default::default();
+    for t in &tris {
+        let mut key = *t;
+        key.sort_unstable();
+        *count.entry(key).or_default() += 1;
+    }
+    tris.retain(|t| {
+        let mut key = *t;
+        key.sort_unstable();
+        count[&key] == 1
+    });
+    // Keep the used vertices, in sample order.
+    let mut used = vec![false; samples.len()];
+    for t in &tris {
+        for &v in t {
+            used[v as usize] = true;
+        }
+    }
+    let mut new_index = vec![u32::MAX; samples.len()];
+    let mut kept = Vec::with_capacity(samples.len());
+    for (v, &s) in samples.iter().enumerate() {
+        if used[v] {
+            new_index[v] = kept.len() as u32;
+            kept.push(s);
+        }
+    }
+    let verts: Vec<Vec3> = kept.iter().map(|&s| positions[s as usize]).collect();
+    let tris = tris
+        .into_iter()
+        .map(|t| t.map(|v| new_index[v as usize]))
+        .collect();
+    (Mesh::new(verts, tris), kept)
 }
 
 #[cfg(test)]
@@ -299,6 +377,59 @@ mod tests {
             },
         );
         assert_eq!(unchecked.held_back, 0);
+    }
+
+    /// A sphere's layout with both cut tips at corners: the border folded in half at (0, 0)
+    /// and at (n − 1, n − 1), border position t mated with 4(n − 1) − t.
+    fn folded_at_two_corners(n: u32) -> GeometryImage {
+        let mut gi = plane(n);
+        let nn = n as usize;
+        let border: Vec<usize> = (0..nn - 1)
+            .chain((0..nn - 1).map(|i| i * nn + nn - 1))
+            .chain((0..nn - 1).map(|j| (nn - 1) * nn + (nn - 1 - j)))
+            .chain((0..nn - 1).map(|i| (nn - 1 - i) * nn))
+            .collect();
+        let p = border.len();
+        for t in 1..p / 2 {
+            let (a, b) = (border[t], border[p - t]);
+            let r = a.min(b);
+            gi.mate_rep[a] = r as u32;
+            gi.mate_rep[b] = r as u32;
+        }
+        // Jittered off the plane so that no triangle is flat by accident.
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut jitter = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        for k in 0..nn * nn {
+            gi.positions[k] += Vec3::new(0.2 * jitter(), 0.2 * jitter(), jitter());
+        }
+        for k in 0..nn * nn {
+            gi.positions[k] = gi.positions[gi.mate_rep[k] as usize];
+        }
+        gi
+    }
+
+    #[test]
+    fn a_fold_at_a_corner_leaves_a_closed_manifold_without_its_tip() {
+        let n = 9u32;
+        let gi = folded_at_two_corners(n);
+        let (mesh, samples) = grid_mesh(&gi, &gi.positions);
+        let h = crate::geom::mesh_check::mesh_health(&mesh);
+        assert!(h.is_closed_manifold(), "{}", h.summary());
+        let he = crate::geom::half_edge::HalfEdgeMesh::new(&mesh).unwrap();
+        assert_eq!(he.components()[0].genus, 0);
+        // The two corner tips have no triangle of their own (their one cell folds onto
+        // itself) and are left out; every other mate group is a vertex.
+        let groups = (0..(n * n) as usize)
+            .filter(|&k| gi.mate_rep[k] as usize == k)
+            .count();
+        assert_eq!(mesh.vertex_count(), groups - 2);
+        let last = n * n - 1;
+        assert!(!samples.contains(&0) && !samples.contains(&last));
     }
 
     #[test]

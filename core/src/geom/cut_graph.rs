@@ -13,7 +13,8 @@
 //! surface, the virtual vertices are kept from pruning (so the cut joins every loop, along
 //! shortest paths between loops), and the spokes are dropped. Loop edges go first into the
 //! dual tree, so they never become cut edges. Closed genus-0 meshes get the shortest path
-//! between two far-apart vertices (a double Dijkstra sweep).
+//! between two far-apart vertices (a double Dijkstra sweep), lengthened to two edges when it
+//! has fewer (a one-edge cut splits no vertex, so it opens nothing: the tetrahedron).
 //!
 //! Optional extremity cuts (a simple form of Gu et al. 2002's iterative cuts and of Zhu et
 //! al. 2003's skeleton-based seams): shortest paths from the cut to the vertex farthest from
@@ -357,18 +358,49 @@ pub fn cut_graph(
     for i in 0..nl {
         terminal[nv + i] = true;
     }
-    let selected: Vec<bool> = if comp.genus == 0 && nl == 0 {
+    let ne_real = he.edge_count();
+    let sphere = comp.genus == 0 && nl == 0;
+    let selected: Vec<bool> = if sphere {
         // Closed sphere: the path between two far-apart vertices (double sweep).
         let (d0, _) = aug.dijkstra(&[first_used], true);
         let (a, _) = farthest(&d0, nv).expect("reached");
         let (da, parent) = aug.dijkstra(&[a], true);
         let (b, _) = farthest(&da, nv).expect("reached");
         let mut sel = vec![false; aug.ends.len()];
+        let mut path = 0;
         let mut v = b;
         while v != a {
             let e = parent[v as usize];
             sel[e as usize] = true;
+            path += 1;
             v = aug.other(e, v);
+        }
+        // Cutting a path splits only its inner vertices: a path of one edge (a tetrahedron,
+        // or coincident vertices at zero distance) opens nothing, and of none cuts nothing.
+        // Such a path is lengthened at its far end by the neighbour farthest from `a` (ties:
+        // smaller index), which exists since every vertex of a closed surface has three.
+        let mut end = b;
+        while path < 2 {
+            let mut next: Option<(u32, u32)> = None;
+            for &(w, e) in aug.neighbors(end) {
+                if (e as usize) < ne_real && !sel[e as usize] && w != a && w != end {
+                    let better = next.is_none_or(|(bw, _)| {
+                        da[w as usize] > da[bw as usize]
+                            || (da[w as usize] == da[bw as usize] && w < bw)
+                    });
+                    if better {
+                        next = Some((w, e));
+                    }
+                }
+            }
+            let Some((w, e)) = next else {
+                return Err(CutError::Internal(format!(
+                    "vertex {end} has no neighbour to lengthen the sphere's cut"
+                )));
+            };
+            sel[e as usize] = true;
+            path += 1;
+            end = w;
         }
         sel
     } else if comp.genus == 0 && nl == 1 {
@@ -422,7 +454,10 @@ pub fn cut_graph(
             is_cut[e] = true;
         }
     }
-    straighten(he, &aug.len[..ne], &mut is_cut, STRAIGHTEN_PASSES);
+    // A sphere's cut is already a shortest path (or one lengthened on purpose, above).
+    if !sphere {
+        straighten(he, &aug.len[..ne], &mut is_cut, STRAIGHTEN_PASSES);
+    }
     // Extremity cuts: shortest paths from the cut (and the boundary) to the farthest vertex.
     let mut extremities = Vec::new();
     let mut on_cut = vec![false; nv];
@@ -495,6 +530,24 @@ fn split_wedges(he: &HalfEdgeMesh, is_cut: &[bool]) -> (Vec<u32>, Vec<u32>) {
 /// Whether cutting along `is_cut` (interior edges only) leaves one disk: the triangles stay
 /// connected and the Euler characteristic of the cut surface is 1.
 fn cuts_to_disk(he: &HalfEdgeMesh, is_cut: &[bool]) -> bool {
+    // A cut edge between two interior vertices that are both cut only there splits neither:
+    // its two sides would be two edges between the same vertices, which a triangle mesh
+    // cannot hold (the count below would still come out as a disk).
+    let mut degree = vec![0u32; he.vertex_count()];
+    for e in 0..he.edge_count() as u32 {
+        if is_cut[e as usize] {
+            let (a, b) = he.edge_vertices(e);
+            degree[a as usize] += 1;
+            degree[b as usize] += 1;
+        }
+    }
+    let tip = |v: u32| degree[v as usize] == 1 && !he.is_boundary_vertex(v);
+    if (0..he.edge_count() as u32).any(|e| {
+        let (a, b) = he.edge_vertices(e);
+        is_cut[e as usize] && tip(a) && tip(b)
+    }) {
+        return false;
+    }
     let (_, ov) = split_wedges(he, is_cut);
     let cut_count = is_cut.iter().filter(|&&c| c).count();
     let chi = ov.len() as i64 - (he.edge_count() + cut_count) as i64 + he.face_count() as i64;

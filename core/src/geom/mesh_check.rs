@@ -17,11 +17,21 @@ pub struct MeshHealth {
     pub non_manifold_edges: usize,
     /// Vertices no triangle uses.
     pub unreferenced_vertices: usize,
+    /// Edges used by exactly one triangle: 0 for a closed mesh. Not a defect (open meshes are
+    /// fine for most methods), so [`MeshHealth::is_clean`] ignores it.
+    pub boundary_edges: usize,
 }
 
 impl MeshHealth {
+    /// No defect and no unreferenced vertex (the mesh may be open).
     pub fn is_clean(&self) -> bool {
-        *self == MeshHealth::default()
+        !self.has_defects() && self.unreferenced_vertices == 0
+    }
+
+    /// Clean and closed: every edge has exactly two triangles. (A vertex where two fans of
+    /// triangles meet is not counted here; [`super::half_edge::HalfEdgeMesh::new`] refuses it.)
+    pub fn is_closed_manifold(&self) -> bool {
+        self.is_clean() && self.boundary_edges == 0
     }
 
     /// Whether anything beyond unreferenced vertices (which are allowed: they keep a file's
@@ -63,6 +73,7 @@ impl MeshHealth {
                 "unreferenced vertex",
                 "unreferenced vertices",
             ),
+            (self.boundary_edges, "boundary edge", "boundary edges"),
         ]
         .iter()
         .filter(|(n, _, _)| *n > 0)
@@ -104,6 +115,7 @@ pub fn mesh_health(mesh: &Mesh) -> MeshHealth {
         }
     }
     h.non_manifold_edges = edges.values().filter(|&&n| n > 2).count();
+    h.boundary_edges = edges.values().filter(|&&n| n == 1).count();
     h.unreferenced_vertices = used.iter().filter(|&&u| !u).count();
     h
 }
@@ -115,7 +127,14 @@ mod tests {
 
     #[test]
     fn a_clean_mesh_is_clean_and_each_oddity_is_counted() {
-        assert!(mesh_health(&crate::geom::primitives::octahedron()).is_clean());
+        let closed = mesh_health(&crate::geom::primitives::octahedron());
+        assert!(
+            closed.is_clean() && closed.is_closed_manifold(),
+            "{closed:?}"
+        );
+        let open = mesh_health(&crate::geom::primitives::grid(3, 1.0));
+        assert!(open.is_clean() && !open.is_closed_manifold());
+        assert_eq!(open.boundary_edges, 8, "a 3 × 3 grid has 8 border edges");
         let p = vec![
             Vec3::ZERO,
             Vec3::X,
@@ -139,9 +158,11 @@ mod tests {
         assert_eq!(h.duplicate_faces, 1);
         assert_eq!(h.non_manifold_edges, 1, "edge 0-1 has five triangles");
         assert_eq!(h.unreferenced_vertices, 1, "vertex 4");
+        // 1-3, 3-0, 1-5 and 5-0 have one triangle each.
+        assert_eq!(h.boundary_edges, 4);
         assert_eq!(
             h.summary(),
-            "2 degenerate triangles, 1 duplicate triangle, 1 non-manifold edge, 1 unreferenced vertex"
+            "2 degenerate triangles, 1 duplicate triangle, 1 non-manifold edge, 1 unreferenced vertex, 4 boundary edges"
         );
     }
 }

@@ -64,6 +64,51 @@ pub fn octahedron() -> Mesh {
     Mesh::new(p, upper.chain(lower).collect())
 }
 
+/// The regular tetrahedron with corners (1, 1, 1), (1, −1, −1), (−1, 1, −1), (−1, −1, 1):
+/// the smallest closed triangle mesh (4 vertices, 6 edges, 4 triangles), outward-facing.
+pub fn tetrahedron() -> Mesh {
+    let p = vec![
+        Vec3::new(1.0, 1.0, 1.0),
+        Vec3::new(1.0, -1.0, -1.0),
+        Vec3::new(-1.0, 1.0, -1.0),
+        Vec3::new(-1.0, -1.0, 1.0),
+    ];
+    Mesh::new(p, vec![[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])
+}
+
+/// The octahedron split `levels` times into four (midpoints pushed out to the unit sphere):
+/// a closed genus-0 mesh of 8·4^levels triangles.
+pub fn icosphere(levels: u32) -> Mesh {
+    let mut m = octahedron();
+    for _ in 0..levels {
+        m = super::subdivide::subdivide(&m);
+        let p = m.positions.iter().map(|p| p.normalize()).collect();
+        m = Mesh::new(p, m.triangles.clone());
+    }
+    m
+}
+
+/// The 7-vertex torus (Möbius 1861, Császár 1949): the smallest closed triangle mesh of
+/// genus 1, every vertex joined to every other. Triangles {i, i+1, i+3} and {i, i+3, i+2}
+/// (mod 7); vertex i sits on a torus at angles (2πi/7, 2π·3i/7), which gives every triangle
+/// some area (the mesh intersects itself, which the topology does not mind).
+pub fn seven_vertex_torus() -> Mesh {
+    let p = (0..7)
+        .map(|i| {
+            let (a, b) = (
+                std::f32::consts::TAU * i as f32 / 7.0,
+                std::f32::consts::TAU * (3 * i % 7) as f32 / 7.0,
+            );
+            let r = 2.0 + b.cos();
+            Vec3::new(r * a.cos(), r * a.sin(), b.sin())
+        })
+        .collect();
+    let t = (0..7u32)
+        .flat_map(|i| [[i, (i + 1) % 7, (i + 3) % 7], [i, (i + 3) % 7, (i + 2) % 7]])
+        .collect();
+    Mesh::new(p, t)
+}
+
 /// A quad in the XY plane, [-1, 1]², facing +Z, as two triangles, with the texture
 /// coordinates of each triangle's corners in the OBJ convention: (0, 0) bottom left to
 /// (1, 1) top right.
