@@ -445,8 +445,8 @@ struct Ctx<'a, 'v> {
     /// Side of the blocks of texels that share their random variant choice.
     block: usize,
     search: Search,
-    /// `(1 + coherence)²`, on the squared distances of k-coherent candidates.
-    jump_factor: f32,
+    /// `coherence` of the parameters.
+    coherence: f32,
     /// Per (variant, level), `v * levels + l`: the map to the sample's level 0.
     maps: Vec<SampleMap>,
 }
@@ -679,6 +679,9 @@ impl Ctx<'_, '_> {
         let ks = vars.kset(kl);
         let kscale = (1u64 << kl) as f64;
         let kk = vars.coherent_k();
+        // Hertzmann et al.'s level scaling of κ: coarser levels jump more freely, so the
+        // coarse layout keeps the sample's statistics rather than the first texels' copies.
+        let jump_factor = (1.0 + self.coherence / (1u32 << l) as f32).powi(2);
         let cands = &mut scratch.candidates;
         cands.clear();
         // The texel itself (its prediction from the coarser level, or its value before this
@@ -686,11 +689,19 @@ impl Ctx<'_, '_> {
         // the neighbour's offset.
         let own = std::iter::once((0i32, 0i32));
         for (dx, dy) in own.chain(taps.iter().copied()) {
-            let (ti, tj) = (i + dy as i64, j + dx as i64);
-            if !lv.grid.inside(ti, tj) {
+            // Across a cut whose sides share their axes (a quarter turn of 0) the shift holds
+            // too; across a turning cut it would need the turned variant, so those taps bring
+            // none. Outside taps of the scanline pass are read from the starting values (see
+            // `gather`), and so are their sources.
+            let (k, r, outside) = lv.grid.locate(i + dy as i64, j + dx as i64);
+            if r != 0 {
                 continue;
             }
-            let src = lv.src[lv.grid.idx(ti, tj)];
+            let src = if outside && kind == Template::Causal {
+                lv.init_src[k]
+            } else {
+                lv.src[k]
+            };
             let (sv, sk) = ((src >> 32) as usize, (src & 0xFFFF_FFFF) as u32);
             let sw = vars.level(sv, l).width;
             let q = [
@@ -730,7 +741,7 @@ impl Ctx<'_, '_> {
         // goes.
         cands.sort_unstable();
         cands.dedup_by(|b, a| *a >> 1 == *b >> 1);
-        if cands.is_empty() {
+        if cands.is_empty() && !(l + 1 == nl && kind == Template::Causal) {
             // Nothing coherent lies inside the variant: a random texel whose template does.
             let h = counter_hash(self.seed, STREAM_FALLBACK, choice_index(l, pass, lv.grid.idx(i, j)));
             let nx = (range[1] - range[0] + 1) as u64;
@@ -741,31 +752,22 @@ impl Ctx<'_, '_> {
         }
         let c = self.channels;
         let query = &scratch.raw;
-        let mut best = (f32::INFINITY, (cands[0] >> 1) as u32);
-        for &cand in cands.iter() {
-            // Jumps to a k-coherent texel must be (1 + coherence) times better than a shifted
-            // candidate (Hertzmann et al. 2001's κ): the distance starts at its share.
-            let jump = cand & 1 == 1;
-            let cand = (cand >> 1) as u32;
-            let scale = if jump { self.jump_factor } else { 1.0 };
+        let w = img.width as i64;
+        // Squared template distance of the texel at (x, y), or a value ≥ `bound` once the
+        // partial sum reaches it.
+        let dist = |x: i64, y: i64, bound: f32| -> f32 {
             let mut d = 0.0f32;
-            let (x, y) = ((cand % img.width) as i64, (cand / img.width) as i64);
             let mut o = 0;
-            let mut over = false;
             for &(dx, dy) in taps {
-                let k = ((y + dy as i64) * img.width as i64 + x + dx as i64) as usize * c;
+                let k = ((y + dy as i64) * w + x + dx as i64) as usize * c;
                 for ch in 0..c {
                     let e = img.texels[k + ch] * self.weights[ch] - query[o + ch];
                     d += e * e;
                 }
                 o += c;
-                if d * scale >= best.0 {
-                    over = true;
-                    break;
+                if d >= bound {
+                    return d;
                 }
-            }
-            if over {
-                continue;
             }
             if let Some(cl) = coarser {
                 let (cx, cy) = (x / 2, y / 2);
@@ -779,8 +781,33 @@ impl Ctx<'_, '_> {
                     o += c;
                 }
             }
-            if d * scale < best.0 {
-                best = (d * scale, cand);
+            d
+        };
+        if l + 1 == nl && kind == Template::Causal {
+            // The coarsest level's scanline pass lays out the whole texture, and coherent
+            // candidates there only propagate the random start: every texel of the variant is
+            // a candidate (the coarsest levels are small).
+            let mut best = (f32::INFINITY, 0i64);
+            for y in range[2]..=range[3] {
+                for x in range[0]..=range[1] {
+                    let d = dist(x, y, best.0);
+                    if d < best.0 {
+                        best = (d, y * w + x);
+                    }
+                }
+            }
+            return best.1 as usize;
+        }
+        let mut best = (f32::INFINITY, (cands[0] >> 1) as u32);
+        for &cand in cands.iter() {
+            // Jumps to a k-coherent texel must be (1 + coherence) times better than a shifted
+            // candidate (Hertzmann et al. 2001's κ), as squared distances.
+            let scale = if cand & 1 == 1 { jump_factor } else { 1.0 };
+            let cand = (cand >> 1) as u32;
+            let (x, y) = ((cand % img.width) as i64, (cand / img.width) as i64);
+            let d = dist(x, y, best.0 / scale) * scale;
+            if d < best.0 {
+                best = (d, cand);
             }
         }
         best.1 as usize
@@ -1062,7 +1089,7 @@ fn synthesize_impl(
         scales: ss,
         block: vp.template as usize,
         search: p.search,
-        jump_factor: (1.0 + p.coherence).powi(2),
+        coherence: p.coherence,
         maps,
     };
     let causal_taps = template_taps(Template::Causal, vp.template);
@@ -1462,7 +1489,7 @@ mod tests {
                 scales: 1,
                 block: 5,
                 search: Search::PerTexel,
-                jump_factor: 1.0,
+                coherence: 0.0,
                 maps: vec![vr.sample_map(0, 0), vr.sample_map(0, 1)],
             };
             for kind in [Template::Causal, Template::Full] {
