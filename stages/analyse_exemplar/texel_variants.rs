@@ -1622,6 +1622,67 @@ mod tests {
     }
 
     #[test]
+    fn sample_map_points_at_the_texel_a_variant_copied() {
+        let mut sample = TexelImage::new(30, 30, 3);
+        for (k, v) in sample.data.iter_mut().enumerate() {
+            *v = crate::random::counter_unit(5, 0, k as u64);
+        }
+        let p = TexelVariantParams {
+            orientations: 4,
+            scales: 3,
+            levels: 1,
+            ..Default::default()
+        };
+        let owned = build_texel_variants_with(&sample, &p, false, &|_| {}).unwrap();
+        let v = owned.as_ref();
+        assert!(!v.meta.per_texel && v.try_set(0, 0, Template::Causal).is_none());
+        // Quarter turns at the sample's own scale copy texels exactly: each variant texel is
+        // the sample texel its map points at.
+        for k in 0..4 {
+            let var = v.variant(1, k);
+            let (lv, map) = (v.level(var, 0), v.sample_map(var, 0));
+            for q in [[0.0, 0.0], [3.0, 17.0], [29.0, 1.0]] {
+                let x = map.to_sample(q);
+                let (sx, sy) = (x[0].round() as u32, x[1].round() as u32);
+                assert!((x[0] - sx as f64).abs() < 1e-9 && (x[1] - sy as f64).abs() < 1e-9);
+                let at = (q[1] as usize * lv.width as usize + q[0] as usize) * 3 + 2;
+                assert_eq!(lv.texels[at], sample.texel(sx, sy)[2], "orientation {k} {q:?}");
+                let back = map.from_sample(x);
+                assert!((back[0] - q[0]).abs() < 1e-9 && (back[1] - q[1]).abs() < 1e-9);
+            }
+        }
+        // The enlarged variant's texel 2q shows the sample's texel q.
+        let big = v.sample_map(v.variant(0, 0), 0);
+        assert_eq!(big.to_sample([10.0, 4.0]), [5.0, 2.0]);
+    }
+
+    #[test]
+    fn k_coherent_sets_hold_similar_texels_away_from_the_texel() {
+        // Stripes of period 6 along x: a texel's best matches are the texels one or more
+        // periods away on its own column phase.
+        let sample = stripes(48, 48, 6.0);
+        let p = TexelVariantParams {
+            orientations: 1,
+            scales: 1,
+            levels: 1,
+            ..Default::default()
+        };
+        let owned = build_texel_variants_with(&sample, &p, false, &|_| {}).unwrap();
+        let v = owned.as_ref();
+        let ks = v.kset(0);
+        let k = v.coherent_k();
+        assert_eq!(ks.entries.len(), 48 * 48 * k);
+        for t in [24 * 48 + 24, 10 * 48 + 31] {
+            let (x, y) = (t % 48, t / 48);
+            for &e in &ks.entries[t * k..(t + 1) * k] {
+                let (ex, ey) = (e as usize % 48, e as usize / 48);
+                assert!(ex.abs_diff(x) > 2 || ey.abs_diff(y) > 2, "{e} is inside {t}'s window");
+                assert_eq!(ex % 6, x % 6, "texel {t}: {e} is on another phase");
+            }
+        }
+    }
+
+    #[test]
     fn build_is_thread_count_independent() {
         let p = TexelVariantParams {
             orientations: 3,

@@ -1435,10 +1435,17 @@ mod tests {
             )
             .unwrap();
             let vr = owned.as_ref();
-            let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
-            let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
-            let bits = |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&a), bits(&b), "template {template}");
+            for search in [Search::KCoherence, Search::PerTexel] {
+                let p = GeometrySynthParams {
+                    search,
+                    ..p.clone()
+                };
+                let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
+                let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
+                let bits =
+                    |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a), bits(&b), "template {template} {search:?}");
+            }
         }
     }
 
