@@ -189,7 +189,8 @@ fn checked(config: &Config) -> Result<GeometryImagesConfig, MethodError> {
                 ),
             )
         })?;
-        super::check_variant_memory(config, size, &c.analyse_exemplar)?;
+        let per_texel = c.synthesize.search == Search::PerTexel;
+        super::check_variant_memory(config, size, &c.analyse_exemplar, per_texel)?;
     }
     Ok(c)
 }
