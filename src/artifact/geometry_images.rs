@@ -142,6 +142,7 @@ mod tests {
     use super::*;
     use crate::stages::analyse_exemplar::texel_variants::{
         Template, TexelVariantParams, VariantsMeta, build_texel_variants,
+        build_texel_variants_with,
     };
 
     fn stripes(n: u32, period: f32) -> TexelImage {
@@ -254,6 +255,23 @@ mod tests {
         let mut bad = meta;
         bad.levels.pop();
         assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
+        // Without the per-texel structures: the k-coherent sets come back, and a short one is
+        // an error.
+        let lean = build_texel_variants_with(&stripes(40, 7.0), &p, false, &|_| {}).unwrap();
+        let art = round_trip(&lean);
+        let r = TexelVariants::view(&art).unwrap();
+        assert!(r.try_set(0, 0, Template::Causal).is_none());
+        for l in 0..p.kset_levels() {
+            assert_eq!(r.kset(l).entries, lean.as_ref().kset(l).entries);
+        }
+        let meta: VariantsMeta = art.meta().unwrap();
+        assert!(
+            TexelVariantsRef::from_arrays(meta, |n| {
+                let a = art.raw_array(n).ok()?;
+                Some(if n == "kset" { &a[..a.len() - 4] } else { a })
+            })
+            .is_err()
+        );
         // Damage found through the format is an artifact error, not a panic.
         let mut fewer = v.clone();
         fewer.meta.levels.pop();

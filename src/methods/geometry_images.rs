@@ -25,7 +25,7 @@ use crate::geom::geometry_image::TexelImage;
 use crate::image::Image;
 use crate::pipeline::{Dag, Handle, NodeError, NodeSpec, Stage};
 use crate::stages::analyse_exemplar::texel_variants::{
-    TexelVariantParams, build_texel_variants, check_sample_size,
+    TexelVariantParams, build_texel_variants_with, check_sample_size,
 };
 use crate::stages::extract::height_field::{height_field_image, is_image_path};
 use crate::stages::extract::{ExtractMethod, ExtractParams, extract_mesh_texture};
@@ -33,7 +33,7 @@ use crate::stages::field::param_field::{ParamFieldParams, param_field};
 use crate::stages::parameterize::geometry_image::{GeometryImageParams, build_geometry_image};
 use crate::stages::reconstruct::relief_export::{ReliefExportParams, export_relief};
 use crate::stages::synthesize::geometry_texture::{
-    GeometrySynthParams, synthesize_geometry_texture,
+    GeometrySynthParams, Search, synthesize_geometry_texture,
 };
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -42,8 +42,8 @@ const GEOMETRY_IMAGE_VERSION: u32 = 2;
 const EXTRACT_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 3;
 const RECONSTRUCT_VERSION: u32 = 6;
-const VARIANTS_VERSION: u32 = 1;
-const SYNTH_VERSION: u32 = 1;
+const VARIANTS_VERSION: u32 = 2;
+const SYNTH_VERSION: u32 = 2;
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -106,6 +106,15 @@ impl ParameterizeSection {
             coarse_levels: levels,
         }
     }
+}
+
+/// The analysis node's parameters: `[analyse_exemplar]`, and whether synthesis searches per
+/// texel (`synthesize.search = "per_texel"`), which alone needs the per-texel search
+/// structures (nearly all of the variant set's size and build time).
+#[derive(Serialize)]
+struct VariantsNodeParams {
+    variants: TexelVariantParams,
+    per_texel: bool,
 }
 
 /// The key of an image sample's extraction: its height scale alone (the other `[extract]`
@@ -183,7 +192,8 @@ fn checked(config: &Config) -> Result<GeometryImagesConfig, MethodError> {
                 ),
             )
         })?;
-        super::check_variant_memory(config, size, &c.analyse_exemplar)?;
+        let per_texel = c.synthesize.search == Search::PerTexel;
+        super::check_variant_memory(config, size, &c.analyse_exemplar, per_texel)?;
     }
     Ok(c)
 }
@@ -231,10 +241,16 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
 
     let variants = dag.node(
         NodeSpec::new(Stage::AnalyseExemplar, "texel_variants", VARIANTS_VERSION),
-        c.analyse_exemplar.clone(),
+        VariantsNodeParams {
+            variants: c.analyse_exemplar.clone(),
+            per_texel: c.synthesize.search == Search::PerTexel,
+        },
         texels,
         |ctx, p, sample| {
-            build_texel_variants(&sample, p, &|f| ctx.progress.set(f)).map_err(NodeError::input)
+            build_texel_variants_with(&sample, &p.variants, p.per_texel, &|f| {
+                ctx.progress.set(f)
+            })
+            .map_err(NodeError::input)
         },
     );
     let field = dag.node(

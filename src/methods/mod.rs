@@ -195,15 +195,19 @@ pub(crate) fn check_memory(
 /// `configs/dragon_knot.toml` (a geometry-only sample; 8 orientations): peak 0.42 GB at
 /// 128² with 3 scales, 1.62 GB at 128² with 5, 5.93 GB at 256² with 5; about 580 bytes per
 /// texel of the unscaled variants' total. A sample with colour has twice the channels and up
-/// to twice the need.
+/// to twice the need. Without the per-texel search structures (`per_texel` false, the default
+/// k-coherence search) the variants are their pyramids' texels (12 bytes each, 16 with the
+/// pyramid) and the resampling's copies: estimated at 40 bytes per texel.
 pub(crate) fn check_variant_memory(
     config: &Config,
     size: u32,
     p: &crate::stages::analyse_exemplar::texel_variants::TexelVariantParams,
+    per_texel: bool,
 ) -> Result<(), MethodError> {
     let mid = (p.scales as i32 - 1) / 2;
     let spread: f64 = (-mid..=mid).map(|j| 4f64.powi(j)).sum();
-    let per_texel = (580.0 * p.orientations as f64 * spread) as u64;
+    let bytes = if per_texel { 580.0 } else { 40.0 };
+    let per_texel = (bytes * p.orientations as f64 * spread) as u64;
     check_memory(
         config,
         "extract.size",

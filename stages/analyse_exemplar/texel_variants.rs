@@ -58,6 +58,7 @@
 use crate::check::{ParamError, check_range};
 use crate::geom::geometry_image::TexelImage;
 use crate::image::knn::{KdNode, KdTree, KdTreeError, KdTreeRef};
+use crate::image::neighbourhood::mirror;
 use crate::image::pca::{Pca, PcaParams};
 use crate::image::{Image, pyramid};
 use rayon::prelude::*;
@@ -91,6 +92,10 @@ pub struct TexelVariantParams {
     /// Weight of the colour channels (r, g, b) relative to the geometric ones after both are
     /// normalized by their spread, 0..=100. Ignored for 3-channel samples. Default: 1.
     pub color_weight: f32,
+    /// Size `k` of the k-coherent sets (Tong et al. 2002) of the default synthesis search,
+    /// 1..=16: for each texel of the sample's pyramid, the `k` texels with the most similar
+    /// neighbourhoods. Default: 6.
+    pub coherent_k: u32,
 }
 
 impl Default for TexelVariantParams {
@@ -104,6 +109,7 @@ impl Default for TexelVariantParams {
             pca_dims: 16,
             coarse_weight: 0.3,
             color_weight: 1.0,
+            coherent_k: 6,
         }
     }
 }
@@ -237,7 +243,14 @@ impl TexelVariantParams {
         }
         in_range("pca_dims", self.pca_dims, 0, 64)?;
         in_range("coarse_weight", self.coarse_weight, 0.0, 4.0)?;
-        in_range("color_weight", self.color_weight, 0.0, 100.0)
+        in_range("color_weight", self.color_weight, 0.0, 100.0)?;
+        in_range("coherent_k", self.coherent_k, 1, 16)
+    }
+
+    /// Levels of the sample pyramid that the k-coherent sets cover: variant level `l` of scale
+    /// `s` corresponds to sample level `l + s − middle`, so `levels + middle`.
+    pub fn kset_levels(&self) -> usize {
+        self.levels as usize + self.middle_scale()
     }
 
     /// Number of variants (`orientations × scales`).
@@ -339,8 +352,13 @@ pub struct VariantsMeta {
     /// `v / orientations` and orientation `v % orientations`.
     pub levels: Vec<LevelMeta>,
     /// Per (variant, level, template), `sets[(v * levels + l) * 2 + t]`, `t` 0 for the causal
-    /// and 1 for the full template.
+    /// and 1 for the full template. Empty unless `per_texel`.
     pub sets: Vec<SetMeta>,
+    /// Whether the per-texel search structures (PCA bases, kd-trees) were built.
+    pub per_texel: bool,
+    /// Per level of the sample pyramid ([`TexelVariantParams::kset_levels`]), its size and
+    /// where its k-coherent sets (`coherent_k` texel indices per texel) start in `kset`.
+    pub ksets: Vec<LevelMeta>,
 }
 
 /// The variant set, owned: flat arrays described by [`VariantsMeta`].
@@ -354,10 +372,13 @@ pub struct TexelVariants {
     pub tree_points: Vec<f32>,
     pub tree_ids: Vec<u32>,
     pub tree_nodes: Vec<KdNode>,
+    /// The k-coherent sets, see [`VariantsMeta::ksets`]; `u32::MAX` pads a set of a level with
+    /// too few texels.
+    pub kset: Vec<u32>,
 }
 
 /// Names of the arrays of [`TexelVariants::arrays`], in order.
-pub const ARRAY_NAMES: [&str; 7] = [
+pub const ARRAY_NAMES: [&str; 8] = [
     "texels",
     "centres",
     "pca_mean",
@@ -365,7 +386,44 @@ pub const ARRAY_NAMES: [&str; 7] = [
     "tree_points",
     "tree_ids",
     "tree_nodes",
+    "kset",
 ];
+
+/// One level of the sample pyramid's k-coherent sets, borrowed.
+#[derive(Clone, Copy, Debug)]
+pub struct KsetRef<'a> {
+    pub width: u32,
+    pub height: u32,
+    /// `k` texel indices (`y * width + x`) per texel, row-major; `u32::MAX` for none.
+    pub entries: &'a [u32],
+}
+
+/// The affine map from a variant level's texel coordinates to the sample's level-0 texel
+/// coordinates (`x0 = a · q + b`), and back.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleMap {
+    pub a: [[f64; 2]; 2],
+    pub b: [f64; 2],
+    pub inv: [[f64; 2]; 2],
+}
+
+impl SampleMap {
+    #[inline]
+    pub fn to_sample(&self, q: [f64; 2]) -> [f64; 2] {
+        let a = &self.a;
+        [
+            a[0][0] * q[0] + a[0][1] * q[1] + self.b[0],
+            a[1][0] * q[0] + a[1][1] * q[1] + self.b[1],
+        ]
+    }
+
+    #[inline]
+    pub fn from_sample(&self, x: [f64; 2]) -> [f64; 2] {
+        let (u, v) = (x[0] - self.b[0], x[1] - self.b[1]);
+        let m = &self.inv;
+        [m[0][0] * u + m[0][1] * v, m[1][0] * u + m[1][1] * v]
+    }
+}
 
 /// One level of one variant, borrowed: `width × height` texels of `channels` values.
 #[derive(Clone, Copy, Debug)]
@@ -409,6 +467,7 @@ pub struct TexelVariantsRef<'a> {
     pub meta: VariantsMeta,
     levels: Vec<LevelRef<'a>>,
     sets: Vec<SetRef<'a>>,
+    ksets: Vec<KsetRef<'a>>,
 }
 
 impl<'a> TexelVariantsRef<'a> {
@@ -440,13 +499,74 @@ impl<'a> TexelVariantsRef<'a> {
         self.levels[variant * self.levels() + level]
     }
 
+    /// The per-texel feature set; `None` when the set was built without them
+    /// (`meta.per_texel` false).
     #[inline]
-    pub fn set(&self, variant: usize, level: usize, kind: Template) -> &SetRef<'a> {
+    pub fn try_set(&self, variant: usize, level: usize, kind: Template) -> Option<&SetRef<'a>> {
         let t = match kind {
             Template::Causal => 0,
             Template::Full => 1,
         };
-        &self.sets[(variant * self.levels() + level) * 2 + t]
+        self.sets.get((variant * self.levels() + level) * 2 + t)
+    }
+
+    /// As [`Self::try_set`]; panics without per-texel structures.
+    #[inline]
+    pub fn set(&self, variant: usize, level: usize, kind: Template) -> &SetRef<'a> {
+        self.try_set(variant, level, kind)
+            .expect("texel variants built without per-texel search structures")
+    }
+
+    /// The k-coherent sets of sample pyramid level `level`.
+    #[inline]
+    pub fn kset(&self, level: usize) -> &KsetRef<'a> {
+        &self.ksets[level]
+    }
+
+    /// `k` of the k-coherent sets.
+    pub fn coherent_k(&self) -> usize {
+        self.meta.params.coherent_k as usize
+    }
+
+    /// Sample pyramid level matching level `level` of `variant` (see
+    /// [`TexelVariantParams::kset_levels`]).
+    pub fn kset_level_of(&self, variant: usize, level: usize) -> usize {
+        let p = &self.meta.params;
+        let s = variant / p.orientations as usize;
+        (level + s).saturating_sub(p.middle_scale()).min(p.kset_levels() - 1)
+    }
+
+    /// The map between level `level` of `variant` and the sample's level 0 (see
+    /// [`resample_variant`]: the variant's level-0 texel `p` shows the source level's point
+    /// `c + R(−θ) (p − h) / m`).
+    pub fn sample_map(&self, variant: usize, level: usize) -> SampleMap {
+        let p = &self.meta.params;
+        let (s, k) = (
+            variant / p.orientations as usize,
+            (variant % p.orientations as usize) as u32,
+        );
+        let rs = resampling(self.meta.sample_width, self.meta.sample_height, p, s, k);
+        let (mut w, mut h) = (self.meta.sample_width, self.meta.sample_height);
+        for _ in 0..rs.source_level {
+            w = w.div_ceil(2);
+            h = h.div_ceil(2);
+        }
+        let (cos, sin) = orientation_cos_sin(k, p.orientations);
+        let f = (1u64 << rs.source_level) as f64;
+        let g = (1u64 << level) as f64 / rs.magnification;
+        let half = (rs.side as f64 - 1.0) / 2.0;
+        let (cx, cy) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+        // x0 = f (c + R(−θ) (g q − h (1, 1)) / 1) with R(−θ) = [[cos, sin], [−sin, cos]] and
+        // g folding the level's spacing and the magnification.
+        let a = [[f * g * cos, f * g * sin], [-f * g * sin, f * g * cos]];
+        let hm = half / rs.magnification;
+        let b = [
+            f * (cx - (cos * hm + sin * hm)),
+            f * (cy - (-sin * hm + cos * hm)),
+        ];
+        let ig = 1.0 / (f * g);
+        let inv = [[ig * cos, -ig * sin], [ig * sin, ig * cos]];
+        SampleMap { a, b, inv }
     }
 
     /// Views arrays exported by [`TexelVariants::arrays`]. `get` returns an array's bytes by
@@ -499,12 +619,18 @@ impl<'a> TexelVariantsRef<'a> {
         }
         let nv = meta.params.variant_count();
         let nl = meta.params.levels as usize;
-        if meta.levels.len() != nv * nl || meta.sets.len() != nv * nl * 2 {
+        let want_sets = if meta.per_texel { nv * nl * 2 } else { 0 };
+        if meta.levels.len() != nv * nl || meta.sets.len() != want_sets {
             return Err(E::MetaCounts {
                 levels: meta.levels.len(),
                 sets: meta.sets.len(),
                 want_levels: nv * nl,
-                want_sets: nv * nl * 2,
+                want_sets,
+            });
+        }
+        if meta.ksets.len() != meta.params.kset_levels() {
+            return Err(E::Layout {
+                what: "the k-coherent set levels".into(),
             });
         }
         let texels: &[f32] = arr(&get, "texels")?;
@@ -514,6 +640,7 @@ impl<'a> TexelVariantsRef<'a> {
         let tree_points: &[f32] = arr(&get, "tree_points")?;
         let tree_ids: &[u32] = arr(&get, "tree_ids")?;
         let tree_nodes: &[KdNode] = arr(&get, "tree_nodes")?;
+        let kset: &[u32] = arr(&get, "kset")?;
         // The layout is the canonical one (arrays concatenated in order, nothing between or
         // after), so a metadata entry that disagrees with its neighbours is caught.
         let layout_err = |what: &str| E::Layout { what: what.into() };
@@ -618,7 +745,35 @@ impl<'a> TexelVariantsRef<'a> {
         if next.iter().zip(lens).any(|(&a, b)| a != b as u64) || tree_ids.len() != centres.len() {
             return Err(layout_err("the end of the feature arrays"));
         }
-        Ok(TexelVariantsRef { meta, levels, sets })
+        let k = meta.params.coherent_k as u64;
+        let mut next_k = 0u64;
+        let mut ksets = Vec::with_capacity(meta.ksets.len());
+        for (i, km) in meta.ksets.iter().enumerate() {
+            let count = km.width as u64 * km.height as u64;
+            let what = format!("k-coherent sets of sample level {i}");
+            if km.texel_offset != next_k {
+                return Err(layout_err(&what));
+            }
+            next_k += count * k;
+            let entries = sub(kset, km.texel_offset, count * k, &what)?;
+            if entries.iter().any(|&e| e != u32::MAX && e as u64 >= count) {
+                return Err(E::CandidateOutside { what });
+            }
+            ksets.push(KsetRef {
+                width: km.width,
+                height: km.height,
+                entries,
+            });
+        }
+        if next_k != kset.len() as u64 {
+            return Err(layout_err("the end of the k-coherent sets"));
+        }
+        Ok(TexelVariantsRef {
+            meta,
+            levels,
+            sets,
+            ksets,
+        })
     }
 }
 
@@ -633,6 +788,7 @@ impl TexelVariants {
             ("tree_points", bytemuck::cast_slice(&self.tree_points)),
             ("tree_ids", bytemuck::cast_slice(&self.tree_ids)),
             ("tree_nodes", bytemuck::cast_slice(&self.tree_nodes)),
+            ("kset", bytemuck::cast_slice(&self.kset)),
         ]
     }
 
@@ -1050,11 +1206,115 @@ fn features(
     raw
 }
 
-/// Builds the variant set of `sample` (3 channels dx, dy, dn, or 6 with r, g, b). `progress`
-/// gets the fraction done, from 0 to 1, from the calling thread.
+/// Builds the variant set of `sample` (3 channels dx, dy, dn, or 6 with r, g, b), with the
+/// per-texel search structures. `progress` gets the fraction done, from 0 to 1, from the
+/// calling thread.
 pub fn build_texel_variants(
     sample: &TexelImage,
     params: &TexelVariantParams,
+    progress: &dyn Fn(f32),
+) -> Result<TexelVariants, VariantsError> {
+    build_texel_variants_with(sample, params, true, progress)
+}
+
+/// The k-coherent sets of every level of the sample pyramid `pyr`: per texel, the
+/// `k` texels with the nearest feature vectors (the full `side`² window plus the coarser
+/// level's [`coarse_window`], read mirrored at the borders so every texel has one; PCA-reduced
+/// as the per-texel sets are), leaving out the texel's own `side`² window, whose texels the
+/// coherent candidates already bring. Returns the level sizes and the concatenated sets.
+fn k_coherent_sets(
+    pyr: &[TexelImage],
+    params: &TexelVariantParams,
+    weights: &[f32],
+) -> (Vec<LevelMeta>, Vec<u32>) {
+    let side = params.template;
+    let k = params.coherent_k as usize;
+    let r = (side / 2) as i64;
+    let taps = template_taps(Template::Full, side);
+    let ctaps = coarse_taps(side);
+    let mut metas = Vec::new();
+    let mut out = Vec::new();
+    for l in 0..pyr.len() {
+        let level = &pyr[l];
+        let coarser = pyr.get(l + 1);
+        let c = level.channels as usize;
+        let (w, h) = (level.width as i64, level.height as i64);
+        let count = (w * h) as usize;
+        let dim = (taps.len() + if coarser.is_some() { ctaps.len() } else { 0 }) * c;
+        let mut raw = vec![0.0f32; count * dim];
+        raw.par_chunks_mut(dim).enumerate().for_each(|(t, o)| {
+            let (x, y) = (t as i64 % w, t as i64 / w);
+            let mut at = 0;
+            for &(dx, dy) in &taps {
+                let px = level.texel(mirror(x + dx as i64, w) as u32, mirror(y + dy as i64, h) as u32);
+                for ch in 0..c {
+                    o[at + ch] = px[ch] * weights[ch];
+                }
+                at += c;
+            }
+            if let Some(cl) = coarser {
+                let (cw, chh) = (cl.width as i64, cl.height as i64);
+                for &(dx, dy) in &ctaps {
+                    let px = cl.texel(
+                        mirror(x / 2 + dx as i64, cw) as u32,
+                        mirror(y / 2 + dy as i64, chh) as u32,
+                    );
+                    for ch in 0..c {
+                        o[at + ch] = px[ch] * weights[ch] * params.coarse_weight;
+                    }
+                    at += c;
+                }
+            }
+        });
+        let stride = count.div_ceil(PCA_FIT_SAMPLES).max(1);
+        let fit: Vec<f32> = raw
+            .chunks_exact(dim)
+            .step_by(stride)
+            .flatten()
+            .copied()
+            .collect();
+        let pca = Pca::fit(
+            &fit,
+            dim,
+            &PcaParams {
+                components: params.pca_dims,
+                variance: 0.999,
+                min_auto: 8,
+                max_auto: 24,
+            },
+        );
+        let points = pca.project_all(&raw);
+        let dims = pca.components();
+        let tree = KdTree::build(&points, dims);
+        let tree = tree.as_ref();
+        let mut sets = vec![u32::MAX; count * k];
+        sets.par_chunks_mut(k).enumerate().for_each(|(t, o)| {
+            let (x, y) = (t as i64 % w, t as i64 / w);
+            let found = tree.nearest_approx(&points[t * dims..(t + 1) * dims], k, 0.25, |id| {
+                let (ix, iy) = (id as i64 % w, id as i64 / w);
+                (ix - x).abs() > r || (iy - y).abs() > r
+            });
+            for (slot, (id, _)) in o.iter_mut().zip(found) {
+                *slot = id;
+            }
+        });
+        metas.push(LevelMeta {
+            width: level.width,
+            height: level.height,
+            texel_offset: out.len() as u64,
+        });
+        out.extend_from_slice(&sets);
+    }
+    (metas, out)
+}
+
+/// [`build_texel_variants`]; `per_texel` false leaves out the per-texel search structures
+/// (PCA bases and kd-trees of every variant, level and template: nearly all of the set's size
+/// and build time), which only `synthesize.search = "per_texel"` reads.
+pub fn build_texel_variants_with(
+    sample: &TexelImage,
+    params: &TexelVariantParams,
+    per_texel: bool,
     progress: &dyn Fn(f32),
 ) -> Result<TexelVariants, VariantsError> {
     params.validate()?;
@@ -1096,7 +1356,8 @@ pub fn build_texel_variants(
     }
     progress(0.0);
     let weights = channel_weights(sample, params.color_weight);
-    let sources = texel_pyramid(sample, params.middle_scale() + 1);
+    let sources = texel_pyramid(sample, params.kset_levels());
+    let (kset_meta, kset) = k_coherent_sets(&sources, params, &weights);
     let nl = params.levels as usize;
     let k_count = params.orientations;
     let jobs: Vec<(usize, u32)> = (0..params.scales as usize)
@@ -1113,7 +1374,8 @@ pub fn build_texel_variants(
     ];
     // Sets in (variant, level, template) order.
     let set_of = |v: usize, l: usize, t: usize| (v * nl + l) * 2 + t;
-    let centres: Vec<Vec<u32>> = (0..nv * nl * 2)
+    let sets = if per_texel { nv * nl * 2 } else { 0 };
+    let centres: Vec<Vec<u32>> = (0..sets)
         .into_par_iter()
         .map(|idx| {
             let (v, l, t) = (idx / (2 * nl), idx / 2 % nl, idx % 2);
@@ -1130,7 +1392,7 @@ pub fn build_texel_variants(
         .collect();
     // A PCA basis per set, fitted to a regular subsample of at most PCA_FIT_SAMPLES of its
     // candidates.
-    let bases: Vec<Pca> = (0..nv * nl * 2)
+    let bases: Vec<Pca> = (0..sets)
         .into_par_iter()
         .map(|idx| {
             let (v, l, t) = (idx / (2 * nl), idx / 2 % nl, idx % 2);
@@ -1159,7 +1421,7 @@ pub fn build_texel_variants(
         })
         .collect();
     let basis_of = |v: usize, l: usize, t: usize| &bases[set_of(v, l, t)];
-    let trees: Vec<KdTree> = (0..nv * nl * 2)
+    let trees: Vec<KdTree> = (0..sets)
         .into_par_iter()
         .map(|idx| {
             let (v, l, t) = (idx / (2 * nl), idx / 2 % nl, idx % 2);
@@ -1188,6 +1450,8 @@ pub fn build_texel_variants(
             channel_weights: weights,
             levels: Vec::new(),
             sets: Vec::new(),
+            per_texel,
+            ksets: kset_meta,
         },
         texels: Vec::new(),
         centres: Vec::new(),
@@ -1196,6 +1460,7 @@ pub fn build_texel_variants(
         tree_points: Vec::new(),
         tree_ids: Vec::new(),
         tree_nodes: Vec::new(),
+        kset,
     };
     for (v, pyr) in pyramids.iter().enumerate() {
         for img in pyr {
@@ -1206,7 +1471,7 @@ pub fn build_texel_variants(
             });
             out.texels.extend_from_slice(&img.data);
         }
-        for l in 0..nl {
+        for l in 0..nl * per_texel as usize {
             for t in 0..2 {
                 let idx = set_of(v, l, t);
                 let pca = basis_of(v, l, t);
@@ -1354,6 +1619,67 @@ mod tests {
         assert!(shortfall(n, n, &p, FEW_CANDIDATES).is_none());
         assert!(shortfall(n - 1, n - 1, &p, FEW_CANDIDATES).is_some());
         println!("a sample of {n}² gives every level {FEW_CANDIDATES} candidates");
+    }
+
+    #[test]
+    fn sample_map_points_at_the_texel_a_variant_copied() {
+        let mut sample = TexelImage::new(30, 30, 3);
+        for (k, v) in sample.data.iter_mut().enumerate() {
+            *v = crate::random::counter_unit(5, 0, k as u64);
+        }
+        let p = TexelVariantParams {
+            orientations: 4,
+            scales: 3,
+            levels: 1,
+            ..Default::default()
+        };
+        let owned = build_texel_variants_with(&sample, &p, false, &|_| {}).unwrap();
+        let v = owned.as_ref();
+        assert!(!v.meta.per_texel && v.try_set(0, 0, Template::Causal).is_none());
+        // Quarter turns at the sample's own scale copy texels exactly: each variant texel is
+        // the sample texel its map points at.
+        for k in 0..4 {
+            let var = v.variant(1, k);
+            let (lv, map) = (v.level(var, 0), v.sample_map(var, 0));
+            for q in [[0.0, 0.0], [3.0, 17.0], [29.0, 1.0]] {
+                let x = map.to_sample(q);
+                let (sx, sy) = (x[0].round() as u32, x[1].round() as u32);
+                assert!((x[0] - sx as f64).abs() < 1e-9 && (x[1] - sy as f64).abs() < 1e-9);
+                let at = (q[1] as usize * lv.width as usize + q[0] as usize) * 3 + 2;
+                assert_eq!(lv.texels[at], sample.texel(sx, sy)[2], "orientation {k} {q:?}");
+                let back = map.from_sample(x);
+                assert!((back[0] - q[0]).abs() < 1e-9 && (back[1] - q[1]).abs() < 1e-9);
+            }
+        }
+        // The enlarged variant's texel 2q shows the sample's texel q.
+        let big = v.sample_map(v.variant(0, 0), 0);
+        assert_eq!(big.to_sample([10.0, 4.0]), [5.0, 2.0]);
+    }
+
+    #[test]
+    fn k_coherent_sets_hold_similar_texels_away_from_the_texel() {
+        // Stripes of period 6 along x: a texel's best matches are the texels one or more
+        // periods away on its own column phase.
+        let sample = stripes(48, 48, 6.0);
+        let p = TexelVariantParams {
+            orientations: 1,
+            scales: 1,
+            levels: 1,
+            ..Default::default()
+        };
+        let owned = build_texel_variants_with(&sample, &p, false, &|_| {}).unwrap();
+        let v = owned.as_ref();
+        let ks = v.kset(0);
+        let k = v.coherent_k();
+        assert_eq!(ks.entries.len(), 48 * 48 * k);
+        for t in [24 * 48 + 24, 10 * 48 + 31] {
+            let (x, y) = (t % 48, t / 48);
+            for &e in &ks.entries[t * k..(t + 1) * k] {
+                let (ex, ey) = (e as usize % 48, e as usize / 48);
+                assert!(ex.abs_diff(x) > 2 || ey.abs_diff(y) > 2, "{e} is inside {t}'s window");
+                assert_eq!(ex % 6, x % 6, "texel {t}: {e} is on another phase");
+            }
+        }
     }
 
     #[test]

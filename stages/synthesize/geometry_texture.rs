@@ -75,7 +75,7 @@
 //!   Orientations are still drawn per texel: per cell, stripes broke into straight pieces at the
 //!   cell borders.
 use crate::analyse_exemplar::texel_variants::{
-    Template, TexelVariantsRef, coarse_taps, template_taps,
+    SampleMap, Template, TexelVariantsRef, coarse_taps, coarse_window, template_taps,
 };
 use crate::check::{ParamError, check_range};
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
@@ -104,8 +104,37 @@ pub struct GeometrySynthParams {
     /// Approximate nearest-neighbour factor, 0..=10: a match may be up to `1 + search_eps`
     /// times farther than the best one; 0 = exact. Default: 0.25 (on the tests' bumps, 0.5 and
     /// 1 left flat triangular plateaus that exact search does not; 0.25 looked like exact
-    /// search, and at 257² exact search costs about 0.25 s on 2 cores anyway).
+    /// search, and at 257² exact search costs about 0.25 s on 2 cores anyway). Used by
+    /// `search = "per_texel"` only.
     pub search_eps: f32,
+    /// How a texel's match is found: `"k_coherence"` (default) or `"per_texel"` (the paper's
+    /// kd-tree search over every texel of the variant, §4.2.1).
+    pub search: Search,
+    /// How much better (as a factor `1 + coherence` on the template distance) a k-coherent
+    /// candidate must match than the best shifted one to be taken (`k_coherence` only),
+    /// 0..=10. Default: see [`GeometrySynthParams::default`].
+    pub coherence: f32,
+    /// Correction passes per level after the scanline pass (`k_coherence` only; Lefebvre &
+    /// Hoppe 2005), 0..=8: every texel rematched with the full boundary template against the
+    /// level as the previous pass left it, all at once. Default: 1.
+    pub correction_passes: u32,
+    /// Factor on the coarser level's taps in the template distance of `k_coherence`, 0..=4
+    /// (`per_texel` uses `analyse_exemplar.coarse_weight`, which its features are built with).
+    /// Default: 1 (the relief_cow sample at one scale: nearest-patch ratio 0.81 at 0.3, 0.49
+    /// at 1, both with coherence 1 and one correction pass... see BENCHMARKS.md).
+    pub coarse_weight: f32,
+}
+
+/// The candidate search of each texel's match.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Search {
+    /// Coherent candidates (Ashikhmin 2001) and their k-coherent sets (Tong et al. 2002),
+    /// compared by the full template distance.
+    #[default]
+    KCoherence,
+    /// The paper's approximate nearest neighbour over all texels of the variant.
+    PerTexel,
 }
 
 impl Default for GeometrySynthParams {
@@ -115,6 +144,10 @@ impl Default for GeometrySynthParams {
             boundary_passes: 2,
             boundary_strip: 4,
             search_eps: 0.25,
+            search: Search::KCoherence,
+            coherence: 1.0,
+            correction_passes: 1,
+            coarse_weight: 1.0,
         }
     }
 }
@@ -125,7 +158,10 @@ impl GeometrySynthParams {
         let within = |e: ParamError| e.within("geometry texture");
         check_range("boundary_passes", self.boundary_passes, 0, 16).map_err(within)?;
         check_range("boundary_strip", self.boundary_strip, 1, 64).map_err(within)?;
-        check_range("search_eps", self.search_eps, 0.0, 10.0).map_err(within)
+        check_range("search_eps", self.search_eps, 0.0, 10.0).map_err(within)?;
+        check_range("coherence", self.coherence, 0.0, 10.0).map_err(within)?;
+        check_range("correction_passes", self.correction_passes, 0, 8).map_err(within)?;
+        check_range("coarse_weight", self.coarse_weight, 0.0, 4.0).map_err(within)
     }
 }
 
@@ -134,6 +170,13 @@ const STREAM_ORIENT: u64 = 0x6774_0002;
 const STREAM_SCALE: u64 = 0x6774_0003;
 const STREAM_MATE: u64 = 0x6774_0004;
 const STREAM_BLOCK: u64 = 0x6774_0005;
+const STREAM_FALLBACK: u64 = 0x6774_0006;
+
+/// A texel's source: variant `v` and texel index `k` of the variant's level, `v << 32 | k`.
+#[inline]
+fn pack_src(v: usize, k: usize) -> u64 {
+    ((v as u64) << 32) | k as u64
+}
 
 /// Most channels a texel has.
 const MAX_CHANNELS: usize = 6;
@@ -384,6 +427,9 @@ struct Level {
     orient: Vec<f32>,
     /// Fractional scale index in `[0, scales − 1]` (0 = most enlarged).
     scale: Vec<f32>,
+    /// Per texel, where its value was copied from ([`pack_src`]), and the same for `init`.
+    src: Vec<u64>,
+    init_src: Vec<u64>,
 }
 
 /// Everything a texel's match needs, shared by the passes.
@@ -398,6 +444,11 @@ struct Ctx<'a, 'v> {
     scales: usize,
     /// Side of the blocks of texels that share their random variant choice.
     block: usize,
+    search: Search,
+    /// `coherence` of the parameters.
+    coherence: f32,
+    /// Per (variant, level), `v * levels + l`: the map to the sample's level 0.
+    maps: Vec<SampleMap>,
 }
 
 /// Scratch buffers of one matcher.
@@ -406,6 +457,33 @@ struct Scratch {
     raw: Vec<f32>,
     reduced: Vec<f32>,
     search: Vec<f32>,
+    /// Candidate texel index `<< 1`, plus 1 for a k-coherent (not shifted) one.
+    candidates: Vec<u64>,
+}
+
+/// The texels of a `w × h` variant level (with a `cw × ch` coarser level, if any) whose whole
+/// template lies inside, as inclusive ranges `[x_lo, x_hi, y_lo, y_hi]` (as the analysis'
+/// candidates).
+fn valid_range(kind: Template, side: u32, w: u32, h: u32, coarse: Option<(u32, u32)>) -> [i64; 4] {
+    let r = (side / 2) as i64;
+    let (w, h) = (w as i64, h as i64);
+    let mut b = [
+        r,
+        w - 1 - r,
+        r,
+        match kind {
+            Template::Causal => h - 1,
+            Template::Full => h - 1 - r,
+        },
+    ];
+    if let Some((cw, ch)) = coarse {
+        let rc = (coarse_window(side) / 2) as i64;
+        b[0] = b[0].max(2 * rc);
+        b[1] = b[1].min(2 * (cw as i64 - 1 - rc) + 1);
+        b[2] = b[2].max(2 * rc);
+        b[3] = b[3].min(2 * (ch as i64 - 1 - rc) + 1);
+    }
+    b
 }
 
 impl Ctx<'_, '_> {
@@ -509,7 +587,7 @@ impl Ctx<'_, '_> {
     }
 
     /// The synthesized value of texel `(i, j)` of `levels[l]` with template `kind`, written to
-    /// `out` (in the texel's grid axes).
+    /// `out` (in the texel's grid axes); returns where it was copied from ([`pack_src`]).
     #[allow(clippy::too_many_arguments)]
     fn synthesize_texel(
         &self,
@@ -523,27 +601,215 @@ impl Ctx<'_, '_> {
         j: i64,
         scratch: &mut Scratch,
         out: &mut [f32],
-    ) {
+    ) -> u64 {
         let c = self.channels;
         let lv = &levels[l];
         let t = lv.grid.idx(i, j);
         let v = self.choose(lv, l, pass, t);
-        let set = self.variants.set(v, l, kind);
         // The scanline pass reads outside taps from the level's starting values, so no texel
         // depends on one synthesized later (and the wavefront order stays exact); boundary
         // resynthesis reads the current values across the cuts.
         let from_init = kind == Template::Causal;
         self.gather(levels, l, taps, ctaps, i, j, from_init, &mut scratch.raw);
-        debug_assert_eq!(scratch.raw.len(), set.dim_in);
-        scratch.reduced.resize(set.dims, 0.0);
-        set.project(&scratch.raw, &mut scratch.reduced);
-        let (id, _) = set
-            .tree
-            .nearest1_approx(&scratch.reduced, self.eps, &mut scratch.search)
-            .expect("feature sets are never empty");
         let level_img = self.variants.level(v, l);
-        let k = set.centres[id as usize] as usize;
+        let k = match self.search {
+            Search::PerTexel => {
+                let set = self.variants.set(v, l, kind);
+                debug_assert_eq!(scratch.raw.len(), set.dim_in);
+                scratch.reduced.resize(set.dims, 0.0);
+                set.project(&scratch.raw, &mut scratch.reduced);
+                let (id, _) = set
+                    .tree
+                    .nearest1_approx(&scratch.reduced, self.eps, &mut scratch.search)
+                    .expect("feature sets are never empty");
+                set.centres[id as usize] as usize
+            }
+            Search::KCoherence => {
+                self.coherent_match(levels, l, pass, kind, taps, ctaps, i, j, v, scratch)
+            }
+        };
         out[..c].copy_from_slice(&level_img.texels[k * c..(k + 1) * c]);
+        pack_src(v, k)
+    }
+
+    /// Rounds a point of level `l` of variant `v` to a texel index inside `range`.
+    #[inline]
+    fn texel_in(range: &[i64; 4], w: u32, q: [f64; 2]) -> Option<u32> {
+        let (x, y) = ((q[0] + 0.5).floor() as i64, (q[1] + 0.5).floor() as i64);
+        (x >= range[0] && x <= range[1] && y >= range[2] && y <= range[3])
+            .then(|| (y * w as i64 + x) as u32)
+    }
+
+    /// The k-coherence match of texel `(i, j)` of `levels[l]` in variant `v` (see the module
+    /// docs): the candidate of least template distance to the gathered `scratch.raw`, as a
+    /// texel index of the variant's level.
+    #[allow(clippy::too_many_arguments)]
+    fn coherent_match(
+        &self,
+        levels: &[Level],
+        l: usize,
+        pass: u32,
+        kind: Template,
+        taps: &[(i32, i32)],
+        ctaps: &[(i32, i32)],
+        i: i64,
+        j: i64,
+        v: usize,
+        scratch: &mut Scratch,
+    ) -> usize {
+        let vars = self.variants;
+        let nl = vars.levels();
+        let lv = &levels[l];
+        let img = vars.level(v, l);
+        let coarser = (l + 1 < nl).then(|| vars.level(v, l + 1));
+        let side = match kind {
+            Template::Causal => vars.params().template,
+            Template::Full => vars.params().boundary_template,
+        };
+        let range = valid_range(
+            kind,
+            side,
+            img.width,
+            img.height,
+            coarser.map(|cl| (cl.width, cl.height)),
+        );
+        let nlv = nl;
+        let map_v = &self.maps[v * nlv + l];
+        let kl = vars.kset_level_of(v, l);
+        let ks = vars.kset(kl);
+        let kscale = (1u64 << kl) as f64;
+        let kk = vars.coherent_k();
+        // Hertzmann et al.'s level scaling of κ: coarser levels jump more freely, so the
+        // coarse layout keeps the sample's statistics rather than the first texels' copies.
+        let jump_factor = (1.0 + self.coherence / (1u32 << l) as f32).powi(2);
+        let cands = &mut scratch.candidates;
+        cands.clear();
+        // The texel itself (its prediction from the coarser level, or its value before this
+        // pass) and each synthesized neighbour inside the square: their source, shifted back by
+        // the neighbour's offset.
+        let own = std::iter::once((0i32, 0i32));
+        for (dx, dy) in own.chain(taps.iter().copied()) {
+            // Across a cut whose sides share their axes (a quarter turn of 0) the shift holds
+            // too; across a turning cut it would need the turned variant, so those taps bring
+            // none. Outside taps of the scanline pass are read from the starting values (see
+            // `gather`), and so are their sources.
+            let (k, r, outside) = lv.grid.locate(i + dy as i64, j + dx as i64);
+            if r != 0 {
+                continue;
+            }
+            let src = if outside && kind == Template::Causal {
+                lv.init_src[k]
+            } else {
+                lv.src[k]
+            };
+            let (sv, sk) = ((src >> 32) as usize, (src & 0xFFFF_FFFF) as u32);
+            let sw = vars.level(sv, l).width;
+            let q = [
+                (sk % sw) as f64 - dx as f64,
+                (sk / sw) as f64 - dy as f64,
+            ];
+            let q = if sv == v {
+                q
+            } else {
+                // Another variant: the same point of the sample, in this variant's texels.
+                map_v.from_sample(self.maps[sv * nlv + l].to_sample(q))
+            };
+            if let Some(id) = Self::texel_in(&range, img.width, q) {
+                cands.push((id as u64) << 1);
+            }
+            // Its k-coherent set, through the sample level matching this variant's level.
+            let x0 = map_v.to_sample(q);
+            let (kx, ky) = (
+                ((x0[0] / kscale + 0.5).floor() as i64).clamp(0, ks.width as i64 - 1),
+                ((x0[1] / kscale + 0.5).floor() as i64).clamp(0, ks.height as i64 - 1),
+            );
+            let at = (ky * ks.width as i64 + kx) as usize * kk;
+            for &e in &ks.entries[at..at + kk] {
+                if e == u32::MAX {
+                    continue;
+                }
+                let ex = [
+                    (e % ks.width) as f64 * kscale,
+                    (e / ks.width) as f64 * kscale,
+                ];
+                if let Some(id) = Self::texel_in(&range, img.width, map_v.from_sample(ex)) {
+                    cands.push(((id as u64) << 1) | 1);
+                }
+            }
+        }
+        // By texel, a shifted candidate before a k-coherent one of the same texel, which then
+        // goes.
+        cands.sort_unstable();
+        cands.dedup_by(|b, a| *a >> 1 == *b >> 1);
+        if cands.is_empty() && !(l + 1 == nl && kind == Template::Causal) {
+            // Nothing coherent lies inside the variant: a random texel whose template does.
+            let h = counter_hash(self.seed, STREAM_FALLBACK, choice_index(l, pass, lv.grid.idx(i, j)));
+            let nx = (range[1] - range[0] + 1) as u64;
+            let ny = (range[3] - range[2] + 1) as u64;
+            let x = range[0] + (h % nx) as i64;
+            let y = range[2] + ((h >> 32) % ny) as i64;
+            return (y * img.width as i64 + x) as usize;
+        }
+        let c = self.channels;
+        let query = &scratch.raw;
+        let w = img.width as i64;
+        // Squared template distance of the texel at (x, y), or a value ≥ `bound` once the
+        // partial sum reaches it.
+        let dist = |x: i64, y: i64, bound: f32| -> f32 {
+            let mut d = 0.0f32;
+            let mut o = 0;
+            for &(dx, dy) in taps {
+                let k = ((y + dy as i64) * w + x + dx as i64) as usize * c;
+                for ch in 0..c {
+                    let e = img.texels[k + ch] * self.weights[ch] - query[o + ch];
+                    d += e * e;
+                }
+                o += c;
+                if d >= bound {
+                    return d;
+                }
+            }
+            if let Some(cl) = coarser {
+                let (cx, cy) = (x / 2, y / 2);
+                for &(dx, dy) in ctaps {
+                    let k = ((cy + dy as i64) * cl.width as i64 + cx + dx as i64) as usize * c;
+                    for ch in 0..c {
+                        let e = cl.texels[k + ch] * self.weights[ch] * self.coarse_weight
+                            - query[o + ch];
+                        d += e * e;
+                    }
+                    o += c;
+                }
+            }
+            d
+        };
+        let mut best = (f32::INFINITY, 0u32);
+        if l + 1 == nl && kind == Template::Causal {
+            // The coarsest level's scanline pass lays out the whole texture, and coherent
+            // candidates alone only propagate its random start (a sample of sparse bumps came
+            // out with a third fewer): every texel of the variant is a candidate too, as a jump
+            // (the coarsest levels are small).
+            for y in range[2]..=range[3] {
+                for x in range[0]..=range[1] {
+                    let d = dist(x, y, best.0 / jump_factor) * jump_factor;
+                    if d < best.0 {
+                        best = (d, (y * w + x) as u32);
+                    }
+                }
+            }
+        }
+        for &cand in cands.iter() {
+            // Jumps to a k-coherent texel must be (1 + coherence) times better than a shifted
+            // candidate (Hertzmann et al. 2001's κ), as squared distances.
+            let scale = if cand & 1 == 1 { jump_factor } else { 1.0 };
+            let cand = (cand >> 1) as u32;
+            let (x, y) = ((cand % img.width) as i64, (cand / img.width) as i64);
+            let d = dist(x, y, best.0 / scale) * scale;
+            if d < best.0 {
+                best = (d, cand);
+            }
+        }
+        best.1 as usize
     }
 }
 
@@ -565,6 +831,27 @@ fn unify_mates(lv: &mut Level, c: usize, seed: u64, level: usize, pass: u32) {
             lv.data[q * c..(q + 1) * c].copy_from_slice(&w[..c]);
         }
     }
+}
+
+/// The sources of a finer level's starting values: texel `(i, j)` takes its parent
+/// `(i / 2, j / 2)`'s source texel `q` (in the coarser level of the parent's variant) as
+/// `2 q + (j mod 2, i mod 2)` in that variant's finer level (`size` gives its width and
+/// height), clamped inside.
+fn upsample_sources(coarse: &Level, nf: usize, size: impl Fn(usize) -> (u32, u32)) -> Vec<u64> {
+    let nc = coarse.grid.n;
+    let mut out = vec![0u64; nf * nf];
+    for i in 0..nf {
+        for j in 0..nf {
+            let src = coarse.src[(i / 2) * nc + j / 2];
+            let (v, k) = ((src >> 32) as usize, (src & 0xFFFF_FFFF) as u32);
+            let (w, h) = size(v);
+            let cw = w.div_ceil(2);
+            let x = (2 * (k % cw) + (j % 2) as u32).min(w - 1);
+            let y = (2 * (k / cw) + (i % 2) as u32).min(h - 1);
+            out[i * nf + j] = pack_src(v, (y * w + x) as usize);
+        }
+    }
+    out
 }
 
 /// Bilinear interpolation of the coarser level `coarse` onto a grid of side `nf` (sample `i` of
@@ -603,6 +890,11 @@ pub enum GeometryTextureError {
         8 * (1usize << (.levels - 1)) + 1
     )]
     Levels { n: usize, levels: usize },
+    #[error(
+        "geometry texture: search = \"per_texel\" needs the variants' per-texel search \
+         structures, which this variant set was built without"
+    )]
+    NoPerTexelSets,
     #[error("geometry texture: the geometry image has {entries} mate entries for {n}×{n} samples")]
     MateCount { entries: usize, n: usize },
     #[error(
@@ -771,19 +1063,33 @@ fn synthesize_impl(
             init: Vec::new(),
             orient,
             scale,
+            src: Vec::new(),
+            init_src: Vec::new(),
         });
     }
+    if p.search == Search::PerTexel && !variants.meta.per_texel {
+        return Err(GeometryTextureError::NoPerTexelSets);
+    }
+    let maps: Vec<_> = (0..variants.variant_count() * nl)
+        .map(|vl| variants.sample_map(vl / nl, vl % nl))
+        .collect();
 
     let ctx = Ctx {
         variants,
         channels: c,
         weights: &variants.meta.channel_weights,
-        coarse_weight: vp.coarse_weight,
+        coarse_weight: match p.search {
+            Search::KCoherence => p.coarse_weight,
+            Search::PerTexel => vp.coarse_weight,
+        },
         seed: p.seed,
         eps: p.search_eps,
         orientations: kk,
         scales: ss,
         block: vp.template as usize,
+        search: p.search,
+        coherence: p.coherence,
+        maps,
     };
     let causal_taps = template_taps(Template::Causal, vp.template);
     let causal_ctaps = coarse_taps(vp.template);
@@ -809,20 +1115,32 @@ fn synthesize_impl(
         let init = if l + 1 == nl {
             let lv = &levels[l];
             let mut init = vec![0.0f32; lv.grid.n * lv.grid.n * c];
-            init.par_chunks_mut(c).enumerate().for_each(|(t, out)| {
-                let v = ctx.choose(lv, l, INIT_PASS, t);
-                let img = variants.level(v, l);
-                let count = (img.width * img.height) as u64;
-                let key = choice_index(l, INIT_PASS, t);
-                let k = (counter_hash(p.seed, STREAM_INIT, key) % count) as usize;
-                out.copy_from_slice(&img.texels[k * c..(k + 1) * c]);
-            });
-            init
+            let mut src = vec![0u64; lv.grid.n * lv.grid.n];
+            init.par_chunks_mut(c)
+                .zip(src.par_iter_mut())
+                .enumerate()
+                .for_each(|(t, (out, src))| {
+                    let v = ctx.choose(lv, l, INIT_PASS, t);
+                    let img = variants.level(v, l);
+                    let count = (img.width * img.height) as u64;
+                    let key = choice_index(l, INIT_PASS, t);
+                    let k = (counter_hash(p.seed, STREAM_INIT, key) % count) as usize;
+                    out.copy_from_slice(&img.texels[k * c..(k + 1) * c]);
+                    *src = pack_src(v, k);
+                });
+            (init, src)
         } else {
-            upsample(&levels[l + 1], levels[l].grid.n, c)
+            let src = upsample_sources(&levels[l + 1], levels[l].grid.n, |v| {
+                let img = variants.level(v, l);
+                (img.width, img.height)
+            });
+            (upsample(&levels[l + 1], levels[l].grid.n, c), src)
         };
+        let (init, init_src) = init;
         levels[l].data = init.clone();
         levels[l].init = init;
+        levels[l].src = init_src.clone();
+        levels[l].init_src = init_src;
         // 2. Scanline synthesis, one anti-diagonal wave at a time (or in plain scanline order).
         let f = if wavefront {
             (vp.template / 2) as i64 + 1
@@ -830,7 +1148,7 @@ fn synthesize_impl(
             n
         };
         let last_wave = (n - 1) + f * (n - 1);
-        let mut results: Vec<[f32; MAX_CHANNELS]> = Vec::new();
+        let mut results: Vec<([f32; MAX_CHANNELS], u64)> = Vec::new();
         for w in 0..=last_wave {
             let i_lo = if w > n - 1 {
                 (w - (n - 1) + f - 1) / f
@@ -843,7 +1161,7 @@ fn synthesize_impl(
             }
             let compute = |scratch: &mut Scratch, i: i64| {
                 let mut out = [0.0f32; MAX_CHANNELS];
-                ctx.synthesize_texel(
+                let src = ctx.synthesize_texel(
                     &levels,
                     l,
                     0,
@@ -855,7 +1173,7 @@ fn synthesize_impl(
                     scratch,
                     &mut out,
                 );
-                out
+                (out, src)
             };
             results.clear();
             if i_hi - i_lo < 8 || !wavefront {
@@ -868,9 +1186,46 @@ fn synthesize_impl(
                     .collect_into_vec(&mut results);
             }
             let lv = &mut levels[l];
-            for (i, px) in (i_lo..=i_hi).zip(&results) {
+            for (i, (px, src)) in (i_lo..=i_hi).zip(&results) {
                 let t = lv.grid.idx(i, w - f * i);
                 lv.data[t * c..(t + 1) * c].copy_from_slice(&px[..c]);
+                lv.src[t] = *src;
+            }
+        }
+        // 2b. Correction passes (k-coherence only): each texel rematched in the variant of its
+        // scanline match, from the level as the previous pass left it, so the texels do not
+        // depend on one another and any thread count gives the same result.
+        let corrections = if p.search == Search::KCoherence {
+            p.correction_passes
+        } else {
+            0
+        };
+        for _ in 0..corrections {
+            let nn = levels[l].grid.n * levels[l].grid.n;
+            let res: Vec<([f32; MAX_CHANNELS], u64)> = (0..nn)
+                .into_par_iter()
+                .map_init(Scratch::default, |scratch, t| {
+                    let (i, j) = levels[l].grid.coords(t as u32);
+                    let mut out = [0.0f32; MAX_CHANNELS];
+                    let src = ctx.synthesize_texel(
+                        &levels,
+                        l,
+                        0,
+                        Template::Full,
+                        &full_taps,
+                        &full_ctaps,
+                        i,
+                        j,
+                        scratch,
+                        &mut out,
+                    );
+                    (out, src)
+                })
+                .collect();
+            let lv = &mut levels[l];
+            for (t, (px, src)) in res.iter().enumerate() {
+                lv.data[t * c..(t + 1) * c].copy_from_slice(&px[..c]);
+                lv.src[t] = *src;
             }
         }
         unify_mates(&mut levels[l], c, p.seed, l, 0);
@@ -884,7 +1239,7 @@ fn synthesize_impl(
             for &t in &strip {
                 let (i, j) = levels[l].grid.coords(t);
                 let mut out = [0.0f32; MAX_CHANNELS];
-                ctx.synthesize_texel(
+                let src = ctx.synthesize_texel(
                     &levels,
                     l,
                     pass,
@@ -898,6 +1253,7 @@ fn synthesize_impl(
                 );
                 let t = t as usize;
                 levels[l].data[t * c..(t + 1) * c].copy_from_slice(&out[..c]);
+                levels[l].src[t] = src;
             }
             done += strip.len() as f64;
             levels[l].grid.strip = strip;
@@ -1078,10 +1434,17 @@ mod tests {
             )
             .unwrap();
             let vr = owned.as_ref();
-            let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
-            let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
-            let bits = |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&a), bits(&b), "template {template}");
+            for search in [Search::KCoherence, Search::PerTexel] {
+                let p = GeometrySynthParams {
+                    search,
+                    ..p.clone()
+                };
+                let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
+                let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
+                let bits =
+                    |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a), bits(&b), "template {template} {search:?}");
+            }
         }
     }
 
@@ -1116,6 +1479,8 @@ mod tests {
                         init: lev.texels.to_vec(),
                         orient: vec![0.0; m * m],
                         scale: vec![0.0; m * m],
+                        src: vec![0; m * m],
+                        init_src: vec![0; m * m],
                     }
                 })
                 .collect();
@@ -1129,6 +1494,9 @@ mod tests {
                 orientations: 1,
                 scales: 1,
                 block: 5,
+                search: Search::PerTexel,
+                coherence: 0.0,
+                maps: vec![vr.sample_map(0, 0), vr.sample_map(0, 1)],
             };
             for kind in [Template::Causal, Template::Full] {
                 let taps = template_taps(kind, template);
