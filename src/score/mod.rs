@@ -257,6 +257,31 @@ impl<'a> Run<'a> {
         exemplar: ImageView<'_>,
     ) -> Result<(), ScoreFailure> {
         use crate::image::patch_score::ScoreError;
+        // What is scored, as a picture (masked texels black), for looking at.
+        if let Some(dir) = std::env::var_os("TEXSYN_SCORE_DUMP") {
+            let slug: String = item
+                .output
+                .chars()
+                .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+                .collect();
+            let mut img = Image {
+                width: output.width,
+                height: output.height,
+                pixels: output.pixels.to_vec(),
+            };
+            if let Some(m) = mask {
+                for (p, &inside) in img.pixels.iter_mut().zip(m) {
+                    if !inside {
+                        *p = [0.0, 0.0, 0.0, 1.0];
+                    }
+                }
+            }
+            let png = crate::stages::reconstruct::textured_export::encode_png(&img.to_rgba8(), false);
+            let path = Path::new(&dir).join(format!("score_{}.png", &slug[..slug.len().min(60)]));
+            if let Err(e) = std::fs::write(&path, png) {
+                tracing::warn!("TEXSYN_SCORE_DUMP: writing {}: {e}", path.display());
+            }
+        }
         match patch_score_masked(output, mask, exemplar, &self.params) {
             Ok(s) => item.score = Some(s),
             Err(e @ (ScoreError::NoPatchInMask { .. } | ScoreError::TooSmall { which: "output", .. })) => {
