@@ -12,8 +12,9 @@
 //!
 //! **Mesh.** `relief.obj` as written: boundary edges (one triangle), non-manifold edges (more
 //! than two), unreferenced vertices, and flipped faces: triangles whose normal points against
-//! the same triangle's normal on the undisplaced geometry-image mesh (`grid_mesh` of the
-//! input's geometry image, which has the same triangles), i.e. relative to the input surface.
+//! the normal of the same three vertices on the undisplaced geometry-image mesh (`grid_mesh`
+//! of the input's geometry image, which numbers its vertices the same way), i.e. relative to
+//! the input surface.
 
 use super::{Item, Run, ScoreFailure};
 use crate::geom::Mesh;
@@ -83,6 +84,13 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Item, ScoreFailure> {
     let relief = crate::geom::io::read_mesh_bytes(Path::new("relief.obj"), &bytes)
         .map_err(|e| ScoreFailure::new(format!("reading relief.obj: {e}")))?;
     let (base, _) = grid_mesh(&gi, &gi.positions);
+    tracing::debug!(
+        "score: relief {} vertices {} triangles, undisplaced {} vertices {} triangles",
+        relief.positions.len(),
+        relief.triangles.len(),
+        base.positions.len(),
+        base.triangles.len()
+    );
     let checks = mesh_checks(&relief, Some(&base));
     item.extra.insert(
         "mesh".into(),
@@ -100,12 +108,14 @@ pub struct MeshChecks {
     /// Edges with more than two triangles.
     pub non_manifold_edges: usize,
     pub unreferenced_vertices: usize,
-    /// Triangles whose normal points against the reference's same triangle; `None` without a
-    /// reference with the same triangles.
+    /// Triangles whose normal points against the same three vertices' on the reference;
+    /// `None` without a reference with the same vertices.
     pub flipped_faces: Option<usize>,
 }
 
-/// [`MeshChecks`] of `mesh`; flips against `reference` (same triangles, other positions).
+/// [`MeshChecks`] of `mesh`; flips against `reference` (the same vertices at other
+/// positions: each triangle of `mesh` is compared with its three vertices there, so the two
+/// may triangulate differently).
 pub fn mesh_checks(mesh: &Mesh, reference: Option<&Mesh>) -> MeshChecks {
     let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
     let mut used = vec![false; mesh.positions.len()];
@@ -121,7 +131,7 @@ pub fn mesh_checks(mesh: &Mesh, reference: Option<&Mesh>) -> MeshChecks {
         (p[1] - p[0]).cross(p[2] - p[0])
     };
     let flipped_faces = reference
-        .filter(|r| r.triangles == mesh.triangles && r.positions.len() == mesh.positions.len())
+        .filter(|r| r.positions.len() == mesh.positions.len())
         .map(|r| {
             mesh.triangles
                 .iter()
