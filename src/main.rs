@@ -361,6 +361,14 @@ fn real_main() -> Result<i32> {
         } => {
             let mut reports = Vec::new();
             for config in configs {
+                // A glob over a config folder also meets the files configs name (curves):
+                // with several files, one without `method` is passed over, said on stderr.
+                if configs.len() > 1
+                    && Config::load(config, &[]).is_ok_and(|c| !c.table.contains_key("method"))
+                {
+                    eprintln!("{}: no `method`, not a config; passed over", config.display());
+                    continue;
+                }
                 let (plan, result) = run_config(config, sets, &cache_dir, progress)?;
                 let section = plan.score.clone().unwrap_or_default();
                 reports.push(score_plan(config, sets, &plan, &result, &section)?);

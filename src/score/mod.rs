@@ -16,6 +16,7 @@
 pub mod charts;
 pub mod geometry;
 pub mod solid;
+pub mod surface;
 
 use crate::artifact::{Bundle, Format};
 use crate::check::{ParamError, check_range};
@@ -165,16 +166,7 @@ pub fn score_run(
         "jump_maps" => charts::jump_maps(&run)?,
         "geometry_images" => vec![geometry::geometry_images(&run)?],
         "solid" => solid::solid(&run, &mut not_scored)?,
-        "graph_matching" => {
-            not_scored.push(
-                "graph_matching: its result is one colour per vertex of a √2-subdivided mesh \
-                 (the method bakes no texture, §3.5 of the paper); comparing it with the \
-                 exemplar needs the surface resampled into exemplar-aligned patches along the \
-                 field, which texsyn score does not do yet"
-                    .into(),
-            );
-            Vec::new()
-        }
+        "graph_matching" => vec![surface::graph_matching(&run)?],
         "feature_aligned" => {
             not_scored.push(
                 "feature_aligned: its result is one colour per vertex of the refined mesh; the \
