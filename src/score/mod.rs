@@ -167,17 +167,7 @@ pub fn score_run(
         "geometry_images" => vec![geometry::geometry_images(&run)?],
         "solid" => solid::solid(&run, &mut not_scored)?,
         "graph_matching" => vec![surface::graph_matching(&run)?],
-        "feature_aligned" => {
-            not_scored.push(
-                "feature_aligned: its result is one colour per vertex of the refined mesh; the \
-                 baked textured_atlas.png lays each input triangle in the atlas with its \
-                 longest edge horizontal, not along the texture's field, so its patches are \
-                 rotated against the exemplar's and a nearest-patch distance would measure the \
-                 rotation; resampling along the field is not done yet"
-                    .into(),
-            );
-            Vec::new()
-        }
+        "feature_aligned" => surface::feature_aligned(&run)?,
         other => {
             return Err(ScoreFailure::new(format!(
                 "method {other:?} has no scoring"
