@@ -366,7 +366,10 @@ fn real_main() -> Result<i32> {
                 if configs.len() > 1
                     && Config::load(config, &[]).is_ok_and(|c| !c.table.contains_key("method"))
                 {
-                    eprintln!("{}: no `method`, not a config; passed over", config.display());
+                    eprintln!(
+                        "{}: no `method`, not a config; passed over",
+                        config.display()
+                    );
                     continue;
                 }
                 let (plan, result) = run_config(config, sets, &cache_dir, progress)?;

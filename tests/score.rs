@@ -19,11 +19,7 @@ fn texsyn(args: &[&str], cwd: &Path) -> Output {
 }
 
 fn json(o: &Output) -> Value {
-    assert!(
-        o.status.success(),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     serde_json::from_slice(&o.stdout).expect("JSON on stdout")
 }
 
@@ -107,10 +103,7 @@ fn score_reports_the_measures_and_run_json_repeats_them_when_asked() {
     }
 
     // Several configs (or --markdown): one table.
-    let o = texsyn(
-        &["score", "small.toml", "small.toml", "--cache", "c"],
-        dir,
-    );
+    let o = texsyn(&["score", "small.toml", "small.toml", "--cache", "c"], dir);
     let table = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success());
     assert!(table.starts_with("| config | output | ratio"), "{table}");
@@ -123,7 +116,10 @@ fn bad_score_sections_and_missing_inputs_are_named() {
     let dir = d.path();
     let cases = [
         ("[score]\npach = 5\n", vec!["small.toml", "score", "pach"]),
-        ("[score]\npatch = 0\n", vec!["small.toml", "score.patch", "0"]),
+        (
+            "[score]\npatch = 0\n",
+            vec!["small.toml", "score.patch", "0"],
+        ),
         (
             "[score]\nmax_queries = 0\n",
             vec!["small.toml", "score.max_queries"],
@@ -158,7 +154,10 @@ fn bad_score_sections_and_missing_inputs_are_named() {
     let o = texsyn(&["score", "gone.toml", "--cache", "c"], dir);
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
-    assert!(e.contains("gone.png") && e.contains("inputs.exemplar"), "{e}");
+    assert!(
+        e.contains("gone.png") && e.contains("inputs.exemplar"),
+        "{e}"
+    );
     // A config that is not there.
     let o = texsyn(&["score", "nope.toml", "--cache", "c"], dir);
     assert!(!o.status.success());

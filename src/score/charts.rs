@@ -52,9 +52,12 @@ pub(crate) fn jump_maps(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
         sets: &sets,
         texture: ex,
     };
-    let charts = unfolded_discs(&mesh.triangles, &(&param).into(), run.params.seed, |f, b| {
-        shader.rgba(f, b)
-    });
+    let charts = unfolded_discs(
+        &mesh.triangles,
+        &(&param).into(),
+        run.params.seed,
+        |f, b| shader.rgba(f, b),
+    );
     let mut item = Item::new(
         format!(
             "the blended surface, {} discs unfolded into texel coordinates",
@@ -62,12 +65,7 @@ pub(crate) fn jump_maps(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
         ),
         "inputs.exemplar",
     );
-    run.score_into(
-        &mut item,
-        charts.image.view(),
-        Some(&charts.mask),
-        ex,
-    )?;
+    run.score_into(&mut item, charts.image.view(), Some(&charts.mask), ex)?;
     let seams = seam_score(&mesh.triangles, &single, ex, run.params.seed);
     item.extra.insert(
         "seams".into(),
@@ -150,7 +148,10 @@ pub fn unfolded_discs(
             if cu.length() > DISC_RADIUS as f32 {
                 continue;
             }
-            let (a, b) = (param.adj_offsets[u] as usize, param.adj_offsets[u + 1] as usize);
+            let (a, b) = (
+                param.adj_offsets[u] as usize,
+                param.adj_offsets[u + 1] as usize,
+            );
             for j in a..b {
                 let w = param.neighbors[j] as usize;
                 if coord[w].is_none() {
@@ -164,7 +165,10 @@ pub fn unfolded_discs(
             (k / per_row * (tile + 1)) as f32,
         ) + Vec2::splat(DISC_RADIUS as f32 + 0.5);
         let (x0, y0) = ((k % per_row) * (tile + 1), (k / per_row) * (tile + 1));
-        let mut faces: Vec<usize> = reached.iter().flat_map(|&v| faces_of[v].iter().copied()).collect();
+        let mut faces: Vec<usize> = reached
+            .iter()
+            .flat_map(|&v| faces_of[v].iter().copied())
+            .collect();
         faces.sort_unstable();
         faces.dedup();
         for f in faces {
@@ -180,7 +184,11 @@ pub fn unfolded_discs(
             if det.abs() < 1e-12 || !det.is_finite() {
                 continue;
             }
-            let lo = c[0].min(c[1]).min(c[2]).floor().max(Vec2::new(x0 as f32, y0 as f32));
+            let lo = c[0]
+                .min(c[1])
+                .min(c[2])
+                .floor()
+                .max(Vec2::new(x0 as f32, y0 as f32));
             let hi = c[0]
                 .max(c[1])
                 .max(c[2])
@@ -231,7 +239,12 @@ pub struct SeamScore {
 
 /// The seam score of a mesh whose triangle `f` has corner texel coordinates `coords[f]` into
 /// `ex`.
-pub fn seam_score(triangles: &[[u32; 3]], coords: &[[Vec2; 3]], ex: ImageView, seed: u64) -> SeamScore {
+pub fn seam_score(
+    triangles: &[[u32; 3]],
+    coords: &[[Vec2; 3]],
+    ex: ImageView,
+    seed: u64,
+) -> SeamScore {
     let mut first: HashMap<(u32, u32), (usize, usize)> = HashMap::new();
     let mut pairs = Vec::new();
     for (f, t) in triangles.iter().enumerate() {
@@ -247,7 +260,10 @@ pub fn seam_score(triangles: &[[u32; 3]], coords: &[[Vec2; 3]], ex: ImageView, s
         }
     }
     let corner = |f: usize, v: u32| -> Vec2 {
-        let i = triangles[f].iter().position(|&x| x == v).expect("edge of the face");
+        let i = triangles[f]
+            .iter()
+            .position(|&x| x == v)
+            .expect("edge of the face");
         coords[f][i]
     };
     let (w, h) = (ex.width as f32, ex.height as f32);
@@ -303,7 +319,12 @@ pub fn bilinear(img: ImageView, p: Vec2) -> [f32; 3] {
     let (x0, y0) = (x0 as i64, y0 as i64);
     let at = |x: i64, y: i64| img.get_clamped(x, y);
     let mut out = [0.0f32; 3];
-    let (p00, p10, p01, p11) = (at(x0, y0), at(x0 + 1, y0), at(x0, y0 + 1), at(x0 + 1, y0 + 1));
+    let (p00, p10, p01, p11) = (
+        at(x0, y0),
+        at(x0 + 1, y0),
+        at(x0, y0 + 1),
+        at(x0 + 1, y0 + 1),
+    );
     for c in 0..3 {
         let top = p00[c] + (p10[c] - p00[c]) * fx;
         let bottom = p01[c] + (p11[c] - p01[c]) * fx;

@@ -258,7 +258,8 @@ impl<'a> Run<'a> {
                     }
                 }
             }
-            let png = crate::stages::reconstruct::textured_export::encode_png(&img.to_rgba8(), false);
+            let png =
+                crate::stages::reconstruct::textured_export::encode_png(&img.to_rgba8(), false);
             let path = Path::new(&dir).join(format!("score_{}.png", &slug[..slug.len().min(60)]));
             if let Err(e) = std::fs::write(&path, png) {
                 tracing::warn!("TEXSYN_SCORE_DUMP: writing {}: {e}", path.display());
@@ -266,9 +267,12 @@ impl<'a> Run<'a> {
         }
         match patch_score_masked(output, mask, exemplar, &self.params) {
             Ok(s) => item.score = Some(s),
-            Err(e @ (ScoreError::NoPatchInMask { .. } | ScoreError::TooSmall { which: "output", .. })) => {
-                item.notes.push(format!("not scored: {e}"))
-            }
+            Err(
+                e @ (ScoreError::NoPatchInMask { .. }
+                | ScoreError::TooSmall {
+                    which: "output", ..
+                }),
+            ) => item.notes.push(format!("not scored: {e}")),
             Err(e) => {
                 return Err(ScoreFailure::new(format!(
                     "scoring {} against {}: {e}",
@@ -307,7 +311,11 @@ pub fn report_text(r: &Report) -> String {
                 sc.largest_offset,
                 sc.gradient_ratio,
                 sc.queries,
-                if sc.subsampled { " (seeded subset)" } else { "" }
+                if sc.subsampled {
+                    " (seeded subset)"
+                } else {
+                    ""
+                }
             );
         }
         for (k, v) in &item.extra {
@@ -372,7 +380,9 @@ pub fn markdown_table(reports: &[Report]) -> String {
         }
         for n in &r.not_scored {
             let short = n.split(':').next().unwrap_or(n);
-            s += &format!("| {name} | not scored ({short}) | – | – | – | – | – | see `texsyn score` |\n");
+            s += &format!(
+                "| {name} | not scored ({short}) | – | – | – | – | – | see `texsyn score` |\n"
+            );
         }
     }
     s

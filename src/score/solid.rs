@@ -39,9 +39,8 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
             return Ok(Vec::new());
         }
         Request::Section { normal, .. } => {
-            let axis = (0..3).find(|&a| {
-                (0..3).all(|b| b == a || normal[b].abs() <= 1e-6 * normal[a].abs())
-            });
+            let axis = (0..3)
+                .find(|&a| (0..3).all(|b| b == a || normal[b].abs() <= 1e-6 * normal[a].abs()));
             match axis {
                 Some(0) => ("section.png", "yz"),
                 Some(1) => ("section.png", "zx"),

@@ -25,16 +25,16 @@
 
 use super::charts::{EdgeOffsets, unfolded_discs};
 use super::{Item, Run, ScoreFailure};
-use crate::image::Image;
 use crate::artifact::feature_aligned::OrientedField;
 use crate::geom::edge_refine::Refined;
+use crate::image::Image;
 use crate::methods::feature_aligned::{FeatureAlignedConfig, carry_field};
 use crate::methods::graph_matching::GraphMatchingConfig;
 use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
-use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
 use crate::stages::field::sweep_field::SweepField;
 use crate::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
 use crate::stages::synthesize::graph_matching::GraphMatching;
+use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
 use glam::{Vec2, Vec3};
 
 pub(crate) fn graph_matching(run: &Run) -> Result<Item, ScoreFailure> {
