@@ -354,10 +354,12 @@ mod tests {
         )
     }
 
+    /// Stripes with seeded noise, so that no two patches are equal.
     fn stripes() -> Image {
         Image::from_fn(128, 128, |x, y| {
             let v = ((x * 7 + y * 3) % 11) as f32 / 10.0;
-            [v, 1.0 - v, (y % 5) as f32 / 4.0, 1.0]
+            let e = 0.2 * counter_unit(5, 0, (y * 128 + x) as u64);
+            [0.8 * v + e, 1.0 - v, (y % 5) as f32 / 4.0, 1.0]
         })
     }
 
@@ -388,7 +390,8 @@ mod tests {
             }
         }
         let spacing = 3.0f32;
-        let pos = |v: u32| Vec2::new((v % n) as f32, (v / n) as f32) * spacing + Vec2::splat(2.0);
+        // Vertices at texel centres (half-integers), so the discs' texels land on them.
+        let pos = |v: u32| Vec2::new((v % n) as f32, (v / n) as f32) * spacing + Vec2::splat(2.5);
         let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); (n * n) as usize];
         for t in &tris {
             for k in 0..3 {
