@@ -433,9 +433,17 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
         Command::Bench { output, runs } => {
-            let report = texsyn::bench::run_all(*runs.max(&1))?;
+            let mut report = texsyn::bench::run_all(*runs.max(&1))?;
             match output {
-                Some(p) => write_atomic(p, report.as_bytes())?,
+                Some(p) => {
+                    // The quality table is `texsyn score`'s, not the bench's: kept as it is.
+                    if let Ok(old) = std::fs::read_to_string(p)
+                        && let Some(i) = old.find(texsyn::score::QUALITY_HEADING)
+                    {
+                        report = format!("{}\n{}", report.trim_end(), &old[i..]);
+                    }
+                    write_atomic(p, report.as_bytes())?
+                }
                 None => print!("{report}"),
             }
             Ok(0)

@@ -23,7 +23,10 @@ pub(crate) fn rows(brick_wall_512: &Image, runs: usize, rows: &mut Vec<Row>) -> 
         ]
     });
     for (what, out) in [
-        ("brick_wall_512.png (512²) against its top-left 256² quarter", img),
+        (
+            "brick_wall_512.png (512²) against its top-left 256² quarter",
+            img,
+        ),
         ("512² seeded noise against the same 256² quarter", &noise),
     ] {
         let (t, s) = time(runs, || {

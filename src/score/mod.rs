@@ -331,6 +331,9 @@ pub fn report_text(r: &Report) -> String {
     s
 }
 
+/// The heading of BENCHMARKS.md's quality table, which `texsyn bench -o` keeps.
+pub const QUALITY_HEADING: &str = "## Quality: nearest-patch scores of every shipped config";
+
 /// The quality table of several reports (BENCHMARKS.md): one row per scored item.
 pub fn markdown_table(reports: &[Report]) -> String {
     let mut s = String::from(

@@ -83,6 +83,13 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         .collect();
     let mut item = Item::new(file, key);
     run.score_into(&mut item, out.view(), Some(&mask), exemplar.view())?;
+    if !c.regions.is_empty() {
+        item.notes.push(format!(
+            "the config has {} [[regions]] with exemplars of their own: their voxels in the \
+             section are scored against the base exemplar too, and far from it",
+            c.regions.len()
+        ));
+    }
     if !c.field.curves.is_empty() || c.field.curves_file.is_some() {
         item.notes.push(
             "the rotation field follows sketched curves: where it turns the solid, this \
