@@ -374,7 +374,25 @@ fn real_main() -> Result<i32> {
                 }
                 let (plan, result) = run_config(config, sets, &cache_dir, progress)?;
                 let section = plan.score.clone().unwrap_or_default();
-                reports.push(score_plan(config, sets, &plan, &result, &section)?);
+                let cfg = Config::load(config, sets)?;
+                // A solid surface has no planar image: a section of the same solid is
+                // synthesized (from the cached bricks where they overlap) and scored.
+                let report = match texsyn::score::solid::substitute_section(&plan, &result, &cfg) {
+                    Some(set) => {
+                        let mut with = sets.clone();
+                        with.push(set.clone());
+                        let (plan2, result2) = run_config(config, &with, &cache_dir, progress)?;
+                        let mut r = score_plan(config, &with, &plan2, &result2, &section)?;
+                        for item in &mut r.items {
+                            item.notes.push(format!(
+                                "the config requests the surface; this is a section synthesized for scoring (--set '{set}')"
+                            ));
+                        }
+                        r
+                    }
+                    None => score_plan(config, sets, &plan, &result, &section)?,
+                };
+                reports.push(report);
             }
             if cli.json {
                 if reports.len() == 1 && !*markdown {

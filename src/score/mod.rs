@@ -5,10 +5,12 @@
 //! the mean RMS distance of each output `p × p` patch to its exact nearest exemplar patch,
 //! divided by the same for unseen parts of the exemplar (`ratio`), `coverage`,
 //! `largest_offset` and `gradient_ratio`. What each method's output is, and how it is brought
-//! into the exemplar's frame, is in its own function: [`synth2d`] here, [`charts`] (jump maps:
-//! texture-space charts and coordinate seams), [`geometry`] (geometry images: relief image and
-//! mesh checks), [`solid`] (sections along an exemplar plane). Methods whose output has no
-//! exemplar-aligned image are listed with the reason in [`Report::not_scored`].
+//! into the exemplar's frame, is in its own file: [`synth2d`] here, [`charts`] (jump maps:
+//! discs unfolded through the parameterization, and coordinate seams), [`geometry`] (geometry
+//! images: relief image and mesh checks), [`solid`] (sections along an exemplar plane),
+//! [`surface`] (graph matching and feature-aligned texturing: vertex colours on discs
+//! unfolded along the field). Outputs with no exemplar-aligned image (a solid's surface
+//! request) are listed with the reason in [`Report::not_scored`].
 //!
 //! `[score]` never reaches a node: it is taken out of the config before the method builds
 //! its DAG, so adding it changes no key and no lock file.

@@ -7,8 +7,9 @@
 //! against `yz`, y against `zx`, falling back to `inputs.exemplar`), a `box` request's middle
 //! z slice (`volume_middle_slice.png`, against `xy`). Pixels outside the synthesized voxels
 //! (the section image's background colour) are masked out. A `surface` request makes no
-//! planar image and is not scored: score the same config with a section request, e.g.
-//! `--set 'parameterize.request={ kind = "section", point = [0, 0, 0], normal = [0, 0, 1] }'`.
+//! planar image: `texsyn score` then synthesizes a section through the centre of the mesh's
+//! bounding box, normal z, in the same cache ([`substitute_section`]; bricks the surface
+//! already made are reused) and scores that; `run`'s `[score]` reports it as not scored.
 //!
 //! Limits: the section is in world axes; where the rotation field turns the solid away from
 //! them (sketched curves), its slices are not along the exemplar planes and score farther
@@ -32,8 +33,8 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         Request::Surface => {
             not_scored.push(
                 "solid surface request: the solid is synthesized only where the surface passes, \
-                 so there is no planar image to compare; score it with a section request \
-                 (--set 'parameterize.request={ kind = \"section\", point = [0, 0, 0], normal = [0, 0, 1] }')"
+                 so there is no planar image to compare; `texsyn score` on this config synthesizes \
+                 a section through the mesh's centre (normal z) and scores that"
                     .into(),
             );
             return Ok(Vec::new());
@@ -98,6 +99,33 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         );
     }
     Ok(vec![item])
+}
+
+/// For a solid config whose request is the surface: the `--set` that asks for a section
+/// instead, through the centre of the mesh's bounding box with normal z (the `xy` exemplar's
+/// plane), which cuts the mesh whatever its shape. `texsyn score` runs that (the bricks the
+/// two requests share are reused from the cache) and scores its `section.png`. `None` for
+/// other methods and requests.
+pub fn substitute_section(
+    plan: &crate::methods::Plan,
+    result: &crate::pipeline::RunResult,
+    config: &crate::config::Config,
+) -> Option<String> {
+    if plan.method != "solid" {
+        return None;
+    }
+    let c: SolidConfig = crate::methods::without_score(config).parse().ok()?;
+    if c.parameterize.request != Request::Surface {
+        return None;
+    }
+    let i = plan.dag.node_index("import.mesh")?;
+    let mesh = <crate::geom::Mesh as crate::artifact::Format>::view(&result.artifacts[i]).ok()?;
+    let (lo, hi) = mesh.bounds();
+    let m = (lo + hi) * 0.5;
+    Some(format!(
+        "parameterize.request={{ kind = \"section\", point = [{}, {}, {}], normal = [0.0, 0.0, 1.0] }}",
+        m.x, m.y, m.z
+    ))
 }
 
 /// The exemplar image a spec names, transposed when it says so.
