@@ -237,3 +237,40 @@ fn geometry_images_score_the_relief_and_check_the_mesh() {
         assert!(mesh[k].as_u64().unwrap() < triangles, "{k}: {mesh}");
     }
 }
+
+/// A solid surface request has no planar image: `score` synthesizes a section of the same
+/// solid for scoring (and says so); a section request is scored as it is.
+#[test]
+fn solid_surface_requests_are_scored_on_a_section_made_for_it() {
+    let d = tempfile::tempdir().unwrap();
+    let small = [
+        "parameterize.resolution=40",
+        "analyse_exemplar.levels=3",
+        "analyse_exemplar.neighbourhood_coarsest=5",
+        "analyse_exemplar.neighbourhood=5",
+        "synthesize.levels=[{ passes = 2, scheme = \"plain\" }, { passes = 2 }, { passes = 2 }]",
+        "reconstruct.preview_size=32",
+        "reconstruct.atlas_size=1024",
+        "score.patch=3",
+    ];
+    let config = repo().join("configs/solid_trivial.toml");
+    let mut args = vec!["score", config.to_str().unwrap(), "--cache", "c", "--json"];
+    for s in &small {
+        args.push("--set");
+        args.push(s);
+    }
+    let v = json(&texsyn(&args, d.path()));
+    let item = &v["items"][0];
+    assert_eq!(item["output"], "section.png", "{v}");
+    assert_eq!(item["exemplar"], "inputs.xy", "{v}");
+    assert!(item["score"]["ratio"].as_f64().unwrap() > 0.0, "{item}");
+    let notes = item["notes"].to_string();
+    assert!(notes.contains("section synthesized for scoring"), "{notes}");
+
+    // `run` with `[score]` does not synthesize more than asked: not scored, with the reason.
+    args[0] = "run";
+    args.extend(["--out", "o", "--set", "score.enabled=true"]);
+    let v = json(&texsyn(&args, d.path()));
+    let reason = v["scores"]["not_scored"][0].as_str().unwrap();
+    assert!(reason.contains("surface request"), "{reason}");
+}
