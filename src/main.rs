@@ -384,6 +384,7 @@ fn real_main() -> Result<i32> {
                         let (plan2, result2) = run_config(config, &with, &cache_dir, progress)?;
                         let mut r = score_plan(config, &with, &plan2, &result2, &section)?;
                         for item in &mut r.items {
+                            item.output = format!("{} (a section made for scoring)", item.output);
                             item.notes.push(format!(
                                 "the config requests the surface; this is a section synthesized for scoring (--set '{set}')"
                             ));
