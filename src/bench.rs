@@ -18,6 +18,7 @@ use std::time::Instant;
 
 mod feature_aligned;
 mod graph_matching;
+mod score;
 
 fn shared_data() -> Option<PathBuf> {
     let candidates = [
@@ -130,6 +131,18 @@ pub fn run_all(runs: usize) -> Result<String> {
     let data = shared_data();
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
     // One method's rows alone, for work on that method (the full table takes most of an hour).
+    if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("score") {
+        match &data {
+            Some(d) => {
+                let p = d.join("exemplars/brick_wall_512.png");
+                let bytes = std::fs::read(&p).with_context(|| p.display().to_string())?;
+                score::rows(&crate::image::decode_image(&p, &bytes)?, runs, &mut rows)?;
+            }
+            None => notes.push("the shared data is missing: no score rows".into()),
+        }
+        notes.push("TEXSYN_BENCH_ONLY=score: only the score rows".into());
+        return Ok(table(runs, &rows, "", &notes));
+    }
     if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("feature_aligned") {
         feature_aligned::rows(repo, runs, &mut rows)?;
         notes.push("TEXSYN_BENCH_ONLY=feature_aligned: only the feature-aligned rows".into());
@@ -182,6 +195,7 @@ pub fn run_all(runs: usize) -> Result<String> {
             goal: "< 10 s on 2 cores".into(),
             verdict: verdict_below(t, 10.0),
         });
+        score::rows(&img, runs.min(3), &mut rows)?;
     } else {
         notes.push("../shared/data is not here: the 512×512 jump-map row is not measured".into());
     }

@@ -11,6 +11,7 @@ pub mod config;
 pub mod lockfile;
 pub mod methods;
 pub mod pipeline;
+pub mod score;
 
 // The core (meshes, images, solvers, randomness, rasterizer, writers) and the stage algorithms
 // are crates of their own (DESIGN.md, Layout); re-exported so `crate::geom::…`,

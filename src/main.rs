@@ -89,6 +89,18 @@ enum Command {
         #[arg(long)]
         fresh: bool,
     },
+    /// Score a run's results against their exemplars (nearest-patch measures; README,
+    /// "Scoring"). Runs what is not cached first, like `run`, but writes no outputs. With
+    /// several configs (or --markdown), prints one table of all of them.
+    Score {
+        #[arg(required = true)]
+        configs: Vec<PathBuf>,
+        #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
+        sets: Vec<String>,
+        /// Print a Markdown table (BENCHMARKS.md's quality table).
+        #[arg(long)]
+        markdown: bool,
+    },
     /// Print the config's DAG in Graphviz DOT.
     Graph {
         config: PathBuf,
@@ -215,23 +227,32 @@ fn real_main() -> Result<i32> {
                     out_dir.display()
                 )
             })?;
+            // Scores when the config asks for them (`[score]`, enabled).
+            let scores = match plan.score.as_ref().filter(|s| s.enabled) {
+                Some(section) => Some(score_plan(config, sets, &plan, &result, section)?),
+                None => None,
+            };
             let seconds = start.elapsed().as_secs_f64();
             if cli.json {
                 let outputs: Vec<_> = written
                     .iter()
                     .map(|(p, w)| serde_json::json!({ "path": p, "written": w }))
                     .collect();
-                println!(
-                    "{}",
-                    serde_json::to_string_pretty(&serde_json::json!({
-                        "nodes": result.reports,
-                        "outputs": outputs,
-                        "warnings": result.warnings,
-                        "seconds": seconds,
-                    }))?
-                );
+                let mut report = serde_json::json!({
+                    "nodes": result.reports,
+                    "outputs": outputs,
+                    "warnings": result.warnings,
+                    "seconds": seconds,
+                });
+                if let Some(s) = &scores {
+                    report["scores"] = serde_json::to_value(s)?;
+                }
+                println!("{}", serde_json::to_string_pretty(&report)?);
             } else if !cli.quiet {
                 print_table(&result.reports);
+                if let Some(s) = &scores {
+                    print!("{}", texsyn::score::report_text(s));
+                }
                 let changed = written.iter().filter(|w| w.1).count();
                 println!(
                     "outputs: {} ({} written, {} unchanged) in {:.3} s",
@@ -387,6 +408,60 @@ fn real_main() -> Result<i32> {
             }
             Ok(code)
         }
+        Command::Score {
+            configs,
+            sets,
+            markdown,
+        } => {
+            let mut reports = Vec::new();
+            for config in configs {
+                // A glob over a config folder also meets the files configs name (curves):
+                // with several files, one without `method` is passed over, said on stderr.
+                if configs.len() > 1
+                    && Config::load(config, &[]).is_ok_and(|c| !c.table.contains_key("method"))
+                {
+                    eprintln!(
+                        "{}: no `method`, not a config; passed over",
+                        config.display()
+                    );
+                    continue;
+                }
+                let (plan, result) = run_config(config, sets, &cache_dir, progress)?;
+                let section = plan.score.clone().unwrap_or_default();
+                let cfg = Config::load(config, sets)?;
+                // A solid surface has no planar image: a section of the same solid is
+                // synthesized (from the cached bricks where they overlap) and scored.
+                let report = match texsyn::score::solid::substitute_section(&plan, &result, &cfg) {
+                    Some(set) => {
+                        let mut with = sets.clone();
+                        with.push(set.clone());
+                        let (plan2, result2) = run_config(config, &with, &cache_dir, progress)?;
+                        let mut r = score_plan(config, &with, &plan2, &result2, &section)?;
+                        for item in &mut r.items {
+                            item.output = format!("{} (a section made for scoring)", item.output);
+                            item.notes.push(format!(
+                                "the config requests the surface; this is a section synthesized for scoring (--set '{set}')"
+                            ));
+                        }
+                        r
+                    }
+                    None => score_plan(config, sets, &plan, &result, &section)?,
+                };
+                reports.push(report);
+            }
+            if cli.json {
+                if reports.len() == 1 && !*markdown {
+                    println!("{}", serde_json::to_string_pretty(&reports[0])?);
+                } else {
+                    println!("{}", serde_json::to_string_pretty(&reports)?);
+                }
+            } else if *markdown || reports.len() > 1 {
+                print!("{}", texsyn::score::markdown_table(&reports));
+            } else if !cli.quiet {
+                print!("{}", texsyn::score::report_text(&reports[0]));
+            }
+            Ok(0)
+        }
         Command::Graph { config, sets } => {
             let plan = load_plan(config, sets)?;
             print!("{}", plan.dag.to_dot());
@@ -431,9 +506,17 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
         Command::Bench { output, runs } => {
-            let report = texsyn::bench::run_all(*runs.max(&1))?;
+            let mut report = texsyn::bench::run_all(*runs.max(&1))?;
             match output {
-                Some(p) => write_atomic(p, report.as_bytes())?,
+                Some(p) => {
+                    // The quality table is `texsyn score`'s, not the bench's: kept as it is.
+                    if let Ok(old) = std::fs::read_to_string(p)
+                        && let Some(i) = old.find(texsyn::score::QUALITY_HEADING)
+                    {
+                        report = format!("{}\n{}", report.trim_end(), &old[i..]);
+                    }
+                    write_atomic(p, report.as_bytes())?
+                }
                 None => print!("{report}"),
             }
             Ok(0)
@@ -464,6 +547,19 @@ fn run_config(
     let plan = load_plan(config, sets)?;
     let result = run_plan(&plan, cache_dir, progress)?;
     Ok((plan, result))
+}
+
+/// Scores a run of `config` (see `texsyn::score`).
+fn score_plan(
+    config: &Path,
+    sets: &[String],
+    plan: &Plan,
+    result: &RunResult,
+    section: &texsyn::score::ScoreSection,
+) -> Result<texsyn::score::Report> {
+    let cfg = Config::load(config, sets)?;
+    texsyn::score::score_run(&cfg, plan, result, section)
+        .with_context(|| format!("scoring {}", config.display()))
 }
 
 /// Runs a planned DAG in the cache at `cache_dir`, computing what is not cached.

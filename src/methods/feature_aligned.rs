@@ -407,7 +407,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
 
 /// The input mesh's field on the refined mesh: each new vertex the mean of its parents',
 /// then projected to its tangent plane and normalized (zero stays zero).
-fn carry_field(refined: &Refined, vectors: &[Vec3]) -> Result<Vec<Vec3>, NodeError> {
+pub(crate) fn carry_field(refined: &Refined, vectors: &[Vec3]) -> Result<Vec<Vec3>, NodeError> {
     if vectors.len() != refined.input_vertices as usize {
         return Err(NodeError::internal("the field and the mesh disagree"));
     }

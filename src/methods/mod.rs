@@ -39,13 +39,21 @@ pub enum MethodError {
 /// A config turned into work: the DAG and the nodes whose bundles are the run's outputs.
 pub struct Plan {
     pub dag: Dag,
+    /// The config's `method`.
+    pub method: String,
+    /// The config's `[score]` section, when it has one (validated).
+    pub score: Option<crate::score::ScoreSection>,
     /// Default output directory (`out/<config stem>`), used unless `--out` is given.
     pub default_out: PathBuf,
 }
 
 pub fn plan(config: &Config) -> Result<Plan, MethodError> {
-    let method = config.method()?;
-    let dag = match method {
+    let method = config.method()?.to_owned();
+    // `[score]` reads the run's artifacts after it and never reaches a node, so it is taken
+    // out before the method parses its sections (and adding it changes no key).
+    let score = crate::score::ScoreSection::from_config(config)?;
+    let config = &without_score(config);
+    let dag = match method.as_str() {
         "jump_maps" => jump_maps::build(config)?,
         "synth2d" => synth2d::build(config)?,
         "geometry_images" => geometry_images::build(config)?,
@@ -62,8 +70,17 @@ pub fn plan(config: &Config) -> Result<Plan, MethodError> {
     };
     Ok(Plan {
         dag,
+        method,
+        score,
         default_out: Path::new("out").join(&config.stem),
     })
+}
+
+/// The config without its `[score]` section: what a method parses.
+pub fn without_score(config: &Config) -> Config {
+    let mut c = config.clone();
+    c.table.remove("score");
+    c
 }
 
 /// A format that an input file is read into by an `import` node.

@@ -81,6 +81,10 @@ pub enum ScoreError {
     ZeroPatch,
     #[error("max_queries must be at least 1")]
     ZeroQueries,
+    #[error("the mask has {len} flags for a {width}×{height} output")]
+    MaskSize { width: u32, height: u32, len: usize },
+    #[error("no {patch}×{patch} patch of the output lies wholly inside its mask")]
+    NoPatchInMask { patch: u32 },
     #[error("{which} image is {width}×{height} but has {pixels} pixels")]
     PixelCount {
         which: &'static str,
@@ -109,6 +113,27 @@ pub enum ScoreError {
     },
 }
 
+/// Indices `y · (w − patch + 1) + x` of the patch positions whose `patch × patch` pixels are
+/// all inside `mask`, ascending (a summed-area table of the outside pixels).
+fn patches_inside(mask: &[bool], w: usize, h: usize, patch: usize) -> Vec<usize> {
+    let mut sat = vec![0u32; (w + 1) * (h + 1)];
+    for y in 0..h {
+        for x in 0..w {
+            let out = u32::from(!mask[y * w + x]);
+            sat[(y + 1) * (w + 1) + x + 1] =
+                out + sat[y * (w + 1) + x + 1] + sat[(y + 1) * (w + 1) + x] - sat[y * (w + 1) + x];
+        }
+    }
+    let (nx, ny) = (w - patch + 1, h - patch + 1);
+    (0..nx * ny)
+        .filter(|&i| {
+            let (x, y) = (i % nx, i / nx);
+            let at = |x: usize, y: usize| sat[y * (w + 1) + x];
+            at(x + patch, y + patch) + at(x, y) - at(x + patch, y) - at(x, y + patch) == 0
+        })
+        .collect()
+}
+
 /// Square crops of the self baseline.
 const BASELINE_CROPS: u64 = 8;
 const STREAM_QUERIES: u64 = 1;
@@ -122,22 +147,57 @@ pub fn patch_score(
     exemplar: ImageView<'_>,
     p: &ScoreParams,
 ) -> Result<PatchScore, ScoreError> {
+    patch_score_masked(output, None, exemplar, p)
+}
+
+/// [`patch_score`] of the part of `output` where `mask` (one flag per pixel, row-major) is
+/// set: only output patches wholly inside the mask are scored (the pool subsampling draws
+/// from), and the output's gradient energy is the mean over neighbour pairs that are both
+/// inside. For outputs that are pieces laid out on a canvas (atlas charts, resampled surface
+/// patches) whose background must not count. `None` scores every pixel.
+pub fn patch_score_masked(
+    output: ImageView<'_>,
+    mask: Option<&[bool]>,
+    exemplar: ImageView<'_>,
+    p: &ScoreParams,
+) -> Result<PatchScore, ScoreError> {
     validate(output, exemplar, p)?;
     let patch = p.patch as usize;
     let out = Plane::new(output);
     let ex = Plane::new(exemplar);
-    let cands = Candidates::new(&ex, patch);
 
     // Output patches against the whole exemplar.
     let onx = out.w - patch + 1;
     let ony = out.h - patch + 1;
-    let (picked, subsampled) = subsample(onx * ony, p.max_queries, p.seed, STREAM_QUERIES);
+    let positions: Option<Vec<usize>> = match mask {
+        None => None,
+        Some(m) => {
+            if m.len() != out.w * out.h {
+                return Err(ScoreError::MaskSize {
+                    width: output.width,
+                    height: output.height,
+                    len: m.len(),
+                });
+            }
+            let inside = patches_inside(m, out.w, out.h, patch);
+            if inside.is_empty() {
+                return Err(ScoreError::NoPatchInMask { patch: p.patch });
+            }
+            Some(inside)
+        }
+    };
+    let pool = positions.as_ref().map_or(onx * ony, |v| v.len());
+    let cands = Candidates::new(&ex, patch);
+    let (picked, subsampled) = subsample(pool, p.max_queries, p.seed, STREAM_QUERIES);
     let queries: Vec<Query> = picked
         .iter()
-        .map(|&i| Query {
-            x: i % onx,
-            y: i / onx,
-            crop: None,
+        .map(|&i| {
+            let i = positions.as_ref().map_or(i, |v| v[i]);
+            Query {
+                x: i % onx,
+                y: i / onx,
+                crop: None,
+            }
         })
         .collect();
     let found = cands.search(&out, &queries);
@@ -202,7 +262,7 @@ pub fn patch_score(
         baseline_rms,
         coverage,
         largest_offset,
-        gradient_ratio: quotient(out.gradient_energy(), ex.gradient_energy()),
+        gradient_ratio: quotient(out.gradient_energy(mask), ex.gradient_energy(None)),
         queries: queries.len(),
         subsampled,
     })
@@ -335,8 +395,9 @@ impl Plane {
 
     /// Mean over horizontal neighbour pairs of the squared RGB difference, plus the same over
     /// vertical pairs.
-    fn gradient_energy(&self) -> f64 {
+    fn gradient_energy(&self, mask: Option<&[bool]>) -> f64 {
         let (w, h) = (self.w, self.h);
+        let inside = |x: usize, y: usize| mask.is_none_or(|m| m[y * w + x]);
         let px = |x: usize, y: usize| &self.rgb[3 * (y * w + x)..3 * (y * w + x) + 3];
         let sq = |a: &[f32], b: &[f32]| -> f64 {
             a.iter()
@@ -347,20 +408,25 @@ impl Plane {
                 })
                 .sum()
         };
-        let mut gx = 0.0;
-        let mut gy = 0.0;
+        let (mut gx, mut nx) = (0.0, 0usize);
+        let (mut gy, mut ny) = (0.0, 0usize);
         for y in 0..h {
             for x in 0..w {
-                if x + 1 < w {
-                    gx += sq(px(x + 1, y), px(x, y));
+                if !inside(x, y) {
+                    continue;
                 }
-                if y + 1 < h {
+                if x + 1 < w && inside(x + 1, y) {
+                    gx += sq(px(x + 1, y), px(x, y));
+                    nx += 1;
+                }
+                if y + 1 < h && inside(x, y + 1) {
                     gy += sq(px(x, y + 1), px(x, y));
+                    ny += 1;
                 }
             }
         }
         let mean = |s: f64, n: usize| if n > 0 { s / n as f64 } else { 0.0 };
-        mean(gx, (w - 1) * h) + mean(gy, w * (h - 1))
+        mean(gx, nx) + mean(gy, ny)
     }
 }
 
@@ -748,6 +814,79 @@ mod tests {
         assert!(s.ratio > 2.0, "{s:?}");
         assert!(s.gradient_ratio > 1.0, "{s:?}");
         assert!(s.largest_offset < 0.1, "{s:?}");
+    }
+
+    /// The exemplar's own pixels in a seeded random order: the same colours, none of the
+    /// structure, so its patches are far from every exemplar patch.
+    #[test]
+    fn shuffled_pixels_are_far_from_the_exemplar() {
+        let ex = structured(40, 40, 13);
+        let mut order: Vec<(u64, usize)> = (0..ex.pixels.len())
+            .map(|i| (crate::random::counter_hash(3, 0, i as u64), i))
+            .collect();
+        order.sort_unstable();
+        let shuffled = Image::from_fn(40, 40, |x, y| ex.pixels[order[(y * 40 + x) as usize].1]);
+        let s = patch_score(shuffled.view(), ex.view(), &params()).unwrap();
+        // Twice as far as unseen parts of the exemplar (its noise keeps the baseline up).
+        assert!(s.ratio > 2.0, "{s:?}");
+        assert!(s.gradient_ratio > 5.0, "{s:?}");
+        assert!(s.largest_offset < 0.05, "{s:?}");
+    }
+
+    /// A verbatim crop pasted on a noise canvas scores as the crop alone once the noise is
+    /// masked out; unmasked, the noise makes it far from the exemplar.
+    #[test]
+    fn masked_canvas_scores_only_its_inside() {
+        let ex = structured(40, 40, 14);
+        let piece = crop(&ex, 9, 4, 20, 16);
+        let bg = noise(48, 40, 15);
+        let (ox, oy) = (13u32, 17u32);
+        let inside = |x: u32, y: u32| x >= ox && x < ox + 20 && y >= oy && y < oy + 16;
+        let canvas = Image::from_fn(48, 40, |x, y| {
+            if inside(x, y) {
+                piece.view().get(x - ox, y - oy)
+            } else {
+                bg.view().get(x, y)
+            }
+        });
+        let mask: Vec<bool> = (0..48 * 40).map(|i| inside(i % 48, i / 48)).collect();
+        let s = patch_score_masked(canvas.view(), Some(&mask), ex.view(), &params()).unwrap();
+        let alone = patch_score(piece.view(), ex.view(), &params()).unwrap();
+        assert_eq!(s.mean_rms, 0.0, "{s:?}");
+        assert_eq!(s.largest_offset, 1.0, "{s:?}");
+        assert_eq!(s.queries, 14 * 10);
+        assert_eq!(s.coverage, alone.coverage);
+        assert_eq!(s.gradient_ratio, alone.gradient_ratio);
+        let unmasked = patch_score(canvas.view(), ex.view(), &params()).unwrap();
+        assert!(unmasked.ratio > 1.0, "{unmasked:?}");
+        // A mask holding no whole patch, and one of the wrong length, are errors.
+        let thin: Vec<bool> = (0..48 * 40).map(|i| i % 48 < 6).collect();
+        assert_eq!(
+            patch_score_masked(canvas.view(), Some(&thin), ex.view(), &params()).unwrap_err(),
+            ScoreError::NoPatchInMask { patch: 7 }
+        );
+        assert!(matches!(
+            patch_score_masked(canvas.view(), Some(&mask[1..]), ex.view(), &params()),
+            Err(ScoreError::MaskSize { .. })
+        ));
+    }
+
+    /// The summed-area test against checking every pixel of every patch.
+    #[test]
+    fn patches_inside_the_mask_match_a_plain_check() {
+        let (w, h, patch) = (23usize, 17usize, 4usize);
+        let mask: Vec<bool> = (0..w * h)
+            .map(|i| counter_unit(21, 0, i as u64) < 0.93)
+            .collect();
+        let nx = w - patch + 1;
+        let want: Vec<usize> = (0..nx * (h - patch + 1))
+            .filter(|&i| {
+                let (x, y) = (i % nx, i / nx);
+                (0..patch).all(|dy| (0..patch).all(|dx| mask[(y + dy) * w + x + dx]))
+            })
+            .collect();
+        assert!(!want.is_empty() && want.len() < nx * (h - patch + 1));
+        assert_eq!(patches_inside(&mask, w, h, patch), want);
     }
 
     #[test]

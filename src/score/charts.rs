@@ -1,0 +1,436 @@
+//! Scoring the jump-map method (Zelinka & Garland, §4.3–4.4): its blended surface in
+//! texture space, and its coordinate seams.
+//!
+//! **Unfolded discs.** The baked atlas (`baked_basecolor.png`) lays each triangle with its
+//! longest edge horizontal and at the atlas's own scale, so its patches are rotated and
+//! rescaled against the exemplar's, and a nearest-patch distance would mostly measure that;
+//! single triangles are also smaller than a patch on most meshes (on the demo's cow no
+//! 7 × 7 patch fits inside one). Instead, discs of the surface around 64 seeded vertices are unfolded into
+//! texel coordinates by summing the parameterization's edge offsets (§4.2.2) outward from
+//! the centre, so the texture is upright and at the exemplar's scale across many triangles,
+//! and coloured with the §4.4 blend of the three corner sets (the `BlendShader` the bake
+//! uses), which is what a viewer of `textured.glb` sees. Only texels a triangle covers are in
+//! the mask (`patch_score_masked`).
+//!
+//! **Seams.** Where two triangles that share an edge have different coordinates for its
+//! ends (a coordinate seam), the OBJ shows the exemplar at two places side by side. The seam
+//! score samples both sides' exemplar colour at 8 points along each seam edge (RMS over RGB)
+//! and divides the mean by the same measure with the second side placed at a seeded random
+//! position in the exemplar ("randomly placed triangles"): 0 means invisible seams, 1 seams as
+//! visible as pasting unrelated pieces together.
+
+use super::{Item, Run, ScoreFailure};
+use crate::artifact::jump_maps::{JumpParameterization, TexelAddresses};
+use crate::geom::Mesh;
+use crate::image::{Image, ImageView};
+use crate::random::{counter_hash, counter_unit};
+use crate::stages::parameterize::jump_parameterization::ParamParts;
+use crate::stages::reconstruct::jump_blend::{BlendShader, corner_sets, random_base_set};
+use glam::{Vec2, Vec3};
+use std::collections::HashMap;
+
+/// Discs unfolded (at most; fewer on a mesh with fewer vertices).
+const DISCS: usize = 64;
+/// Their radius in exemplar texels: several patches across, and small enough that the
+/// unfolding rarely meets itself.
+const DISC_RADIUS: usize = 24;
+const STREAM_DISC: u64 = 0x5ea0_0003;
+/// Samples along each seam edge.
+const SEAM_SAMPLES: usize = 8;
+const STREAM_SEAM_X: u64 = 0x5ea0_0001;
+const STREAM_SEAM_Y: u64 = 0x5ea0_0002;
+
+pub(crate) fn jump_maps(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
+    let mesh = run.view::<Mesh>("import.mesh")?;
+    let param = run.view::<JumpParameterization>("parameterize")?;
+    let walk = run.view::<TexelAddresses>("synthesize")?;
+    let ex = run.view::<Image>("import.exemplar")?;
+    let sets = corner_sets(&mesh.triangles, &param, walk.addresses)
+        .map_err(|e| ScoreFailure::new(format!("internal error: {e}")))?;
+    let single = random_base_set(&sets);
+    let shader = BlendShader {
+        sets: &sets,
+        texture: ex,
+    };
+    let charts = unfolded_discs(
+        &mesh.triangles,
+        &(&param).into(),
+        run.params.seed,
+        |f, b| shader.rgba(f, b),
+    );
+    let mut item = Item::new(
+        format!(
+            "the blended surface, {} discs unfolded into texel coordinates",
+            charts.discs
+        ),
+        "inputs.exemplar",
+    );
+    run.score_into(&mut item, charts.image.view(), Some(&charts.mask), ex)?;
+    let seams = seam_score(&mesh.triangles, &single, ex, run.params.seed);
+    item.extra.insert(
+        "seams".into(),
+        serde_json::to_value(&seams).expect("plain numbers"),
+    );
+    Ok(vec![item])
+}
+
+/// The texture-coordinate offset of every half-edge, in compressed adjacency form: the
+/// neighbours of `v` are `neighbors[adj_offsets[v]..adj_offsets[v + 1]]`, with the offsets
+/// from `v` to them at the same places of `edge_offsets` (as [`ParamParts`] holds them).
+pub struct EdgeOffsets<'a> {
+    pub adj_offsets: &'a [u32],
+    pub neighbors: &'a [u32],
+    pub edge_offsets: &'a [Vec2],
+}
+
+impl<'a> From<&ParamParts<'a>> for EdgeOffsets<'a> {
+    fn from(p: &ParamParts<'a>) -> Self {
+        EdgeOffsets {
+            adj_offsets: p.adj_offsets,
+            neighbors: p.neighbors,
+            edge_offsets: p.edge_offsets,
+        }
+    }
+}
+
+/// Discs of the surface unfolded into texel coordinates, packed on one canvas.
+pub struct Charts {
+    pub image: Image,
+    /// Texels that some triangle covers.
+    pub mask: Vec<bool>,
+    /// Discs laid out.
+    pub discs: usize,
+}
+
+/// Unfolds [`DISCS`] discs of the surface, each around a seeded vertex, into the texel
+/// coordinates the parameterization gives (§4.2.2's edge offsets, summed outward from the
+/// centre breadth first, to [`DISC_RADIUS`] texels), rasterizes their triangles there at one
+/// texel per exemplar texel, coloured by `colour(face, barycentrics)`, and packs the discs
+/// in a grid of tiles one texel apart. Where the unfolding overlaps itself (the offsets
+/// around a singularity of the field do not close), the later triangle wins.
+pub fn unfolded_discs(
+    triangles: &[[u32; 3]],
+    offsets: &EdgeOffsets,
+    seed: u64,
+    colour: impl Fn(usize, Vec3) -> [f32; 4],
+) -> Charts {
+    let param = offsets;
+    let n = param.adj_offsets.len() - 1;
+    let mut faces_of: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for (f, t) in triangles.iter().enumerate() {
+        for &v in t {
+            faces_of[v as usize].push(f);
+        }
+    }
+    // Centres: the vertices with the smallest seeded hashes among those with a face.
+    let mut order: Vec<(u64, usize)> = (0..n)
+        .filter(|&v| !faces_of[v].is_empty())
+        .map(|v| (counter_hash(seed, STREAM_DISC, v as u64), v))
+        .collect();
+    order.sort_unstable();
+    order.truncate(DISCS);
+    let tile = 2 * DISC_RADIUS + 1;
+    let per_row = (order.len() as f64).sqrt().ceil().max(1.0) as usize;
+    let rows = order.len().div_ceil(per_row).max(1);
+    let (cw, ch) = (per_row * (tile + 1), rows * (tile + 1));
+    let mut pixels = vec![[0.0f32; 4]; cw * ch];
+    let mut mask = vec![false; cw * ch];
+    let mut coord: Vec<Option<Vec2>> = vec![None; n];
+    for (k, &(_, centre)) in order.iter().enumerate() {
+        // Breadth-first unfolding from the centre.
+        let mut reached = vec![centre];
+        coord[centre] = Some(Vec2::ZERO);
+        let mut i = 0;
+        while i < reached.len() {
+            let u = reached[i];
+            i += 1;
+            let cu = coord[u].expect("reached");
+            if cu.length() > DISC_RADIUS as f32 {
+                continue;
+            }
+            let (a, b) = (
+                param.adj_offsets[u] as usize,
+                param.adj_offsets[u + 1] as usize,
+            );
+            for j in a..b {
+                let w = param.neighbors[j] as usize;
+                if coord[w].is_none() {
+                    coord[w] = Some(cu + param.edge_offsets[j]);
+                    reached.push(w);
+                }
+            }
+        }
+        let origin = Vec2::new(
+            (k % per_row * (tile + 1)) as f32,
+            (k / per_row * (tile + 1)) as f32,
+        ) + Vec2::splat(DISC_RADIUS as f32 + 0.5);
+        let (x0, y0) = ((k % per_row) * (tile + 1), (k / per_row) * (tile + 1));
+        let mut faces: Vec<usize> = reached
+            .iter()
+            .flat_map(|&v| faces_of[v].iter().copied())
+            .collect();
+        faces.sort_unstable();
+        faces.dedup();
+        for f in faces {
+            let Some(c) = triangles[f]
+                .iter()
+                .map(|&v| coord[v as usize].map(|p| p + origin))
+                .collect::<Option<Vec<Vec2>>>()
+            else {
+                continue;
+            };
+            let (a, e1, e2) = (c[0], c[1] - c[0], c[2] - c[0]);
+            let det = e1.perp_dot(e2);
+            if det.abs() < 1e-12 || !det.is_finite() {
+                continue;
+            }
+            let lo = c[0]
+                .min(c[1])
+                .min(c[2])
+                .floor()
+                .max(Vec2::new(x0 as f32, y0 as f32));
+            let hi = c[0]
+                .max(c[1])
+                .max(c[2])
+                .ceil()
+                .min(Vec2::new((x0 + tile) as f32, (y0 + tile) as f32));
+            for y in lo.y as usize..hi.y.max(lo.y) as usize {
+                for x in lo.x as usize..hi.x.max(lo.x) as usize {
+                    let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - a;
+                    let u = p.perp_dot(e2) / det;
+                    let v = e1.perp_dot(p) / det;
+                    let bary = Vec3::new(1.0 - u - v, u, v);
+                    if bary.min_element() < 0.0 {
+                        continue;
+                    }
+                    pixels[y * cw + x] = colour(f, bary);
+                    mask[y * cw + x] = true;
+                }
+            }
+        }
+        for &v in &reached {
+            coord[v] = None;
+        }
+    }
+    Charts {
+        image: Image {
+            width: cw as u32,
+            height: ch as u32,
+            pixels,
+        },
+        mask,
+        discs: order.len(),
+    }
+}
+
+/// How visible coordinate seams are; see the module doc.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SeamScore {
+    /// Seam edge colour difference over the random placement's (0 = invisible).
+    pub ratio: f64,
+    /// Mean RMS colour difference across seam edges.
+    pub seam_rms: f64,
+    /// The same with one side placed at random.
+    pub random_rms: f64,
+    /// Interior edges whose two triangles disagree on the coordinates of its ends.
+    pub seam_edges: usize,
+    pub interior_edges: usize,
+}
+
+/// The seam score of a mesh whose triangle `f` has corner texel coordinates `coords[f]` into
+/// `ex`.
+pub fn seam_score(
+    triangles: &[[u32; 3]],
+    coords: &[[Vec2; 3]],
+    ex: ImageView,
+    seed: u64,
+) -> SeamScore {
+    let mut first: HashMap<(u32, u32), (usize, usize)> = HashMap::new();
+    let mut pairs = Vec::new();
+    for (f, t) in triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let key = (a.min(b), a.max(b));
+            match first.get(&key) {
+                None => {
+                    first.insert(key, (f, k));
+                }
+                Some(&(g, m)) => pairs.push(((f, k), (g, m))),
+            }
+        }
+    }
+    let corner = |f: usize, v: u32| -> Vec2 {
+        let i = triangles[f]
+            .iter()
+            .position(|&x| x == v)
+            .expect("edge of the face");
+        coords[f][i]
+    };
+    let (w, h) = (ex.width as f32, ex.height as f32);
+    let (mut seam, mut random, mut seams) = (0.0f64, 0.0f64, 0usize);
+    for &((f, k), (g, _)) in &pairs {
+        let (a, b) = (triangles[f][k], triangles[f][(k + 1) % 3]);
+        let (fa, fb) = (corner(f, a), corner(f, b));
+        let (ga, gb) = (corner(g, a), corner(g, b));
+        if fa.distance(ga) < 1e-3 && fb.distance(gb) < 1e-3 {
+            continue;
+        }
+        // The random placement: g's side moved so its midpoint falls at a seeded point.
+        let r = Vec2::new(
+            counter_unit(seed, STREAM_SEAM_X, seams as u64) * w,
+            counter_unit(seed, STREAM_SEAM_Y, seams as u64) * h,
+        ) - (ga + gb) * 0.5;
+        seams += 1;
+        for s in 0..SEAM_SAMPLES {
+            let t = (s as f32 + 0.5) / SEAM_SAMPLES as f32;
+            let cf = bilinear(ex, fa.lerp(fb, t));
+            let cg = bilinear(ex, ga.lerp(gb, t));
+            let cr = bilinear(ex, ga.lerp(gb, t) + r);
+            seam += rms(cf, cg);
+            random += rms(cf, cr);
+        }
+    }
+    let n = (seams * SEAM_SAMPLES).max(1) as f64;
+    let (seam_rms, random_rms) = (seam / n, random / n);
+    SeamScore {
+        ratio: if random_rms > 0.0 {
+            seam_rms / random_rms
+        } else {
+            0.0
+        },
+        seam_rms,
+        random_rms,
+        seam_edges: seams,
+        interior_edges: pairs.len(),
+    }
+}
+
+fn rms(a: [f32; 3], b: [f32; 3]) -> f64 {
+    let s: f64 = (0..3).map(|c| ((a[c] - b[c]) as f64).powi(2)).sum();
+    (s / 3.0).sqrt()
+}
+
+/// RGB at texel coordinates `p` (texel centres at half-integers), clamped to the border and
+/// to [0, 1].
+pub fn bilinear(img: ImageView, p: Vec2) -> [f32; 3] {
+    let q = p - Vec2::splat(0.5);
+    let (x0, y0) = (q.x.floor(), q.y.floor());
+    let (fx, fy) = (q.x - x0, q.y - y0);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let at = |x: i64, y: i64| img.get_clamped(x, y);
+    let mut out = [0.0f32; 3];
+    let (p00, p10, p01, p11) = (
+        at(x0, y0),
+        at(x0 + 1, y0),
+        at(x0, y0 + 1),
+        at(x0 + 1, y0 + 1),
+    );
+    for c in 0..3 {
+        let top = p00[c] + (p10[c] - p00[c]) * fx;
+        let bottom = p01[c] + (p11[c] - p01[c]) * fx;
+        out[c] = (top + (bottom - top) * fy).clamp(0.0, 1.0);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two triangles of a unit square in texel units, scaled by `s`, the second moved by
+    /// `second_offset`.
+    fn square(s: f32, second_offset: Vec2) -> (Vec<[u32; 3]>, Vec<[Vec2; 3]>) {
+        let p = |x: f32, y: f32| Vec2::new(x, y) * s + Vec2::splat(4.0);
+        (
+            vec![[0, 1, 2], [0, 2, 3]],
+            vec![
+                [p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0)],
+                [
+                    p(0.0, 0.0) + second_offset,
+                    p(1.0, 1.0) + second_offset,
+                    p(0.0, 1.0) + second_offset,
+                ],
+            ],
+        )
+    }
+
+    /// Stripes with seeded noise, so that no two patches are equal.
+    fn stripes() -> Image {
+        Image::from_fn(128, 128, |x, y| {
+            let v = ((x * 7 + y * 3) % 11) as f32 / 10.0;
+            let e = 0.2 * counter_unit(5, 0, (y * 128 + x) as u64);
+            [0.8 * v + e, 1.0 - v, (y % 5) as f32 / 4.0, 1.0]
+        })
+    }
+
+    #[test]
+    fn continuous_coordinates_have_no_seam_and_jumps_do() {
+        let ex = stripes();
+        let (tris, coords) = square(20.0, Vec2::ZERO);
+        let s = seam_score(&tris, &coords, ex.view(), 0);
+        assert_eq!((s.seam_edges, s.interior_edges), (0, 1), "{s:?}");
+        let (tris, coords) = square(20.0, Vec2::new(13.0, 5.0));
+        let s = seam_score(&tris, &coords, ex.view(), 0);
+        assert_eq!(s.seam_edges, 1, "{s:?}");
+        assert!(s.seam_rms > 0.05 && s.ratio > 0.3, "{s:?}");
+    }
+
+    /// A planar grid whose parameterization is the identity (offsets = the edges in
+    /// texels): every disc is the exemplar itself, so its patches are verbatim.
+    #[test]
+    fn unfolded_discs_of_a_continuous_parameterization_are_verbatim() {
+        let ex = stripes();
+        let n = 40u32;
+        let idx = |i: u32, j: u32| j * n + i;
+        let mut tris = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                tris.push([idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)]);
+                tris.push([idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]);
+            }
+        }
+        let spacing = 3.0f32;
+        // Vertices at texel centres (half-integers), so the discs' texels land on them.
+        let pos = |v: u32| Vec2::new((v % n) as f32, (v / n) as f32) * spacing + Vec2::splat(2.5);
+        let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); (n * n) as usize];
+        for t in &tris {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                nbrs[a as usize].push(b);
+                nbrs[b as usize].push(a);
+            }
+        }
+        let (mut adj, mut neighbors, mut offs) = (vec![0u32], Vec::new(), Vec::new());
+        for (v, list) in nbrs.iter_mut().enumerate() {
+            list.sort_unstable();
+            list.dedup();
+            for &w in list.iter() {
+                neighbors.push(w);
+                offs.push(pos(w) - pos(v as u32));
+            }
+            adj.push(neighbors.len() as u32);
+        }
+        let offsets = EdgeOffsets {
+            adj_offsets: &adj,
+            neighbors: &neighbors,
+            edge_offsets: &offs,
+        };
+        let c = unfolded_discs(&tris, &offsets, 1, |f, b| {
+            let t = tris[f].map(pos);
+            let p = t[0] * b.x + t[1] * b.y + t[2] * b.z;
+            let [r, g, bl] = bilinear(ex.view(), p);
+            [r, g, bl, 1.0]
+        });
+        assert_eq!(c.discs, DISCS);
+        let covered = c.mask.iter().filter(|&&m| m).count();
+        assert!(covered > DISCS * DISC_RADIUS * DISC_RADIUS, "{covered}");
+        let s = crate::image::patch_score::patch_score_masked(
+            c.image.view(),
+            Some(&c.mask),
+            ex.view(),
+            &crate::image::patch_score::ScoreParams::default(),
+        )
+        .unwrap();
+        assert!(s.mean_rms < 1e-3 && s.queries > 1000, "{s:?}");
+    }
+}

@@ -1,0 +1,184 @@
+//! Scoring the geometry-image method (Lai, Hu, Gu & Martin): the synthesized relief image
+//! against the sample's, and the output mesh's soundness.
+//!
+//! **Relief.** The synthesize node's texels hold `(dx, dy, dn)` (and colour); the height `dn`
+//! is scored as a grey image against the `dn` of the sample variant the synthesis copies from
+//! at the field's reference scale: the analysis's middle scale, orientation 0 (the sample
+//! unrotated), finest level. Both go through one mapping, the reference's `dn` range onto
+//! [0, 1] (values outside clamp), so distances are fractions of the sample's relief depth.
+//! The synthesized image covers the geometry image's square, whose texels are spread over
+//! the surface at the field's scale: with `field.density_offset` ≠ 0 the texture is
+//! synthesized from other scales and the ratio compares unlike sizes (reported with it).
+//!
+//! **Mesh.** `relief.obj` as written: boundary edges (one triangle), non-manifold edges (more
+//! than two), unreferenced vertices, and flipped faces: triangles whose normal points against
+//! the normal of the same three vertices on the undisplaced geometry-image mesh (`grid_mesh`
+//! of the input's geometry image, which numbers its vertices the same way), i.e. relative to
+//! the input surface.
+
+use super::{Item, Run, ScoreFailure};
+use crate::geom::Mesh;
+use crate::geom::geometry_image::{GeometryImage, TexelImage};
+use crate::image::Image;
+use crate::methods::geometry_images::GeometryImagesConfig;
+use crate::stages::analyse_exemplar::texel_variants::TexelVariants;
+use crate::stages::reconstruct::displacement::grid_mesh;
+use std::collections::HashMap;
+use std::path::Path;
+
+/// The texel channel holding the height (`dn`).
+const HEIGHT: usize = 2;
+
+pub(crate) fn geometry_images(run: &Run) -> Result<Item, ScoreFailure> {
+    let c: GeometryImagesConfig = run
+        .config
+        .parse()
+        .map_err(|e| ScoreFailure::new(e.to_string()))?;
+    let texels = run.view::<TexelImage>("synthesize")?;
+    let variants = run.view::<TexelVariants>("analyse_exemplar")?;
+    let v = variants.variant(variants.params().middle_scale(), 0);
+    let reference = variants.level(v, 0);
+    let ref_channels = variants.channels();
+    let ref_h: Vec<f32> = reference
+        .texels
+        .chunks_exact(ref_channels)
+        .map(|t| t[HEIGHT])
+        .collect();
+    let (lo, hi) = ref_h
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
+            (lo.min(h), hi.max(h))
+        });
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let grey = |w: u32, h: u32, values: &[f32]| {
+        Image::from_fn(w, h, |x, y| {
+            let g = (values[(y * w + x) as usize] - lo) / span;
+            [g, g, g, 1.0]
+        })
+    };
+    let reference_img = grey(reference.width, reference.height, &ref_h);
+    let out_h: Vec<f32> = texels
+        .data
+        .chunks_exact(texels.channels as usize)
+        .map(|t| t[HEIGHT])
+        .collect();
+    let out_img = grey(texels.width, texels.height, &out_h);
+    let mut item = Item::new(
+        "the synthesized relief (dn, as grey)",
+        "the sample's relief at the reference scale, unrotated",
+    );
+    run.score_into(&mut item, out_img.view(), None, reference_img.view())?;
+    let offset = c.field.density_offset;
+    item.extra
+        .insert("density_offset".into(), serde_json::json!(offset));
+    if offset != 0.0 {
+        item.notes.push(format!(
+            "field.density_offset = {offset}: the texture is synthesized {:.2}× denser than the \
+             reference, so the ratio compares unlike scales (it is meaningful at 0)",
+            2f32.powf(offset)
+        ));
+    }
+
+    let gi = run.view::<GeometryImage>("parameterize")?;
+    let bytes = run.file("reconstruct", "relief.obj")?;
+    let relief = crate::geom::io::read_mesh_bytes(Path::new("relief.obj"), &bytes)
+        .map_err(|e| ScoreFailure::new(format!("reading relief.obj: {e}")))?;
+    let (base, _) = grid_mesh(&gi, &gi.positions);
+    tracing::debug!(
+        "score: relief {} vertices {} triangles, undisplaced {} vertices {} triangles",
+        relief.positions.len(),
+        relief.triangles.len(),
+        base.positions.len(),
+        base.triangles.len()
+    );
+    let checks = mesh_checks(&relief, Some(&base));
+    item.extra.insert(
+        "mesh".into(),
+        serde_json::to_value(&checks).expect("plain numbers"),
+    );
+    Ok(item)
+}
+
+/// Soundness of an output mesh.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MeshChecks {
+    pub triangles: usize,
+    /// Edges with one triangle (0 for a closed mesh).
+    pub boundary_edges: usize,
+    /// Edges with more than two triangles.
+    pub non_manifold_edges: usize,
+    pub unreferenced_vertices: usize,
+    /// Triangles whose normal points against the same three vertices' on the reference;
+    /// `None` without a reference with the same vertices.
+    pub flipped_faces: Option<usize>,
+}
+
+/// [`MeshChecks`] of `mesh`; flips against `reference` (the same vertices at other
+/// positions: each triangle of `mesh` is compared with its three vertices there, so the two
+/// may triangulate differently).
+pub fn mesh_checks(mesh: &Mesh, reference: Option<&Mesh>) -> MeshChecks {
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut used = vec![false; mesh.positions.len()];
+    for t in &mesh.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+            used[t[k] as usize] = true;
+        }
+    }
+    let normal = |m: &Mesh, t: &[u32; 3]| {
+        let p = t.map(|i| m.positions[i as usize]);
+        (p[1] - p[0]).cross(p[2] - p[0])
+    };
+    let flipped_faces = reference
+        .filter(|r| r.positions.len() == mesh.positions.len())
+        .map(|r| {
+            mesh.triangles
+                .iter()
+                .filter(|t| normal(mesh, t).dot(normal(r, t)) < 0.0)
+                .count()
+        });
+    MeshChecks {
+        triangles: mesh.triangles.len(),
+        boundary_edges: edges.values().filter(|&&c| c == 1).count(),
+        non_manifold_edges: edges.values().filter(|&&c| c > 2).count(),
+        unreferenced_vertices: used.iter().filter(|&&u| !u).count(),
+        flipped_faces,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    #[test]
+    fn a_tetrahedron_is_closed_and_an_open_flipped_one_is_not() {
+        let p = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE];
+        let tris = vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]];
+        let tet = Mesh::new(p.clone(), tris.clone());
+        let c = mesh_checks(&tet, Some(&tet));
+        assert_eq!(
+            c,
+            MeshChecks {
+                triangles: 4,
+                boundary_edges: 0,
+                non_manifold_edges: 0,
+                unreferenced_vertices: 1,
+                flipped_faces: Some(0)
+            }
+        );
+        // Vertex 3 pushed through the base flips the three faces around it.
+        let mut q = p.clone();
+        q[3] = Vec3::new(0.2, 0.2, -1.0);
+        let dented = Mesh::new(q, tris.clone());
+        assert_eq!(mesh_checks(&dented, Some(&tet)).flipped_faces, Some(3));
+        // One face removed: three boundary edges; a fin on an edge: non-manifold.
+        let open = Mesh::new(p.clone(), tris[..3].to_vec());
+        assert_eq!(mesh_checks(&open, None).boundary_edges, 3);
+        let mut fin = tris.clone();
+        fin.push([0, 1, 4]);
+        let c = mesh_checks(&Mesh::new(p, fin), None);
+        assert_eq!((c.non_manifold_edges, c.flipped_faces), (1, None));
+    }
+}

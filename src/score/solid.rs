@@ -1,0 +1,147 @@
+//! Scoring the solid method (Zhang, Du, Lai, Ni & Hu, "Sketch Guided Solid Texturing"):
+//! planar sections of the synthesized solid against the exemplar of their plane.
+//!
+//! The solid matches each axis plane's slices to that plane's exemplar (§4), so a section
+//! along an axis plane is comparable with it. What is scored is what the run's request makes:
+//! a `section` request whose normal is an axis (`section.png`: normal z against `xy`, x
+//! against `yz`, y against `zx`, falling back to `inputs.exemplar`), a `box` request's middle
+//! z slice (`volume_middle_slice.png`, against `xy`). Pixels outside the synthesized voxels
+//! (the section image's background colour) are masked out. A `surface` request makes no
+//! planar image: `texsyn score` then synthesizes a section through the centre of the mesh's
+//! bounding box, normal z, in the same cache ([`substitute_section`]; bricks the surface
+//! already made are reused) and scores that; `run`'s `[score]` reports it as not scored.
+//!
+//! Limits: the section is in world axes; where the rotation field turns the solid away from
+//! them (sketched curves), its slices are not along the exemplar planes and score farther
+//! than the synthesis is; region exemplars (`[[regions]]`) are not told apart.
+
+use super::{Item, Run, ScoreFailure};
+use crate::image::Image;
+use crate::methods::solid::{ExemplarSpec, SolidConfig};
+use crate::stages::parameterize::volume_embedding::Request;
+use std::path::Path;
+
+/// `section.png`'s colour where no voxel was synthesized (solid_colour.rs).
+const BACKGROUND: [u8; 3] = [235, 236, 240];
+
+pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+    let c: SolidConfig = run
+        .config
+        .parse()
+        .map_err(|e| ScoreFailure::new(e.to_string()))?;
+    let (file, plane) = match c.parameterize.request {
+        Request::Surface => {
+            not_scored.push(
+                "solid surface request: the solid is synthesized only where the surface passes, \
+                 so there is no planar image to compare; `texsyn score` on this config synthesizes \
+                 a section through the mesh's centre (normal z) and scores that"
+                    .into(),
+            );
+            return Ok(Vec::new());
+        }
+        Request::Section { normal, .. } => {
+            let axis = (0..3)
+                .find(|&a| (0..3).all(|b| b == a || normal[b].abs() <= 1e-6 * normal[a].abs()));
+            match axis {
+                Some(0) => ("section.png", "yz"),
+                Some(1) => ("section.png", "zx"),
+                Some(2) => ("section.png", "xy"),
+                _ => {
+                    not_scored.push(format!(
+                        "solid section with normal {normal:?}: not along an exemplar plane (its \
+                         normal is no axis)"
+                    ));
+                    return Ok(Vec::new());
+                }
+            }
+        }
+        Request::Box { .. } => ("volume_middle_slice.png", "xy"),
+    };
+    let spec = match plane {
+        "xy" => c.inputs.xy.as_ref(),
+        "yz" => c.inputs.yz.as_ref(),
+        _ => c.inputs.zx.as_ref(),
+    };
+    let (spec, key) = match spec {
+        Some(s) => (s, format!("inputs.{plane}")),
+        None => match c.inputs.exemplar.as_ref() {
+            Some(s) => (s, "inputs.exemplar".to_owned()),
+            None => {
+                not_scored.push(format!("solid {file}: no exemplar for the {plane} plane"));
+                return Ok(Vec::new());
+            }
+        },
+    };
+    let exemplar = load_exemplar(run, spec, &key)?;
+    let out = run.image("reconstruct", file)?;
+    let mask: Vec<bool> = out
+        .pixels
+        .iter()
+        .map(|p| {
+            let q = [p[0], p[1], p[2]].map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8);
+            q != BACKGROUND
+        })
+        .collect();
+    let mut item = Item::new(file, key);
+    run.score_into(&mut item, out.view(), Some(&mask), exemplar.view())?;
+    if !c.regions.is_empty() {
+        item.notes.push(format!(
+            "the config has {} [[regions]] with exemplars of their own: their voxels in the \
+             section are scored against the base exemplar too, and far from it",
+            c.regions.len()
+        ));
+    }
+    if !c.field.curves.is_empty() || c.field.curves_file.is_some() {
+        item.notes.push(
+            "the rotation field follows sketched curves: where it turns the solid, this \
+             world-axis section is not along the exemplar plane"
+                .into(),
+        );
+    }
+    Ok(vec![item])
+}
+
+/// For a solid config whose request is the surface: the `--set` that asks for a section
+/// instead, through the centre of the mesh's bounding box with normal z (the `xy` exemplar's
+/// plane), which cuts the mesh whatever its shape. `texsyn score` runs that (the bricks the
+/// two requests share are reused from the cache) and scores its `section.png`. `None` for
+/// other methods and requests.
+pub fn substitute_section(
+    plan: &crate::methods::Plan,
+    result: &crate::pipeline::RunResult,
+    config: &crate::config::Config,
+) -> Option<String> {
+    if plan.method != "solid" {
+        return None;
+    }
+    let c: SolidConfig = crate::methods::without_score(config).parse().ok()?;
+    if c.parameterize.request != Request::Surface {
+        return None;
+    }
+    let i = plan.dag.node_index("import.mesh")?;
+    let mesh = <crate::geom::Mesh as crate::artifact::Format>::view(&result.artifacts[i]).ok()?;
+    let (lo, hi) = mesh.bounds();
+    let m = (lo + hi) * 0.5;
+    Some(format!(
+        "parameterize.request={{ kind = \"section\", point = [{}, {}, {}], normal = [0.0, 0.0, 1.0] }}",
+        m.x, m.y, m.z
+    ))
+}
+
+/// The exemplar image a spec names, transposed when it says so.
+fn load_exemplar(run: &Run, spec: &ExemplarSpec, key: &str) -> Result<Image, ScoreFailure> {
+    let (path, transpose) = match spec {
+        ExemplarSpec::Path(p) => (p, false),
+        ExemplarSpec::Spec { path, transpose } => (path, *transpose),
+    };
+    let path = run.config.resolve(path);
+    let bytes = std::fs::read(&path)
+        .map_err(|e| ScoreFailure::new(format!("{} ({key}): {e}", path.display())))?;
+    let img = crate::image::decode_image(Path::new(&path), &bytes)
+        .map_err(|e| ScoreFailure::new(format!("{} ({key}): {e}", path.display())))?;
+    Ok(if transpose {
+        Image::from_fn(img.height, img.width, |x, y| img.view().get(y, x))
+    } else {
+        img
+    })
+}

@@ -1,0 +1,199 @@
+//! Scoring the methods that colour vertices, graph matching (Bangay & Morkel) and
+//! feature-aligned texturing (Xu et al.), by resampling their colours into the exemplar's
+//! frame along the field each synthesis itself reads the surface with.
+//!
+//! Graph matching makes one colour per vertex of the finest √2-subdivision level and bakes no
+//! texture (§3.5). Its synthesis reads the surface through one texture-space step per edge
+//! (`Level::step` in stages/synthesize/graph_matching.rs): the edge projected onto the
+//! vertex's (right, −up) frame of the sweep field, kept at its length, times `scale` texels
+//! per unit. The same step, summed outward from 64 seeded vertices over the finest level's
+//! triangulated edges, unfolds discs of the surface into exemplar texels
+//! ([`super::charts::unfolded_discs`]); their triangles are filled by interpolating the
+//! vertex colours, and the discs are scored against the exemplar. So the picture is the
+//! texture as the method lays it out, at one texel per exemplar texel.
+//!
+//! Feature-aligned texturing's texture optimization (§5) reads a vertex's neighbourhood in
+//! the frame (u = the field on the tangent plane, n × u), turned by the texture's principal
+//! angle onto exemplar pixel axes, at `parameterize.scale` texels per unit; the same frame
+//! unfolds its refined mesh (see [`feature_aligned`]). Its `textured_atlas.png` is not used:
+//! it lays each input triangle with its longest edge horizontal, so its patches are rotated
+//! against the exemplar's.
+//!
+//! Limits: colours between vertices are interpolated, so where edges are longer than a
+//! texel the discs are smoother than the synthesis meant (the gradient ratio falls with the
+//! edge length); near a singularity of the field the unfolding overlaps itself.
+
+use super::charts::{EdgeOffsets, unfolded_discs};
+use super::{Item, Run, ScoreFailure};
+use crate::artifact::feature_aligned::OrientedField;
+use crate::geom::edge_refine::Refined;
+use crate::image::Image;
+use crate::methods::feature_aligned::{FeatureAlignedConfig, carry_field};
+use crate::methods::graph_matching::GraphMatchingConfig;
+use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
+use crate::stages::field::sweep_field::SweepField;
+use crate::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
+use crate::stages::synthesize::graph_matching::GraphMatching;
+use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
+use glam::{Vec2, Vec3};
+
+pub(crate) fn graph_matching(run: &Run) -> Result<Item, ScoreFailure> {
+    let c: GraphMatchingConfig = run
+        .config
+        .parse()
+        .map_err(|e| ScoreFailure::new(e.to_string()))?;
+    let scale = c.parameterize.scale;
+    let h = run.view::<Sqrt2Hierarchy>("parameterize")?;
+    let field = run.view::<SweepField>("field")?;
+    let out = run.view::<GraphMatching>("synthesize")?;
+    let ex = run.view::<Image>("import.exemplar")?;
+    let level = h.level(h.levels() - 1);
+    let normals = level.vertex_normals();
+    let mesh = level.to_triangles();
+    let n = mesh.positions.len();
+    if out.colours.len() != n || field.orientation.len() < n {
+        return Err(ScoreFailure::new(
+            "internal error: colours, field and hierarchy disagree on the vertex count",
+        ));
+    }
+    // The synthesis's frame per vertex: "up" is the field projected on the tangent plane,
+    // and an edge maps to (right, −up) texels at its own length.
+    let frames = frames(&normals, &field.orientation[..n]);
+    let step = |from: usize, to: usize| {
+        let d = mesh.positions[to] - mesh.positions[from];
+        let (up, right) = frames[from];
+        at_length(Vec2::new(d.dot(right), -d.dot(up)), d.length() * scale)
+    };
+    let mut item = Item::new(
+        format!("the finest level's vertex colours, {DISCS_NOTE}"),
+        "inputs.exemplar",
+    );
+    item.extra.insert(
+        "texels_per_edge".into(),
+        serde_json::json!(mesh.mean_edge_length() * scale),
+    );
+    score_vertex_colours(run, &mut item, &mesh, &out.colours, step, ex)?;
+    Ok(item)
+}
+
+/// Feature-aligned texturing (Xu et al.): the refined mesh's colours, unfolded with the
+/// frame texture optimization matches in (§5: `u` the field projected on the tangent plane,
+/// `v = n × u`, turned by the texture's principal angle onto exemplar pixel axes, 1 /
+/// `parameterize.scale` object units per texel), for the aligned result and, with `compare`,
+/// the unaligned one.
+pub(crate) fn feature_aligned(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
+    let c: FeatureAlignedConfig = run
+        .config
+        .parse()
+        .map_err(|e| ScoreFailure::new(e.to_string()))?;
+    let scale = c.parameterize.scale;
+    let refined = run.view::<Refined>("parameterize")?;
+    let field = run.view::<OrientedField>("field")?;
+    let tf = run.view::<TextureFeatures>("analyse_exemplar")?;
+    let ex = run.view::<Image>("import.exemplar")?;
+    let vectors = carry_field(&refined, &field.field.vectors)
+        .map_err(|e| ScoreFailure::new(e.to_string()))?;
+    let mesh = &refined.mesh;
+    let normals: Vec<Vec3> = mesh.vertex_normals().to_vec();
+    // `frames` gives (u, n × u)… as (up, right) = (u, u × n); texture optimization's second
+    // axis is n × u = −right.
+    let frames = frames(&normals, &vectors);
+    let (cos, sin) = (tf.principal_angle.cos(), tf.principal_angle.sin());
+    let step = |from: usize, to: usize| {
+        let d = mesh.positions[to] - mesh.positions[from];
+        let (u, right) = frames[from];
+        let o = Vec2::new(d.dot(u), -d.dot(right));
+        let o = Vec2::new(o.x * cos - o.y * sin, o.x * sin + o.y * cos);
+        at_length(o, d.length() * scale)
+    };
+    let mut items = Vec::new();
+    let mut names = vec![("synthesize", "the refined mesh's colours")];
+    if c.compare {
+        names.push(("synthesize.unaligned", "the unaligned comparison's colours"));
+    }
+    for (node, what) in names {
+        let out = run.view::<SurfaceSynthesis>(node)?;
+        if out.colours.len() != mesh.positions.len() {
+            return Err(ScoreFailure::new(
+                "internal error: colours and refined mesh disagree on the vertex count",
+            ));
+        }
+        let mut item = Item::new(format!("{what}, {DISCS_NOTE}"), "inputs.exemplar");
+        score_vertex_colours(run, &mut item, mesh, &out.colours, step, ex)?;
+        items.push(item);
+    }
+    Ok(items)
+}
+
+const DISCS_NOTE: &str = "discs unfolded along the field";
+
+/// Per vertex, (up, right): the field projected on the tangent plane (any tangent where it
+/// vanishes) and `up × n`.
+fn frames(normals: &[Vec3], field: &[Vec3]) -> Vec<(Vec3, Vec3)> {
+    normals
+        .iter()
+        .zip(field)
+        .map(|(&nrm, &o)| {
+            let nrm = nrm.try_normalize().unwrap_or(Vec3::Z);
+            let t = (o - o.dot(nrm) * nrm)
+                .try_normalize()
+                .unwrap_or_else(|| nrm.any_orthonormal_vector());
+            (t, t.cross(nrm))
+        })
+        .collect()
+}
+
+/// `o` scaled to `len` (zero stays zero).
+fn at_length(o: Vec2, len: f32) -> Vec2 {
+    let l = o.length();
+    if l > 0.0 { o * (len / l) } else { Vec2::ZERO }
+}
+
+/// Unfolds discs of `mesh` with the texel offset `step(from, to)` of each edge, fills their
+/// triangles with the interpolated vertex `colours` and scores them into `item`.
+fn score_vertex_colours(
+    run: &Run,
+    item: &mut Item,
+    mesh: &crate::geom::Mesh,
+    colours: &[[f32; 3]],
+    step: impl Fn(usize, usize) -> Vec2,
+    ex: crate::image::ImageView,
+) -> Result<(), ScoreFailure> {
+    let n = mesh.positions.len();
+    let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
+    for t in &mesh.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            nbrs[a as usize].push(b);
+            nbrs[b as usize].push(a);
+        }
+    }
+    let (mut adj, mut neighbors, mut offsets) = (vec![0u32], Vec::new(), Vec::new());
+    for (v, list) in nbrs.iter_mut().enumerate() {
+        list.sort_unstable();
+        list.dedup();
+        for &w in list.iter() {
+            neighbors.push(w);
+            offsets.push(step(v, w as usize));
+        }
+        adj.push(neighbors.len() as u32);
+    }
+    let edges = EdgeOffsets {
+        adj_offsets: &adj,
+        neighbors: &neighbors,
+        edge_offsets: &offsets,
+    };
+    let charts = unfolded_discs(&mesh.triangles, &edges, run.params.seed, |f, b| {
+        let t = mesh.triangles[f];
+        let mut c = [0.0f32, 0.0, 0.0, 1.0];
+        for (k, w) in b.to_array().into_iter().enumerate() {
+            for ch in 0..3 {
+                c[ch] += w * colours[t[k] as usize][ch];
+            }
+        }
+        c
+    });
+    item.extra
+        .insert("discs".into(), serde_json::json!(charts.discs));
+    run.score_into(item, charts.image.view(), Some(&charts.mask), ex)
+}
