@@ -223,6 +223,40 @@ fn a_box_request_writes_a_raw_volume_with_its_header() {
     // Wood: the voxels are not all one colour.
     let first = &raw[0..3];
     assert!(raw.chunks(3).any(|c| c != first));
+    // volume.exr holds the same voxels, one part per z-slice, read with the exr crate.
+    use exr::prelude::{ReadChannels, ReadLayers};
+    let bytes = std::fs::read(out.path().join("volume.exr")).unwrap();
+    let img = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_buffered(std::io::Cursor::new(&bytes))
+        .unwrap();
+    assert_eq!(img.layer_data.len() as u64, d[2]);
+    let (w, h) = (d[0] as usize, d[1] as usize);
+    for (z, layer) in img.layer_data.iter().enumerate() {
+        assert_eq!(
+            layer.attributes.layer_name.as_ref().unwrap().to_string(),
+            format!("z{z:04}")
+        );
+        assert_eq!((layer.size.x(), layer.size.y()), (w, h));
+        let names: Vec<String> = layer
+            .channel_data
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        assert_eq!(names, ["B", "G", "R"]);
+        for (ch, c) in layer.channel_data.list.iter().zip([2usize, 1, 0]) {
+            for i in 0..w * h {
+                let x = ch.sample_data.value_by_flat_index(i).to_f32();
+                let byte = (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+                assert_eq!(byte, raw[(z * w * h + i) * 3 + c], "slice {z}, voxel {i}");
+            }
+        }
+    }
 }
 
 fn samples(r: &RunResult, node: &str) -> std::collections::BTreeMap<[i32; 3], [u8; 12]> {

@@ -368,6 +368,61 @@ fn dual_grid_depends_on_fewer_voxels_than_plain_correction() {
     );
 }
 
+/// The stencil the dependent set dilates by is as tight as the reads (⌊e + ½⌋ for nearest
+/// sampling, the exact lattice for the trivial field): the set shrinks, and every voxel, at
+/// every level, is what the one-voxel-wider stencil of before gives.
+#[test]
+fn the_exact_stencil_gives_the_same_voxels_from_a_thinner_set() {
+    let (_, a) = small();
+    let vol = cube(40);
+    let trivial = common::solid::trivial_field(&vol);
+    let rotated = rotated_field(
+        &vol,
+        Quat::from_rotation_y(0.5) * Quat::from_rotation_x(0.2),
+    );
+    let req = VoxelRequest::plane(&vol, Vec3::splat(20.0), Vec3::new(0.1, 0.2, 1.0));
+    for (name, field) in [("trivial", &trivial), ("rotated", &rotated)] {
+        let exact = SolidSynthesis::new(a.as_ref(), field, vol, small_solid_params()).unwrap();
+        let wide = SolidSynthesis::new(a.as_ref(), field, vol, small_solid_params())
+            .unwrap()
+            .widen_reach(1);
+        if name == "trivial" {
+            // N = 5, 7, 7: the sample offsets reach N_h exactly, trilinear or not.
+            assert_eq!(exact.reach(), [2, 3, 3]);
+        }
+        let (de, dw) = (exact.dependent_set(&req), wide.dependent_set(&req));
+        for (e, w) in de.iter().zip(&dw) {
+            assert!(e.voxels <= w.voxels, "{name} level {}", e.level);
+        }
+        assert!(
+            de[2].voxels < dw[2].voxels,
+            "{name}: {} vs {}",
+            de[2].voxels,
+            dw[2].voxels
+        );
+        let (se, sw) = (MemoryBrickStore::new(), MemoryBrickStore::new());
+        exact.synthesize(&req, &se).unwrap();
+        wide.synthesize(&req, &sw).unwrap();
+        let mut compared = 0;
+        for (level, b, brick) in all_bricks(&exact, &se) {
+            let other = sw.get(level, b).expect("the wider set makes every brick");
+            assert!(
+                *other == brick,
+                "{name}: brick {b:?} of level {level} differs"
+            );
+            compared += 1;
+        }
+        assert!(compared > 10, "{name}: {compared}");
+        for v in req.voxels() {
+            assert_eq!(
+                exact.triple_at(&se, 3, v),
+                wide.triple_at(&sw, 3, v),
+                "{name} {v:?}"
+            );
+        }
+    }
+}
+
 /// A 48² crop of wood2 as a solid layered across x: xy shows the stripes, zx the transposed
 /// stripes, yz (weight 0) is not matched.
 fn wood_layers() -> &'static (Image, SolidAnalysis) {

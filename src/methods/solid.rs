@@ -42,7 +42,8 @@ const ANALYSIS_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 2;
 const REQUEST_VERSION: u32 = 4;
 const SYNTH_VERSION: u32 = 2;
-const RECONSTRUCT_VERSION: u32 = 1;
+// 2: box requests also write volume.exr.
+const RECONSTRUCT_VERSION: u32 = 2;
 
 /// A `solid` config. `[inputs]` and each of `[[regions]]` name an exemplar set: one image for
 /// all three planes (`exemplar`), or one per plane of the local frame (`xy`, `yz`, `zx`; any

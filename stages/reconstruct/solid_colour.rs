@@ -10,7 +10,9 @@
 //!   colour per vertex (`solid_surface.ply`), the original mesh with a baked texture
 //!   (`solid_surface.glb`, `baked_surface.png`) and a preview of the coloured surface;
 //! - a section: the cut as an image, one pixel per sample of the plane (`section.png`);
-//! - a box: the voxels as raw RGB with a JSON header, and its middle z-slice as a PNG.
+//! - a box: the voxels as raw RGB with a JSON header, the same voxels as a multi-part
+//!   OpenEXR (one part per z-slice, `volume.exr`) that image tools open directly, and its
+//!   middle z-slice as a PNG.
 //!
 //! Departure: the paper renders the solid texture per pixel; here a surface point takes the
 //! colour of the voxel it lies in (or of the nearest synthesized voxel around it, for points
@@ -69,6 +71,8 @@ impl SolidExportParams {
 pub enum SolidExportError {
     #[error("reconstruct.atlas_size: {0}")]
     Atlas(#[from] AtlasError),
+    #[error("volume.exr: {0}")]
+    Exr(#[from] crate::export::exr::ExrError),
 }
 
 /// The finest-level colours of the synthesized voxels, from one exemplar set or several (the
@@ -131,7 +135,7 @@ pub fn export_solid(
     Ok(match output {
         SolidOutput::Surface(mesh) => export_surface(mesh, vol, colours, p, progress)?,
         SolidOutput::Section(s) => vec![("section.png".into(), section_png(vol, s, colours))],
-        SolidOutput::Box(voxels) => export_box(voxels, vol, colours),
+        SolidOutput::Box(voxels) => export_box(voxels, vol, colours)?,
     })
 }
 
@@ -269,9 +273,14 @@ fn to8(x: f32) -> u8 {
     (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
-/// A box as raw RGB bytes (x fastest, then y, then z) with a JSON header, and its middle
-/// z-slice as a PNG for a quick look.
-fn export_box(voxels: &[IVec3], vol: &Volume, colours: &VoxelColours) -> Vec<(String, Vec<u8>)> {
+/// A box as raw RGB bytes (x fastest, then y, then z) with a JSON header, the same bytes as a
+/// multi-part EXR (part `zNNNN` = slice z, half floats `byte / 255`), and its middle z-slice
+/// as a PNG for a quick look.
+fn export_box(
+    voxels: &[IVec3],
+    vol: &Volume,
+    colours: &VoxelColours,
+) -> Result<Vec<(String, Vec<u8>)>, SolidExportError> {
     let lo = voxels
         .iter()
         .copied()
@@ -297,6 +306,7 @@ fn export_box(voxels: &[IVec3], vol: &Volume, colours: &VoxelColours) -> Vec<(St
     let header = serde_json::json!({
         "format": "raw RGB, 8 bits per channel, x fastest, then y, then z",
         "file": "volume.raw",
+        "exr": "volume.exr: one part per z-slice (z0000 = z 0), channels R, G, B as half floats byte / 255, row 0 = y 0",
         "dims": [d.x, d.y, d.z],
         "origin": [origin.x, origin.y, origin.z],
         "voxel": vol.voxel,
@@ -313,12 +323,14 @@ fn export_box(voxels: &[IVec3], vol: &Volume, colours: &VoxelColours) -> Vec<(St
             );
         }
     }
-    vec![
+    let exr = crate::export::exr::write_exr_volume([d.x as u32, d.y as u32, d.z as u32], &raw)?;
+    Ok(vec![
         ("volume.raw".into(), raw),
         (
             "volume.json".into(),
             serde_json::to_vec_pretty(&header).expect("json of plain values"),
         ),
+        ("volume.exr".into(), exr),
         ("volume_middle_slice.png".into(), encode_png(&slice, false)),
-    ]
+    ])
 }

@@ -129,16 +129,32 @@ pub fn dependent_set(
     for step in schedule.steps().iter().rev() {
         let threshold = 1 + step.version_after() as u8;
         // Active voxels whose new version is needed, and their bounding box.
-        let (mut alo, mut ahi) = (IVec3::MAX, IVec3::MIN);
-        for (i, &x) in grid.need.iter().enumerate() {
-            if x >= threshold {
-                let p = grid.position(i);
-                if step.active(p) {
-                    alo = alo.min(p);
-                    ahi = ahi.max(p);
+        // Row by row in parallel; min and max do not depend on the order of the reduction.
+        let nx = grid.n.x as usize;
+        let (alo, ahi) = grid
+            .need
+            .par_chunks(nx.max(1))
+            .enumerate()
+            .map(|(row, xs)| {
+                let (mut lo, mut hi) = (IVec3::MAX, IVec3::MIN);
+                if xs.iter().any(|&x| x >= threshold) {
+                    let p0 = grid.position(row * nx);
+                    for (x, &b) in xs.iter().enumerate() {
+                        if b >= threshold {
+                            let p = p0 + IVec3::new(x as i32, 0, 0);
+                            if step.active(p) {
+                                lo = lo.min(p);
+                                hi = hi.max(p);
+                            }
+                        }
+                    }
                 }
-            }
-        }
+                (lo, hi)
+            })
+            .reduce(
+                || (IVec3::MAX, IVec3::MIN),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            );
         if alo.x > ahi.x {
             continue;
         }

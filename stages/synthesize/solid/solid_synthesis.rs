@@ -77,8 +77,9 @@
 //! - Working values live in 8³ chunks allocated only where the dependent set is; the
 //!   dependency bytes themselves are dense over the bounding box of a level's dependent set
 //!   (one byte per voxel), which bounds the request size in practice (a 512³ box is 128 MB).
-//! - The dependency stencil is the cube of radius `r = ⌈N_h √2 s_max⌉` (+1 with trilinear
-//!   sampling), or the exact extent for a constant field; the paper's `D = ⌈N√2⌉`.
+//! - The dependency stencil is the cube of radius `r = ⌊N_h √2 s_max + ½⌋` (`⌊N_h √2 s_max⌋ + 1`
+//!   with trilinear sampling), or the exact extent for a constant field (see
+//!   [`stencil_reach`]); the paper's `D = ⌈N√2⌉`.
 
 use super::dependent_set::{NeedGrid, dependent_set};
 use super::history_window::{HistoryWindow, Schedule};
@@ -767,6 +768,70 @@ struct LevelPlan {
     need: NeedGrid,
 }
 
+/// The dependency stencil radius of each level: the largest per-axis offset, in voxels of the
+/// level, of any voxel a correction reads (neighbourhood samples, trilinear corners, candidate
+/// positions). The dependent set dilates by the cube of this radius, so it must bound every
+/// read, and each voxel it overstates thickens every ring of the set by one voxel per side.
+///
+/// A sample at in-plane offset `(i, j)` sits at `v + s (i c₁ + j c₂)` with `c₁, c₂` two
+/// columns of the local frame: per axis at most `e = N_h s (|c₁ₐ| + |c₂ₐ|)` from `v`, which is
+/// `N_h s_max √2` in general and exact for a constant field.
+/// - Nearest sampling reads `[v + x]` (halves up), so `|offset| ≤ ⌊e + ½⌋`, not `⌈e⌉`: for
+///   the trivial field at `N = 9`, `e = 4` and the reach is 4 where `⌈4 + ε⌉` gave 5.
+/// - Trilinear sampling reads `⌊v + x⌋` and `⌊v + x⌋ + 1`, the second only with a non-zero
+///   weight, so `⌊e⌋ + 1` in general. When the field is the identity at an integral scale
+///   everywhere (`RotationField::trivial`), every sample position is an integer (the
+///   interpolated frame is exactly the identity and the scale exactly `s` in `f32`), the
+///   `+1` corners have weight 0 and are never read, and the reach is `N_h s`.
+/// A margin `δ` covers `f32` rounding of positions (it grows with the volume's side).
+fn stencil_reach(
+    analysis: &SolidAnalysisRef,
+    field: &RotationField,
+    pyramid: &Pyramid,
+    params: &SolidParams,
+) -> Vec<i32> {
+    let q0 = field.rotations[0];
+    let s0 = field.scales[0];
+    let constant =
+        field.rotations.iter().all(|q| *q == q0) && field.scales.iter().all(|s| *s == s0);
+    let lattice =
+        constant && (q0 == glam::Quat::IDENTITY || q0 == -glam::Quat::IDENTITY) && s0 == s0.round();
+    let per_axis = if constant {
+        let mat = Mat3::from_quat(q0);
+        let mut e = 0.0f32;
+        for p in 0..3 {
+            let (a, b) = (mat.col(p), mat.col((p + 1) % 3));
+            for i in 0..3 {
+                e = e.max(a[i].abs() + b[i].abs());
+            }
+        }
+        e * s0
+    } else {
+        std::f32::consts::SQRT_2 * field.scales.iter().fold(0.0f32, |a, &b| a.max(b))
+    };
+    let side = pyramid.volume.dims.iter().copied().max().unwrap_or(1) as f32;
+    let delta = 1e-3 + side * f32::EPSILON * 8.0;
+    params
+        .levels
+        .iter()
+        .enumerate()
+        .map(|(li, l)| {
+            let nh = (analysis.n(li) / 2) as f32;
+            let r = if lattice {
+                (nh * per_axis) as i32
+            } else {
+                let e = nh * per_axis + delta;
+                if l.trilinear {
+                    e.floor() as i32 + 1
+                } else {
+                    (e + 0.5).floor() as i32
+                }
+            };
+            r.max(1)
+        })
+        .collect()
+}
+
 /// A configured synthesis: analysis, field, volume and parameters, validated.
 pub struct SolidSynthesis<'a> {
     analysis: SolidAnalysisRef<'a>,
@@ -835,37 +900,7 @@ impl<'a> SolidSynthesis<'a> {
                 Scheme::DualGrid => Schedule::dual_grid(l.passes, l.subpasses, m),
             })
             .collect();
-        // Per-axis extent of a unit in-plane offset: exact for a constant field, else the
-        // bound √2 · max scale.
-        let constant = field.rotations.iter().all(|q| *q == field.rotations[0])
-            && field.scales.iter().all(|s| *s == field.scales[0]);
-        let per_axis = if constant {
-            let mat = Mat3::from_quat(field.rotations[0]);
-            let mut e = 0.0f32;
-            for p in 0..3 {
-                let (a, b) = (mat.col(p), mat.col((p + 1) % 3));
-                for i in 0..3 {
-                    e = e.max(a[i].abs() + b[i].abs());
-                }
-            }
-            e * field.scales[0]
-        } else {
-            std::f32::consts::SQRT_2 * field.scales.iter().fold(0.0f32, |a, &b| a.max(b))
-        };
-        let reach = params
-            .levels
-            .iter()
-            .enumerate()
-            .map(|(li, l)| {
-                let ext = (analysis.n(li) / 2) as f32 * per_axis + 1e-3;
-                let r = if l.trilinear {
-                    ext.floor() as i32 + 1
-                } else {
-                    ext.ceil() as i32
-                };
-                r.max(1)
-            })
-            .collect();
+        let reach = stencil_reach(&analysis, field, &pyramid, &params);
         let images = analysis.meta.images as usize;
         let mean_proj = (0..pyramid.levels as usize)
             .map(|li| {
@@ -913,6 +948,14 @@ impl<'a> SolidSynthesis<'a> {
     /// The dependency stencil radius of each level (coarsest first).
     pub fn reach(&self) -> &[i32] {
         &self.reach
+    }
+
+    /// The same synthesis with a stencil `extra` voxels wider on every level: the same voxel
+    /// results from a larger dependent set (the stencil before it was made exact; for tests
+    /// and the benchmark's before/after counts).
+    pub fn widen_reach(mut self, extra: i32) -> Self {
+        self.reach.iter_mut().for_each(|r| *r += extra.max(0));
+        self
     }
 
     /// The schedule of each level (coarsest first).
@@ -1386,9 +1429,7 @@ impl<'a> SolidSynthesis<'a> {
             let img = a.image_of(p);
             let (_, basis) = a.pca(li, img);
             let mp = &self.mean_proj[li][img];
-            for k in 0..comps {
-                sc.proj[p][k] = dot(&basis[k * dim..(k + 1) * dim], &sc.vec[..dim]) - mp[k];
-            }
+            project(basis, &sc.vec[..dim], mp, &mut sc.proj[p][..comps]);
             // Candidates S_P(v), reduced form.
             for d2 in -1..=1 {
                 for d1 in -1..=1 {
@@ -1400,7 +1441,11 @@ impl<'a> SolidSynthesis<'a> {
                         wrap(round_i(tw.c[p][0] as f32 - e1), w),
                         wrap(round_i(tw.c[p][1] as f32 - e2), hh),
                     ];
-                    sc.cands.extend_from_slice(a.candidates(li, p, px));
+                    // One push each: a copy of a few triples is cheaper inline than
+                    // through a memcpy call.
+                    for t in a.candidates(li, p, px) {
+                        sc.cands.push(*t);
+                    }
                     if self.params.coherent_candidates {
                         // The neighbour's whole triple, shifted back (eq. 4).
                         sc.cands.push(tw.offset((-round_v(e)).into(), w, hh));
@@ -1442,7 +1487,23 @@ impl<'a> SolidSynthesis<'a> {
             }
         }
         let mut best = (f32::INFINITY, triple_of_key(sc.keys[0]));
-        for key in &sc.keys {
+        let prefetch = |key: u128| {
+            let cand = triple_of_key(key);
+            for p in 0..3 {
+                if weights[p] != 0.0 {
+                    prefetch_slice(a.feature(li, a.image_of(p), cand.c[p]));
+                }
+            }
+        };
+        // The features of the candidates are scattered over the exemplar's stack: ask for
+        // them a few candidates ahead (a hint only; the values compared are the same).
+        for key in sc.keys.iter().take(PREFETCH_AHEAD) {
+            prefetch(*key);
+        }
+        for (ki, key) in sc.keys.iter().enumerate() {
+            if let Some(next) = sc.keys.get(ki + PREFETCH_AHEAD) {
+                prefetch(*next);
+            }
             let cand = &triple_of_key(*key);
             let mut e = 0.0f32;
             for p in 0..3 {
@@ -1495,6 +1556,84 @@ fn triple_key(t: &Triple) -> u128 {
 fn triple_of_key(k: u128) -> Triple {
     let x = |i: u32| (k >> (16 * (5 - i))) as u16;
     Triple::new([x(0), x(1)], [x(2), x(3)], [x(4), x(5)])
+}
+
+/// Candidates whose features are requested ahead of their comparison.
+const PREFETCH_AHEAD: usize = 4;
+
+/// A cache hint for the lines of `s`.
+#[inline]
+fn prefetch_slice(s: &[f32]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let p = s.as_ptr() as *const i8;
+        let bytes = std::mem::size_of_val(s);
+        let mut off = 0;
+        while off < bytes {
+            // SAFETY: a prefetch is a hint that never faults; the address is inside `s`.
+            unsafe { _mm_prefetch(p.add(off), _MM_HINT_T0) };
+            off += 64;
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = s;
+}
+
+/// `out[k] = basis_k · x − mean_k` for the rows `basis_k` of a row-major basis: each row's dot
+/// product is [`dot`]'s, term for term and in the same order (so the same value), but four
+/// rows go through the vector at once, which keeps four independent sums in flight where
+/// one row at a time waits on its own additions.
+#[inline]
+fn project(basis: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
+    const L: usize = 8;
+    let dim = x.len();
+    let comps = out.len();
+    let whole = dim / L * L;
+    let mut k = 0;
+    while k + 4 <= comps {
+        let rows: [&[f32]; 4] = std::array::from_fn(|r| &basis[(k + r) * dim..(k + r + 1) * dim]);
+        let mut acc = [[0.0f32; L]; 4];
+        let mut c = 0;
+        while c < whole {
+            let xs = &x[c..c + L];
+            for r in 0..4 {
+                let row = &rows[r][c..c + L];
+                for i in 0..L {
+                    acc[r][i] += row[i] * xs[i];
+                }
+            }
+            c += L;
+        }
+        for r in 0..4 {
+            let mut tail = 0.0f32;
+            for i in whole..dim {
+                tail += rows[r][i] * x[i];
+            }
+            out[k + r] = reduce_lanes(acc[r]) + tail - mean[k + r];
+        }
+        k += 4;
+    }
+    while k < comps {
+        out[k] = dot(&basis[k * dim..(k + 1) * dim], x) - mean[k];
+        k += 1;
+    }
+}
+
+/// [`lane_sum`]'s final reduction of eight lanes.
+#[inline]
+fn reduce_lanes(mut acc: [f32; 8]) -> f32 {
+    let mut n = 4;
+    for i in 0..n {
+        acc[i] += acc[i + n];
+    }
+    while n > 1 {
+        for i in 0..n / 2 {
+            acc[i] = acc[2 * i] + acc[2 * i + 1];
+        }
+        n /= 2;
+    }
+    acc[0]
 }
 
 /// Dot product with eight partial sums (see [`lane_sum`]).
