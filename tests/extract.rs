@@ -15,6 +15,7 @@ use texsyn::stages::extract::planar_ransac::{
 };
 use texsyn::stages::extract::sample_region::{Region, select_region};
 use texsyn::stages::extract::{ExtractError, ExtractMethod, ExtractParams, extract_mesh_texture};
+use texsyn_core::math::PureMath;
 
 /// A rigid placement of the sample in space: world = rot · local + shift.
 struct Placement {
@@ -41,7 +42,7 @@ impl Placement {
 /// that the relief has no first moments: its least-squares plane is z = const.
 fn bumps(x: f32, y: f32) -> f32 {
     let g = |cx: f32, cy: f32, s: f32, a: f32| {
-        a * (-((x - cx).powi(2) + (y - cy).powi(2)) / (2.0 * s * s)).exp()
+        a * (-((x - cx).powi(2) + (y - cy).powi(2)) / (2.0 * s * s)).exp_pure()
     };
     let pi = std::f32::consts::PI;
     g(0.5, 0.5, 0.15, 0.05)
@@ -49,7 +50,7 @@ fn bumps(x: f32, y: f32) -> f32 {
         + g(0.5, -0.5, 0.15, 0.05)
         + g(-0.5, -0.5, 0.15, 0.05)
         + g(0.0, 0.0, 0.12, -0.03)
-        + 0.01 * (5.0 * pi * x).sin() * (4.0 * pi * y).sin()
+        + 0.01 * (5.0 * pi * x).sin_pure() * (4.0 * pi * y).sin_pure()
 }
 
 /// An (n+1)×(n+1)-vertex grid over [-1, 1]² with z = h(x, y), placed in space, optionally
@@ -251,9 +252,9 @@ fn the_height_field_takes_the_highest_crossing_of_an_overhang() {
 
 /// A flat patch with 0.004 ripples, 30% of whose area (x > 0.4) is a ridge 0.3 high.
 fn ridge(x: f32, y: f32) -> f32 {
-    let ripple = 0.004 * (20.0 * x).sin() * (17.0 * y).sin();
+    let ripple = 0.004 * (20.0 * x).sin_pure() * (17.0 * y).sin_pure();
     if x > 0.4 {
-        ripple + 0.3 * (std::f32::consts::PI * (x - 0.4) / 0.6).sin()
+        ripple + 0.3 * (std::f32::consts::PI * (x - 0.4) / 0.6).sin_pure()
     } else {
         ripple
     }
@@ -304,7 +305,7 @@ fn curved_geometry_image(n: u32, amp: f32, place: &Placement) -> (GeometryImage,
             let base = Vec3::new(u, v, -c * (u * u + v * v));
             let normal = Vec3::new(2.0 * c * u, 2.0 * c * v, 1.0).normalize();
             let tau = std::f32::consts::TAU;
-            let h = amp * (tau * u / wavelength).sin() * (tau * v / wavelength).sin();
+            let h = amp * (tau * u / wavelength).sin_pure() * (tau * v / wavelength).sin_pure();
             positions.push(place.to_world(base + h * normal));
             normals.push(place.rot * normal);
             relief.push(h);
@@ -773,7 +774,7 @@ fn geometry_image_samples_take_the_colours_of_the_disk_under_them() {
 /// A fine sinusoidal relief (wavelength 0.25, amplitude 0.02): texture, not shape.
 fn ripples(x: f32, y: f32) -> f32 {
     let k = std::f32::consts::TAU / 0.25;
-    0.02 * (k * x).sin() * (k * y).sin()
+    0.02 * (k * x).sin_pure() * (k * y).sin_pure()
 }
 
 #[test]

@@ -12,6 +12,7 @@ use std::collections::HashMap;
 use texsyn::artifact::Format;
 use texsyn::geom::geometry_image::{GeometryImage, TexelImage};
 use texsyn::pipeline::RunResult;
+use texsyn_core::math::PureMath;
 
 /// Small and quick: a 65² geometry image, 4 orientations, tiny previews.
 const SMALL: &[&str] = &[
@@ -84,7 +85,7 @@ fn a_genus_one_input_gives_a_closed_manifold_relief_with_mates_identical_and_no_
     // undisplaced surface (vertices are numbered by mate group either way).
     let undisplaced = texsyn::stages::reconstruct::displacement::grid_mesh(&gi, &gi.positions).0;
     assert_eq!(undisplaced.positions.len(), mesh.positions.len());
-    let cos_limit = 150f32.to_radians().cos();
+    let cos_limit = 150f32.to_radians().cos_pure();
     let normal = |p: &[glam::Vec3], t: &[u32; 3]| {
         (p[t[1] as usize] - p[t[0] as usize])
             .cross(p[t[2] as usize] - p[t[0] as usize])

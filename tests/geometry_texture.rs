@@ -12,6 +12,7 @@ use texsyn::stages::analyse_exemplar::texel_variants::{TexelVariantParams, build
 use texsyn::stages::synthesize::geometry_texture::{
     GeometrySynthParams, ParamField, Search, synthesize_geometry_texture,
 };
+use texsyn_core::math::PureMath;
 
 fn mean_std(v: &[f32]) -> (f64, f64) {
     let n = v.len() as f64;
@@ -68,8 +69,8 @@ fn dominant_period(t: &TexelImage) -> f64 {
             let (mut re, mut im) = (0.0, 0.0);
             for x in 0..t.width {
                 let v = t.texel(x, y)[2] as f64 - m;
-                re += v * (w * x as f64).cos();
-                im += v * (w * x as f64).sin();
+                re += v * (w * x as f64).cos_pure();
+                im += v * (w * x as f64).sin_pure();
             }
             power += re * re + im * im;
         }
@@ -258,7 +259,7 @@ fn variant_rotation_turns_the_vectors_with_the_pattern() {
             assert!((t[2] - at(0, y)[2]).abs() < 1e-6);
             // The content at sample column s shows at variant row s: dy = 0.3 cos, dn = sin.
             let a = std::f32::consts::TAU * y as f32 / 8.0;
-            assert!((t[1] - 0.3 * a.cos()).abs() < 1e-5 && (t[2] - a.sin()).abs() < 1e-5);
+            assert!((t[1] - 0.3 * a.cos_pure()).abs() < 1e-5 && (t[2] - a.sin_pure()).abs() < 1e-5);
         }
     }
     // 45°: a cropped square inside the rotated sample; the vector turned by 45°.
@@ -372,4 +373,3 @@ fn too_small_samples_and_bad_inputs_are_errors() {
     f.dir.pop();
     assert!(synthesize_geometry_texture(&flat(33), &f, &v.as_ref(), &p, &|_| {}).is_err());
 }
-

@@ -2,6 +2,7 @@
 //! names the key, the allowed values and the value given, e.g.
 //! `synthesize.width must be in 1..=16384, got 0`.
 
+use crate::math::PureMath;
 use std::fmt::Display;
 
 /// A parameter that is out of its range or otherwise unusable.
@@ -130,7 +131,7 @@ impl Display for Significant {
         } else if !(1e-3..1e6).contains(&x.abs()) {
             write!(f, "{x:.3e}")
         } else {
-            let digits = (3 - x.abs().log10().floor() as i32).max(0) as usize;
+            let digits = (3 - x.abs().log10_pure().floor() as i32).max(0) as usize;
             write!(f, "{x:.digits$}")
         }
     }

@@ -11,6 +11,7 @@ pub mod export;
 pub mod geom;
 pub mod image;
 pub mod linalg;
+pub mod math;
 pub mod max_flow;
 pub mod memory;
 pub mod random;

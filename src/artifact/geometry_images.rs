@@ -141,9 +141,9 @@ impl Format for TexelVariants {
 mod tests {
     use super::*;
     use crate::stages::analyse_exemplar::texel_variants::{
-        Template, TexelVariantParams, VariantsMeta, build_texel_variants,
-        build_texel_variants_with,
+        Template, TexelVariantParams, VariantsMeta, build_texel_variants, build_texel_variants_with,
     };
+    use texsyn_core::math::PureMath;
 
     fn stripes(n: u32, period: f32) -> TexelImage {
         let mut t = TexelImage::new(n, n, 3);
@@ -152,7 +152,7 @@ mod tests {
                 let p = t.texel_mut(x, y);
                 p[0] = 1.0;
                 p[1] = 0.25;
-                p[2] = (std::f32::consts::TAU * x as f32 / period).sin();
+                p[2] = (std::f32::consts::TAU * x as f32 / period).sin_pure();
             }
         }
         t

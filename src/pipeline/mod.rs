@@ -192,6 +192,11 @@ pub struct Node {
     pub(crate) compute: ComputeFn,
 }
 
+/// Mixed into every node key: a change to arithmetic that every node shares changes every key,
+/// as a version bump of every algorithm would. v2: transcendental functions from the pure-Rust
+/// libm (`texsyn_core::math`) instead of the platform's C library (issue 14, item 1).
+pub const KEY_EPOCH: &[u8] = b"texsyn node key v2\0";
+
 /// A method's nodes in topological order (every input refers to an earlier node).
 #[derive(Default)]
 pub struct Dag {
@@ -240,10 +245,10 @@ impl Dag {
         self.nodes.iter().position(|n| n.name == name)
     }
 
-    /// The node's key, given the content hashes of its inputs.
+    /// The node's key, given the content hashes of its inputs. [`KEY_EPOCH`] comes first.
     pub fn key(&self, node: &Node, input_hashes: &[ContentHash]) -> Key {
         let mut h = blake3::Hasher::new();
-        h.update(b"texsyn node key v1\0");
+        h.update(KEY_EPOCH);
         h.update(node.stage.name().as_bytes());
         h.update(b"\0");
         h.update(node.algorithm.as_bytes());

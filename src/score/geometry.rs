@@ -25,6 +25,7 @@ use crate::stages::analyse_exemplar::texel_variants::TexelVariants;
 use crate::stages::reconstruct::displacement::grid_mesh;
 use std::collections::HashMap;
 use std::path::Path;
+use texsyn_core::math::PureMath;
 
 /// The texel channel holding the height (`dn`).
 const HEIGHT: usize = 2;
@@ -75,7 +76,7 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Item, ScoreFailure> {
         item.notes.push(format!(
             "field.density_offset = {offset}: the texture is synthesized {:.2}× denser than the \
              reference, so the ratio compares unlike scales (it is meaningful at 0)",
-            2f32.powf(offset)
+            2f32.powf_pure(offset)
         ));
     }
 

@@ -36,6 +36,7 @@ use crate::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
 use crate::stages::synthesize::graph_matching::GraphMatching;
 use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
 use glam::{Vec2, Vec3};
+use texsyn_core::math::PureMath;
 
 pub(crate) fn graph_matching(run: &Run) -> Result<Item, ScoreFailure> {
     let c: GraphMatchingConfig = run
@@ -98,7 +99,7 @@ pub(crate) fn feature_aligned(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
     // `frames` gives (u, n × u)… as (up, right) = (u, u × n); texture optimization's second
     // axis is n × u = −right.
     let frames = frames(&normals, &vectors);
-    let (cos, sin) = (tf.principal_angle.cos(), tf.principal_angle.sin());
+    let (cos, sin) = (tf.principal_angle.cos_pure(), tf.principal_angle.sin_pure());
     let step = |from: usize, to: usize| {
         let d = mesh.positions[to] - mesh.positions[from];
         let (u, right) = frames[from];

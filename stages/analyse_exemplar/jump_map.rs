@@ -37,6 +37,7 @@ use crate::image::knn::KdTree;
 use crate::image::neighbourhood::{NeighbourhoodParams, Neighbourhoods};
 use crate::image::pca::{Pca, PcaParams};
 use rayon::prelude::*;
+use texsyn_core::math::PureMath;
 
 /// The smallest weight a found jump gets (weight 0 marks an unused slot).
 pub const MIN_WEIGHT: f32 = 1e-9;
@@ -359,7 +360,7 @@ pub fn build_jump_map(img: ImageView, params: &JumpMapParams, progress: &dyn Fn(
                 *s = if id == u32::MAX {
                     0.0
                 } else if sigma > 0.0 {
-                    (-(d2 as f64) / (2.0 * sigma * sigma)).exp()
+                    (-(d2 as f64) / (2.0 * sigma * sigma)).exp_pure()
                 } else if d2 == 0.0 {
                     1.0
                 } else {

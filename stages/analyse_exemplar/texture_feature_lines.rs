@@ -82,6 +82,7 @@
 use crate::check::{ParamError, check_range};
 use crate::image::Image;
 use serde::{Deserialize, Serialize};
+use texsyn_core::math::PureMath;
 
 /// Below this scale-normalised strength (σ²·λ, in luminance units: about the Hessian answer to
 /// a line of 1.5/255 contrast) nothing is a line, whatever `threshold` says: 8-bit
@@ -477,7 +478,10 @@ fn kernels(sigma: f64) -> (i64, Vec<f64>, Vec<f64>, Vec<f64>) {
     let r = (4.0 * sigma).ceil().max(2.0) as i64;
     let ks: Vec<f64> = (-r..=r).map(|k| k as f64).collect();
     let s2 = sigma * sigma;
-    let mut g: Vec<f64> = ks.iter().map(|k| (-k * k / (2.0 * s2)).exp()).collect();
+    let mut g: Vec<f64> = ks
+        .iter()
+        .map(|k| (-k * k / (2.0 * s2)).exp_pure())
+        .collect();
     let sum: f64 = g.iter().sum();
     g.iter_mut().for_each(|x| *x /= sum);
     let mut d1: Vec<f64> = ks.iter().zip(&g).map(|(k, g)| k / s2 * g).collect();
@@ -549,9 +553,9 @@ fn line_response(
         let dev = (0.25 * (a - c) * (a - c) + b * b).sqrt();
         let (l1, l2) = (mean + dev, mean - dev);
         // Eigenvector of λ₁; λ₂'s is perpendicular to it.
-        let phi = 0.5 * (2.0 * b).atan2(a - c);
-        let e1 = [phi.cos(), phi.sin()];
-        let e2 = [-phi.sin(), phi.cos()];
+        let phi = 0.5 * (2.0 * b).atan2_pure(a - c);
+        let e1 = [phi.cos_pure(), phi.sin_pure()];
+        let e2 = [-phi.sin_pure(), phi.cos_pure()];
         let dark = (s2 * l1).max(0.0);
         let bright = (-s2 * l2).max(0.0);
         let (s, n) = match polarity {
@@ -807,10 +811,10 @@ fn split_at_corners(c: Vec<usize>, w: usize, arm: f32) -> Vec<Vec<usize>> {
         let (a, v, b) = (pts[i - k], pts[i], pts[i + k]);
         let (ux, uy) = (v[0] - a[0], v[1] - a[1]);
         let (wx, wy) = (b[0] - v[0], b[1] - v[1]);
-        let norm = (ux.hypot(uy) * wx.hypot(wy)).max(f32::MIN_POSITIVE);
+        let norm = (ux.hypot_pure(uy) * wx.hypot_pure(wy)).max(f32::MIN_POSITIVE);
         cos_turn[i] = (ux * wx + uy * wy) / norm;
     }
-    let cos_limit = CORNER_DEG.to_radians().cos();
+    let cos_limit = CORNER_DEG.to_radians().cos_pure();
     let mut cuts = Vec::new();
     for i in k..n - k {
         if cos_turn[i] >= cos_limit {
@@ -912,7 +916,7 @@ fn principal_line(lines: &[Vec<[f32; 2]>]) -> (usize, f32) {
                     line: li,
                     from: s[0],
                     to: s[1],
-                    angle: fold_angle(dy.atan2(dx)),
+                    angle: fold_angle(dy.atan2_pure(dx)),
                     length,
                 });
             }
@@ -939,13 +943,13 @@ fn principal_line(lines: &[Vec<[f32; 2]>]) -> (usize, f32) {
             .iter()
             .filter(|t| angle_between(dominant, t.angle) <= window)
         {
-            c2 += t.length as f64 * (2.0 * t.angle as f64).cos();
-            s2 += t.length as f64 * (2.0 * t.angle as f64).sin();
+            c2 += t.length as f64 * (2.0 * t.angle as f64).cos_pure();
+            s2 += t.length as f64 * (2.0 * t.angle as f64).sin_pure();
         }
         if c2 == 0.0 && s2 == 0.0 {
             break;
         }
-        dominant = fold_angle((0.5 * s2.atan2(c2)) as f32);
+        dominant = fold_angle((0.5 * s2.atan2_pure(c2)) as f32);
     }
     let mut aligned = vec![0.0f32; lines.len()];
     for s in &segs {
@@ -989,7 +993,7 @@ fn principal_line(lines: &[Vec<[f32; 2]>]) -> (usize, f32) {
         cxy += wgt * (x - cx) * (y - cy);
         cyy += wgt * (y - cy) * (y - cy);
     }
-    let angle = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+    let angle = 0.5 * (2.0 * cxy).atan2_pure(cxx - cyy);
     (principal, fold_angle(angle as f32))
 }
 
@@ -1005,7 +1009,7 @@ mod tests {
     /// direction `angle` (radians, y down), antialiased, one every `PERIOD` texels; returns the
     /// image and the stripes' signed distance function (0 on a stripe's centre line).
     fn stripes(w: u32, h: u32, angle: f32, seed: u64) -> (Image, impl Fn(f32, f32) -> f32) {
-        let (c, s) = (angle.cos(), angle.sin());
+        let (c, s) = (angle.cos_pure(), angle.sin_pure());
         let (cx, cy) = (w as f32 / 2.0 + 0.5, h as f32 / 2.0 + 0.5);
         let offset = move |x: f32, y: f32| {
             let t = -s * (x - cx) + c * (y - cy);
@@ -1045,7 +1049,7 @@ mod tests {
             );
         }
         // Walk each stripe's centre line at unit steps.
-        let (c, s) = (angle.cos(), angle.sin());
+        let (c, s) = (angle.cos_pure(), angle.sin_pure());
         let (cx, cy) = (w as f32 / 2.0 + 0.5, h as f32 / 2.0 + 0.5);
         let reach = (w + h) as i32;
         let mut stripes_checked = 0;
@@ -1223,7 +1227,12 @@ mod tests {
             .map(|l| {
                 let (a, b) = (l[0], l[l.len() - 1]);
                 assert!(line_length(l) >= 30.0, "a piece of {}", line_length(l));
-                (b[1] - a[1]).atan2(b[0] - a[0]).to_degrees().abs().round() as i32 % 180
+                (b[1] - a[1])
+                    .atan2_pure(b[0] - a[0])
+                    .to_degrees()
+                    .abs()
+                    .round() as i32
+                    % 180
             })
             .collect();
         dirs.sort();
@@ -1333,7 +1342,7 @@ mod tests {
     fn mask_diagonal_gives_its_angle() {
         let (w, h) = (100, 80);
         let exemplar = Image::from_fn(w, h, |_, _| [0.5, 0.5, 0.5, 1.0]);
-        let expected = (-50.0f32).atan2(80.0).to_degrees(); // rises to the right: negative
+        let expected = (-50.0f32).atan2_pure(80.0).to_degrees(); // rises to the right: negative
         for alpha in [false, true] {
             let f = features_from_mask(&exemplar, &diagonal_mask(w, h, alpha), &Default::default())
                 .unwrap();
@@ -1345,9 +1354,10 @@ mod tests {
             assert_eq!(f.lines.len(), 1, "{} lines", f.lines.len());
             // Thinned: one texel per step, near the stroke's centre line.
             let l = &f.lines[0];
-            assert!(line_length(l) >= 0.9 * (80.0f32.hypot(50.0) - 4.0));
+            assert!(line_length(l) >= 0.9 * (80.0f32.hypot_pure(50.0) - 4.0));
             for q in l {
-                let d = ((q[0] - 10.0) * -50.0 - (q[1] - 70.0) * 80.0).abs() / 80.0f32.hypot(50.0);
+                let d =
+                    ((q[0] - 10.0) * -50.0 - (q[1] - 70.0) * 80.0).abs() / 80.0f32.hypot_pure(50.0);
                 assert!(
                     d <= 1.0,
                     "skeleton texel {q:?} is {d} off the stroke's axis"
@@ -1421,7 +1431,7 @@ mod tests {
         let mut m = vec![false; 30 * 20];
         m[0] = true;
         let d = distance_transform(&m, 30, 20);
-        assert!((d[30 * 20 - 1] - (29.0f32).hypot(19.0)).abs() < 1e-4);
+        assert!((d[30 * 20 - 1] - (29.0f32).hypot_pure(19.0)).abs() < 1e-4);
     }
 
     #[test]

@@ -26,6 +26,7 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicU32, Ordering};
+use texsyn_core::math::PureMath;
 
 /// The bilateral filter's widths.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -173,7 +174,7 @@ pub fn bilateral_difference(
         .map(|k| {
             let (di, dj) = (k / w, k % w);
             let d2 = (di as f64 - r as f64).powi(2) + (dj as f64 - r as f64).powi(2);
-            (-d2 / (2.0 * sigma_grid as f64 * sigma_grid as f64)).exp()
+            (-d2 / (2.0 * sigma_grid as f64 * sigma_grid as f64)).exp_pure()
         })
         .collect();
     // The window is the disc of radius r: per window row, the columns within it.
@@ -198,7 +199,7 @@ pub fn bilateral_difference(
                 let arow = &alpha[di * w + c0..di * w + c1];
                 for (&p, &a) in row.iter().zip(arow) {
                     let d = p - p0;
-                    let wt = a * (-d.length_squared() * inv_two_s2).exp();
+                    let wt = a * (-d.length_squared() * inv_two_s2).exp_pure();
                     sum += wt * d;
                     weight += wt;
                 }

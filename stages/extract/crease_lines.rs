@@ -17,6 +17,7 @@ use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+use texsyn_core::math::PureMath;
 
 /// Parameters of [`crease_lines`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -55,7 +56,7 @@ pub struct Polyline {
 /// The creases of `mesh` (see the module doc), in a deterministic order: open polylines by
 /// their first edge in vertex order, then loops.
 pub fn crease_lines(mesh: &Mesh, p: &CreaseParams) -> Vec<Polyline> {
-    let cos_limit = p.angle.to_radians().cos();
+    let cos_limit = p.angle.to_radians().cos_pure();
     // Undirected edge -> the faces using it.
     let mut faces: BTreeMap<(u32, u32), Vec<usize>> = BTreeMap::new();
     for (f, t) in mesh.triangles.iter().enumerate() {
@@ -136,8 +137,8 @@ mod tests {
         for p in &mut m.positions {
             if p.x > 0.5 {
                 let d = p.x - 0.5;
-                p.x = 0.5 + d * a.cos();
-                p.z = d * a.sin();
+                p.x = 0.5 + d * a.cos_pure();
+                p.z = d * a.sin_pure();
             }
         }
         Mesh::new(m.positions.clone(), m.triangles.clone())
@@ -183,7 +184,11 @@ mod tests {
             for i in 0..n {
                 let a = i as f32 / n as f32 * std::f32::consts::TAU;
                 let r = if ring == 1 { 1.5 } else { 1.0 };
-                pos.push(glam::Vec3::new(r * a.cos(), ring as f32, r * a.sin()));
+                pos.push(glam::Vec3::new(
+                    r * a.cos_pure(),
+                    ring as f32,
+                    r * a.sin_pure(),
+                ));
             }
         }
         let mut tris = Vec::new();

@@ -60,6 +60,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+use texsyn_core::math::PureMath;
 
 /// Which crest lines to find.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -323,12 +324,12 @@ fn fit_vertex(
     let (k1, k2) = (half_tr + root, half_tr - root);
     let ev_a = (s12, k1 - s11);
     let ev_b = (k1 - s22, s21);
-    let (al, be) = if ev_a.0.hypot(ev_a.1) >= ev_b.0.hypot(ev_b.1) {
+    let (al, be) = if ev_a.0.hypot_pure(ev_a.1) >= ev_b.0.hypot_pure(ev_b.1) {
         ev_a
     } else {
         ev_b
     };
-    let (al, be) = if al.hypot(be) < 1e-12 * (1.0 + k1.abs()) {
+    let (al, be) = if al.hypot_pure(be) < 1e-12 * (1.0 + k1.abs()) {
         (1.0, 0.0)
     } else {
         (al, be)
@@ -699,7 +700,7 @@ mod tests {
             for i in 0..n {
                 // Alternate rows are offset by half a step, for near-equilateral triangles.
                 let a = (i as f32 + 0.5 * (j % 2) as f32) / n as f32 * TAU;
-                pos.push(Vec3::new(r * a.cos(), r * a.sin(), j as f32 * h));
+                pos.push(Vec3::new(r * a.cos_pure(), r * a.sin_pure(), j as f32 * h));
             }
         }
         let mut tris = Vec::new();
@@ -786,7 +787,7 @@ mod tests {
             .iter()
             .map(|p| {
                 let x = p.x + x0;
-                Vec3::new(x, p.y, amp * (TAU * x / lambda).sin())
+                Vec3::new(x, p.y, amp * (TAU * x / lambda).sin_pure())
             })
             .collect();
         Mesh::new(pos, g.triangles.clone())

@@ -29,6 +29,7 @@ use crate::random::counter_hash;
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use texsyn_core::math::PureMath;
 
 /// Random streams of this module (counter-based, see [`crate::random`]).
 const STREAM_FACE: u64 = 0x5041_4e45_0001;
@@ -61,7 +62,7 @@ impl Plane {
     /// The same plane with (e1, e2) turned by `angle` radians about the normal, so that the
     /// new coordinates of a point are [`rotate_into`] of its old ones.
     pub fn rotated(&self, angle: f32) -> Plane {
-        let (s, c) = angle.sin_cos();
+        let (s, c) = angle.sin_cos_pure();
         let e1 = (c * self.e1 + s * self.e2).normalize();
         Plane {
             origin: self.origin,

@@ -14,6 +14,7 @@
 
 use glam::Vec2;
 use rayon::prelude::*;
+use texsyn_core::math::PureMath;
 
 /// How many square orientations are tried, evenly spaced over 90°.
 pub const ANGLES: u32 = 18;
@@ -41,7 +42,7 @@ impl Square {
 /// of `p` along (cos a, sin a) and (−sin a, cos a).
 #[inline]
 pub fn rotate_into(p: Vec2, angle: f32) -> Vec2 {
-    let (s, c) = angle.sin_cos();
+    let (s, c) = angle.sin_cos_pure();
     Vec2::new(c * p.x + s * p.y, -s * p.x + c * p.y)
 }
 

@@ -40,6 +40,7 @@ use crate::geom::Mesh;
 use glam::Vec3;
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
+use texsyn_core::math::PureMath;
 
 /// Number of edges over which incoming/outgoing directions are measured (see module doc).
 pub const SPAN: usize = 4;
@@ -58,7 +59,7 @@ pub fn group_and_break(
         .filter(|c| c.vertices.len() >= 2 && c.vertices.iter().all(|&v| (v as usize) < n))
         .cloned()
         .collect();
-    let cos_limit = break_angle.to_radians().cos();
+    let cos_limit = break_angle.to_radians().cos_pure();
     join_all(mesh, &mut work, join_distance, cos_limit);
     work.iter()
         .flat_map(|c| break_curve(mesh, c, cos_limit))

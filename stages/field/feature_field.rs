@@ -71,6 +71,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::time::Instant;
+use texsyn_core::math::PureMath;
 
 /// Stream of `counter_hash` for arbitrary curve signs.
 const SIGN_STREAM: u64 = 0x5167_0001;
@@ -573,7 +574,10 @@ pub fn consistency_score(mesh: &Mesh, curve: &Polyline, field: &[Vec3]) -> (f64,
         let theta = if t.length() < 1e-6 || u.length() < 1e-6 {
             PI / 2.0
         } else {
-            t.normalize().dot(u.normalize()).clamp(-1.0, 1.0).acos()
+            t.normalize()
+                .dot(u.normalize())
+                .clamp(-1.0, 1.0)
+                .acos_pure()
         };
         agree += (PI - theta) / (PI + theta);
         oppose += theta / (2.0 * PI - theta);
@@ -607,7 +611,7 @@ fn triangle_index(mesh: &Mesh, field: &[Vec3], f: usize) -> Option<i32> {
     let mut sum = 0.0;
     for k in 0..3 {
         let (a, b) = (w[k], w[(k + 1) % 3]);
-        sum += n.dot(a.cross(b)).atan2(a.dot(b));
+        sum += n.dot(a.cross(b)).atan2_pure(a.dot(b));
     }
     Some((sum / (2.0 * PI)).round() as i32)
 }
@@ -709,7 +713,11 @@ mod tests {
                 let n = normals[v];
                 let t = tangent(mesh, c, k) * *s as f32;
                 let t = (t - n * n.dot(t)).normalize();
-                let angle = f.vectors[v].dot(t).clamp(-1.0, 1.0).acos().to_degrees();
+                let angle = f.vectors[v]
+                    .dot(t)
+                    .clamp(-1.0, 1.0)
+                    .acos_pure()
+                    .to_degrees();
                 assert!(
                     angle < max_deg,
                     "vertex {v}: field is {angle}° off the curve"
@@ -734,7 +742,7 @@ mod tests {
                 &polyline(
                     |t| {
                         let a = t * std::f32::consts::PI;
-                        Vec3::new(0.5 + 0.25 * a.cos(), 0.5 + 0.25 * a.sin(), 0.0)
+                        Vec3::new(0.5 + 0.25 * a.cos_pure(), 0.5 + 0.25 * a.sin_pure(), 0.0)
                     },
                     24,
                 ),
@@ -778,7 +786,7 @@ mod tests {
                 curves.push(trace(
                     mesh,
                     &polyline(
-                        |t| Vec3::new(x0 + 0.38 * t, y + 0.025 * (6.0 * t + phase).sin(), 0.0),
+                        |t| Vec3::new(x0 + 0.38 * t, y + 0.025 * (6.0 * t + phase).sin_pure(), 0.0),
                         12,
                     ),
                     false,
@@ -986,7 +994,7 @@ mod tests {
             &polyline(
                 |t| {
                     let a = t * 2.0;
-                    Vec3::new(0.5 + 0.35 * a.cos(), 0.5 + 0.35 * a.sin(), 0.0)
+                    Vec3::new(0.5 + 0.35 * a.cos_pure(), 0.5 + 0.35 * a.sin_pure(), 0.0)
                 },
                 30,
             ),

@@ -29,6 +29,7 @@ use crate::geom::Mesh;
 use crate::geom::laplacian::{cotan_weights, harmonic_interpolate};
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
+use texsyn_core::math::PureMath;
 
 /// A place on the mesh: a position (snapped to the nearest vertex) or a vertex index.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -215,7 +216,7 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
                     .map(|&(v, d)| {
                         let (b, nv) = (fill[v as usize], normals[v as usize]);
                         let d = tangent(d, nv);
-                        let angle = (nv.cross(b).dot(d) as f64).atan2(b.dot(d) as f64);
+                        let angle = (nv.cross(b).dot(d) as f64).atan2_pure(b.dot(d) as f64);
                         (v, vec![angle])
                     })
                     .collect();
@@ -223,7 +224,7 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
                 field = (0..n)
                     .map(|v| {
                         let (b, nv) = (fill[v], normals[v]);
-                        let (s, c) = (theta[v] as f32).sin_cos();
+                        let (s, c) = (theta[v] as f32).sin_cos_pure();
                         c * b + s * nv.cross(b)
                     })
                     .collect();
@@ -452,9 +453,9 @@ mod tests {
             for s in 0..segments {
                 let ph = 2.0 * std::f32::consts::PI * s as f32 / segments as f32;
                 p.push(Vec3::new(
-                    th.sin() * ph.cos(),
-                    th.cos(),
-                    th.sin() * ph.sin(),
+                    th.sin_pure() * ph.cos_pure(),
+                    th.cos_pure(),
+                    th.sin_pure() * ph.sin_pure(),
                 ));
             }
         }

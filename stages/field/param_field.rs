@@ -20,6 +20,7 @@ use crate::geom::geometry_image::GeometryImage;
 use crate::linalg::{SolveError, SpdSolver};
 use glam::{DVec3, Vec2, Vec3};
 use serde::{Deserialize, Serialize};
+use texsyn_core::math::PureMath;
 
 /// A key tangent vector: a direction at the surface point nearest to `at`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -98,7 +99,7 @@ pub fn param_field(
     };
     let spacing = local_spacing(gi);
     let mean = spacing.iter().map(|&s| s as f64).sum::<f64>() / count as f64;
-    let factor = 2f64.powf(p.density_offset as f64);
+    let factor = 2f64.powf_pure(p.density_offset as f64);
     let rel_scale = spacing
         .iter()
         .map(|&s| {
@@ -383,7 +384,7 @@ mod tests {
         };
         let f = param_field(&gi, &p).unwrap();
         // Turning monotonically from +x at the bottom to +y at the top, along column 4.
-        let angle = |i: usize| f.dir[i * n + 4].y.atan2(f.dir[i * n + 4].x);
+        let angle = |i: usize| f.dir[i * n + 4].y.atan2_pure(f.dir[i * n + 4].x);
         for i in 1..n {
             assert!(angle(i) >= angle(i - 1) - 1e-4, "row {i}");
         }

@@ -572,6 +572,7 @@ fn normalize_or_neighbour(grid: &FieldGrid, q: Vec<DQuat>) -> Vec<Quat> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use texsyn_core::math::PureMath;
 
     fn grid() -> FieldGrid {
         FieldGrid::covering(Vec3::ZERO, Vec3::new(2.0, 1.0, 1.0), 10)
@@ -583,7 +584,7 @@ mod tests {
             .dot(dir.normalize())
             .abs()
             .clamp(0.0, 1.0)
-            .acos()
+            .acos_pure()
             .to_degrees()
     }
 

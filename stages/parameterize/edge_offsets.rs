@@ -134,6 +134,7 @@ pub fn largest_fitting_scale(boxes: &[OffsetBox], scale: f32, width: u32, height
 #[cfg(test)]
 mod tests {
     use super::*;
+    use texsyn_core::math::PureMath;
 
     use crate::geom::primitives::grid;
 
@@ -166,7 +167,7 @@ mod tests {
         let mut m = grid(6, 0.3);
         // Bend it and give it a swirling field so frames differ between endpoints.
         for p in &mut m.positions {
-            p.z = (p.x * 3.0).sin() * 0.2;
+            p.z = (p.x * 3.0).sin_pure() * 0.2;
         }
         let m = Mesh::new(m.positions.clone(), m.triangles.clone());
         let n = m.vertex_normals().to_vec();

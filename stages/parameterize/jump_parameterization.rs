@@ -17,6 +17,7 @@ use crate::parameterize::region_growing::region_growing_order;
 use crate::synthesize::jump_walk::WalkInput;
 use glam::Vec2;
 use serde::{Deserialize, Serialize};
+use texsyn_core::math::PureMath;
 
 /// `[parameterize]`.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
@@ -211,7 +212,7 @@ pub fn jump_parameterization(
         if p.rotation != 0.0 {
             // Texel y points down, so a counter-clockwise turn on screen is clockwise in
             // (x, y). Negation commutes with the rotation exactly, keeping offsets antisymmetric.
-            let (s, c) = (-p.rotation.to_radians()).sin_cos();
+            let (s, c) = (-p.rotation.to_radians()).sin_cos_pure();
             for d in &mut o {
                 *d = glam::Vec2::new(c * d.x - s * d.y, s * d.x + c * d.y);
             }

@@ -14,6 +14,7 @@
 
 use crate::image::{Image, ImageView};
 use rayon::prelude::*;
+use texsyn_core::math::PureMath;
 
 /// The blend radius that looked best on the test exemplars with the default synthesis
 /// parameters: 1 (a 3×3 kernel, σ = 1). 0 leaves jagged seams; 2 visibly softens them.
@@ -39,7 +40,7 @@ pub fn render_2d(
     let r = blend_radius as i64;
     let sigma = blend_radius as f32 / 2.0 + 0.5;
     let kernel: Vec<f32> = (-r..=r)
-        .map(|d| (-((d * d) as f32) / (2.0 * sigma * sigma)).exp())
+        .map(|d| (-((d * d) as f32) / (2.0 * sigma * sigma)).exp_pure())
         .collect();
     out.pixels
         .par_chunks_mut(w)
@@ -138,7 +139,7 @@ mod tests {
             })
             .collect();
         let b = render_2d(ex.view(), &addr, w, h, 1);
-        let k = [(-0.5f32).exp(), 1.0, (-0.5f32).exp()]; // sigma = 1
+        let k = [(-0.5f32).exp_pure(), 1.0, (-0.5f32).exp_pure()]; // sigma = 1
         // Pixel 2: q = 1, 2 from patch A (address x), q = 3 from patch B, whose continuation to
         // p = 2 is (-1, 5), clamped to (0, 5).
         let want = (k[0] * ex.view().get(2, 0)[1]

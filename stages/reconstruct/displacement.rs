@@ -24,6 +24,7 @@ use crate::geom::geometry_image::{GeometryImage, TexelImage, local_frames};
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use texsyn_core::math::PureMath;
 
 /// `[reconstruct]` of the geometry-image method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -106,7 +107,7 @@ pub fn displace(
             (t[0] * f.x + t[1] * f.y + t[2] * f.n) * scale
         })
         .collect();
-    let cos_limit = p.flip_angle.to_radians().cos();
+    let cos_limit = p.flip_angle.to_radians().cos_pure();
     // Flips are judged per grid triangle: a triangle whose normal turns too far unwinds the
     // last step of all its samples (the "related vertices" of §4.4.1), whichever moved.
     let cells = grid_triangles(n);
@@ -442,7 +443,8 @@ mod tests {
             let angle = |j: usize| j as f32 / (n - 1) as f32 * std::f32::consts::TAU;
             for j in 0..n as usize {
                 let a = angle(j);
-                gi.positions[i * n as usize + j] = Vec3::new(a.cos(), i as f32 * 0.3, a.sin());
+                gi.positions[i * n as usize + j] =
+                    Vec3::new(a.cos_pure(), i as f32 * 0.3, a.sin_pure());
             }
             gi.positions[r] = gi.positions[l];
             gi.mate_rep[r] = l as u32;

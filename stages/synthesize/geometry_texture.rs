@@ -84,6 +84,7 @@ use crate::random::{counter_hash, counter_unit};
 use glam::Vec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use texsyn_core::math::PureMath;
 
 /// The per-sample controls of synthesis (§4.3), computed by the field stage.
 pub use crate::field::param_field::ParamField;
@@ -704,10 +705,7 @@ impl Ctx<'_, '_> {
             };
             let (sv, sk) = ((src >> 32) as usize, (src & 0xFFFF_FFFF) as u32);
             let sw = vars.level(sv, l).width;
-            let q = [
-                (sk % sw) as f64 - dx as f64,
-                (sk / sw) as f64 - dy as f64,
-            ];
+            let q = [(sk % sw) as f64 - dx as f64, (sk / sw) as f64 - dy as f64];
             let q = if sv == v {
                 q
             } else {
@@ -743,7 +741,11 @@ impl Ctx<'_, '_> {
         cands.dedup_by(|b, a| *a >> 1 == *b >> 1);
         if cands.is_empty() && !(l + 1 == nl && kind == Template::Causal) {
             // Nothing coherent lies inside the variant: a random texel whose template does.
-            let h = counter_hash(self.seed, STREAM_FALLBACK, choice_index(l, pass, lv.grid.idx(i, j)));
+            let h = counter_hash(
+                self.seed,
+                STREAM_FALLBACK,
+                choice_index(l, pass, lv.grid.idx(i, j)),
+            );
             let nx = (range[1] - range[0] + 1) as u64;
             let ny = (range[3] - range[2] + 1) as u64;
             let x = range[0] + (h % nx) as i64;
@@ -1021,7 +1023,7 @@ fn synthesize_impl(
         .iter()
         .map(|&d| {
             let (cos, sin) = dir_rotation(d);
-            let theta = (sin as f64).atan2(cos as f64);
+            let theta = (sin as f64).atan2_pure(cos as f64);
             let f = (theta / (tau / kk as f64)).rem_euclid(kk as f64);
             if f >= kk as f64 { 0.0 } else { f as f32 }
         })
@@ -1029,7 +1031,7 @@ fn synthesize_impl(
     let scale0: Vec<f32> = field
         .rel_scale
         .iter()
-        .map(|&r| (r.log2() + mid as f32).clamp(0.0, (ss - 1) as f32))
+        .map(|&r| (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32))
         .collect();
 
     // Level grids: mates from the level-0 samples on each level's lattice.
@@ -1394,9 +1396,9 @@ mod tests {
             for x in 0..40u32 {
                 let h = counter_unit(9, 0, (y * 40 + x) as u64);
                 let t = sample.texel_mut(x, y);
-                t[0] = (x as f32 * 0.7).sin() * 0.2;
+                t[0] = (x as f32 * 0.7).sin_pure() * 0.2;
                 t[1] = h - 0.5;
-                t[2] = (x as f32 * 0.9 + y as f32 * 0.3).sin() + 0.3 * h;
+                t[2] = (x as f32 * 0.9 + y as f32 * 0.3).sin_pure() + 0.3 * h;
             }
         }
         let vp = TexelVariantParams {
@@ -1441,8 +1443,7 @@ mod tests {
                 };
                 let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
                 let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
-                let bits =
-                    |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                let bits = |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&a), bits(&b), "template {template} {search:?}");
             }
         }

@@ -66,6 +66,7 @@ use crate::random::counter_hash;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use texsyn_core::math::PureMath;
 use texsyn_core::max_flow::MaxFlow;
 
 /// How the best texel is searched.
@@ -368,7 +369,13 @@ impl<'a> Level<'a> {
         let ebar = mesh.mean_edge_lengths();
         let stack = input.stack;
         let top = stack.levels() as f32 - 1.0;
-        let level_of = |e: f32| (input.scale * e).max(1e-9).log2().round().clamp(0.0, top) as u8;
+        let level_of = |e: f32| {
+            (input.scale * e)
+                .max(1e-9)
+                .log2_pure()
+                .round()
+                .clamp(0.0, top) as u8
+        };
         let mean_level = level_of(mesh.mean_edge_length());
         let n = mesh.vertex_count();
         let mut up = vec![Vec3::ZERO; n];
@@ -757,7 +764,7 @@ impl MatchCtx<'_, '_> {
                         {
                             let x2 = r.offset[i].length_squared() + r.offset[j].length_squared();
                             let w = (mismatch[i] + mismatch[j])
-                                * (-x2 / (self.p.sigma * diameter2)).exp();
+                                * (-x2 / (self.p.sigma * diameter2)).exp_pure();
                             flow.add_edge(i, j, w as f64, w as f64);
                         }
                     }

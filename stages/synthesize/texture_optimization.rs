@@ -123,6 +123,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, VecDeque};
+use texsyn_core::math::PureMath;
 
 const STREAM_ORDER: u64 = 1;
 const STREAM_INIT: u64 = 2;
@@ -922,8 +923,8 @@ pub fn texture_optimization(
         }
     }
     let rot = Rot {
-        c: input.exemplar_angle.cos(),
-        s: input.exemplar_angle.sin(),
+        c: input.exemplar_angle.cos_pure(),
+        s: input.exemplar_angle.sin_pure(),
     };
     let w = p.patch as usize;
     let finest = Level { w, step: 1.0 };
@@ -1102,7 +1103,7 @@ pub fn texture_optimization(
                 .map(|(&e, &zi)| {
                     (e.sqrt() as f32)
                         .max(MIN_PATCH_DISTANCE)
-                        .powf(p.robust_exponent - 2.0)
+                        .powf_pure(p.robust_exponent - 2.0)
                         / penalty[zi as usize]
                 })
                 .collect();
@@ -1205,7 +1206,7 @@ fn total_energy(
     errors
         .iter()
         .zip(&info.lambda)
-        .map(|(&e, &l)| l as f64 * e.powf(r as f64 * 0.5))
+        .map(|(&e, &l)| l as f64 * e.powf_pure(r as f64 * 0.5))
         .sum()
 }
 
@@ -1829,7 +1830,9 @@ mod tests {
             } else {
                 let i = (y * size + x) as u64;
                 let blob = 0.5
-                    + 0.15 * ((x as f32 * 0.45).sin() * (y as f32 * 0.3 + x as f32 * 0.1).cos())
+                    + 0.15
+                        * ((x as f32 * 0.45).sin_pure()
+                            * (y as f32 * 0.3 + x as f32 * 0.1).cos_pure())
                     + 0.06 * (counter_unit(5, 1, i) - 0.5);
                 [blob + 0.2, blob + 0.1, blob * 0.6, 1.0]
             }

@@ -12,6 +12,7 @@ use texsyn::stages::analyse_exemplar::texel_variants::{
 use texsyn::stages::synthesize::geometry_texture::{
     GeometrySynthParams, ParamField, synthesize_geometry_texture,
 };
+use texsyn_core::math::PureMath;
 
 /// A flat square: no mates.
 pub fn flat(n: u32) -> GeometryImage {
@@ -75,9 +76,9 @@ pub fn stripes(size: u32, period: f32) -> TexelImage {
         for x in 0..size {
             let a = std::f32::consts::TAU * x as f32 / period;
             let p = t.texel_mut(x, y);
-            p[0] = 0.3 * a.cos();
+            p[0] = 0.3 * a.cos_pure();
             p[1] = 0.0;
-            p[2] = a.sin();
+            p[2] = a.sin_pure();
         }
     }
     t
@@ -103,7 +104,7 @@ pub fn bumps(size: u32, seed: u64, color: bool) -> TexelImage {
             let (mut h, mut gx, mut gy) = (0.0f32, 0.0f32, 0.0f32);
             for &(cx, cy, a) in &centres {
                 let (dx, dy) = (x as f32 - cx, y as f32 - cy);
-                let e = a * (-(dx * dx + dy * dy) / (2.0 * sigma * sigma)).exp();
+                let e = a * (-(dx * dx + dy * dy) / (2.0 * sigma * sigma)).exp_pure();
                 h += e;
                 gx -= e * dx / (sigma * sigma);
                 gy -= e * dy / (sigma * sigma);

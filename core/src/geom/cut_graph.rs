@@ -962,6 +962,7 @@ pub fn cut_to_disk(mesh: &Mesh, he: &HalfEdgeMesh, is_cut: &[bool]) -> Result<Di
 mod tests {
     use super::*;
     use crate::geom::primitives::octahedron;
+    use crate::math::PureMath;
 
     fn torus(n: u32, m: u32) -> Mesh {
         crate::geom::primitives::torus(n, m, 0.5)
@@ -1006,8 +1007,8 @@ mod tests {
         assert_eq!(cut.genus, 1);
         // One tube circle (≈ π) and one loop the long way round the inside (≈ 2π·1.5),
         // measured on the polygonal mesh: well under a generous bound and over the minimum.
-        let tube = 10.0 * 2.0 * 0.5 * (std::f64::consts::PI / 10.0).sin();
-        let inner = 24.0 * 2.0 * 1.5 * (std::f64::consts::PI / 24.0).sin();
+        let tube = 10.0 * 2.0 * 0.5 * (std::f64::consts::PI / 10.0).sin_pure();
+        let inner = 24.0 * 2.0 * 1.5 * (std::f64::consts::PI / 24.0).sin_pure();
         assert!(cut.length >= 0.999 * (tube + inner), "{}", cut.length);
         assert!(
             cut.length < 1.3 * (tube + inner),
@@ -1067,8 +1068,8 @@ mod tests {
         let before = total(&is_cut);
         straighten(&he, &len, &mut is_cut, 8);
         let after = total(&is_cut);
-        let tube = m as f64 * 2.0 * 0.5 * (std::f64::consts::PI / m as f64).sin();
-        let inner = n as f64 * 2.0 * 1.5 * (std::f64::consts::PI / n as f64).sin();
+        let tube = m as f64 * 2.0 * 0.5 * (std::f64::consts::PI / m as f64).sin_pure();
+        let inner = n as f64 * 2.0 * 1.5 * (std::f64::consts::PI / n as f64).sin_pure();
         assert!(after < before - 1.0, "{before} -> {after}");
         assert!(after <= tube + inner + 1e-6, "{after} vs {}", tube + inner);
         assert!(cuts_to_disk(&he, &is_cut));
@@ -1088,7 +1089,7 @@ mod tests {
         // The loops are 23 ring steps apart along the tube; the shortest path between them
         // runs along the inner equator (radius 1.5).
         assert_eq!(cut.edges.len(), 23);
-        let inner_step = 2.0 * 1.5 * (std::f64::consts::PI / 24.0).sin();
+        let inner_step = 2.0 * 1.5 * (std::f64::consts::PI / 24.0).sin_pure();
         assert!(
             (cut.length - 23.0 * inner_step).abs() < 1e-4,
             "{}",

@@ -488,6 +488,7 @@ impl Iterator for Outgoing<'_> {
 mod tests {
     use super::*;
     use crate::geom::primitives::octahedron;
+    use crate::math::PureMath;
     use glam::Vec3;
 
     fn torus(n: u32, m: u32) -> Mesh {
@@ -616,7 +617,7 @@ mod tests {
         for (s, z) in [(1u32, 1.0f32), (4, -1.0)] {
             for k in 0..3 {
                 let a = k as f32 * 2.1;
-                p.push(Vec3::new(a.cos(), a.sin(), z));
+                p.push(Vec3::new(a.cos_pure(), a.sin_pure(), z));
             }
             t.push([0, s, s + 1]);
             t.push([0, s + 1, s + 2]);

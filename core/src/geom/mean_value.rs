@@ -478,6 +478,7 @@ pub fn reduce_stretch(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::PureMath;
     use glam::Vec3;
 
     /// An n×n grid of the unit square with interior vertices jittered (still a valid
@@ -545,13 +546,13 @@ mod tests {
         let mut pos = vec![Vec3::ZERO];
         for k in 0..6 {
             let a = k as f32 * std::f32::consts::PI / 3.0;
-            pos.push(Vec3::new(a.cos(), a.sin(), 0.0));
+            pos.push(Vec3::new(a.cos_pure(), a.sin_pure(), 0.0));
         }
         let tris: Vec<[u32; 3]> = (0..6).map(|k| [0, 1 + k, 1 + (k + 1) % 6]).collect();
         let mesh = Mesh::new(pos, tris);
         let w = mean_value_weights(&mesh);
         let adj = mesh.adjacency();
-        let want = 2.0 * (std::f64::consts::PI / 6.0).tan();
+        let want = 2.0 * (std::f64::consts::PI / 6.0).tan_pure();
         for k in adj.offsets[0] as usize..adj.offsets[1] as usize {
             assert!((w[k] - want).abs() < 1e-6, "{} vs {want}", w[k]);
         }
@@ -564,8 +565,14 @@ mod tests {
             let phi = r as f32 / rings as f32 * 2.3;
             for s in 0..sectors {
                 let th = s as f32 / sectors as f32 * std::f32::consts::TAU;
-                let bump = 1.0 + 0.15 * (3.0 * th).sin() * (r as f32 / rings as f32);
-                pos.push(Vec3::new(phi.sin() * th.cos(), phi.sin() * th.sin(), phi.cos()) * bump);
+                let bump = 1.0 + 0.15 * (3.0 * th).sin_pure() * (r as f32 / rings as f32);
+                pos.push(
+                    Vec3::new(
+                        phi.sin_pure() * th.cos_pure(),
+                        phi.sin_pure() * th.sin_pure(),
+                        phi.cos_pure(),
+                    ) * bump,
+                );
             }
         }
         let id = |r: usize, s: usize| (1 + (r - 1) * sectors + s % sectors) as u32;
@@ -601,7 +608,7 @@ mod tests {
             .enumerate()
             .map(|(k, &v)| {
                 let a = k as f64 / bnd.len() as f64 * std::f64::consts::TAU;
-                (v, DVec2::new(a.cos(), a.sin()))
+                (v, DVec2::new(a.cos_pure(), a.sin_pure()))
             })
             .collect();
         let mut solver = ConvexCombinationSolver::new(&mesh, &fixed).unwrap();

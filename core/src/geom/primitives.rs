@@ -1,6 +1,7 @@
 //! Simple meshes for tests, examples and benchmarks.
 
 use super::Mesh;
+use crate::math::PureMath;
 use glam::{Vec2, Vec3};
 
 /// An n×n grid of vertices in the z = 0 plane, `spacing` apart, x along columns and y along
@@ -99,8 +100,8 @@ pub fn seven_vertex_torus() -> Mesh {
                 std::f32::consts::TAU * i as f32 / 7.0,
                 std::f32::consts::TAU * (3 * i % 7) as f32 / 7.0,
             );
-            let r = 2.0 + b.cos();
-            Vec3::new(r * a.cos(), r * a.sin(), b.sin())
+            let r = 2.0 + b.cos_pure();
+            Vec3::new(r * a.cos_pure(), r * a.sin_pure(), b.sin_pure())
         })
         .collect();
     let t = (0..7u32)
@@ -143,8 +144,12 @@ pub fn torus(n: u32, m: u32, tube: f32) -> Mesh {
                 i as f32 / n as f32 * std::f32::consts::TAU,
                 j as f32 / m as f32 * std::f32::consts::TAU,
             );
-            let r = 2.0 + tube * b.cos();
-            p.push(Vec3::new(r * a.cos(), r * a.sin(), tube * b.sin()));
+            let r = 2.0 + tube * b.cos_pure();
+            p.push(Vec3::new(
+                r * a.cos_pure(),
+                r * a.sin_pure(),
+                tube * b.sin_pure(),
+            ));
         }
     }
     let id = |i: u32, j: u32| (i % n) * m + j % m;

@@ -194,6 +194,7 @@ impl<'a> SurfaceDistance<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::PureMath;
 
     fn brute(mesh: &Mesh, p: Vec3) -> f32 {
         mesh.triangles
@@ -284,9 +285,9 @@ mod tests {
         for k in 0..300 {
             let f = k as f32;
             let p = Vec3::new(
-                (f * 0.731).sin() * 3.0,
-                (f * 1.173).cos() * 3.0,
-                (f * 0.377).sin() * 0.5 + 0.5,
+                (f * 0.731).sin_pure() * 3.0,
+                (f * 1.173).cos_pure() * 3.0,
+                (f * 0.377).sin_pure() * 0.5 + 0.5,
             );
             let (got, expect) = (s.distance(p), brute(&m, p));
             assert!((got - expect).abs() < 1e-5, "{p}: {got} vs {expect}");

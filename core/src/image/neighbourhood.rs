@@ -12,6 +12,7 @@
 
 use super::ImageView;
 use super::pyramid::Pyramid;
+use crate::math::PureMath;
 use rayon::prelude::*;
 
 /// Neighbourhood shape. Defaults: 3 levels, a 5×5 window at the finest level.
@@ -83,7 +84,7 @@ impl Neighbourhoods {
             for dy in -r..=r {
                 for dx in -r..=r {
                     let d2 = (dx * dx + dy * dy) as f32;
-                    ws.push((-d2 / (2.0 * sigma * sigma)).exp());
+                    ws.push((-d2 / (2.0 * sigma * sigma)).exp_pure());
                 }
             }
             let total: f32 = ws.iter().sum();
@@ -254,7 +255,7 @@ mod tests {
         let mut wsum = 0.0f32;
         for dy in -2i64..=2 {
             for dx in -2i64..=2 {
-                let w = (-((dx * dx + dy * dy) as f32) / (2.0 * sigma * sigma)).exp();
+                let w = (-((dx * dx + dy * dy) as f32) / (2.0 * sigma * sigma)).exp_pure();
                 let p = img.view().get((6 + dx) as u32, (7 + dy) as u32);
                 let q = img.view().get((12 + dx) as u32, (9 + dy) as u32);
                 for c in 0..3 {

@@ -722,6 +722,7 @@ impl Candidates {
 mod tests {
     use super::*;
     use crate::image::Image;
+    use crate::math::PureMath;
     use crate::random::counter_unit;
 
     /// Smooth colour waves plus a little seeded noise, so no two patches are equal.
@@ -730,9 +731,9 @@ mod tests {
             let (xf, yf) = (x as f32, y as f32);
             let n = |c: u64| 0.1 * counter_unit(seed, c, (y * w + x) as u64);
             [
-                0.45 + 0.35 * (0.5 * xf).sin() * (0.3 * yf).cos() + n(0),
-                0.45 + 0.35 * (0.21 * xf + 0.4 * yf).sin() + n(1),
-                0.45 + 0.35 * (0.33 * yf).sin() + n(2),
+                0.45 + 0.35 * (0.5 * xf).sin_pure() * (0.3 * yf).cos_pure() + n(0),
+                0.45 + 0.35 * (0.21 * xf + 0.4 * yf).sin_pure() + n(1),
+                0.45 + 0.35 * (0.33 * yf).sin_pure() + n(2),
                 1.0,
             ]
         })

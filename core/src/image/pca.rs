@@ -298,6 +298,7 @@ pub fn symmetric_eigen(a: &[f64], n: usize) -> (Vec<f64>, Vec<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::PureMath;
 
     struct Rng(u64);
     impl Rng {
@@ -310,7 +311,7 @@ mod tests {
         fn normal(&mut self) -> f64 {
             let u = self.next().max(1e-12);
             let v = self.next();
-            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+            (-2.0 * u.ln_pure()).sqrt() * (std::f64::consts::TAU * v).cos_pure()
         }
     }
 

@@ -271,6 +271,7 @@ impl LuPattern {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::PureMath;
 
     #[test]
     fn solves_a_tridiagonal_system_with_two_right_hand_sides() {
@@ -285,7 +286,7 @@ mod tests {
             }
         }
         let s = SpdSolver::new(n, &t).unwrap();
-        let b: Vec<f64> = (0..2 * n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let b: Vec<f64> = (0..2 * n).map(|i| (i as f64 * 0.37).sin_pure()).collect();
         let mut x = b.clone();
         s.solve(&mut x, 2);
         for c in 0..2 {
@@ -369,7 +370,7 @@ mod tests {
             let mut fresh_t = t.clone();
             fresh_t.extend(extra.iter().enumerate().map(|(i, &d)| (i, i, d)));
             let fresh = SpdSolver::new(n, &fresh_t).unwrap();
-            let b: Vec<f64> = (0..n).map(|i| (i as f64 * 0.7).cos()).collect();
+            let b: Vec<f64> = (0..n).map(|i| (i as f64 * 0.7).cos_pure()).collect();
             let (mut x, mut y) = (b.clone(), b.clone());
             f.solve(&mut x, 1);
             fresh.solve(&mut y, 1);

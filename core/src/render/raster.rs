@@ -124,6 +124,7 @@ pub fn raster_triangle(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::PureMath;
 
     /// A small deterministic generator for test inputs (splitmix64).
     struct Rng(u64);
@@ -218,7 +219,7 @@ mod tests {
         let mut ring = vec![];
         for k in 0..12 {
             let a = k as f32 * std::f32::consts::TAU / 12.0;
-            ring.push(c + Vec2::new(a.cos(), a.sin()) * 13.0);
+            ring.push(c + Vec2::new(a.cos_pure(), a.sin_pure()) * 13.0);
         }
         ring.push(Vec2::new(16.5, 2.5)); // extra vertex on a pixel centre
         ring.sort_by(|p, q| {

@@ -384,6 +384,7 @@ pub(crate) mod tests {
     use super::*;
     use crate::geom::primitives::uv_quad;
     use crate::image::Image;
+    use crate::math::PureMath;
     use crate::render::shader::{ConstantShader, CornerUvShader};
 
     /// A UV sphere (OBJ-convention corner uvs per face), `rings` × `segments`.
@@ -397,9 +398,9 @@ pub(crate) mod tests {
                 let u = s as f32 / segments as f32;
                 let phi = u * std::f32::consts::TAU;
                 pos.push(Vec3::new(
-                    theta.sin() * phi.sin(),
-                    theta.cos(),
-                    theta.sin() * phi.cos(),
+                    theta.sin_pure() * phi.sin_pure(),
+                    theta.cos_pure(),
+                    theta.sin_pure() * phi.cos_pure(),
                 ));
                 uv.push(Vec2::new(u, 1.0 - v));
             }

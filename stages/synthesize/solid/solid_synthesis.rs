@@ -783,6 +783,7 @@ struct LevelPlan {
 ///   everywhere (`RotationField::trivial`), every sample position is an integer (the
 ///   interpolated frame is exactly the identity and the scale exactly `s` in `f32`), the
 ///   `+1` corners have weight 0 and are never read, and the reach is `N_h s`.
+///
 /// A margin `δ` covers `f32` rounding of positions (it grows with the volume's side).
 fn stencil_reach(
     analysis: &SolidAnalysisRef,
