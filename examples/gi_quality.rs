@@ -81,13 +81,7 @@ fn main() -> anyhow::Result<()> {
         lo,
         hi,
     );
-    let out = grey(
-        synth.width,
-        synth.height,
-        |x, y| synth.texel(x, y)[2],
-        lo,
-        hi,
-    );
+    let out = grey(synth.width, synth.height, |x, y| synth.texel(x, y)[2], lo, hi);
     let s = patch_score(out.view(), exemplar.view(), &ScoreParams::default())?;
     let ra = &result.reports[ia];
     let rs = &result.reports[is];

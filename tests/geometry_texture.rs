@@ -372,3 +372,4 @@ fn too_small_samples_and_bad_inputs_are_errors() {
     f.dir.pop();
     assert!(synthesize_geometry_texture(&flat(33), &f, &v.as_ref(), &p, &|_| {}).is_err());
 }
+

@@ -261,10 +261,7 @@ fn solid_surface_requests_are_scored_on_a_section_made_for_it() {
     }
     let v = json(&texsyn(&args, d.path()));
     let item = &v["items"][0];
-    assert_eq!(
-        item["output"], "section.png (a section made for scoring)",
-        "{v}"
-    );
+    assert_eq!(item["output"], "section.png (a section made for scoring)", "{v}");
     assert_eq!(item["exemplar"], "inputs.xy", "{v}");
     assert!(item["score"]["ratio"].as_f64().unwrap() > 0.0, "{item}");
     let notes = item["notes"].to_string();

@@ -141,7 +141,8 @@ impl Format for TexelVariants {
 mod tests {
     use super::*;
     use crate::stages::analyse_exemplar::texel_variants::{
-        Template, TexelVariantParams, VariantsMeta, build_texel_variants, build_texel_variants_with,
+        Template, TexelVariantParams, VariantsMeta, build_texel_variants,
+        build_texel_variants_with,
     };
 
     fn stripes(n: u32, period: f32) -> TexelImage {

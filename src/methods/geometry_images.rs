@@ -247,8 +247,10 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         },
         texels,
         |ctx, p, sample| {
-            build_texel_variants_with(&sample, &p.variants, p.per_texel, &|f| ctx.progress.set(f))
-                .map_err(NodeError::input)
+            build_texel_variants_with(&sample, &p.variants, p.per_texel, &|f| {
+                ctx.progress.set(f)
+            })
+            .map_err(NodeError::input)
         },
     );
     let field = dag.node(

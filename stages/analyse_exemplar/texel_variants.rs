@@ -533,9 +533,7 @@ impl<'a> TexelVariantsRef<'a> {
     pub fn kset_level_of(&self, variant: usize, level: usize) -> usize {
         let p = &self.meta.params;
         let s = variant / p.orientations as usize;
-        (level + s)
-            .saturating_sub(p.middle_scale())
-            .min(p.kset_levels() - 1)
+        (level + s).saturating_sub(p.middle_scale()).min(p.kset_levels() - 1)
     }
 
     /// The map between level `level` of `variant` and the sample's level 0 (see
@@ -1248,10 +1246,7 @@ fn k_coherent_sets(
             let (x, y) = (t as i64 % w, t as i64 / w);
             let mut at = 0;
             for &(dx, dy) in &taps {
-                let px = level.texel(
-                    mirror(x + dx as i64, w) as u32,
-                    mirror(y + dy as i64, h) as u32,
-                );
+                let px = level.texel(mirror(x + dx as i64, w) as u32, mirror(y + dy as i64, h) as u32);
                 for ch in 0..c {
                     o[at + ch] = px[ch] * weights[ch];
                 }
@@ -1651,11 +1646,7 @@ mod tests {
                 let (sx, sy) = (x[0].round() as u32, x[1].round() as u32);
                 assert!((x[0] - sx as f64).abs() < 1e-9 && (x[1] - sy as f64).abs() < 1e-9);
                 let at = (q[1] as usize * lv.width as usize + q[0] as usize) * 3 + 2;
-                assert_eq!(
-                    lv.texels[at],
-                    sample.texel(sx, sy)[2],
-                    "orientation {k} {q:?}"
-                );
+                assert_eq!(lv.texels[at], sample.texel(sx, sy)[2], "orientation {k} {q:?}");
                 let back = map.from_sample(x);
                 assert!((back[0] - q[0]).abs() < 1e-9 && (back[1] - q[1]).abs() < 1e-9);
             }
@@ -1685,10 +1676,7 @@ mod tests {
             let (x, y) = (t % 48, t / 48);
             for &e in &ks.entries[t * k..(t + 1) * k] {
                 let (ex, ey) = (e as usize % 48, e as usize / 48);
-                assert!(
-                    ex.abs_diff(x) > 2 || ey.abs_diff(y) > 2,
-                    "{e} is inside {t}'s window"
-                );
+                assert!(ex.abs_diff(x) > 2 || ey.abs_diff(y) > 2, "{e} is inside {t}'s window");
                 assert_eq!(ex % 6, x % 6, "texel {t}: {e} is on another phase");
             }
         }

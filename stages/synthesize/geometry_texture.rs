@@ -704,7 +704,10 @@ impl Ctx<'_, '_> {
             };
             let (sv, sk) = ((src >> 32) as usize, (src & 0xFFFF_FFFF) as u32);
             let sw = vars.level(sv, l).width;
-            let q = [(sk % sw) as f64 - dx as f64, (sk / sw) as f64 - dy as f64];
+            let q = [
+                (sk % sw) as f64 - dx as f64,
+                (sk / sw) as f64 - dy as f64,
+            ];
             let q = if sv == v {
                 q
             } else {
@@ -740,11 +743,7 @@ impl Ctx<'_, '_> {
         cands.dedup_by(|b, a| *a >> 1 == *b >> 1);
         if cands.is_empty() && !(l + 1 == nl && kind == Template::Causal) {
             // Nothing coherent lies inside the variant: a random texel whose template does.
-            let h = counter_hash(
-                self.seed,
-                STREAM_FALLBACK,
-                choice_index(l, pass, lv.grid.idx(i, j)),
-            );
+            let h = counter_hash(self.seed, STREAM_FALLBACK, choice_index(l, pass, lv.grid.idx(i, j)));
             let nx = (range[1] - range[0] + 1) as u64;
             let ny = (range[3] - range[2] + 1) as u64;
             let x = range[0] + (h % nx) as i64;
@@ -1442,7 +1441,8 @@ mod tests {
                 };
                 let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
                 let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
-                let bits = |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                let bits =
+                    |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&a), bits(&b), "template {template} {search:?}");
             }
         }
