@@ -302,6 +302,13 @@ pub fn pack(
         bytes_entry(config_entry.clone(), Role::Config, &config_bytes),
         Source::Bytes(&config_bytes),
     ));
+    let archive_abs = absolute(archive).map_err(io_at(archive))?;
+    if archive_abs == config_abs || inputs_abs.contains(&archive_abs) {
+        return Err(not_packable(format!(
+            "the archive {} would overwrite the config or one of its input files",
+            archive.display()
+        )));
+    }
     for (f, abs) in plan.dag.files.iter().zip(&inputs_abs) {
         let path = rel(abs)?;
         if path == config_entry {
@@ -309,6 +316,10 @@ pub fn pack(
                 "the config reads itself as an input ({})",
                 f.path.display()
             )));
+        }
+        // One file named two ways (`a.png`, `./a.png`) is packed once.
+        if entries.iter().any(|(e, _)| e.path == path) {
+            continue;
         }
         entries.push((
             bytes_entry(path, Role::Input, &f.bytes),
@@ -404,7 +415,11 @@ pub fn pack(
         archive: archive.to_owned(),
         bytes,
         objects: object_at.len(),
-        inputs: plan.dag.files.len(),
+        inputs: manifest
+            .entries
+            .iter()
+            .filter(|e| e.role == Role::Input)
+            .count(),
         outputs: manifest
             .entries
             .iter()

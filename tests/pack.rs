@@ -517,3 +517,68 @@ fn a_crafted_archive_cannot_plant_an_object_under_a_key_it_does_not_earn() {
     let e = assert_refused(d, "slipped.tar.zst", "c4");
     assert!(e.contains("not listed in the manifest"), "{e}");
 }
+
+#[test]
+fn an_input_by_absolute_path_is_not_packed() {
+    let dir = scratch();
+    let d = dir.path();
+    let exemplar = d.join("assets/leopard.png");
+    let o = texsyn(
+        &[
+            &[
+                "pack",
+                "synth2d.toml",
+                "--cache",
+                "c",
+                "-o",
+                "r.tar.zst",
+                "-q",
+            ],
+            &SETS[..],
+            &[
+                "--set",
+                &format!("inputs.exemplar={:?}", exemplar.to_str().unwrap()),
+            ],
+        ]
+        .concat(),
+        d,
+    );
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("cannot pack synth2d.toml"), "{e}");
+    assert!(
+        e.contains(exemplar.to_str().unwrap()),
+        "names the file: {e}"
+    );
+    assert!(e.contains("relative to the config"), "{e}");
+    assert!(!d.join("r.tar.zst").exists());
+    let left: Vec<_> = std::fs::read_dir(d)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().contains("tar.zst"))
+        .collect();
+    assert!(left.is_empty(), "temporary archive left: {left:?}");
+}
+
+#[test]
+fn unpacking_over_other_files_is_refused_before_importing() {
+    let dir = scratch();
+    let d = dir.path();
+    pack(d);
+    std::fs::create_dir_all(d.join("u")).unwrap();
+    std::fs::write(d.join("u/synth2d.toml"), "method = \"synth2d\"  # mine\n").unwrap();
+    let o = texsyn(&["unpack", "r.tar.zst", "--cache", "c2", "-o", "u"], d);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("u/synth2d.toml"), "names the file: {e}");
+    assert!(
+        e.contains("other content") && e.contains("nothing was imported"),
+        "{e}"
+    );
+    assert_eq!(object_count(&d.join("c2")), 0);
+    assert_eq!(
+        std::fs::read_to_string(d.join("u/synth2d.toml")).unwrap(),
+        "method = \"synth2d\"  # mine\n"
+    );
+    assert!(!d.join("u/assets").exists());
+}
