@@ -32,8 +32,11 @@
 //!
 //! # Unpacking
 //!
-//! `unpack` reads the whole archive into a temporary folder and checks everything before it
-//! imports anything:
+//! `unpack` reads the whole archive into a temporary folder (in `$TMPDIR`, which needs room
+//! for the archive's uncompressed size; removed afterwards, or by the next unpack if this one
+//! was killed) and checks everything before it imports anything. `pack` runs the same checks
+//! on the archive it wrote before moving it into place, so it never leaves an archive that
+//! `unpack` would refuse:
 //!
 //! 1. The file starts with zstd's magic number and its first entry is the manifest, whose
 //!    magic names this format: otherwise it is *not a texsyn pack archive* (a foreign
