@@ -10,6 +10,7 @@ pub mod cache;
 pub mod config;
 pub mod lockfile;
 pub mod methods;
+pub mod pack;
 pub mod pipeline;
 pub mod score;
 

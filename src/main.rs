@@ -123,6 +123,27 @@ enum Command {
         #[arg(long, default_value = "y")]
         up: String,
     },
+    /// Pack a run into one archive (README, "Packing a run"): the config, its input files,
+    /// the lock file, every node's cached artifact and the outputs, in a zstd-compressed tar.
+    /// Computes what is not cached first, and re-hashes every cached object.
+    Pack {
+        config: PathBuf,
+        #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
+        sets: Vec<String>,
+        /// The archive to write (e.g. results.tar.zst).
+        #[arg(short, long, value_name = "ARCHIVE")]
+        output: PathBuf,
+    },
+    /// Import a `pack` archive into the cache, after checking every entry's hash and that every
+    /// object's key is one the packed config's graph produces; a damaged or foreign archive
+    /// is refused and nothing is imported. With `-o DIR`, also writes the config, its inputs,
+    /// its lock (NAME.lock beside the config) and the outputs (DIR/out/NAME/).
+    Unpack {
+        archive: PathBuf,
+        /// Where to write the config, inputs, lock and outputs.
+        #[arg(short, long, value_name = "DIR")]
+        output: Option<PathBuf>,
+    },
     /// Trim the cache to a size, least recently used objects first.
     Gc {
         /// Budget, e.g. 500M or 2G.
@@ -485,6 +506,65 @@ fn real_main() -> Result<i32> {
             write_atomic(output, &png)?;
             if !cli.quiet {
                 println!("wrote {}", output.display());
+            }
+            Ok(0)
+        }
+        Command::Pack {
+            config,
+            sets,
+            output,
+        } => {
+            let cache = Cache::open(&cache_dir)?;
+            let report = texsyn::pack::pack(config, sets, &cache, output, progress)?;
+            if cli.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else if !cli.quiet {
+                println!(
+                    "packed {} objects ({} computed now), {} input files, {} outputs and the lock \
+                     into {} ({})",
+                    report.objects,
+                    report.computed,
+                    report.inputs,
+                    report.outputs,
+                    output.display(),
+                    texsyn::memory::human(report.bytes)
+                );
+            }
+            Ok(0)
+        }
+        Command::Unpack { archive, output } => {
+            let report = texsyn::pack::unpack(archive, &cache_dir, output.as_deref())?;
+            if cli.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else if !cli.quiet {
+                println!(
+                    "imported {} objects into {} ({} were there already)",
+                    report.imported,
+                    cache_dir.display(),
+                    report.present
+                );
+                if let (Some(config), Some(lock), Some(out)) =
+                    (&report.config, &report.lock, &report.outputs)
+                {
+                    let sets: String = report
+                        .sets
+                        .iter()
+                        .map(|s| format!(" --set '{s}'"))
+                        .collect();
+                    println!("config: {}", config.display());
+                    println!("outputs: {}", out.display());
+                    println!(
+                        "check: texsyn verify {} {} --cache {}   (--fresh recomputes)",
+                        config.display(),
+                        lock.display(),
+                        cache_dir.display()
+                    );
+                    println!(
+                        "rerun: texsyn run {}{sets} --cache {}",
+                        config.display(),
+                        cache_dir.display()
+                    );
+                }
             }
             Ok(0)
         }
