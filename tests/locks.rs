@@ -78,3 +78,59 @@ lock_tests!(
     feature_aligned_crest,
     feature_aligned_curves,
 );
+
+/// The small-setting companion locks in configs/cpu/ (which `.ci/verify-emulated-cpu` checks
+/// under an emulated pre-AVX CPU, issue 14 item 2) verify natively too, each with the `--set`
+/// overrides it records, and together they cover every method a shipped config uses.
+#[test]
+fn cpu_companion_locks_verify_and_cover_every_method() {
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let method_of = |config: &std::path::Path| -> Option<String> {
+        let text = std::fs::read_to_string(config).ok()?;
+        let line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with("method"))?;
+        Some(line.split('"').nth(1)?.to_owned())
+    };
+    let mut shipped: Vec<String> = std::fs::read_dir(repo.join("configs"))
+        .unwrap()
+        .filter_map(|e| {
+            let p = e.unwrap().path();
+            (p.extension()? == "toml").then_some(())?;
+            method_of(&p)
+        })
+        .collect();
+    shipped.sort();
+    shipped.dedup();
+    let mut covered = Vec::new();
+    for entry in std::fs::read_dir(repo.join("configs/cpu")).unwrap() {
+        let lock = entry.unwrap().path();
+        let stem = lock.file_stem().unwrap().to_str().unwrap().to_owned();
+        let config = repo.join("configs").join(format!("{stem}.toml"));
+        let text = std::fs::read_to_string(&lock).unwrap();
+        assert!(
+            text.lines().any(|l| l.starts_with("# set: ")),
+            "{stem}: a companion lock records its small settings"
+        );
+        covered.push(method_of(&config).expect("a companion lock names a shipped config"));
+        let cache = tempfile::tempdir().unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_texsyn"))
+            .arg("verify")
+            .arg(&config)
+            .arg(&lock)
+            .args(["--fresh", "--quiet", "--cache"])
+            .arg(cache.path())
+            .current_dir(&repo)
+            .output()
+            .expect("texsyn runs");
+        assert!(
+            o.status.success(),
+            "configs/cpu/{stem}.lock: verify failed:\n{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    covered.sort();
+    covered.dedup();
+    assert_eq!(covered, shipped, "configs/cpu/ has one lock per method");
+}
