@@ -29,7 +29,20 @@ fn children_peak() -> u64 {
 fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     // Runs in order of increasing peak, so the children's maximum is each run's own.
-    let cases: [(&[&str], u64); 3] = [
+    let cases: [(&[&str], u64); 4] = [
+        (
+            // A solid section: dense masks over the volume's box, 2 bytes per voxel of the
+            // cube bound (163 MB measured at 384).
+            &[
+                "run",
+                "configs/solid_trivial.toml",
+                "--set",
+                "parameterize.resolution=384",
+                "--set",
+                "parameterize.request={kind=\"section\",point=[0.0,0.0,0.0],normal=[0.0,0.0,1.0]}",
+            ],
+            2 * 384 * 384 * 384 + (80 << 20),
+        ),
         (
             &[
                 "run",
@@ -134,6 +147,24 @@ fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused()
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
         err.contains("extract.size = 256") && err.contains("fits"),
+        "{err}"
+    );
+    // And for a solid's resolution (a surface request: 16 bytes per voxel of the cube bound).
+    let out = texsyn(
+        &[
+            "run",
+            "configs/solid_trivial.toml",
+            "--max-memory",
+            "1GiB",
+            "--set",
+            "parameterize.resolution=4096",
+        ],
+        dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("parameterize.resolution = 4096") && err.contains("fits"),
         "{err}"
     );
 }

@@ -43,7 +43,9 @@ const EXTRACT_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 3;
 const RECONSTRUCT_VERSION: u32 = 6;
 const VARIANTS_VERSION: u32 = 2;
-const SYNTH_VERSION: u32 = 2;
+// 3: the coarsest scanline pass is an exhaustive search again (a jump-penalized one lowered
+// the bumps' mean by 0.16 std).
+const SYNTH_VERSION: u32 = 3;
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]

@@ -236,17 +236,27 @@ pub(crate) fn check_variant_memory(
 
 /// A solid of `parameterize.resolution` voxels on its longest side (issue 11, item 9): the
 /// volume's voxel masks, their prefix sums and the dependent set's per-level masks are dense
-/// over the volume's box (at most `resolution³` voxels), about 16 bytes per voxel of that cube
-/// bound; the exemplar analysis and the bricks of a surface request add about 180 MB for the
-/// shipped exemplars. Measured (solid_elephant, surface request): 196 MB at 128, 284 MB at
-/// 256, 581 MB at 384; the elephant's box fills about half its cube, so the bound stays within
-/// 2× for both slim and cubic shapes.
-pub(crate) fn check_solid_memory(config: &Config, resolution: u32) -> Result<(), MethodError> {
+/// over the volume's box (at most `resolution³` voxels). A surface or box request needs about
+/// 16 bytes per voxel of that cube bound and 180 MB besides (the exemplar analysis, the
+/// bricks); a section needs about 2 bytes per voxel and 80 MB. Measured (solid_trivial,
+/// elephant): surface 119 MB at 128, 272 MB at 256, 523 MB at 384; section 105 MB at 256,
+/// 163 MB at 384. The elephant's box fills about half its cube, so the cube bound stays
+/// within 2× for slim and cubic shapes alike.
+pub(crate) fn check_solid_memory(
+    config: &Config,
+    resolution: u32,
+    request: &crate::stages::parameterize::volume_embedding::Request,
+) -> Result<(), MethodError> {
+    use crate::stages::parameterize::volume_embedding::Request;
+    let (per_voxel, base) = match request {
+        Request::Section { .. } => (2, 80 << 20),
+        Request::Surface | Request::Box { .. } => (16, 180 << 20),
+    };
     check_memory(
         config,
         "parameterize.resolution",
         resolution as u64,
-        |r| 16 * r * r * r + (180 << 20),
+        |r| per_voxel * r * r * r + base,
         |r| r.to_string(),
     )
 }

@@ -121,7 +121,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
     c.parameterize.validate().map_err(param)?;
     c.reconstruct.validate().map_err(param)?;
     super::check_atlas_memory(config, c.reconstruct.atlas_size)?;
-    super::check_solid_memory(config, c.parameterize.resolution)?;
+    super::check_solid_memory(config, c.parameterize.resolution, &c.parameterize.request)?;
     config.check("synthesize", c.synthesize.validate())?;
     let depths: Vec<f32> = c.regions.iter().map(|r| r.depth).collect();
     volume::validate_region_depths(&depths).map_err(param)?;

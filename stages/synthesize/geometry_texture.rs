@@ -785,21 +785,22 @@ impl Ctx<'_, '_> {
             }
             d
         };
-        let mut best = (f32::INFINITY, 0u32);
         if l + 1 == nl && kind == Template::Causal {
             // The coarsest level's scanline pass lays out the whole texture, and coherent
-            // candidates alone only propagate its random start (a sample of sparse bumps came
-            // out with a third fewer): every texel of the variant is a candidate too, as a jump
-            // (the coarsest levels are small).
+            // candidates there only propagate the random start: every texel of the variant is
+            // a candidate (the coarsest levels are small).
+            let mut best = (f32::INFINITY, 0i64);
             for y in range[2]..=range[3] {
                 for x in range[0]..=range[1] {
-                    let d = dist(x, y, best.0 / jump_factor) * jump_factor;
+                    let d = dist(x, y, best.0);
                     if d < best.0 {
-                        best = (d, (y * w + x) as u32);
+                        best = (d, y * w + x);
                     }
                 }
             }
+            return best.1 as usize;
         }
+        let mut best = (f32::INFINITY, (cands[0] >> 1) as u32);
         for &cand in cands.iter() {
             // Jumps to a k-coherent texel must be (1 + coherence) times better than a shifted
             // candidate (Hertzmann et al. 2001's κ), as squared distances.
