@@ -549,7 +549,7 @@ fn real_main() -> Result<i32> {
                     let sets: String = report
                         .sets
                         .iter()
-                        .map(|s| format!(" --set '{s}'"))
+                        .map(|s| format!(" --set '{}'", s.replace('\'', "'\\''")))
                         .collect();
                     println!("config: {}", config.display());
                     println!("outputs: {}", out.display());
@@ -560,9 +560,10 @@ fn real_main() -> Result<i32> {
                         cache_dir.display()
                     );
                     println!(
-                        "rerun: texsyn run {}{sets} --cache {}",
+                        "rerun: texsyn run {}{sets} --cache {} --out {}",
                         config.display(),
-                        cache_dir.display()
+                        cache_dir.display(),
+                        out.display()
                     );
                 }
             }

@@ -1026,6 +1026,26 @@ pub fn unpack(
     }
 
     let cache = Cache::open(cache_dir)?;
+    // A healthy object already cached under one of the archive's keys with other content is
+    // never replaced: either this code computes something else than the archive's (a version
+    // not bumped) or the archive was not made by it, and the user's own result must stay.
+    for (node, &k) in checked.plan.dag.nodes.iter().zip(&checked.node_objects) {
+        let (key, artifact) = &checked.objects[k];
+        if let Lookup::Hit(a) = cache.peek(key)
+            && a.verify().is_ok()
+            && a.content_hash() != artifact.content_hash()
+        {
+            return Err(nothing(PackError::Destination {
+                path: cache.object_path(key),
+                why: format!(
+                    "the cache already holds node {}'s object under this key with other \
+                     content than the archive's (a code change without a version bump, or an \
+                     archive not made by this texsyn); unpack into another --cache",
+                    node.name
+                ),
+            }));
+        }
+    }
     let (mut imported, mut present) = (0, 0);
     for (key, artifact) in &checked.objects {
         let same = match cache.peek(key) {

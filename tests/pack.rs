@@ -582,3 +582,43 @@ fn unpacking_over_other_files_is_refused_before_importing() {
     );
     assert!(!d.join("u/assets").exists());
 }
+
+/// The path of the object file under `key` in a cache (`objects-v1/ab/cdef…`).
+fn object_file(cache: &Path, key: &str) -> PathBuf {
+    cache.join("objects-v1").join(&key[..2]).join(&key[2..])
+}
+
+/// A healthy object the user's cache already holds under one of the archive's keys, but with
+/// other content (a code change without a version bump, or a crafted archive), is never
+/// replaced: the archive is refused and nothing is imported.
+#[test]
+fn unpack_never_replaces_a_cached_object_with_other_content() {
+    let dir = scratch();
+    let d = dir.path();
+    let archive = pack(d);
+    let entries = read_entries(&archive);
+    let (synth, analysis) = (
+        locked_key(&entries, "synthesize"),
+        locked_key(&entries, "analyse_exemplar"),
+    );
+    // A cache holding analyse_exemplar's (valid) object under synthesize's key.
+    let from = object_file(&d.join("c"), &analysis);
+    let mine_to = object_file(&d.join("mine"), &synth);
+    assert!(from.is_file() && object_file(&d.join("c"), &synth).is_file());
+    std::fs::create_dir_all(mine_to.parent().unwrap()).unwrap();
+    std::fs::copy(&from, &mine_to).unwrap();
+    let before = std::fs::read(&mine_to).unwrap();
+    let o = texsyn(&["unpack", "r.tar.zst", "--cache", "mine"], d);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("synthesize") && e.contains("nothing was imported"),
+        "{e}"
+    );
+    assert_eq!(
+        std::fs::read(&mine_to).unwrap(),
+        before,
+        "the cached object was replaced"
+    );
+    assert_eq!(object_count(&d.join("mine")), 1, "objects were imported");
+}

@@ -232,10 +232,18 @@ fn geometry_images_score_the_relief_and_check_the_mesh() {
     let mesh = &item["extra"]["mesh"];
     let triangles = mesh["triangles"].as_u64().unwrap();
     assert!(triangles > 2 * 60 * 60, "{mesh}");
-    for k in ["boundary_edges", "non_manifold_edges", "flipped_faces"] {
-        // Present and counted (what they are is the synthesis's business, not the score's).
-        assert!(mesh[k].as_u64().unwrap() < triangles, "{k}: {mesh}");
+    // The cow is closed, and so must its relief be (issue 12 §2).
+    for k in [
+        "boundary_edges",
+        "non_manifold_edges",
+        "unreferenced_vertices",
+    ] {
+        assert_eq!(mesh[k].as_u64(), Some(0), "{k}: {mesh}");
     }
+    assert!(
+        mesh["flipped_faces"].as_u64().unwrap() < triangles,
+        "{mesh}"
+    );
 }
 
 /// A solid surface request has no planar image: `score` synthesizes a section of the same

@@ -271,9 +271,8 @@ impl<'a> Run<'a> {
             Ok(s) => item.score = Some(s),
             Err(
                 e @ (ScoreError::NoPatchInMask { .. }
-                | ScoreError::TooSmall {
-                    which: "output", ..
-                }),
+                | ScoreError::TooSmall { .. }
+                | ScoreError::BaselineTooSmall { .. }),
             ) => item.notes.push(format!("not scored: {e}")),
             Err(e) => {
                 return Err(ScoreFailure::new(format!(

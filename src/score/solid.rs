@@ -29,6 +29,12 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         .config
         .parse()
         .map_err(|e| ScoreFailure::new(e.to_string()))?;
+    // How the written image lies against its exemplar (see `PlaneFrame`).
+    let mut frame = PlaneFrame {
+        flip_rows: true,
+        transpose: false,
+        flip_columns: false,
+    };
     let (file, plane) = match c.parameterize.request {
         Request::Surface => {
             not_scored.push(
@@ -42,6 +48,12 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         Request::Section { normal, .. } => {
             let axis = (0..3)
                 .find(|&a| (0..3).all(|b| b == a || normal[b].abs() <= 1e-6 * normal[a].abs()));
+            let positive = axis.is_some_and(|a| normal[a] > 0.0);
+            frame = PlaneFrame {
+                flip_rows: axis != Some(1) && positive,
+                transpose: axis == Some(1),
+                flip_columns: axis == Some(1) && !positive,
+            };
             match axis {
                 Some(0) => ("section.png", "yz"),
                 Some(1) => ("section.png", "zx"),
@@ -73,7 +85,7 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         },
     };
     let exemplar = load_exemplar(run, spec, &key)?;
-    let out = run.image("reconstruct", file)?;
+    let out = frame.apply(&run.image("reconstruct", file)?);
     let mask: Vec<bool> = out
         .pixels
         .iter()
@@ -99,6 +111,79 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         );
     }
     Ok(vec![item])
+}
+
+/// How a section image lies against its plane's exemplar. The exemplar of plane `P` has image
+/// x along local axis `P` and image y (rows down) along axis `P + 1` (candidate_triples.rs).
+/// A section's image has x along its `u` axis and rows running down its `v` axis
+/// (`volume_embedding::section`, `solid_colour.rs`): for a normal `+z`, `u = x` and `v = y`,
+/// so rows run along `−y` and the image is the exemplar's upside down; `+x` likewise (`u = y`,
+/// `v = z`); a negative normal turns `v` round, so no flip; a `±y` normal has `u = x` and
+/// `v = ∓z` against the `zx` exemplar's (z, x): transposed, and mirrored for `−y`. A box's
+/// middle z slice is written like a `+z` section.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PlaneFrame {
+    flip_rows: bool,
+    transpose: bool,
+    /// After the transpose.
+    flip_columns: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(w: u32, h: u32) -> Image {
+        let mut img = Image::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                img.pixels[(y * w + x) as usize] = [x as f32, y as f32, 0.0, 1.0];
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn plane_frames_flip_and_transpose_as_documented() {
+        let img = ramp(3, 2);
+        let at = |i: &Image, x: u32, y: u32| {
+            let p = i.pixels[(y * i.width + x) as usize];
+            (p[0] as u32, p[1] as u32)
+        };
+        let f = |flip_rows, transpose, flip_columns| PlaneFrame {
+            flip_rows,
+            transpose,
+            flip_columns,
+        };
+        let up = f(true, false, false).apply(&img);
+        assert_eq!((up.width, up.height), (3, 2));
+        assert_eq!(at(&up, 0, 0), (0, 1));
+        assert_eq!(at(&up, 2, 1), (2, 0));
+        let t = f(false, true, false).apply(&img);
+        assert_eq!((t.width, t.height), (2, 3));
+        assert_eq!(at(&t, 1, 2), (2, 1));
+        let tm = f(false, true, true).apply(&img);
+        assert_eq!(at(&tm, 0, 2), (2, 1));
+        assert_eq!(at(&tm, 1, 0), (0, 0));
+    }
+}
+
+impl PlaneFrame {
+    fn apply(&self, img: &Image) -> Image {
+        let (w, h) = (img.width, img.height);
+        let (ow, oh) = if self.transpose { (h, w) } else { (w, h) };
+        let mut out = Image::new(ow, oh);
+        for oy in 0..oh {
+            for ox in 0..ow {
+                // (ox, oy) in the exemplar's frame; (sx, sy) in the written image.
+                let tx = if self.flip_columns { ow - 1 - ox } else { ox };
+                let (sx, sy) = if self.transpose { (oy, tx) } else { (tx, oy) };
+                let sy = if self.flip_rows { h - 1 - sy } else { sy };
+                out.pixels[(oy * ow + ox) as usize] = img.pixels[(sy * w + sx) as usize];
+            }
+        }
+        out
+    }
 }
 
 /// For a solid config whose request is the surface: the `--set` that asks for a section
