@@ -129,45 +129,6 @@ struct PlaneFrame {
     flip_columns: bool,
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn ramp(w: u32, h: u32) -> Image {
-        let mut img = Image::new(w, h);
-        for y in 0..h {
-            for x in 0..w {
-                img.pixels[(y * w + x) as usize] = [x as f32, y as f32, 0.0, 1.0];
-            }
-        }
-        img
-    }
-
-    #[test]
-    fn plane_frames_flip_and_transpose_as_documented() {
-        let img = ramp(3, 2);
-        let at = |i: &Image, x: u32, y: u32| {
-            let p = i.pixels[(y * i.width + x) as usize];
-            (p[0] as u32, p[1] as u32)
-        };
-        let f = |flip_rows, transpose, flip_columns| PlaneFrame {
-            flip_rows,
-            transpose,
-            flip_columns,
-        };
-        let up = f(true, false, false).apply(&img);
-        assert_eq!((up.width, up.height), (3, 2));
-        assert_eq!(at(&up, 0, 0), (0, 1));
-        assert_eq!(at(&up, 2, 1), (2, 0));
-        let t = f(false, true, false).apply(&img);
-        assert_eq!((t.width, t.height), (2, 3));
-        assert_eq!(at(&t, 1, 2), (2, 1));
-        let tm = f(false, true, true).apply(&img);
-        assert_eq!(at(&tm, 0, 2), (2, 1));
-        assert_eq!(at(&tm, 1, 0), (0, 0));
-    }
-}
-
 impl PlaneFrame {
     fn apply(&self, img: &Image) -> Image {
         let (w, h) = (img.width, img.height);
@@ -229,4 +190,43 @@ fn load_exemplar(run: &Run, spec: &ExemplarSpec, key: &str) -> Result<Image, Sco
     } else {
         img
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(w: u32, h: u32) -> Image {
+        let mut img = Image::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                img.pixels[(y * w + x) as usize] = [x as f32, y as f32, 0.0, 1.0];
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn plane_frames_flip_and_transpose_as_documented() {
+        let img = ramp(3, 2);
+        let at = |i: &Image, x: u32, y: u32| {
+            let p = i.pixels[(y * i.width + x) as usize];
+            (p[0] as u32, p[1] as u32)
+        };
+        let f = |flip_rows, transpose, flip_columns| PlaneFrame {
+            flip_rows,
+            transpose,
+            flip_columns,
+        };
+        let up = f(true, false, false).apply(&img);
+        assert_eq!((up.width, up.height), (3, 2));
+        assert_eq!(at(&up, 0, 0), (0, 1));
+        assert_eq!(at(&up, 2, 1), (2, 0));
+        let t = f(false, true, false).apply(&img);
+        assert_eq!((t.width, t.height), (2, 3));
+        assert_eq!(at(&t, 1, 2), (2, 1));
+        let tm = f(false, true, true).apply(&img);
+        assert_eq!(at(&tm, 0, 2), (2, 1));
+        assert_eq!(at(&tm, 1, 0), (0, 0));
+    }
 }
