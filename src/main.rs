@@ -349,7 +349,7 @@ fn real_main() -> Result<i32> {
             // The lock's recorded overrides first, so the command line's own win.
             let sets: Vec<String> = lock.sets.iter().chain(sets.iter()).cloned().collect();
             let plan = load_plan(config, &sets)?;
-            let temp = fresh.then(|| TempDir::new("texsyn-verify"));
+            let temp = fresh.then(|| outputs::TempDir::new("texsyn-verify"));
             let cache = match &temp {
                 Some(t) => Cache::open(t.path())?,
                 // Verifying a cache that is not there (a mistyped --cache) is an error, not
@@ -725,47 +725,5 @@ fn print_table(reports: &[pipeline::NodeReport]) {
             r.seconds,
             texsyn::memory::human(r.bytes)
         );
-    }
-}
-
-/// A directory removed when dropped. Named `PREFIX-PID-NANOS`; creating one removes those a
-/// killed texsyn left behind (their process is gone), never those of a live one.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(prefix: &str) -> TempDir {
-        let base = std::env::temp_dir();
-        if let Ok(entries) = std::fs::read_dir(&base) {
-            for e in entries.flatten() {
-                let name = e.file_name();
-                let Some(pid) = name
-                    .to_str()
-                    .and_then(|n| n.strip_prefix(prefix)?.strip_prefix('-')?.split_once('-'))
-                    .and_then(|(pid, nanos)| {
-                        nanos.bytes().all(|b| b.is_ascii_digit()).then_some(pid)
-                    })
-                    .and_then(|pid| pid.parse::<u32>().ok())
-                else {
-                    continue;
-                };
-                if outputs::owner_is_dead(pid, &e.path()) {
-                    let _ = std::fs::remove_dir_all(e.path());
-                }
-            }
-        }
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos())
-            .unwrap_or(0);
-        TempDir(base.join(format!("{prefix}-{}-{nanos}", std::process::id())))
-    }
-    fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
     }
 }

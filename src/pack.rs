@@ -73,6 +73,7 @@ use crate::config::{Config, ConfigError};
 use crate::lockfile::{LockEntry, LockError, LockFile};
 use crate::methods::{self, MethodError, Plan};
 use crate::pipeline::executor::PipelineError;
+use crate::pipeline::outputs::TempDir;
 use crate::pipeline::{self, InputRef, ProgressMode, RunOptions, outputs};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap, HashSet};
@@ -595,7 +596,7 @@ fn check_archive(path: &Path, archive: &Path) -> Result<Checked, PackError> {
     let file = File::open(path).map_err(io_at(archive))?;
     let decoder = zstd::stream::read::Decoder::new(file).map_err(io_at(archive))?;
     let mut tar = tar::Archive::new(decoder);
-    let dir = TempDir::new("texsyn-unpack").map_err(|(p, e)| io_at(&p)(e))?;
+    let dir = TempDir::create("texsyn-unpack").map_err(|(p, e)| io_at(&p)(e))?;
 
     let mut entries = tar
         .entries()
@@ -1212,50 +1213,6 @@ impl Drop for TempFile {
         if self.1.get() {
             let _ = fs::remove_file(&self.0);
         }
-    }
-}
-
-/// A folder in the system's temporary folder, removed when dropped. Named
-/// `PREFIX-PID-NANOS`; creating one removes those a killed texsyn left behind.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(prefix: &str) -> Result<TempDir, (PathBuf, io::Error)> {
-        let base = std::env::temp_dir();
-        if let Ok(entries) = fs::read_dir(&base) {
-            for e in entries.flatten() {
-                let name = e.file_name();
-                let Some(pid) = name
-                    .to_str()
-                    .and_then(|n| n.strip_prefix(prefix)?.strip_prefix('-')?.split_once('-'))
-                    .and_then(|(pid, nanos)| {
-                        nanos.bytes().all(|b| b.is_ascii_digit()).then_some(pid)
-                    })
-                    .and_then(|pid| pid.parse::<u32>().ok())
-                else {
-                    continue;
-                };
-                if pid != std::process::id() && outputs::owner_is_dead(pid, &e.path()) {
-                    let _ = fs::remove_dir_all(e.path());
-                }
-            }
-        }
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos())
-            .unwrap_or(0);
-        let path = base.join(format!("{prefix}-{}-{nanos}", std::process::id()));
-        fs::create_dir_all(&path).map_err(|e| (path.clone(), e))?;
-        Ok(TempDir(path))
-    }
-    fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = fs::remove_dir_all(&self.0);
     }
 }
 

@@ -9,13 +9,18 @@ use std::process::Command;
 
 fn verify_from_empty_cache(name: &str) {
     let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let cache = tempfile::tempdir().unwrap();
     let config = repo.join("configs").join(format!("{name}.toml"));
-    let lock = repo.join("configs").join(format!("{name}.lock"));
+    verify_fresh(&config, &repo.join("configs").join(format!("{name}.lock")));
+}
+
+/// `texsyn verify CONFIG LOCK --fresh` in an empty cache, asserted to pass.
+fn verify_fresh(config: &std::path::Path, lock: &std::path::Path) {
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let cache = tempfile::tempdir().unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_texsyn"))
         .arg("verify")
-        .arg(&config)
-        .arg(&lock)
+        .arg(config)
+        .arg(lock)
         .args(["--fresh", "--quiet", "--cache"])
         .arg(cache.path())
         .current_dir(&repo)
@@ -23,7 +28,8 @@ fn verify_from_empty_cache(name: &str) {
         .expect("texsyn runs");
     assert!(
         o.status.success(),
-        "{name}: verify failed:\n{}{}",
+        "{}: verify failed:\n{}{}",
+        lock.display(),
         String::from_utf8_lossy(&o.stdout),
         String::from_utf8_lossy(&o.stderr)
     );
@@ -113,22 +119,7 @@ fn cpu_companion_locks_verify_and_cover_every_method() {
             "{stem}: a companion lock records its small settings"
         );
         covered.push(method_of(&config).expect("a companion lock names a shipped config"));
-        let cache = tempfile::tempdir().unwrap();
-        let o = Command::new(env!("CARGO_BIN_EXE_texsyn"))
-            .arg("verify")
-            .arg(&config)
-            .arg(&lock)
-            .args(["--fresh", "--quiet", "--cache"])
-            .arg(cache.path())
-            .current_dir(&repo)
-            .output()
-            .expect("texsyn runs");
-        assert!(
-            o.status.success(),
-            "configs/cpu/{stem}.lock: verify failed:\n{}{}",
-            String::from_utf8_lossy(&o.stdout),
-            String::from_utf8_lossy(&o.stderr)
-        );
+        verify_fresh(&config, &lock);
     }
     covered.sort();
     covered.dedup();

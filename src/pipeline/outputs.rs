@@ -466,3 +466,56 @@ fn sync_dir(dir: &Path) -> std::io::Result<()> {
     let _ = dir;
     Ok(())
 }
+
+/// A folder in the system's temporary folder, removed when dropped. Named
+/// `PREFIX-PID-NANOS`; making one removes those a killed texsyn left behind (their process is
+/// gone), never those of a live one. Used by `verify --fresh` (its cache) and `unpack` (the
+/// extracted archive).
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// A fresh path, not created (a cache creates its own root).
+    pub fn new(prefix: &str) -> TempDir {
+        let base = std::env::temp_dir();
+        if let Ok(entries) = fs::read_dir(&base) {
+            for e in entries.flatten() {
+                let name = e.file_name();
+                let Some(pid) = name
+                    .to_str()
+                    .and_then(|n| n.strip_prefix(prefix)?.strip_prefix('-')?.split_once('-'))
+                    .and_then(|(pid, nanos)| {
+                        nanos.bytes().all(|b| b.is_ascii_digit()).then_some(pid)
+                    })
+                    .and_then(|pid| pid.parse::<u32>().ok())
+                else {
+                    continue;
+                };
+                if pid != std::process::id() && owner_is_dead(pid, &e.path()) {
+                    let _ = fs::remove_dir_all(e.path());
+                }
+            }
+        }
+        let nanos = SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0);
+        TempDir(base.join(format!("{prefix}-{}-{nanos}", std::process::id())))
+    }
+
+    /// As [`TempDir::new`], and created (an existing folder of that name is an error).
+    pub fn create(prefix: &str) -> Result<TempDir, (PathBuf, std::io::Error)> {
+        let dir = TempDir::new(prefix);
+        fs::create_dir(&dir.0).map_err(|e| (dir.0.clone(), e))?;
+        Ok(dir)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.0);
+    }
+}
