@@ -1,19 +1,10 @@
 //! The `texsyn` command as a user meets it: the lock file, bad inputs, and the small commands.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn texsyn(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_texsyn"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("texsyn runs")
-}
+mod common;
+use common::cli::{object_count, stderr, stdout, succeeded, texsyn};
+use common::repo;
+use std::path::Path;
+use std::process::Output;
 
 /// `texsyn run demo.toml --cache c --out <out>`, then the `extra` arguments, in `dir`.
 fn run_demo(dir: &Path, out: &str, extra: &[&str]) -> Output {
@@ -21,41 +12,6 @@ fn run_demo(dir: &Path, out: &str, extra: &[&str]) -> Output {
         &[&["run", "demo.toml", "--cache", "c", "--out", out], extra].concat(),
         dir,
     )
-}
-
-/// `o`, once asserted to be the output of a command that succeeded (its stderr tells why
-/// not).
-fn succeeded(o: Output) -> Output {
-    assert!(o.status.success(), "{}", stderr(&o));
-    o
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn object_count(cache: &Path) -> usize {
-    walk(&cache.join("objects-v1"))
-}
-
-fn walk(dir: &Path) -> usize {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return 0;
-    };
-    entries
-        .flatten()
-        .map(|e| {
-            if e.path().is_dir() {
-                walk(&e.path())
-            } else {
-                1
-            }
-        })
-        .sum()
 }
 
 /// A scratch copy of the demo's config and assets, so tests can break them.

@@ -4,8 +4,11 @@
 //!
 //! Every test packs synth2d at 48×40 pixels (well under a second).
 
+mod common;
+use common::cli::{object_count, stderr, succeeded, texsyn};
+use common::repo;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 const SETS: [&str; 4] = [
     "--set",
@@ -14,54 +17,8 @@ const SETS: [&str; 4] = [
     "synthesize.height=40",
 ];
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn texsyn(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_texsyn"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("texsyn runs")
-}
-
-fn succeeded(o: Output) -> Output {
-    assert!(
-        o.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    o
-}
-
 fn json(o: &Output) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).expect("--json prints JSON")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn object_count(cache: &Path) -> usize {
-    walk(&cache.join("objects-v1"))
-}
-
-fn walk(dir: &Path) -> usize {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return 0;
-    };
-    entries
-        .flatten()
-        .map(|e| {
-            if e.path().is_dir() {
-                walk(&e.path())
-            } else {
-                1
-            }
-        })
-        .sum()
 }
 
 /// A folder holding synth2d's config and exemplar, as a user's project would.

@@ -2,21 +2,12 @@
 //! errors. The measures themselves are tested on planted cases in
 //! `core/src/image/patch_score.rs` (verbatim crop, shuffled pixels, blur, brute force).
 
+mod common;
+use common::cli::texsyn;
+use common::repo;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn texsyn(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_texsyn"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("texsyn runs")
-}
+use std::process::Output;
 
 fn json(o: &Output) -> Value {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

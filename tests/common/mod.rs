@@ -13,6 +13,7 @@ use texsyn::pipeline::{self, NodeStatus, RunOptions, RunResult};
 mod exemplars;
 #[allow(unused_imports)] // the files that use none of them
 pub use exemplars::*;
+pub mod cli;
 pub mod geometry_image;
 pub mod geometry_texture;
 pub mod jump_map;
