@@ -9,6 +9,7 @@ use texsyn::config::Config;
 use texsyn::lockfile::LockFile;
 use texsyn::methods::Plan;
 use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, outputs};
+use texsyn::sweep::Sweep;
 
 #[derive(Parser)]
 #[command(
@@ -50,6 +51,31 @@ enum Command {
         #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
         sets: Vec<String>,
         /// Output directory. Default: out/<config name>.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Also write the `--json` report to this file (atomically): what a sweep's table is
+        /// made from.
+        #[arg(long, value_name = "FILE")]
+        report: Option<PathBuf>,
+    },
+    /// Run a sweep (README, "Sweeps"): a base config and axes over its values, one ordinary
+    /// run per point in its own folder (OUT/points/NNN-values/), on one cache; then the
+    /// results table (OUT/results.csv, .md, .json) and the sweep's lock (OUT/sweep.lock).
+    /// Points already done (report present, everything cached) are not run again.
+    Sweep {
+        sweep: PathBuf,
+        /// Say what would run, point by point, and run nothing (like `status`).
+        #[arg(long)]
+        status: bool,
+        /// Where points run: `local` (processes side by side on this machine) or `slurm`
+        /// (one job array; the cache must be on a filesystem the compute nodes see).
+        #[arg(long, default_value = "local")]
+        executor: String,
+        /// Local executor: points run at once. Default: the sweep's `workers`, else one per
+        /// core (at most the number of points); the cores are shared among them.
+        #[arg(long)]
+        workers: Option<usize>,
+        /// The sweep's folder. Default: out/<sweep name>.
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -226,7 +252,12 @@ fn real_main() -> Result<i32> {
         ProgressMode::Bars
     };
     match &cli.command {
-        Command::Run { config, sets, out } => {
+        Command::Run {
+            config,
+            sets,
+            out,
+            report: report_file,
+        } => {
             let start = Instant::now();
             let plan = load_plan(config, sets)?;
             let out_dir = out.clone().unwrap_or(plan.default_out.clone());
@@ -254,20 +285,25 @@ fn real_main() -> Result<i32> {
                 None => None,
             };
             let seconds = start.elapsed().as_secs_f64();
+            let outputs: Vec<_> = written
+                .iter()
+                .map(|(p, w)| serde_json::json!({ "path": p, "written": w }))
+                .collect();
+            let mut report = serde_json::json!({
+                "nodes": result.reports,
+                "outputs": outputs,
+                "warnings": result.warnings,
+                "seconds": seconds,
+                "peak_memory_bytes": texsyn::memory::peak_resident(),
+                "sets": sets,
+            });
+            if let Some(s) = &scores {
+                report["scores"] = serde_json::to_value(s)?;
+            }
+            if let Some(f) = report_file {
+                write_atomic(f, serde_json::to_string_pretty(&report)?.as_bytes())?;
+            }
             if cli.json {
-                let outputs: Vec<_> = written
-                    .iter()
-                    .map(|(p, w)| serde_json::json!({ "path": p, "written": w }))
-                    .collect();
-                let mut report = serde_json::json!({
-                    "nodes": result.reports,
-                    "outputs": outputs,
-                    "warnings": result.warnings,
-                    "seconds": seconds,
-                });
-                if let Some(s) = &scores {
-                    report["scores"] = serde_json::to_value(s)?;
-                }
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else if !cli.quiet {
                 print_table(&result.reports);
@@ -285,6 +321,21 @@ fn real_main() -> Result<i32> {
             }
             Ok(0)
         }
+        Command::Sweep {
+            sweep,
+            status,
+            executor,
+            workers,
+            out,
+        } => sweep_command(
+            &cli,
+            sweep,
+            *status,
+            executor,
+            *workers,
+            out.as_deref(),
+            &cache_dir,
+        ),
         Command::Status { config, sets } => {
             let plan = load_plan(config, sets)?;
             let cache = Cache::open(&cache_dir)?;
@@ -310,6 +361,9 @@ fn real_main() -> Result<i32> {
             output,
             accept_unbumped,
         } => {
+            if Sweep::is_sweep_file(config) {
+                return sweep_hashes(config, sets, output.as_deref(), &cache_dir, progress);
+            }
             let (_, result) = run_config(config, sets, &cache_dir, progress)?;
             let now = LockFile::of_reports(&result.reports, sets);
             let Some(output) = output else {
@@ -345,6 +399,9 @@ fn real_main() -> Result<i32> {
             sets,
             fresh,
         } => {
+            if Sweep::is_sweep_file(config) {
+                return sweep_verify(config, lockfile, sets, *fresh, &cache_dir, progress, &cli);
+            }
             let lock = LockFile::read(lockfile)?;
             // The lock's recorded overrides first, so the command line's own win.
             let sets: Vec<String> = lock.sets.iter().chain(sets.iter()).cloned().collect();
@@ -726,4 +783,307 @@ fn print_table(reports: &[pipeline::NodeReport]) {
             texsyn::memory::human(r.bytes)
         );
     }
+}
+
+/// `texsyn sweep`: checks every point, says or runs what is not done, then writes the table
+/// and the sweep's lock.
+fn sweep_command(
+    cli: &Cli,
+    path: &Path,
+    status_only: bool,
+    executor: &str,
+    workers: Option<usize>,
+    out: Option<&Path>,
+    cache_dir: &Path,
+) -> Result<i32> {
+    use texsyn::sweep::{
+        CommonArgs, PointState, SweepDir, local, lock::SweepLock, point_state, table,
+    };
+    if !matches!(executor, "local" | "slurm") {
+        bail!("--executor {executor:?}: expected `local` or `slurm`");
+    }
+    let sweep = Sweep::load(path)?;
+    let dir = SweepDir::new(&out.map(Path::to_owned).unwrap_or_else(|| sweep.default_out()));
+    let cache = Cache::open(cache_dir)?;
+    let mut states = Vec::new();
+    for p in &sweep.points {
+        states.push(point_state(&sweep, &dir, p, &cache)?);
+    }
+    let todo: Vec<&texsyn::sweep::Point> = sweep
+        .points
+        .iter()
+        .zip(&states)
+        .filter(|(_, s)| **s != PointState::Done)
+        .map(|(p, _)| p)
+        .collect();
+    if status_only {
+        if cli.json {
+            let lines: Vec<_> = sweep
+                .points
+                .iter()
+                .zip(&states)
+                .map(|(p, s)| {
+                    serde_json::json!({ "point": p.index, "values": p.label(), "out": dir.point_out(p), "status": s })
+                })
+                .collect();
+            println!("{}", serde_json::to_string_pretty(&lines)?);
+        } else {
+            for (p, s) in sweep.points.iter().zip(&states) {
+                let what = match s {
+                    PointState::Done => "done".to_owned(),
+                    PointState::WouldRun { nodes } if nodes.is_empty() => {
+                        "would run (everything cached; writes its outputs)".to_owned()
+                    }
+                    PointState::WouldRun { nodes } => format!("would compute {}", nodes.join(", ")),
+                };
+                println!("{:>4}  {:<40} {what}", p.index, p.label());
+            }
+            println!(
+                "{} of {} points to run, in {}",
+                todo.len(),
+                sweep.points.len(),
+                dir.root.display()
+            );
+        }
+        return Ok(0);
+    }
+    if executor == "slurm" {
+        bail!("--executor slurm: not available yet in this build");
+    }
+    let exe = std::env::current_exe().context("finding the texsyn binary")?;
+    let cores = cli.jobs.unwrap_or_else(|| {
+        std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+    });
+    let workers = workers
+        .or(sweep.workers)
+        .unwrap_or(cores)
+        .clamp(1, todo.len().max(1));
+    let common = CommonArgs {
+        cache: std::path::absolute(cache_dir).unwrap_or_else(|_| cache_dir.to_owned()),
+        threads: Some((cores / workers).max(1)),
+        // One budget for the whole sweep, shared by the points running at once.
+        max_memory: Some(texsyn::memory::budget() / workers as u64),
+    };
+    let tasks: Vec<local::Task> = todo
+        .iter()
+        .map(|&point| local::Task { point, shard: None })
+        .collect();
+    let total = tasks.len();
+    let finished = std::sync::atomic::AtomicUsize::new(0);
+    let quiet = cli.quiet || cli.json;
+    let start = Instant::now();
+    if !quiet && total < sweep.points.len() {
+        println!(
+            "{} of {} points done already; running {total}",
+            sweep.points.len() - total,
+            sweep.points.len()
+        );
+    }
+    let failures = local::run_tasks(
+        &exe,
+        &sweep,
+        &dir,
+        &tasks,
+        workers,
+        &common,
+        &|task, outcome, seconds| {
+            let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if quiet {
+                return;
+            }
+            match outcome {
+                Ok(()) => println!(
+                    "[{n}/{total}] point {} ({}): done in {seconds:.2} s",
+                    task.point.index,
+                    task.point.label()
+                ),
+                Err(e) => eprintln!(
+                    "[{n}/{total}] point {} ({}): failed: {e}",
+                    task.point.index,
+                    task.point.label()
+                ),
+            }
+        },
+    );
+    let table = table::Table::collect(&sweep, &dir, &failures);
+    std::fs::create_dir_all(&dir.root)
+        .with_context(|| format!("creating {}", dir.root.display()))?;
+    write_atomic(&dir.root.join("results.csv"), table.to_csv().as_bytes())?;
+    write_atomic(&dir.root.join("results.md"), table.to_markdown().as_bytes())?;
+    write_atomic(
+        &dir.root.join("results.json"),
+        serde_json::to_string_pretty(&table)?.as_bytes(),
+    )?;
+    let lock = SweepLock::of_reports(&sweep, &dir);
+    if let Some(lock) = &lock {
+        write_atomic(
+            &dir.root.join("sweep.lock"),
+            lock.to_text(&sweep.path).as_bytes(),
+        )?;
+    }
+    let failed: Vec<_> = table.failed().collect();
+    if cli.json {
+        println!("{}", serde_json::to_string_pretty(&table)?);
+    } else if !cli.quiet {
+        println!(
+            "{} points ({} run now) in {:.2} s; table: {}",
+            sweep.points.len(),
+            total,
+            start.elapsed().as_secs_f64(),
+            dir.root.join("results.md").display()
+        );
+    }
+    if !failed.is_empty() {
+        for r in &failed {
+            eprintln!(
+                "point {} failed: {}",
+                r.index,
+                r.error.as_deref().unwrap_or("no report")
+            );
+        }
+        eprintln!(
+            "{} of {} points failed; rerun the sweep to run only those",
+            failed.len(),
+            sweep.points.len()
+        );
+        return Ok(1);
+    }
+    Ok(0)
+}
+
+/// `texsyn hashes SWEEP.toml`: every point's lines, computed in this process, as a sweep lock.
+fn sweep_hashes(
+    path: &Path,
+    sets: &[String],
+    output: Option<&Path>,
+    cache_dir: &Path,
+    progress: ProgressMode,
+) -> Result<i32> {
+    use texsyn::sweep::lock::{PointLock, SweepLock};
+    let sweep = Sweep::load(path)?;
+    let mut lock = SweepLock::default();
+    for p in &sweep.points {
+        let point_sets: Vec<String> = p.sets.iter().chain(sets).cloned().collect();
+        let (_, result) = run_config(&sweep.base, &point_sets, cache_dir, progress)
+            .with_context(|| format!("point {} ({})", p.index, p.label()))?;
+        lock.points.push(PointLock {
+            index: p.index,
+            label: p.label(),
+            lock: LockFile::of_reports(&result.reports, &[]),
+        });
+    }
+    let text = lock.to_text(path);
+    match output {
+        Some(o) => write_atomic(o, text.as_bytes())?,
+        None => print!("{text}"),
+    }
+    Ok(0)
+}
+
+/// `texsyn verify SWEEP.toml SWEEP.lock`: every point against its section of the lock.
+fn sweep_verify(
+    path: &Path,
+    lockfile: &Path,
+    sets: &[String],
+    fresh: bool,
+    cache_dir: &Path,
+    progress: ProgressMode,
+    cli: &Cli,
+) -> Result<i32> {
+    use texsyn::sweep::lock::SweepLock;
+    let sweep = Sweep::load(path)?;
+    let lock = SweepLock::read(lockfile)?;
+    let temp = fresh.then(|| outputs::TempDir::new("texsyn-verify"));
+    let cache = match &temp {
+        Some(t) => Cache::open(t.path())?,
+        None => Cache::open_existing(cache_dir)?,
+    };
+    let mut problems = Vec::new();
+    let mut damaged = Vec::new();
+    let mut artifacts = 0;
+    for p in &sweep.points {
+        let section = match lock.section(p) {
+            Ok(s) => s,
+            Err(e) => {
+                problems.push(e);
+                continue;
+            }
+        };
+        let point_sets: Vec<String> = p.sets.iter().chain(sets).cloned().collect();
+        let plan = load_plan(&sweep.base, &point_sets)
+            .with_context(|| format!("point {} ({})", p.index, p.label()))?;
+        let result = pipeline::run(
+            &plan.dag,
+            &cache,
+            RunOptions {
+                progress,
+                verify_all: true,
+            },
+        )?;
+        artifacts += result.reports.len();
+        for d in section
+            .lock
+            .compare(&LockFile::of_reports(&result.reports, &[]))
+        {
+            problems.push(format!("point {} ({}): {d}", p.index, p.label()));
+        }
+        damaged.extend(result.damaged);
+    }
+    for extra in lock
+        .points
+        .iter()
+        .filter(|l| !sweep.points.iter().any(|p| p.index == l.index))
+    {
+        problems.push(format!(
+            "point {} ({}) is in the lock file but not in the sweep",
+            extra.index, extra.label
+        ));
+    }
+    let code = if !problems.is_empty() {
+        VERIFY_MISMATCH
+    } else if !damaged.is_empty() {
+        VERIFY_DAMAGED
+    } else {
+        0
+    };
+    if cli.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "lockfile": lockfile,
+                "points": sweep.points.len(),
+                "artifacts": artifacts,
+                "mismatches": problems,
+                "damaged": damaged,
+                "exit_code": code,
+            }))?
+        );
+    }
+    for d in &damaged {
+        eprintln!(
+            "damaged: {}: {} ({}); recomputed and replaced",
+            d.node,
+            d.path.display(),
+            d.problem
+        );
+    }
+    for p in &problems {
+        eprintln!("mismatch: {p}");
+    }
+    if !problems.is_empty() {
+        eprintln!(
+            "{} mismatch(es) against {}",
+            problems.len(),
+            lockfile.display()
+        );
+    } else if !cli.quiet && !cli.json {
+        println!(
+            "verified: {} points, {artifacts} artifacts match {}",
+            sweep.points.len(),
+            lockfile.display()
+        );
+    }
+    Ok(code)
 }

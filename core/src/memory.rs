@@ -122,6 +122,18 @@ pub fn check_budget(
     })
 }
 
+/// This process's peak resident memory so far (`VmHWM` of /proc/self/status), if the
+/// system says (Linux).
+pub fn peak_resident() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    status
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|kb| kb.parse::<u64>().ok())
+        .map(|kb| kb * 1024)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -142,3 +154,4 @@ mod tests {
         assert_eq!(human(1536), "1.5 KiB");
     }
 }
+
