@@ -25,7 +25,7 @@ pub mod lock;
 pub mod table;
 
 use crate::config::{Config, ConfigError};
-use indexmap::IndexMap;
+use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -81,8 +81,10 @@ struct SweepFile {
     base: PathBuf,
     #[serde(default)]
     combine: Combine,
+    /// Keyed with their place in the file: a TOML table's keys come out sorted, and the axes'
+    /// order as written is the table's column order and the points' loop order.
     #[serde(default)]
-    axes: IndexMap<String, AxisSpec>,
+    axes: BTreeMap<toml::Spanned<String>, AxisSpec>,
     /// Points run side by side by the local executor (default: one per core, at most the
     /// number of points).
     workers: Option<usize>,
@@ -221,8 +223,11 @@ impl Sweep {
                     .into(),
             ));
         }
+        let mut written: Vec<(&toml::Spanned<String>, &AxisSpec)> = file.axes.iter().collect();
+        written.sort_by_key(|(k, _)| k.span().start);
         let mut axes = Vec::new();
-        for (key, spec) in &file.axes {
+        for (key, spec) in written {
+            let key = key.get_ref();
             let at = |m: String| invalid(format!("axes.\"{key}\": {m}"));
             if key.split('.').any(|p| p.trim().is_empty()) {
                 return Err(at("the key has an empty part".into()));
