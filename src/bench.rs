@@ -19,6 +19,7 @@ use std::time::Instant;
 mod feature_aligned;
 mod graph_matching;
 mod score;
+mod sweep;
 
 fn shared_data() -> Option<PathBuf> {
     let candidates = [
@@ -148,6 +149,11 @@ pub fn run_all(runs: usize) -> Result<String> {
         notes.push("TEXSYN_BENCH_ONLY=feature_aligned: only the feature-aligned rows".into());
         return Ok(table(runs, &rows, "", &notes));
     }
+    if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("sweep") {
+        sweep::rows(repo, runs, &mut rows)?;
+        notes.push("TEXSYN_BENCH_ONLY=sweep: only the sweep rows".into());
+        return Ok(table(runs, &rows, "", &notes));
+    }
     if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("solid") {
         let t = solid_rows(&mut rows, runs)?;
         notes.push("TEXSYN_BENCH_ONLY=solid: only the solid rows".into());
@@ -243,6 +249,7 @@ pub fn run_all(runs: usize) -> Result<String> {
     }
     graph_matching::rows(repo, runs, &mut rows)?;
     feature_aligned::rows(repo, runs, &mut rows)?;
+    sweep::rows(repo, runs, &mut rows)?;
     let solid_table = if std::env::var_os("TEXSYN_BENCH_SKIP_SOLID").is_some() {
         notes.push("TEXSYN_BENCH_SKIP_SOLID is set: the solid rows are not measured".into());
         String::new()
