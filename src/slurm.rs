@@ -88,7 +88,11 @@ impl SlurmOptions {
             if let Some(v) = v
                 && (v.is_empty() || v.contains(|c: char| c.is_whitespace() || c == ','))
             {
-                return Err(bad(field, v.clone(), "must be one name, without spaces or commas"));
+                return Err(bad(
+                    field,
+                    v.clone(),
+                    "must be one name, without spaces or commas",
+                ));
             }
         }
         if let Some(t) = &self.time
@@ -139,12 +143,14 @@ fn check_time(t: &str) -> Result<(), String> {
         None => (None, t),
     };
     let parts: Vec<&str> = rest.split(':').collect();
-    let ok =
-        days.is_none_or(all_digits) && parts.iter().all(|p| all_digits(p)) && parts.len() <= 3;
+    let ok = days.is_none_or(all_digits) && parts.iter().all(|p| all_digits(p)) && parts.len() <= 3;
     if ok {
         Ok(())
     } else {
-        Err("not a Slurm time (MINUTES, MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS or UNLIMITED)".into())
+        Err(
+            "not a Slurm time (MINUTES, MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS or UNLIMITED)"
+                .into(),
+        )
     }
 }
 
@@ -484,7 +490,10 @@ fn log_path(dir: &Path, job_id: &JobId, index: usize) -> PathBuf {
     dir.join("logs").join(format!("{job_id}_{index}.log"))
 }
 
-fn read_json<T: for<'de> Deserialize<'de>>(dir: &Path, file: &str) -> Result<Option<T>, SlurmError> {
+fn read_json<T: for<'de> Deserialize<'de>>(
+    dir: &Path,
+    file: &str,
+) -> Result<Option<T>, SlurmError> {
     let path = dir.join(file);
     match fs::read(&path) {
         Ok(bytes) => serde_json::from_slice(&bytes)
@@ -614,7 +623,10 @@ fn submit(state_dir: &Path, tasks: &[Task], how: Submit<'_>) -> Result<JobId, Sl
     }
     for &i in &how.indices {
         let Some(task) = tasks.get(i) else {
-            return Err(bad(i, &format!("no such task (the list has {})", tasks.len())));
+            return Err(bad(
+                i,
+                &format!("no such task (the list has {})", tasks.len()),
+            ));
         };
         if task.argv.is_empty() {
             return Err(bad(i, "empty command line"));
@@ -680,15 +692,11 @@ fn submit(state_dir: &Path, tasks: &[Task], how: Submit<'_>) -> Result<JobId, Sl
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default()
     );
-    let mut args: Vec<OsString> = vec![
-        "--parsable".into(),
-        format!("--job-name={name}").into(),
-        {
-            let mut s = OsString::from("--chdir=");
-            s.push(&cwd);
-            s
-        },
-    ];
+    let mut args: Vec<OsString> = vec!["--parsable".into(), format!("--job-name={name}").into(), {
+        let mut s = OsString::from("--chdir=");
+        s.push(&cwd);
+        s
+    }];
     let mut output = OsString::from("--output=");
     output.push(dir.join("logs"));
     match how.kind {
@@ -1037,9 +1045,21 @@ pub fn probe_shared_folder_with(
     };
     match outcome.status {
         TaskStatus::Exited(0) => {}
-        TaskStatus::Exited(3) => return Err(fail(format!("the probe job could not read the marker {}", marker.display()))),
-        TaskStatus::Exited(4) => return Err(fail(format!("the probe job read other contents from the marker {}", marker.display()))),
-        TaskStatus::Exited(code) => return Err(fail(format!("the probe job failed with exit code {code}"))),
+        TaskStatus::Exited(3) => {
+            return Err(fail(format!(
+                "the probe job could not read the marker {}",
+                marker.display()
+            )));
+        }
+        TaskStatus::Exited(4) => {
+            return Err(fail(format!(
+                "the probe job read other contents from the marker {}",
+                marker.display()
+            )));
+        }
+        TaskStatus::Exited(code) => {
+            return Err(fail(format!("the probe job failed with exit code {code}")));
+        }
         TaskStatus::Lost { slurm_state } => {
             return Err(fail(format!(
                 "the probe job ended without recording an exit status in the folder ({})",
@@ -1110,7 +1130,9 @@ mod tests {
             ("mem = \"lots\"", "mem"),
             ("mem = 0", "mem"),
         ] {
-            let e = toml::from_str::<SlurmOptions>(text).unwrap_err().to_string();
+            let e = toml::from_str::<SlurmOptions>(text)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains(field), "{text}: {e}");
         }
         let o = SlurmOptions {

@@ -220,10 +220,16 @@ fn gather_job_runs_after_the_array_and_is_cancelled_when_it_fails() {
     let array = slurm::submit_array(&state, &tasks, &[0, 1, 2], &opts(), None).unwrap();
     let gather = slurm::submit_single(&state, &tasks, 3, &opts(), Some(&array)).unwrap();
     let outcomes = slurm::attach(&state, POLL).unwrap();
-    assert!(outcomes.iter().all(|o| o.status.succeeded()), "{outcomes:?}");
+    assert!(
+        outcomes.iter().all(|o| o.status.succeeded()),
+        "{outcomes:?}"
+    );
     assert_eq!(outcomes[3].job_id.as_deref(), Some(gather.0.as_str()));
     // The gather saw every shard's file: it ran after them.
-    assert_eq!(fs::read_to_string(out.join("gathered")).unwrap(), "0\n1\n2\n");
+    assert_eq!(
+        fs::read_to_string(out.join("gathered")).unwrap(),
+        "0\n1\n2\n"
+    );
 
     let state = dir.path().join("failing");
     fs::remove_file(out.join("gathered")).unwrap();
@@ -383,8 +389,15 @@ fn probe_that_cannot_read_the_marker_stops_with_the_jobs_log() {
     assert!(msg.contains("could not read the marker"), "{msg}");
     assert!(msg.contains(&marker.display().to_string()), "{msg}");
     // The job's own log, quoted in the error, says what the node saw.
-    assert!(msg.contains("texsyn probe: cannot read the marker"), "{msg}");
-    assert!(log.exists(), "the failed probe's log is kept: {}", log.display());
+    assert!(
+        msg.contains("texsyn probe: cannot read the marker"),
+        "{msg}"
+    );
+    assert!(
+        log.exists(),
+        "the failed probe's log is kept: {}",
+        log.display()
+    );
 }
 
 #[test]
@@ -395,7 +408,10 @@ fn sbatch_missing_from_path_is_a_clear_error_before_submitting() {
     let out = child("submit", &state).env("PATH", "").output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(3), "{stderr}");
-    assert!(stderr.contains("`sbatch` was not found on PATH"), "{stderr}");
+    assert!(
+        stderr.contains("`sbatch` was not found on PATH"),
+        "{stderr}"
+    );
     assert!(stderr.contains("scripts/slurm-local"), "{stderr}");
     assert!(!state.exists(), "nothing may be written before the check");
 }
