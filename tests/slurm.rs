@@ -247,6 +247,46 @@ fn gather_job_runs_after_the_array_and_is_cancelled_when_it_fails() {
     assert_eq!(slurm::to_resubmit(&state).unwrap(), [1, 3]);
 }
 
+#[test]
+fn task_killed_by_slurm_is_reported_lost_and_never_submitted_twice_while_queued() {
+    if !cluster("killed_task") {
+        return;
+    }
+    let dir = state_dir();
+    let state = dir.path().join("state");
+    let tasks = [task("sleeper", sh("sleep 100", &[]))];
+    let job = slurm::submit_array(&state, &tasks, &[0], &opts(), None).unwrap();
+    let start = Instant::now();
+    while !matches!(&slurm::status(&state).unwrap()[0].status, TaskStatus::Active(s) if s == "RUNNING")
+    {
+        assert!(start.elapsed() < Duration::from_secs(120), "never ran");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // A second submission of a running task is refused, naming it.
+    let err = slurm::submit_array(&state, &tasks, &[0], &opts(), None).unwrap_err();
+    assert!(
+        matches!(err, SlurmError::StillActive { index: 0, .. }),
+        "{err}"
+    );
+    let out = Command::new("scancel")
+        .arg(format!("{job}_0"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let outcomes = slurm::attach(&state, POLL).unwrap();
+    // No exit status: the command never ended on its own. squeue still has the job's state.
+    assert_eq!(
+        outcomes[0].status,
+        TaskStatus::Lost {
+            slurm_state: Some("CANCELLED".into())
+        },
+        "{}",
+        outcomes[0]
+    );
+    assert!(outcomes[0].to_string().contains("killed"));
+    assert_eq!(slurm::to_resubmit(&state).unwrap(), [0]);
+}
+
 /// Runs this test binary again as a child doing `what` (see `child_helper`).
 fn child(what: &str, state: &Path) -> Command {
     let mut c = Command::new(std::env::current_exe().unwrap());
