@@ -8,6 +8,7 @@
 
 use std::ffi::OsString;
 use std::fs;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::OnceLock;
@@ -19,7 +20,9 @@ const POLL: Duration = Duration::from_millis(300);
 /// Starts the local cluster once; false (after a loud SKIPPED line) only with TEXSYN_NO_SLURM=1.
 fn cluster(test: &str) -> bool {
     if std::env::var_os("TEXSYN_NO_SLURM").is_some_and(|v| v == "1") {
-        eprintln!(
+        // Straight to the process's stderr: libtest would swallow eprintln! of a passing test.
+        let _ = writeln!(
+            std::io::stderr(),
             "\n*** SKIPPED: {test}: TEXSYN_NO_SLURM=1, the Slurm integration tests did not run ***\n"
         );
         return false;
