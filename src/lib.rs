@@ -13,8 +13,8 @@ pub mod methods;
 pub mod pack;
 pub mod pipeline;
 pub mod score;
-pub mod sweep;
 pub mod slurm;
+pub mod sweep;
 
 // The core (meshes, images, solvers, randomness, rasterizer, writers) and the stage algorithms
 // are crates of their own (DESIGN.md, Layout); re-exported so `crate::geom::…`,

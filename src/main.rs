@@ -78,6 +78,8 @@ enum Command {
         /// The sweep's folder. Default: out/<sweep name>.
         #[arg(long)]
         out: Option<PathBuf>,
+        #[command(flatten)]
+        slurm: SlurmFlags,
     },
     /// Show what `run` would compute, without computing (like make -n).
     Status {
@@ -185,6 +187,59 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         runs: usize,
     },
+}
+
+/// `--executor slurm`'s options; each overrides the sweep's `[slurm]` value of that name.
+#[derive(clap::Args, Debug, Default)]
+struct SlurmFlags {
+    /// Slurm partition.
+    #[arg(long)]
+    partition: Option<String>,
+    /// Slurm time limit per task (e.g. 30, 1:00:00, 1-00:00).
+    #[arg(long)]
+    time: Option<String>,
+    /// Slurm memory per task (e.g. 4G); also each task's memory budget (--max-memory).
+    #[arg(long)]
+    mem: Option<String>,
+    /// Slurm CPUs per task; also each task's thread count.
+    #[arg(long)]
+    cpus_per_task: Option<u32>,
+    /// Slurm account.
+    #[arg(long)]
+    account: Option<String>,
+}
+
+/// The sweep's `[slurm]` table with the command line's flags over it, checked.
+fn slurm_options(sweep: &Sweep, flags: &SlurmFlags) -> Result<texsyn::slurm::SlurmOptions> {
+    use serde::Deserialize;
+    let mut opts = match &sweep.slurm {
+        Some(t) => texsyn::slurm::SlurmOptions::deserialize(toml::Value::Table(t.clone()))
+            .map_err(|e| {
+                anyhow::anyhow!(
+                    "{}: [slurm]: {}",
+                    sweep.path.display(),
+                    e.to_string().trim()
+                )
+            })?,
+        None => Default::default(),
+    };
+    if let Some(p) = &flags.partition {
+        opts.partition = Some(p.clone());
+    }
+    if let Some(t) = &flags.time {
+        opts.time = Some(t.clone());
+    }
+    if let Some(m) = &flags.mem {
+        opts.mem = Some(parse_size(m).map_err(|e| anyhow::anyhow!("--mem {m}: {e}"))?);
+    }
+    if let Some(c) = flags.cpus_per_task {
+        opts.cpus_per_task = Some(c);
+    }
+    if let Some(a) = &flags.account {
+        opts.account = Some(a.clone());
+    }
+    opts.check()?;
+    Ok(opts)
 }
 
 fn main() {
@@ -327,6 +382,7 @@ fn real_main() -> Result<i32> {
             executor,
             workers,
             out,
+            slurm,
         } => sweep_command(
             &cli,
             sweep,
@@ -334,6 +390,7 @@ fn real_main() -> Result<i32> {
             executor,
             *workers,
             out.as_deref(),
+            slurm,
             &cache_dir,
         ),
         Command::Status { config, sets } => {
@@ -794,16 +851,21 @@ fn sweep_command(
     executor: &str,
     workers: Option<usize>,
     out: Option<&Path>,
+    slurm_flags: &SlurmFlags,
     cache_dir: &Path,
 ) -> Result<i32> {
     use texsyn::sweep::{
-        CommonArgs, PointState, SweepDir, local, lock::SweepLock, point_state, table,
+        CommonArgs, PointState, SweepDir, local, lock::SweepLock, point_state, slurm_executor,
+        table,
     };
     if !matches!(executor, "local" | "slurm") {
         bail!("--executor {executor:?}: expected `local` or `slurm`");
     }
     let sweep = Sweep::load(path)?;
-    let dir = SweepDir::new(&out.map(Path::to_owned).unwrap_or_else(|| sweep.default_out()));
+    let dir = SweepDir::new(
+        &out.map(Path::to_owned)
+            .unwrap_or_else(|| sweep.default_out()),
+    );
     let cache = Cache::open(cache_dir)?;
     let mut states = Vec::new();
     for p in &sweep.points {
@@ -847,66 +909,143 @@ fn sweep_command(
         }
         return Ok(0);
     }
-    if executor == "slurm" {
-        bail!("--executor slurm: not available yet in this build");
-    }
     let exe = std::env::current_exe().context("finding the texsyn binary")?;
-    let cores = cli.jobs.unwrap_or_else(|| {
-        std::thread::available_parallelism()
-            .map(|n| n.get())
-            .unwrap_or(1)
-    });
-    let workers = workers
-        .or(sweep.workers)
-        .unwrap_or(cores)
-        .clamp(1, todo.len().max(1));
-    let common = CommonArgs {
-        cache: std::path::absolute(cache_dir).unwrap_or_else(|_| cache_dir.to_owned()),
-        threads: Some((cores / workers).max(1)),
-        // One budget for the whole sweep, shared by the points running at once.
-        max_memory: Some(texsyn::memory::budget() / workers as u64),
-    };
-    let tasks: Vec<local::Task> = todo
-        .iter()
-        .map(|&point| local::Task { point, shard: None })
-        .collect();
-    let total = tasks.len();
-    let finished = std::sync::atomic::AtomicUsize::new(0);
+    let cache_abs = std::path::absolute(cache_dir).unwrap_or_else(|_| cache_dir.to_owned());
     let quiet = cli.quiet || cli.json;
     let start = Instant::now();
-    if !quiet && total < sweep.points.len() {
+    if !quiet && todo.len() < sweep.points.len() {
         println!(
-            "{} of {} points done already; running {total}",
-            sweep.points.len() - total,
-            sweep.points.len()
+            "{} of {} points done already; running {}",
+            sweep.points.len() - todo.len(),
+            sweep.points.len(),
+            todo.len()
         );
     }
-    let failures = local::run_tasks(
-        &exe,
-        &sweep,
-        &dir,
-        &tasks,
-        workers,
-        &common,
-        &|task, outcome, seconds| {
+    let failures = if executor == "slurm" {
+        let opts = slurm_options(&sweep, slurm_flags)?;
+        let common = CommonArgs {
+            cache: cache_abs.clone(),
+            threads: Some(opts.cpus_per_task.unwrap_or(1) as usize),
+            // A task's budget is the job's memory, when the sweep says it.
+            max_memory: opts.mem,
+        };
+        let list = slurm_executor::TaskList::new(&exe, &sweep, &dir, &common);
+        let mut last = String::new();
+        let mut progress = |s: &[texsyn::slurm::TaskOutcome]| {
+            if quiet {
+                return;
+            }
+            let active = s
+                .iter()
+                .filter(|t| matches!(t.status, texsyn::slurm::TaskStatus::Active(_)))
+                .count();
+            let ended = s
+                .iter()
+                .filter(|t| {
+                    matches!(
+                        t.status,
+                        texsyn::slurm::TaskStatus::Exited(_)
+                            | texsyn::slurm::TaskStatus::Lost { .. }
+                    )
+                })
+                .count();
+            let line = format!("slurm: {active} tasks pending or running, {ended} ended");
+            if line != last {
+                println!("{line}");
+                last = line;
+            }
+        };
+        if slurm_executor::reattach(&dir, &mut progress)? && !quiet {
+            println!("re-attached to the tasks an earlier `texsyn sweep` left in the queue");
+        }
+        // What is still to do once those have ended.
+        let mut todo = Vec::new();
+        for p in &sweep.points {
+            if point_state(&sweep, &dir, p, &cache)? != PointState::Done {
+                todo.push(p);
+            }
+        }
+        if todo.is_empty() {
+            Default::default()
+        } else {
+            if !quiet {
+                println!(
+                    "submitting {} points to Slurm ({} tasks); state in {}",
+                    todo.len(),
+                    todo.len() * list.per_point,
+                    slurm_executor::state_dir(&dir).display()
+                );
+            }
+            slurm_executor::run(&list, &dir, &todo, &cache_abs, &opts, &mut progress)?
+        }
+    } else {
+        let cores = cli.jobs.unwrap_or_else(|| {
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1)
+        });
+        let shards = sweep.shards.unwrap_or(1).max(1);
+        let width = if shards > 1 {
+            todo.len() * shards as usize
+        } else {
+            todo.len()
+        };
+        let workers = workers
+            .or(sweep.workers)
+            .unwrap_or(cores)
+            .clamp(1, width.max(1));
+        let common = CommonArgs {
+            cache: cache_abs.clone(),
+            threads: Some((cores / workers).max(1)),
+            // One budget for the whole sweep, shared by the points running at once.
+            max_memory: Some(texsyn::memory::budget() / workers as u64),
+        };
+        let finished = std::sync::atomic::AtomicUsize::new(0);
+        let total = width + if shards > 1 { todo.len() } else { 0 };
+        let report = |task: &local::Task, outcome: &Result<(), String>, seconds: f64| {
             let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             if quiet {
                 return;
             }
+            let what = match task.shard {
+                Some((i, n)) => format!("shard {i}/{n} of point {}", task.point.index),
+                None => format!("point {}", task.point.index),
+            };
             match outcome {
                 Ok(()) => println!(
-                    "[{n}/{total}] point {} ({}): done in {seconds:.2} s",
-                    task.point.index,
+                    "[{n}/{total}] {what} ({}): done in {seconds:.2} s",
                     task.point.label()
                 ),
-                Err(e) => eprintln!(
-                    "[{n}/{total}] point {} ({}): failed: {e}",
-                    task.point.index,
-                    task.point.label()
-                ),
+                Err(e) => eprintln!("[{n}/{total}] {what} ({}): failed: {e}", task.point.label()),
             }
-        },
-    );
+        };
+        let mut failures = Default::default();
+        let mut ready: Vec<&texsyn::sweep::Point> = todo.clone();
+        if shards > 1 {
+            // The shards of every point first, then each point whose shards all succeeded
+            // gathers them.
+            let tasks: Vec<local::Task> = todo
+                .iter()
+                .flat_map(|&point| {
+                    (0..shards).map(move |i| local::Task {
+                        point,
+                        shard: Some((i, shards)),
+                    })
+                })
+                .collect();
+            failures = local::run_tasks(&exe, &sweep, &dir, &tasks, workers, &common, &report);
+            ready.retain(|p| !failures.contains_key(&p.index));
+        }
+        let tasks: Vec<local::Task> = ready
+            .iter()
+            .map(|&point| local::Task { point, shard: None })
+            .collect();
+        failures.extend(local::run_tasks(
+            &exe, &sweep, &dir, &tasks, workers, &common, &report,
+        ));
+        failures
+    };
+    let total = todo.len();
     let table = table::Table::collect(&sweep, &dir, &failures);
     std::fs::create_dir_all(&dir.root)
         .with_context(|| format!("creating {}", dir.root.display()))?;

@@ -36,7 +36,13 @@ fn csv_rows(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
         .map(str::to_owned)
         .collect();
     lines
-        .map(|l| header.iter().cloned().zip(l.split(',').map(str::to_owned)).collect())
+        .map(|l| {
+            header
+                .iter()
+                .cloned()
+                .zip(l.split(',').map(str::to_owned))
+                .collect()
+        })
         .collect()
 }
 
@@ -61,7 +67,11 @@ fn the_tables_hashes_equal_those_of_the_points_run_one_by_one() {
     let rows = csv_rows(&out.join("results.csv"));
     assert_eq!(rows.len(), 3);
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
-    assert_eq!(md.lines().filter(|l| l.starts_with("| ")).count(), 4, "{md}");
+    assert_eq!(
+        md.lines().filter(|l| l.starts_with("| ")).count(),
+        4,
+        "{md}"
+    );
     for (i, row) in rows.iter().enumerate() {
         assert_eq!(row["state"], "ok");
         assert_eq!(row["synthesize.seed"], (i + 1).to_string());
@@ -84,17 +94,29 @@ fn the_tables_hashes_equal_those_of_the_points_run_one_by_one() {
         let mut compared = 0;
         for line in stdout(&lock).lines().filter(|l| !l.starts_with('#')) {
             let f: Vec<&str> = line.split_whitespace().collect();
-            assert_eq!(row[&format!("{} hash", f[0])], f[2], "point {i}, node {}", f[0]);
+            assert_eq!(
+                row[&format!("{} hash", f[0])],
+                f[2],
+                "point {i}, node {}",
+                f[0]
+            );
             compared += 1;
         }
         assert!(compared >= 3, "{}", stdout(&lock));
         // Its outputs are in its own folder.
         let folder = PathBuf::from(&row["output folder"]);
-        assert!(folder.join("synthesized.png").is_file(), "{}", folder.display());
+        assert!(
+            folder.join("synthesized.png").is_file(),
+            "{}",
+            folder.display()
+        );
     }
     // Points differ by seed: their synthesis differs, their shared import does not.
     assert_ne!(rows[0]["synthesize hash"], rows[1]["synthesize hash"]);
-    assert_eq!(rows[0]["import.exemplar hash"], rows[2]["import.exemplar hash"]);
+    assert_eq!(
+        rows[0]["import.exemplar hash"],
+        rows[2]["import.exemplar hash"]
+    );
 
     // The sweep's lock verifies, and a changed hash in it is a mismatch naming the point.
     let lock = out.join("sweep.lock");
@@ -246,7 +268,10 @@ fn bad_sweeps_are_refused_before_anything_runs() {
         ("\"synthesize.sede\" = [1]", "sede"),
         ("\"synthesize.seed\" = [\"one\"]", "synthesize.seed"),
         ("\"synthesize.seed\" = []", "no values"),
-        ("\"synthesize.seed\" = { from = 1, to = 2, steps = 0 }", "steps"),
+        (
+            "\"synthesize.seed\" = { from = 1, to = 2, steps = 0 }",
+            "steps",
+        ),
     ];
     for (axes, says) in cases {
         let path = t.path().join("s.toml");
@@ -255,10 +280,16 @@ fn bad_sweeps_are_refused_before_anything_runs() {
             format!("base = {:?}\n[axes]\n{axes}\n", base.to_str().unwrap()),
         )
         .unwrap();
-        let o = texsyn(&["sweep", "s.toml", "--cache", "c", "--out", "out"], t.path());
+        let o = texsyn(
+            &["sweep", "s.toml", "--cache", "c", "--out", "out"],
+            t.path(),
+        );
         assert_eq!(o.status.code(), Some(1), "{axes}");
         let err = stderr(&o);
-        assert!(err.contains("s.toml") && err.contains(says), "{axes}: {err}");
+        assert!(
+            err.contains("s.toml") && err.contains(says),
+            "{axes}: {err}"
+        );
         assert!(!t.path().join("out").exists(), "{axes}: something ran");
     }
     std::fs::write(

@@ -154,4 +154,3 @@ mod tests {
         assert_eq!(human(1536), "1.5 KiB");
     }
 }
-

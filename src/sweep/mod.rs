@@ -16,17 +16,18 @@
 //! loops written in the file's order). Each point is the base config with one `--set` per axis,
 //! so everything `run` guarantees holds for a point; the sweep adds the table of all points
 //! ([`table`]), the lock of all of them ([`lock`]), and executors that run them side by side
-//! ([`local`]) or as Slurm job arrays. A point's run writes its report
+//! ([`local`]) or as Slurm job arrays ([`slurm_executor`]). A point's run writes its report
 //! (`run --report`) beside its outputs; the table is made from those reports, so a point run
 //! by another process, on another machine or in an earlier, killed sweep counts the same.
 
 pub mod local;
 pub mod lock;
+pub mod slurm_executor;
 pub mod table;
 
 use crate::config::{Config, ConfigError};
-use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
@@ -385,7 +386,10 @@ fn range_values(r: &RangeSpec) -> Result<Vec<toml::Value>, String> {
         return Err(format!("`steps` must be at least 1, found {}", r.steps));
     }
     if r.steps > 1_000_000 {
-        return Err(format!("`steps` must be at most 1000000, found {}", r.steps));
+        return Err(format!(
+            "`steps` must be at most 1000000, found {}",
+            r.steps
+        ));
     }
     let n = r.steps;
     if n == 1 {
@@ -401,7 +405,11 @@ fn range_values(r: &RangeSpec) -> Result<Vec<toml::Value>, String> {
         .map(|i| {
             let t = i as f64 / (n - 1) as f64;
             // The ends exactly as written; between them, a lerp.
-            let x = if i == n - 1 { to } else { from + (to - from) * t };
+            let x = if i == n - 1 {
+                to
+            } else {
+                from + (to - from) * t
+            };
             toml::Value::Float(x)
         })
         .collect())
@@ -669,7 +677,10 @@ mod tests {
         )
         .unwrap();
         assert_eq!(z.points.len(), 2);
-        assert_eq!(z.points[1].sets, ["synthesize.seed=2", "parameterize.scale=20.0"]);
+        assert_eq!(
+            z.points[1].sets,
+            ["synthesize.seed=2", "parameterize.scale=20.0"]
+        );
     }
 
     #[test]
@@ -689,10 +700,8 @@ mod tests {
     fn input_paths_are_relative_to_the_sweep_file_and_rewritten_for_the_base() {
         // The sweep in sweeps/, the base in the folder above: sweeps/../assets/a.off is
         // assets/a.off from the base's folder.
-        let s = sweep(
-            "base = \"../demo.toml\"\n[axes]\n\"inputs.mesh\" = [\"../assets/a.off\"]\n",
-        )
-        .unwrap();
+        let s = sweep("base = \"../demo.toml\"\n[axes]\n\"inputs.mesh\" = [\"../assets/a.off\"]\n")
+            .unwrap();
         let set = &s.points[0].sets[0];
         assert!(set.starts_with("inputs.mesh="), "{set}");
         let value = set.trim_start_matches("inputs.mesh=").trim_matches('"');
@@ -707,10 +716,16 @@ mod tests {
     fn bad_axes_are_errors_naming_the_file_and_the_axis() {
         let e = |t: &str| sweep(t).unwrap_err().to_string();
         let m = e("base = \"b.toml\"\n[axes]\n\"synthesize.seed\" = []\n");
-        assert!(m.starts_with("sweeps/s.toml") && m.contains("synthesize.seed") && m.contains("no values"), "{m}");
+        assert!(
+            m.starts_with("sweeps/s.toml")
+                && m.contains("synthesize.seed")
+                && m.contains("no values"),
+            "{m}"
+        );
         let m = e("base = \"b.toml\"\n[axes]\n");
         assert!(m.contains("at least one axis"), "{m}");
-        let m = e("base = \"b.toml\"\ncombine = \"zip\"\n[axes]\n\"a.x\" = [1]\n\"a.y\" = [1, 2]\n");
+        let m =
+            e("base = \"b.toml\"\ncombine = \"zip\"\n[axes]\n\"a.x\" = [1]\n\"a.y\" = [1, 2]\n");
         assert!(m.contains("one length") && m.contains("a.y"), "{m}");
         let m = e("base = \"b.toml\"\n[axes]\n\"a.x\" = { from = \"a\", to = 1, steps = 2 }\n");
         assert!(m.contains("a.x"), "{m}");

@@ -102,7 +102,11 @@ impl Table {
             let mut f: Vec<String> = vec![r.index.to_string()];
             f.extend(r.values.iter().map(|(_, v)| v.clone()));
             f.push(r.state.clone());
-            f.extend(c.nodes.iter().map(|n| lookup(&r.nodes, n).unwrap_or_default()));
+            f.extend(
+                c.nodes
+                    .iter()
+                    .map(|n| lookup(&r.nodes, n).unwrap_or_default()),
+            );
             f.extend(
                 c.stages
                     .iter()
@@ -119,7 +123,11 @@ impl Table {
                     .iter()
                     .map(|k| lookup_f(&r.scores, k).map(score).unwrap_or_default()),
             );
-            f.extend(c.nodes.iter().map(|n| lookup(&r.hashes, n).unwrap_or_default()));
+            f.extend(
+                c.nodes
+                    .iter()
+                    .map(|n| lookup(&r.hashes, n).unwrap_or_default()),
+            );
             f.push(r.out.display().to_string());
             f.push(r.error.clone().unwrap_or_default());
             s += &csv_line(&f);
