@@ -98,7 +98,9 @@ impl KeyLocks {
                 }
             };
             match locked {
-                Ok(true) if still_at_path(&file, &path) => return Locking::Held(KeyLock { _file: file }),
+                Ok(true) if still_at_path(&file, &path) => {
+                    return Locking::Held(KeyLock { _file: file });
+                }
                 // `gc` removed the file we locked (or waited on): take the one there now.
                 Ok(true) => continue,
                 Ok(false) => return Locking::Busy,

@@ -410,6 +410,7 @@ impl Executor<'_> {
         if self.found_after_locking(i, key, start) {
             return Ok(());
         }
+        tracing::info!("computing {} (key {})", node.name, key.to_hex());
         let progress = Progress::new(self.opts.progress, &node.name);
         let input_hashes = self.input_hashes(i);
         let (result, pieces) = {
