@@ -34,8 +34,11 @@ fn main() {
         let keys: Vec<ContentHash> = (0..N)
             .map(|i| ContentHash::of(&[round.to_le_bytes(), i.to_le_bytes()].concat()))
             .collect();
-        for (times, blocking) in [(&mut fresh, true), (&mut again, true), (&mut try_again, false)]
-        {
+        for (times, blocking) in [
+            (&mut fresh, true),
+            (&mut again, true),
+            (&mut try_again, false),
+        ] {
             let t = Instant::now();
             for k in &keys {
                 let held = if blocking {
