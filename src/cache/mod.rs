@@ -9,6 +9,13 @@
 //! that does not check out (magic, version, kind code, reserved bytes, lengths, metadata) is
 //! a miss with a warning, never an error, and the object is removed. Least-recently-used order
 //! for `gc` is kept in file modification times, refreshed on every hit.
+//!
+//! Processes sharing a cache order their work on a key with the key locks of [`lock`]; the
+//! store itself needs none.
+
+mod lock;
+
+pub use lock::{KeyLock, KeyLocks, Locking};
 
 use crate::artifact::{Artifact, ArtifactError, Backing, ContentHash, HEADER_LEN, Header, Kind};
 use std::fs::{self, File};
@@ -99,6 +106,11 @@ impl Cache {
 
     pub fn root(&self) -> &Path {
         &self.root
+    }
+
+    /// The cache's key locks (`locks/` beside the objects).
+    pub fn locks(&self) -> KeyLocks {
+        KeyLocks::new(&self.root)
     }
 
     pub fn object_path(&self, key: &Key) -> PathBuf {
@@ -259,6 +271,7 @@ impl Cache {
 
     /// Deletes least recently used objects until the store is within `max_bytes`. An object
     /// that cannot be removed is an error naming it (a read-only cache cannot be trimmed).
+    /// Also removes the key lock files no process holds (they are not counted as objects).
     pub fn gc(&self, max_bytes: u64) -> Result<GcReport, CacheError> {
         let mut objects = self.objects()?;
         // Oldest first; ties by path so the choice is deterministic.
@@ -274,6 +287,7 @@ impl Cache {
             removed += 1;
             removed_bytes += size;
         }
+        self.locks().remove_unused();
         Ok(GcReport {
             removed,
             removed_bytes,

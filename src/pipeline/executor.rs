@@ -10,11 +10,21 @@
 //! (see [`Cache::peek_kind`]), including that the kind is the node's output kind. Any object
 //! that fails a check is removed, recomputed and stored again, and listed in
 //! [`RunResult::damaged`]; it is never an error.
+//!
+//! Several processes may share one cache. A node that is missing is computed under its key's
+//! lock ([`crate::cache::KeyLocks`]): the first process to need it computes it, the others
+//! wait, find it stored when they get the lock, and report it cached. A lock is taken only
+//! once the node's inputs are resolved and held only while computing and storing it, so a
+//! process holding a lock never waits for another: no cycle of waits can form. The import
+//! nodes, which are stored together at the end of their phase, take their locks together
+//! first, in key order, for the same reason. Where locks cannot be used, one warning says so
+//! and the run goes on unlocked, as before (correct, possibly computing a key twice).
 
 use super::{Dag, InputData, InputRef, NodeContext, NodeError, Progress, ProgressMode};
 use crate::artifact::{Artifact, ContentHash};
-use crate::cache::{Cache, CacheError, Key, Lookup};
+use crate::cache::{Cache, CacheError, Key, KeyLock, KeyLocks, Locking, Lookup};
 use serde::Serialize;
+use std::collections::HashMap;
 use std::time::Instant;
 
 #[derive(Clone, Copy, Debug)]
@@ -110,6 +120,11 @@ struct Executor<'a> {
     damaged: Vec<Damage>,
     /// While set, computed artifacts are kept in memory instead of stored (see [`run`]).
     deferred: Option<Vec<(Key, usize)>>,
+    locks: KeyLocks,
+    /// Key locks held until the key's object is stored.
+    held: HashMap<Key, KeyLock>,
+    /// Set once locking failed (and was warned about): the rest of the run goes unlocked.
+    unlocked: bool,
 }
 
 /// Brings every node of the DAG up to date and returns their artifacts.
@@ -125,16 +140,22 @@ pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, Pipe
         warnings: Vec::new(),
         damaged: Vec::new(),
         deferred: Some(Vec::new()),
+        locks: cache.locks(),
+        held: HashMap::new(),
+        unlocked: false,
     };
-    for (i, node) in dag.nodes.iter().enumerate() {
-        if node.stage == super::Stage::Import {
-            ex.resolve(i)?;
-        }
+    let imports: Vec<usize> = (0..dag.nodes.len())
+        .filter(|&i| dag.nodes[i].stage == super::Stage::Import)
+        .collect();
+    ex.lock_missing_imports(&imports);
+    for &i in &imports {
+        ex.resolve(i)?;
     }
     for (key, i) in ex.deferred.take().unwrap_or_default() {
         let state = ex.states[i].as_ref().expect("resolved above");
         cache.put(&key, state.artifact.file_bytes())?;
     }
+    ex.held.clear();
     // What the run hands out is read by the caller (the bundles are written to the output
     // directory): re-hash it like a node's input, as soon as it is resolved, so a repair that
     // changes its content hash comes before anything downstream is keyed on it.
@@ -218,6 +239,104 @@ impl Executor<'_> {
         });
     }
 
+    /// Takes the locks of the import nodes whose objects are missing, in key order (they are
+    /// held until all imports are stored; one order for every process rules out a cycle).
+    fn lock_missing_imports(&mut self, imports: &[usize]) {
+        let mut keys: Vec<(Key, usize)> = imports
+            .iter()
+            .filter(|&&i| {
+                let inputs = &self.dag.nodes[i].inputs;
+                inputs.iter().all(|r| matches!(r, InputRef::File(_)))
+            })
+            .map(|&i| (self.dag.key(&self.dag.nodes[i], &self.input_hashes(i)), i))
+            .filter(|(key, _)| !self.cache.object_path(key).is_file())
+            .collect();
+        keys.sort();
+        keys.dedup_by_key(|k| k.0);
+        for (key, i) in keys {
+            self.lock_key(i, key, true);
+        }
+    }
+
+    /// Takes `key`'s lock for node `i`, waiting for another process if `wait` (saying so);
+    /// else only if free. Whether it is now held.
+    fn lock_key(&mut self, i: usize, key: Key, wait: bool) -> bool {
+        if self.held.contains_key(&key) {
+            return true;
+        }
+        if self.unlocked {
+            return false;
+        }
+        let name = &self.dag.nodes[i].name;
+        let bars = self.opts.progress == ProgressMode::Bars;
+        let locking = if wait {
+            self.locks.lock(&key, || {
+                let msg = format!("waiting for {name} (computed by another process)");
+                if bars {
+                    eprintln!("{msg}");
+                } else {
+                    tracing::info!("{msg}");
+                }
+            })
+        } else {
+            self.locks.try_lock(&key)
+        };
+        match locking {
+            Locking::Held(lock) => {
+                self.held.insert(key, lock);
+                true
+            }
+            Locking::Busy => false,
+            Locking::Unavailable(reason) => {
+                self.unlocked = true;
+                self.warn(format!(
+                    "key locks are unavailable ({reason}); going on without them: processes \
+                     sharing this cache may compute the same node twice (with the same result)"
+                ));
+                false
+            }
+        }
+    }
+
+    /// Before computing node `i`: takes its key's lock, and if another process stored the
+    /// object meanwhile (while this one waited, or between its lookup and the lock), takes
+    /// that as node `i`'s result (cached, payload verified) and releases the lock. Whether
+    /// it did.
+    fn found_after_locking(&mut self, i: usize, key: Key, start: Instant) -> bool {
+        // The imports are stored at the end of their phase: wait only in the key order of
+        // `lock_missing_imports`, which took theirs; any other import goes on unlocked.
+        let wait = self.deferred.is_none();
+        if !self.lock_key(i, key, wait) {
+            return false;
+        }
+        match self.cache.peek_kind(&key, Some(self.dag.nodes[i].kind)) {
+            Lookup::Hit(artifact) => match artifact.verify() {
+                Ok(()) => {
+                    self.held.remove(&key);
+                    self.states[i] = Some(State {
+                        key,
+                        artifact,
+                        verified: true,
+                        status: NodeStatus::Cached,
+                        seconds: start.elapsed().as_secs_f64(),
+                        pieces: None,
+                    });
+                    true
+                }
+                Err(e) => {
+                    drop(artifact);
+                    self.damaged(i, &key, e.to_string());
+                    false
+                }
+            },
+            Lookup::Invalid(e) => {
+                self.damaged(i, &key, e.to_string());
+                false
+            }
+            Lookup::Miss => false,
+        }
+    }
+
     fn resolve(&mut self, i: usize) -> Result<(), PipelineError> {
         let dag = self.dag;
         let node = &dag.nodes[i];
@@ -288,6 +407,10 @@ impl Executor<'_> {
             return self.resolve(i);
         }
         let start = Instant::now();
+        if self.found_after_locking(i, key, start) {
+            return Ok(());
+        }
+        tracing::info!("computing {} (key {})", node.name, key.to_hex());
         let progress = Progress::new(self.opts.progress, &node.name);
         let input_hashes = self.input_hashes(i);
         let (result, pieces) = {
@@ -328,7 +451,10 @@ impl Executor<'_> {
         })?;
         match &mut self.deferred {
             Some(pending) => pending.push((key, i)),
-            None => self.cache.put(&key, artifact.file_bytes())?,
+            None => {
+                self.cache.put(&key, artifact.file_bytes())?;
+                self.held.remove(&key);
+            }
         }
         self.states[i] = Some(State {
             key,

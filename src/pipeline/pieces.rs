@@ -9,6 +9,11 @@
 //! by their coordinates. Each piece is an artifact in the cache like a node's, checked
 //! (kind and payload hash) when read, and a damaged one is removed and computed again. The
 //! run table counts pieces computed and reused per node.
+//!
+//! Pieces take no key locks (the node computing them holds its own): two *different* nodes
+//! needing the same pieces at the same moment may both compute them, with the same bytes. A
+//! level's missing bricks are computed as one batch from their joint dependent set, so locking
+//! them one by one would mean holding one lock (an open file) per brick across the batch.
 
 use crate::artifact::{ContentHash, ReadOwned, canonical_bytes};
 use crate::cache::{Cache, Lookup};
