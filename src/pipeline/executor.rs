@@ -389,7 +389,10 @@ impl Executor<'_> {
             }
             Err(e) if self.planning() => {
                 // Planning repairs nothing; the run will.
-                let msg = format!("{}: cached artifact is damaged ({e})", self.dag.nodes[j].name);
+                let msg = format!(
+                    "{}: cached artifact is damaged ({e})",
+                    self.dag.nodes[j].name
+                );
                 self.warn(msg);
                 Ok(false)
             }

@@ -140,7 +140,6 @@ pub struct NodeContext<'a> {
     pub(crate) shard: Option<ShardMode>,
 }
 
-
 #[derive(Clone, Copy)]
 pub(crate) enum InputData<'a> {
     Artifact(&'a Artifact),
@@ -163,7 +162,9 @@ impl<'a> NodeContext<'a> {
                 shard: m.shard,
                 share: serde_json::to_value(share).unwrap_or_default(),
             },
-            None => NodeError::internal(format!("{}: a share outside a sharded run", self.node.name)),
+            None => {
+                NodeError::internal(format!("{}: a share outside a sharded run", self.node.name))
+            }
         }
     }
 
