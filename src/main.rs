@@ -260,7 +260,7 @@ fn real_main() -> Result<i32> {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else if !cli.quiet {
                 print_table(&result.nodes);
-                print_shard(&result, config);
+                print_shard(&result, config, false);
                 println!("no outputs written (shard {shard}) in {seconds:.3} s");
             }
             Ok(0)
@@ -364,7 +364,7 @@ fn real_main() -> Result<i32> {
                     println!("{:<24} {:<17} {:<20} {state}", l.node, l.stage, l.algorithm);
                 }
                 if let Some(p) = &planned {
-                    print_shard(p, config);
+                    print_shard(p, config, true);
                 }
             }
             Ok(0)
@@ -698,7 +698,7 @@ fn load_shardable_plan(config: &Path, sets: &[String]) -> Result<Plan> {
 }
 
 /// What a shard did (or, from `status`, would do), after the node table.
-fn print_shard(result: &pipeline::ShardResult, config: &Path) {
+fn print_shard(result: &pipeline::ShardResult, config: &Path, planning: bool) {
     let shard = result.shard;
     if result.sharded.is_empty() {
         println!(
@@ -741,7 +741,8 @@ fn print_shard(result: &pipeline::ShardResult, config: &Path) {
             );
         }
     }
-    if !result.skipped.is_empty() {
+    // Planning, the skipped nodes include those not cached yet (the table above says which).
+    if !result.skipped.is_empty() && !planning {
         println!(
             "left to the gather run (`texsyn run {}` without --shard, after all {} shards): {}",
             config.display(),

@@ -10,6 +10,10 @@
 //! (see [`Cache::peek_kind`]), including that the kind is the node's output kind. Any object
 //! that fails a check is removed, recomputed and stored again, and listed in
 //! [`RunResult::damaged`]; it is never an error.
+//!
+//! [`run_shard`] runs one shard of a split run (`--shard i/N`, see [`super::shard`]): the
+//! nodes with pieces compute their share and store no artifact, and what depends on them waits
+//! for the gather run.
 
 use super::{
     Dag, InputData, InputRef, NodeContext, NodeError, Progress, ProgressMode, Shard, ShardMode,
