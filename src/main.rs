@@ -8,7 +8,7 @@ use texsyn::cache::{Cache, parse_size};
 use texsyn::config::Config;
 use texsyn::lockfile::LockFile;
 use texsyn::methods::Plan;
-use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, outputs};
+use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, Shard, outputs};
 use texsyn::sweep::Sweep;
 
 #[derive(Parser)]
@@ -57,6 +57,12 @@ enum Command {
         /// made from.
         #[arg(long, value_name = "FILE")]
         report: Option<PathBuf>,
+        /// Compute only shard i of N of a `solid` run (counting from 0): its share of the
+        /// finest bricks and the coarser bricks they depend on, into the cache; no outputs
+        /// are written. A later run without --shard (the gather) assembles the outputs from
+        /// the cached bricks (README, "Sharded solid runs").
+        #[arg(long, value_name = "i/N", conflicts_with = "out")]
+        shard: Option<String>,
     },
     /// Run a sweep (README, "Sweeps"): a base config and axes over its values, one ordinary
     /// run per point in its own folder (OUT/points/NNN-values/), on one cache; then the
@@ -86,6 +92,10 @@ enum Command {
         config: PathBuf,
         #[arg(long = "set", value_name = "STAGE.KEY=VALUE")]
         sets: Vec<String>,
+        /// Also say what `run --shard i/N` would compute: its finest bricks and, when the
+        /// synthesis' inputs are cached, the bricks per level it would compute.
+        #[arg(long, value_name = "i/N")]
+        shard: Option<String>,
     },
     /// Print one line per artifact: node, key, content hash (computing what is missing).
     /// Redirect it into a lock file for `verify`, or write it with `-o`. The `--set`
@@ -312,6 +322,43 @@ fn real_main() -> Result<i32> {
             sets,
             out,
             report: report_file,
+            shard: Some(shard),
+        } => {
+            let start = Instant::now();
+            let shard: Shard = shard.parse()?;
+            let plan = load_shardable_plan(config, sets)?;
+            let cache = Cache::open(&cache_dir)?;
+            let opts = RunOptions {
+                progress,
+                verify_all: false,
+            };
+            let _ = out; // refused by clap alongside --shard
+            let result = pipeline::run_shard(&plan.dag, &cache, opts, shard, false)?;
+            let seconds = start.elapsed().as_secs_f64();
+            let mut report = serde_json::to_value(&result)?;
+            report["outputs"] = serde_json::json!([]);
+            report["seconds"] = serde_json::json!(seconds);
+            report["peak_memory_bytes"] = serde_json::json!(texsyn::memory::peak_resident());
+            report["sets"] = serde_json::json!(sets);
+            report["shard"] = serde_json::json!(shard.to_string());
+            if let Some(f) = report_file {
+                write_atomic(f, serde_json::to_string_pretty(&report)?.as_bytes())?;
+            }
+            if cli.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else if !cli.quiet {
+                print_table(&result.nodes);
+                print_shard(&result, config, false);
+                println!("no outputs written (shard {shard}) in {seconds:.3} s");
+            }
+            Ok(0)
+        }
+        Command::Run {
+            config,
+            sets,
+            out,
+            report: report_file,
+            ..
         } => {
             let start = Instant::now();
             let plan = load_plan(config, sets)?;
@@ -393,12 +440,33 @@ fn real_main() -> Result<i32> {
             slurm,
             &cache_dir,
         ),
-        Command::Status { config, sets } => {
-            let plan = load_plan(config, sets)?;
+        Command::Status {
+            config,
+            sets,
+            shard,
+        } => {
+            let shard: Option<Shard> = shard.as_deref().map(str::parse).transpose()?;
+            let plan = match shard {
+                Some(_) => load_shardable_plan(config, sets)?,
+                None => load_plan(config, sets)?,
+            };
             let cache = Cache::open(&cache_dir)?;
             let lines = pipeline::status(&plan.dag, &cache);
+            let opts = RunOptions::default();
+            let planned = shard
+                .map(|s| pipeline::run_shard(&plan.dag, &cache, opts, s, true))
+                .transpose()?;
             if cli.json {
-                println!("{}", serde_json::to_string_pretty(&lines)?);
+                match &planned {
+                    Some(p) => println!(
+                        "{}",
+                        serde_json::to_string_pretty(&serde_json::json!({
+                            "nodes": lines,
+                            "shard": p,
+                        }))?
+                    ),
+                    None => println!("{}", serde_json::to_string_pretty(&lines)?),
+                }
             } else {
                 println!("{:<24} {:<17} {:<20} state", "node", "stage", "algorithm");
                 for l in &lines {
@@ -408,6 +476,9 @@ fn real_main() -> Result<i32> {
                         _ => "would run if its inputs change",
                     };
                     println!("{:<24} {:<17} {:<20} {state}", l.node, l.stage, l.algorithm);
+                }
+                if let Some(p) = &planned {
+                    print_shard(p, config, true);
                 }
             }
             Ok(0)
@@ -729,6 +800,76 @@ const VERIFY_DAMAGED: i32 = 3;
 fn load_plan(config: &Path, sets: &[String]) -> Result<Plan> {
     let cfg = Config::load(config, sets)?;
     Ok(texsyn::methods::plan(&cfg)?)
+}
+
+/// [`load_plan`], for a run split into shards: only a config with a node that splits its
+/// work into pieces (the `solid` method's synthesis) can be.
+fn load_shardable_plan(config: &Path, sets: &[String]) -> Result<Plan> {
+    let plan = load_plan(config, sets)?;
+    if !plan.dag.nodes.iter().any(|n| n.splits_into_shards()) {
+        bail!(
+            "{}: --shard splits the bricks of a `solid` run among machines; method `{}` has no \
+             work that can be split (run it without --shard)",
+            config.display(),
+            plan.method
+        );
+    }
+    Ok(plan)
+}
+
+/// What a shard did (or, from `status`, would do), after the node table.
+fn print_shard(result: &pipeline::ShardResult, config: &Path, planning: bool) {
+    let shard = result.shard;
+    if result.sharded.is_empty() {
+        println!(
+            "shard {shard}: the inputs of the synthesis are not all cached yet; the shard \
+             computes them first, and its share of bricks is known then"
+        );
+    }
+    for s in &result.sharded {
+        let share = &s.share;
+        let n = |k: &str| share[k].as_u64().unwrap_or(0);
+        let assigned = share["assigned"].as_array().map_or(0, Vec::len);
+        let levels = share["levels"].as_array().cloned().unwrap_or_default();
+        let per_level = |k: &str| {
+            levels
+                .iter()
+                .map(|l| l[k].as_u64().unwrap_or(0).to_string())
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        println!(
+            "{}: shard {shard}: {assigned} of {} finest bricks; bricks per level, coarsest \
+             first: needed {}, {} {}, {} in the cache",
+            s.node,
+            n("finest_bricks"),
+            per_level("bricks_needed"),
+            if share["from_empty_cache"].is_null() {
+                "computed"
+            } else {
+                "to compute"
+            },
+            per_level("bricks_computed"),
+            per_level("bricks_reused"),
+        );
+        if let Some(fresh) = share["from_empty_cache"].as_array() {
+            let fresh: Vec<String> = fresh.iter().map(|v| v.to_string()).collect();
+            println!(
+                "{}: shard {shard} from an empty cache: {} bricks per level",
+                s.node,
+                fresh.join(" ")
+            );
+        }
+    }
+    // Planning, the skipped nodes include those not cached yet (the table above says which).
+    if !result.skipped.is_empty() && !planning {
+        println!(
+            "left to the gather run (`texsyn run {}` without --shard, after all {} shards): {}",
+            config.display(),
+            shard.count,
+            result.skipped.join(", ")
+        );
+    }
 }
 
 /// Plans `config` and runs it in the cache at `cache_dir`, computing what is not cached

@@ -25,6 +25,7 @@ use crate::config::Config;
 use crate::geom::Mesh;
 use crate::image::Image;
 use crate::pipeline::Stage::{AnalyseExemplar, Field, Parameterize, Reconstruct, Synthesize};
+use crate::pipeline::shard::{self, ShardMode};
 use crate::pipeline::{Dag, Handle, Keyed, NodeError, NodeSpec, PieceStore, WithTail};
 use crate::stages::analyse_exemplar::candidate_triples::{self as triples, SolidAnalysis};
 use crate::stages::field::quaternion_field::{self as sketch, RotationField};
@@ -32,7 +33,7 @@ use crate::stages::parameterize::volume_embedding as volume;
 use crate::stages::parameterize::volume_embedding::{RequestParams, RequestedVoxels as Request};
 use crate::stages::reconstruct::solid_colour::{self as colour, SolidExportParams};
 use crate::stages::synthesize::solid::solid_synthesis::{
-    self as synthesis, Brick, BrickStore, SolidError,
+    self as synthesis, Brick, BrickStore, SolidError, VoxelRequest,
 };
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -269,11 +270,63 @@ fn add_synthesis(
             let voxels = volume::region_voxels(req.voxels, req.regions, *region)
                 .ok_or_else(|| NodeError::internal("a region's synthesis without voxel regions"))?;
             let bricks = ctx.pieces::<(u32, [i32; 3]), Brick>(synth.pyramid())?;
+            if let Some(mode) = ctx.shard() {
+                return Err(ctx.shard_done(&synthesize_share(&synth, &voxels, &bricks, mode)?));
+            }
             let run = synth.synthesize_voxels(&voxels, &bricks);
             let run = run.map_err(|e| NodeError::classify(e, SolidError::is_internal));
             Ok(SolidSamples::new(voxels, run?.0))
         },
     )
+}
+
+/// One shard's share of a solid synthesis (`texsyn run --shard`, `src/pipeline/shard.rs`).
+#[derive(Serialize)]
+struct BrickShare {
+    /// The finest bricks of the whole request, over all shards.
+    finest_bricks: usize,
+    /// This shard's finest bricks, sorted.
+    assigned: Vec<[i32; 3]>,
+    /// Bricks needed, computed and reused per level, coarsest first (planning: what a run
+    /// would compute with the cache as it is).
+    levels: Vec<synthesis::LevelReport>,
+    /// Planning only: the bricks per level the share depends on, all computed from an empty
+    /// cache (what a shard on its own machine, sharing nothing, computes).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    from_empty_cache: Option<Vec<usize>>,
+}
+
+/// Synthesizes (or, planning, plans) this shard's finest bricks among those `voxels` touch
+/// and the coarser bricks they depend on, into `store`.
+fn synthesize_share(
+    synth: &synthesis::SolidSynthesis,
+    voxels: &[[i32; 3]],
+    store: &dyn BrickStore,
+    mode: ShardMode,
+) -> Result<BrickShare, NodeError> {
+    let all = synth.request_bricks(&VoxelRequest::from_voxels(voxels));
+    let assigned = shard::assign(&all, mode.shard);
+    let mine: std::collections::HashSet<[i32; 3]> = assigned.iter().copied().collect();
+    let share: Vec<[i32; 3]> = voxels
+        .iter()
+        .filter(|v| mine.contains(&synth.brick_of(**v)))
+        .copied()
+        .collect();
+    let request = VoxelRequest::from_voxels(&share);
+    let (levels, from_empty_cache) = if mode.plan_only {
+        let fresh = synth.bricks_needed(&request).iter().map(Vec::len).collect();
+        (synth.plan_report(&request, store), Some(fresh))
+    } else {
+        let report = synth.synthesize(&request, store);
+        let report = report.map_err(|e| NodeError::classify(e, SolidError::is_internal))?;
+        (report.levels, None)
+    };
+    Ok(BrickShare {
+        finest_bricks: all.len(),
+        assigned,
+        levels,
+        from_empty_cache,
+    })
 }
 
 /// The synthesis' bricks are its node's pieces, by (level, brick coordinates).

@@ -19,8 +19,14 @@
 //! nodes, which are stored together at the end of their phase, take their locks together
 //! first, in key order, for the same reason. Where locks cannot be used, one warning says so
 //! and the run goes on unlocked, as before (correct, possibly computing a key twice).
+//!
+//! [`run_shard`] runs one shard of a split run (`--shard i/N`, see [`super::shard`]): the
+//! nodes with pieces compute their share and store no artifact, and what depends on them waits
+//! for the gather run.
 
-use super::{Dag, InputData, InputRef, NodeContext, NodeError, Progress, ProgressMode};
+use super::{
+    Dag, InputData, InputRef, NodeContext, NodeError, Progress, ProgressMode, Shard, ShardMode,
+};
 use crate::artifact::{Artifact, ContentHash};
 use crate::cache::{Cache, CacheError, Key, KeyLock, KeyLocks, Locking, Lookup};
 use serde::Serialize;
@@ -125,6 +131,11 @@ struct Executor<'a> {
     held: HashMap<Key, KeyLock>,
     /// Set once locking failed (and was warned about): the rest of the run goes unlocked.
     unlocked: bool,
+    /// Set in a sharded run ([`run_shard`]).
+    shard: Option<ShardMode>,
+    /// Per node, whether (and why) a sharded run stopped short of its artifact.
+    stopped: Vec<Stop>,
+    sharded: Vec<ShardedNode>,
 }
 
 /// Brings every node of the DAG up to date and returns their artifacts.
@@ -132,64 +143,13 @@ struct Executor<'a> {
 /// The import nodes (parsing the input files) run first and store nothing until all of them
 /// have succeeded, so a bad input file leaves the cache exactly as it was.
 pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, PipelineError> {
-    let mut ex = Executor {
-        dag,
-        cache,
-        opts,
-        states: (0..dag.nodes.len()).map(|_| None).collect(),
-        warnings: Vec::new(),
-        damaged: Vec::new(),
-        deferred: Some(Vec::new()),
-        locks: cache.locks(),
-        held: HashMap::new(),
-        unlocked: false,
-    };
-    let imports: Vec<usize> = (0..dag.nodes.len())
-        .filter(|&i| dag.nodes[i].stage == super::Stage::Import)
-        .collect();
-    ex.lock_missing_imports(&imports);
-    for &i in &imports {
-        ex.resolve(i)?;
-    }
-    for (key, i) in ex.deferred.take().unwrap_or_default() {
-        let state = ex.states[i].as_ref().expect("resolved above");
-        cache.put(&key, state.artifact.file_bytes())?;
-    }
-    ex.held.clear();
-    // What the run hands out is read by the caller (the bundles are written to the output
-    // directory): re-hash it like a node's input, as soon as it is resolved, so a repair that
-    // changes its content hash comes before anything downstream is keyed on it.
-    let mut read = vec![false; dag.nodes.len()];
-    for node in &dag.nodes {
-        for input in &node.inputs {
-            if let InputRef::Node(j) = *input {
-                read[j] = true;
-            }
-        }
-    }
-    for i in 0..dag.nodes.len() {
-        if ex.states[i].is_none() {
-            ex.resolve(i)?;
-        }
-        if dag.nodes[i].exports || !read[i] {
-            ex.ensure_verified(i)?;
-        }
-    }
+    let mut ex = Executor::new(dag, cache, opts, None);
+    ex.run_all()?;
     let mut reports = Vec::new();
     let mut artifacts = Vec::new();
     for (node, state) in dag.nodes.iter().zip(ex.states) {
         let s = state.expect("every node resolved");
-        reports.push(NodeReport {
-            node: node.name.clone(),
-            stage: node.stage.name(),
-            algorithm: node.algorithm,
-            status: s.status,
-            seconds: s.seconds,
-            bytes: s.artifact.len() as u64,
-            key: s.key.to_hex(),
-            content_hash: s.artifact.content_hash().to_hex(),
-            pieces: s.pieces,
-        });
+        reports.push(s.report(node));
         artifacts.push(s.artifact);
     }
     Ok(RunResult {
@@ -198,6 +158,162 @@ pub fn run(dag: &Dag, cache: &Cache, opts: RunOptions) -> Result<RunResult, Pipe
         warnings: ex.warnings,
         damaged: ex.damaged,
     })
+}
+
+/// What one shard of a split run did ([`run_shard`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct ShardResult {
+    pub shard: Shard,
+    /// The nodes brought up to date, as in a whole run (those upstream of the split nodes).
+    pub nodes: Vec<NodeReport>,
+    /// The nodes that computed (or, planning, would compute) their share of pieces and
+    /// stored no artifact.
+    pub sharded: Vec<ShardedNode>,
+    /// The nodes left to the gather run (downstream of a split node).
+    pub skipped: Vec<String>,
+    pub warnings: Vec<String>,
+}
+
+/// A node that computed its share of a sharded run.
+#[derive(Clone, Debug, Serialize)]
+pub struct ShardedNode {
+    pub node: String,
+    /// The key the whole node's artifact has (stored by the gather run, not by a shard).
+    pub key: String,
+    pub seconds: f64,
+    /// Pieces computed and reused by this shard.
+    pub pieces: PieceReport,
+    /// What the node says its share was (the solid: its finest bricks, work per level).
+    pub share: serde_json::Value,
+}
+
+/// Runs shard `shard` of the DAG (see [`super::shard`]): the nodes upstream of any node with
+/// pieces are brought up to date as in [`run`], each node with pieces computes its share of
+/// pieces and stores no artifact, and the nodes downstream of those are skipped. With
+/// `plan_only` (`status --shard`), nothing is computed or stored: nodes not in the cache are
+/// skipped, and a node with pieces whose inputs are all cached says what its share would
+/// compute.
+pub fn run_shard(
+    dag: &Dag,
+    cache: &Cache,
+    opts: RunOptions,
+    shard: Shard,
+    plan_only: bool,
+) -> Result<ShardResult, PipelineError> {
+    let mode = ShardMode { shard, plan_only };
+    let mut ex = Executor::new(dag, cache, opts, Some(mode));
+    ex.run_all()?;
+    let mut nodes = Vec::new();
+    let mut skipped = Vec::new();
+    for (i, node) in dag.nodes.iter().enumerate() {
+        match (&ex.states[i], ex.stopped[i]) {
+            (Some(s), _) => nodes.push(s.report(node)),
+            (None, Stop::Skipped) => skipped.push(node.name.clone()),
+            (None, _) => {}
+        }
+    }
+    Ok(ShardResult {
+        shard,
+        nodes,
+        sharded: ex.sharded,
+        skipped,
+        warnings: ex.warnings,
+    })
+}
+
+impl State {
+    fn report(&self, node: &super::Node) -> NodeReport {
+        NodeReport {
+            node: node.name.clone(),
+            stage: node.stage.name(),
+            algorithm: node.algorithm,
+            status: self.status,
+            seconds: self.seconds,
+            bytes: self.artifact.len() as u64,
+            key: self.key.to_hex(),
+            content_hash: self.artifact.content_hash().to_hex(),
+            pieces: self.pieces,
+        }
+    }
+}
+
+/// Why a node of a sharded run has no artifact.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Stop {
+    /// It has one (or will).
+    No,
+    /// It computed its share and stopped.
+    Sharded,
+    /// It depends on a node that stopped (or, planning, is not cached).
+    Skipped,
+}
+
+impl<'a> Executor<'a> {
+    fn new(dag: &'a Dag, cache: &'a Cache, opts: RunOptions, shard: Option<ShardMode>) -> Self {
+        Executor {
+            dag,
+            cache,
+            opts,
+            states: (0..dag.nodes.len()).map(|_| None).collect(),
+            warnings: Vec::new(),
+            damaged: Vec::new(),
+            deferred: Some(Vec::new()),
+            locks: cache.locks(),
+            held: HashMap::new(),
+            unlocked: false,
+            shard,
+            stopped: vec![Stop::No; dag.nodes.len()],
+            sharded: Vec::new(),
+        }
+    }
+
+    /// Resolves every node (in a sharded run: every node not stopped).
+    fn run_all(&mut self) -> Result<(), PipelineError> {
+        let (dag, cache) = (self.dag, self.cache);
+        let imports: Vec<usize> = (0..dag.nodes.len())
+            .filter(|&i| dag.nodes[i].stage == super::Stage::Import)
+            .collect();
+        self.lock_missing_imports(&imports);
+        for &i in &imports {
+            self.resolve(i)?;
+        }
+        for (key, i) in self.deferred.take().unwrap_or_default() {
+            let state = self.states[i].as_ref().expect("resolved above");
+            cache.put(&key, state.artifact.file_bytes())?;
+        }
+        self.held.clear();
+        // What the run hands out is read by the caller (the bundles are written to the output
+        // directory): re-hash it like a node's input, as soon as it is resolved, so a repair
+        // that changes its content hash comes before anything downstream is keyed on it.
+        let mut read = vec![false; dag.nodes.len()];
+        for node in &dag.nodes {
+            for input in &node.inputs {
+                if let InputRef::Node(j) = *input {
+                    read[j] = true;
+                }
+            }
+        }
+        for i in 0..dag.nodes.len() {
+            if self.stopped[i] != Stop::No {
+                continue;
+            }
+            let blocked = dag.nodes[i]
+                .inputs
+                .iter()
+                .any(|input| matches!(*input, InputRef::Node(j) if self.stopped[j] != Stop::No));
+            if blocked {
+                self.stopped[i] = Stop::Skipped;
+                continue;
+            }
+            if self.states[i].is_none() {
+                self.resolve(i)?;
+            }
+            if self.states[i].is_some() && (dag.nodes[i].exports || !read[i]) {
+                self.ensure_verified(i)?;
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Executor<'_> {
@@ -342,6 +458,11 @@ impl Executor<'_> {
         let node = &dag.nodes[i];
         let key = self.dag.key(node, &self.input_hashes(i));
         let start = Instant::now();
+        if self.shard.is_some() && node.pieces.is_some() {
+            // A shard computes its share even when the whole node is cached (cheap then:
+            // every piece is found), so it always says what its share is.
+            return self.compute(i, key);
+        }
         match self.cache.peek_kind(&key, Some(node.kind)) {
             Lookup::Hit(artifact) => {
                 let mut verified = false;
@@ -363,12 +484,18 @@ impl Executor<'_> {
                 });
                 Ok(())
             }
+            // Planning changes nothing in the cache: a damaged object is left to a run.
+            Lookup::Invalid(_) if self.planning() => self.compute(i, key),
             Lookup::Invalid(e) => {
                 self.damaged(i, &key, e.to_string());
                 self.compute(i, key)
             }
             Lookup::Miss => self.compute(i, key),
         }
+    }
+
+    fn planning(&self) -> bool {
+        self.shard.is_some_and(|m| m.plan_only)
     }
 
     /// Makes sure the payload of node `j`'s artifact is intact, recomputing it if not.
@@ -381,6 +508,15 @@ impl Executor<'_> {
         match state.artifact.verify() {
             Ok(()) => {
                 self.states[j].as_mut().unwrap().verified = true;
+                Ok(false)
+            }
+            Err(e) if self.planning() => {
+                // Planning repairs nothing; the run will.
+                let msg = format!(
+                    "{}: cached artifact is damaged ({e})",
+                    self.dag.nodes[j].name
+                );
+                self.warn(msg);
                 Ok(false)
             }
             Err(e) => {
@@ -406,8 +542,16 @@ impl Executor<'_> {
             // A repaired input came back with other content: this node's key is different.
             return self.resolve(i);
         }
+        if self.planning() && node.pieces.is_none() {
+            // `status --shard` computes nothing but the split nodes' plans.
+            self.stopped[i] = Stop::Skipped;
+            return Ok(());
+        }
         let start = Instant::now();
-        if self.found_after_locking(i, key, start) {
+        // A shard's split node stores no artifact under its key, so it takes no lock on it:
+        // shards on one cache run side by side (their pieces are not locked; see pieces.rs).
+        let splits = self.shard.is_some() && node.pieces.is_some();
+        if !splits && self.found_after_locking(i, key, start) {
             return Ok(());
         }
         tracing::info!("computing {} (key {})", node.name, key.to_hex());
@@ -431,6 +575,7 @@ impl Executor<'_> {
                 input_hashes,
                 node,
                 piece_counts: Default::default(),
+                shard: self.shard,
             };
             let result = (node.compute)(&ctx);
             let (computed, reused) = ctx.piece_counts.get();
@@ -441,6 +586,20 @@ impl Executor<'_> {
             (result, pieces)
         };
         progress.finish();
+        if let Err(NodeError::Sharded { share, .. }) = result {
+            self.stopped[i] = Stop::Sharded;
+            self.sharded.push(ShardedNode {
+                node: node.name.clone(),
+                key: key.to_hex(),
+                seconds: start.elapsed().as_secs_f64(),
+                pieces: pieces.unwrap_or(PieceReport {
+                    computed: 0,
+                    reused: 0,
+                }),
+                share,
+            });
+            return Ok(());
+        }
         let bytes = result.map_err(|source| PipelineError::Node {
             node: node.name.clone(),
             source,

@@ -19,13 +19,18 @@ pub mod node;
 pub mod outputs;
 pub mod pieces;
 pub mod progress;
+pub mod shard;
 
 use crate::artifact::{Artifact, ContentHash};
 use crate::cache::Key;
-pub use executor::{NodeReport, NodeStatus, PieceReport, RunOptions, RunResult, run, status};
+pub use executor::{
+    NodeReport, NodeStatus, PieceReport, RunOptions, RunResult, ShardResult, ShardedNode, run,
+    run_shard, status,
+};
 pub use node::{FileHandle, Handle, Inputs, Keyed, NodeSpec, WithTail};
 pub use pieces::{PieceCounts, PieceStore};
 pub use progress::{Progress, ProgressMode};
+pub use shard::{Shard, ShardError, ShardMode};
 use std::path::{Path, PathBuf};
 
 /// The pipeline stages (DESIGN.md, "A run"), plus `import` for turning input files into
@@ -83,6 +88,14 @@ pub enum NodeError {
     /// A bug in texsyn (artifacts that disagree, a wiring mistake).
     #[error("internal error: {0}")]
     Internal(String),
+    /// Not a failure: a node run as one shard ([`shard`]) computed its share of pieces and
+    /// stops before storing an artifact, which would be partial; the value says what its
+    /// share was. The executor stores nothing for the node and skips what depends on it.
+    #[error("computed its share of shard {shard} and stopped")]
+    Sharded {
+        shard: Shard,
+        share: serde_json::Value,
+    },
 }
 
 impl NodeError {
@@ -123,6 +136,8 @@ pub struct NodeContext<'a> {
     pub(crate) input_hashes: Vec<ContentHash>,
     pub(crate) node: &'a Node,
     pub(crate) piece_counts: PieceCounts,
+    /// Set when the run is one shard of a split run ([`shard`]).
+    pub(crate) shard: Option<ShardMode>,
 }
 
 #[derive(Clone, Copy)]
@@ -132,6 +147,27 @@ pub(crate) enum InputData<'a> {
 }
 
 impl<'a> NodeContext<'a> {
+    /// The shard this run computes, if it is one shard of a split run. A node with pieces
+    /// that honours it computes only its share, then returns [`NodeContext::shard_done`];
+    /// one that ignores it computes its whole (correct) result, which is stored as usual.
+    pub fn shard(&self) -> Option<ShardMode> {
+        self.shard
+    }
+
+    /// The "error" that ends a node's share of a sharded run (see [`NodeError::Sharded`]),
+    /// with what the node says about its share.
+    pub fn shard_done(&self, share: &impl serde::Serialize) -> NodeError {
+        match self.shard {
+            Some(m) => NodeError::Sharded {
+                shard: m.shard,
+                share: serde_json::to_value(share).unwrap_or_default(),
+            },
+            None => {
+                NodeError::internal(format!("{}: a share outside a sharded run", self.node.name))
+            }
+        }
+    }
+
     /// The store of the node's pieces, which it declared with [`NodeSpec::pieces`]. `extra`
     /// is what the pieces depend on beyond the declared parameters and keyed inputs that is
     /// only known while computing (it goes into every piece's key).
@@ -190,6 +226,13 @@ pub struct Node {
     /// kind is damaged (the header's kind code is outside the payload hash).
     pub(crate) kind: crate::artifact::Kind,
     pub(crate) compute: ComputeFn,
+}
+
+impl Node {
+    /// Whether a sharded run ([`shard`]) can split this node's work: it caches pieces.
+    pub fn splits_into_shards(&self) -> bool {
+        self.pieces.is_some()
+    }
 }
 
 /// Mixed into every node key: a change to arithmetic that every node shares changes every key,

@@ -608,8 +608,10 @@ pub fn point_command(
         argv.push("--set".into());
         argv.push(s.into());
     }
-    argv.push("--out".into());
-    argv.push(dir.point_out(point).into());
+    if shard.is_none() {
+        argv.push("--out".into());
+        argv.push(dir.point_out(point).into());
+    }
     argv.push("--report".into());
     match shard {
         Some((i, n)) => {

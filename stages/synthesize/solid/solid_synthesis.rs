@@ -979,8 +979,9 @@ impl<'a> SolidSynthesis<'a> {
         (lo.into(), (lo + self.m()).into())
     }
 
-    /// The finest bricks a request touches (inside the volume), sorted.
-    fn request_bricks(&self, request: &VoxelRequest) -> Vec<[i32; 3]> {
+    /// The finest bricks a request touches (inside the volume), sorted: what a sharded run
+    /// splits among its shards.
+    pub fn request_bricks(&self, request: &VoxelRequest) -> Vec<[i32; 3]> {
         let dims = self.pyramid.level_dims(self.pyramid.levels);
         let mut set = BTreeSet::new();
         for v in request.voxels() {
@@ -1085,6 +1086,22 @@ impl<'a> SolidSynthesis<'a> {
                 corrections: p.need.corrections(),
                 bricks: p.needed,
                 impact_distance: self.schedules[li].impact_distance(self.reach[li]),
+            })
+            .collect()
+    }
+
+    /// What [`SolidSynthesis::synthesize`] would do with `store`, per level (coarsest first),
+    /// without doing it: the bricks needed, to compute and found (voxel counts left 0).
+    pub fn plan_report(&self, request: &VoxelRequest, store: &dyn BrickStore) -> Vec<LevelReport> {
+        self.plan(request, Some(store))
+            .into_iter()
+            .enumerate()
+            .map(|(li, p)| LevelReport {
+                level: li as u32 + 1,
+                bricks_needed: p.needed.len() as u64,
+                bricks_computed: p.missing.len() as u64,
+                bricks_reused: (p.needed.len() - p.missing.len()) as u64,
+                ..Default::default()
             })
             .collect()
     }
