@@ -8,48 +8,15 @@
 
 use std::ffi::OsString;
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 use texsyn::slurm::{self, SlurmError, SlurmOptions, Task, TaskStatus};
 
-const POLL: Duration = Duration::from_millis(300);
+mod common;
+use common::cluster::cluster;
 
-/// Starts the local cluster once; false (after a loud SKIPPED line) only with TEXSYN_NO_SLURM=1.
-fn cluster(test: &str) -> bool {
-    if std::env::var_os("TEXSYN_NO_SLURM").is_some_and(|v| v == "1") {
-        // Straight to the process's stderr: libtest would swallow eprintln! of a passing test.
-        let _ = writeln!(
-            std::io::stderr(),
-            "\n*** SKIPPED: {test}: TEXSYN_NO_SLURM=1, the Slurm integration tests did not run ***\n"
-        );
-        return false;
-    }
-    static STARTED: OnceLock<Result<(), String>> = OnceLock::new();
-    let started = STARTED.get_or_init(|| {
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/slurm-local");
-        match Command::new(&script).arg("start").output() {
-            Ok(out) if out.status.success() => Ok(()),
-            Ok(out) => Err(format!(
-                "{} exited with {}:\n{}{}",
-                script.display(),
-                out.status,
-                String::from_utf8_lossy(&out.stdout),
-                String::from_utf8_lossy(&out.stderr)
-            )),
-            Err(e) => Err(format!("{} could not be run: {e}", script.display())),
-        }
-    });
-    if let Err(why) = started {
-        panic!(
-            "the local Slurm cluster could not be started, so the Slurm tests cannot run (they \
-             need root and apt-get or dnf; set TEXSYN_NO_SLURM=1 to skip them loudly):\n{why}"
-        );
-    }
-    true
-}
+const POLL: Duration = Duration::from_millis(300);
 
 fn sh(script: &str, args: &[&str]) -> Vec<OsString> {
     let mut argv: Vec<OsString> = vec!["/bin/sh".into(), "-c".into(), script.into(), "sh".into()];

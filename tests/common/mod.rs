@@ -14,6 +14,7 @@ mod exemplars;
 #[allow(unused_imports)] // the files that use none of them
 pub use exemplars::*;
 pub mod cli;
+pub mod cluster;
 pub mod geometry_image;
 pub mod geometry_texture;
 pub mod jump_map;
