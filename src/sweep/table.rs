@@ -29,6 +29,10 @@ pub struct Row {
     /// (stage, seconds): the sum over the stage's nodes, in the pipeline's order.
     pub stage_seconds: Vec<(String, f64)>,
     pub seconds: Option<f64>,
+    /// A sharded point's shards: their seconds, summed (they may have run side by side), and
+    /// their largest peak memory.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shard_seconds: Option<f64>,
     pub peak_memory_bytes: Option<u64>,
     /// (column, value): each scored output's ratio, coverage and gradient ratio.
     pub scores: Vec<(String, f64)>,
@@ -52,7 +56,7 @@ impl Table {
         let rows = sweep
             .points
             .iter()
-            .map(|p| row(p, dir, failures.get(&p.index)))
+            .map(|p| row(p, dir, failures.get(&p.index), sweep.shards.unwrap_or(1)))
             .collect();
         Table {
             sweep: sweep.path.clone(),
@@ -92,6 +96,7 @@ impl Table {
         header.extend(c.nodes.iter().map(|n| format!("{n} status")));
         header.extend(c.stages.iter().map(|s| format!("{s} seconds")));
         header.push("seconds".into());
+        header.push("shard seconds".into());
         header.push("peak memory bytes".into());
         header.extend(c.scores.iter().cloned());
         header.extend(c.nodes.iter().map(|n| format!("{n} hash")));
@@ -113,6 +118,7 @@ impl Table {
                     .map(|st| lookup_f(&r.stage_seconds, st).map(secs).unwrap_or_default()),
             );
             f.push(r.seconds.map(secs).unwrap_or_default());
+            f.push(r.shard_seconds.map(secs).unwrap_or_default());
             f.push(
                 r.peak_memory_bytes
                     .map(|b| b.to_string())
@@ -145,6 +151,10 @@ impl Table {
         header.push("ran / cached".into());
         header.extend(c.stages.iter().map(|s| format!("{s} s")));
         header.push("total s".into());
+        let sharded = self.rows.iter().any(|r| r.shard_seconds.is_some());
+        if sharded {
+            header.push("shards s".into());
+        }
         header.push("peak memory".into());
         header.extend(c.scores.iter().cloned());
         let last = c.nodes.last().cloned();
@@ -186,6 +196,9 @@ impl Table {
                     .map(|st| lookup_f(&r.stage_seconds, st).map(secs).unwrap_or_default()),
             );
             f.push(r.seconds.map(secs).unwrap_or_default());
+            if sharded {
+                f.push(r.shard_seconds.map(secs).unwrap_or_default());
+            }
             f.push(
                 r.peak_memory_bytes
                     .map(crate::memory::human)
@@ -262,7 +275,7 @@ fn csv_line(fields: &[String]) -> String {
     quoted.join(",") + "\n"
 }
 
-fn row(point: &Point, dir: &SweepDir, failure: Option<&String>) -> Row {
+fn row(point: &Point, dir: &SweepDir, failure: Option<&String>, shards: u32) -> Row {
     let values = point
         .values
         .iter()
@@ -285,6 +298,7 @@ fn row(point: &Point, dir: &SweepDir, failure: Option<&String>) -> Row {
         hashes: Vec::new(),
         stage_seconds: Vec::new(),
         seconds: None,
+        shard_seconds: None,
         peak_memory_bytes: None,
         scores: Vec::new(),
     };
@@ -306,6 +320,19 @@ fn row(point: &Point, dir: &SweepDir, failure: Option<&String>) -> Row {
     }
     row.seconds = Some(report.seconds);
     row.peak_memory_bytes = report.peak_memory_bytes;
+    let shards: Vec<RunReport> = (0..shards)
+        .filter(|_| shards > 1)
+        .filter_map(|i| RunReport::read(&dir.shard_report(point, i)))
+        .filter(|r| r.sets == point.sets)
+        .collect();
+    if !shards.is_empty() {
+        row.shard_seconds = Some(shards.iter().map(|r| r.seconds).sum());
+        row.peak_memory_bytes = shards
+            .iter()
+            .filter_map(|r| r.peak_memory_bytes)
+            .chain(row.peak_memory_bytes)
+            .max();
+    }
     if let Some(scores) = &report.scores {
         row.scores = score_columns(scores);
     }
