@@ -122,9 +122,12 @@ pub fn check_budget(
     })
 }
 
-/// This process's peak resident memory so far (`VmHWM` of /proc/self/status), if the
-/// system says (Linux).
-pub fn peak_resident() -> Option<u64> {
+/// The largest peak seen before a [`reset_peak_resident`], so the process's own peak survives
+/// the resets that measure one node's.
+static PEAK_BEFORE_RESET: AtomicU64 = AtomicU64::new(0);
+
+/// `VmHWM` of /proc/self/status (Linux), in bytes.
+fn vm_hwm() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     status
         .lines()
@@ -132,6 +135,27 @@ pub fn peak_resident() -> Option<u64> {
         .and_then(|l| l.split_whitespace().nth(1))
         .and_then(|kb| kb.parse::<u64>().ok())
         .map(|kb| kb * 1024)
+}
+
+/// This process's peak resident memory so far, if the system says (Linux).
+pub fn peak_resident() -> Option<u64> {
+    let before = PEAK_BEFORE_RESET.load(Ordering::Relaxed);
+    vm_hwm().map(|now| now.max(before))
+}
+
+/// Starts measuring a new peak: [`peak_since_reset`] then gives the peak resident memory since
+/// this call (the kernel's high-water mark is reset to the current size by writing 5 to
+/// /proc/self/clear_refs, Linux 4.0+). False where that is not possible.
+pub fn reset_peak_resident() -> bool {
+    if let Some(p) = vm_hwm() {
+        PEAK_BEFORE_RESET.fetch_max(p, Ordering::Relaxed);
+    }
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+/// The peak resident memory since the last [`reset_peak_resident`] that succeeded.
+pub fn peak_since_reset() -> Option<u64> {
+    vm_hwm()
 }
 
 #[cfg(test)]

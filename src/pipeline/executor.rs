@@ -71,6 +71,9 @@ pub struct NodeReport {
     /// Pieces computed and reused (nodes that declare pieces; see [`super::pieces`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pieces: Option<PieceReport>,
+    /// The process's peak resident memory while this node computed (Linux; nodes that ran).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak_memory_bytes: Option<u64>,
 }
 
 #[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
@@ -115,6 +118,8 @@ struct State {
     status: NodeStatus,
     seconds: f64,
     pieces: Option<PieceReport>,
+    /// Peak resident memory of the process while the node computed (nodes that ran).
+    peak: Option<u64>,
 }
 
 struct Executor<'a> {
@@ -233,6 +238,7 @@ impl State {
             key: self.key.to_hex(),
             content_hash: self.artifact.content_hash().to_hex(),
             pieces: self.pieces,
+            peak_memory_bytes: self.peak,
         }
     }
 }
@@ -436,6 +442,7 @@ impl Executor<'_> {
                         status: NodeStatus::Cached,
                         seconds: start.elapsed().as_secs_f64(),
                         pieces: None,
+                        peak: None,
                     });
                     true
                 }
@@ -481,6 +488,7 @@ impl Executor<'_> {
                     status: NodeStatus::Cached,
                     seconds: start.elapsed().as_secs_f64(),
                     pieces: None,
+                    peak: None,
                 });
                 Ok(())
             }
@@ -557,6 +565,7 @@ impl Executor<'_> {
         tracing::info!("computing {} (key {})", node.name, key.to_hex());
         let progress = Progress::new(self.opts.progress, &node.name);
         let input_hashes = self.input_hashes(i);
+        let peak;
         let (result, pieces) = {
             let inputs = node
                 .inputs
@@ -577,7 +586,13 @@ impl Executor<'_> {
                 piece_counts: Default::default(),
                 shard: self.shard,
             };
+            let measured = crate::memory::reset_peak_resident();
             let result = (node.compute)(&ctx);
+            peak = if measured {
+                crate::memory::peak_since_reset()
+            } else {
+                None
+            };
             let (computed, reused) = ctx.piece_counts.get();
             let pieces = node
                 .pieces
@@ -622,6 +637,7 @@ impl Executor<'_> {
             status: NodeStatus::Ran,
             seconds: start.elapsed().as_secs_f64(),
             pieces,
+            peak,
         });
         Ok(())
     }

@@ -478,6 +478,8 @@ pub struct ReportedNode {
     pub content_hash: String,
     #[serde(default)]
     pub pieces: Option<ReportedPieces>,
+    #[serde(default)]
+    pub peak_memory_bytes: Option<u64>,
 }
 
 #[derive(Debug, Clone, Copy, Deserialize, Serialize)]
