@@ -334,3 +334,56 @@ fn synth2d_writes_an_image_of_the_requested_size() {
     let img = image::open(dir.path().join("o/synthesized.png")).unwrap();
     assert_eq!((img.width(), img.height()), (100, 40));
 }
+
+#[test]
+fn run_json_reports_each_nodes_own_peak_memory() {
+    let t = tempfile::tempdir().unwrap();
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/demo.toml");
+    let o = common::cli::succeeded(common::cli::texsyn(
+        &[
+            "run",
+            demo.to_str().unwrap(),
+            "--cache",
+            "c",
+            "--out",
+            "o",
+            "--json",
+        ],
+        t.path(),
+    ));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let peaks: Vec<(String, u64)> = r["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| {
+            let peak = n["peak_memory_bytes"].as_u64();
+            (
+                n["node"].as_str().unwrap().to_owned(),
+                peak.expect("every node ran: a peak"),
+            )
+        })
+        .collect();
+    let run = r["peak_memory_bytes"].as_u64().unwrap();
+    // Each is a peak of this process: none above the run's (within the kernel's lag in
+    // updating its counters).
+    for (node, p) in &peaks {
+        assert!(
+            *p > 0 && *p as f64 <= run as f64 * 1.02,
+            "{node}: {p} vs run {run}"
+        );
+    }
+    // Measured per node: a process's high-water mark never falls, so a node with a lower peak
+    // than an earlier one shows the mark was reset for it (the small field after the exemplar
+    // analysis).
+    assert!(
+        peaks.windows(2).any(|w| w[1].1 < w[0].1),
+        "peaks never fall from node to node: not measured per node: {peaks:?}"
+    );
+    // The reconstruct's 2048² atlas (16 MiB of RGBA floats at least) shows in its peak.
+    let get = |n: &str| peaks.iter().find(|(m, _)| m == n).unwrap().1;
+    assert!(
+        get("reconstruct") > get("import.mesh") + (16 << 20),
+        "{peaks:?}"
+    );
+}
