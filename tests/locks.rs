@@ -125,3 +125,14 @@ fn cpu_companion_locks_verify_and_cover_every_method() {
     covered.dedup();
     assert_eq!(covered, shipped, "configs/cpu/ has one lock per method");
 }
+
+/// A sweep's lock (every point's hashes; README, "Sweeps") verifies from an empty cache: the
+/// demo's seed sweep, four points sharing one jump map.
+#[test]
+fn the_demo_seed_sweeps_lock_verifies_from_an_empty_cache() {
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    verify_fresh(
+        &repo.join("configs/sweeps/demo_seeds.toml"),
+        &repo.join("configs/sweeps/demo_seeds.lock"),
+    );
+}
