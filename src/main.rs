@@ -432,12 +432,14 @@ fn real_main() -> Result<i32> {
             slurm,
         } => sweep_command(
             &cli,
-            sweep,
-            *status,
-            executor,
-            *workers,
-            out.as_deref(),
-            slurm,
+            SweepArgs {
+                path: sweep,
+                status_only: *status,
+                executor,
+                workers: *workers,
+                out: out.as_deref(),
+                slurm_flags: slurm,
+            },
             &cache_dir,
         ),
         Command::Status {
@@ -983,18 +985,27 @@ fn print_table(reports: &[pipeline::NodeReport]) {
     }
 }
 
+/// `texsyn sweep`'s command line.
+struct SweepArgs<'a> {
+    path: &'a Path,
+    status_only: bool,
+    executor: &'a str,
+    workers: Option<usize>,
+    out: Option<&'a Path>,
+    slurm_flags: &'a SlurmFlags,
+}
+
 /// `texsyn sweep`: checks every point, says or runs what is not done, then writes the table
 /// and the sweep's lock.
-fn sweep_command(
-    cli: &Cli,
-    path: &Path,
-    status_only: bool,
-    executor: &str,
-    workers: Option<usize>,
-    out: Option<&Path>,
-    slurm_flags: &SlurmFlags,
-    cache_dir: &Path,
-) -> Result<i32> {
+fn sweep_command(cli: &Cli, args: SweepArgs, cache_dir: &Path) -> Result<i32> {
+    let SweepArgs {
+        path,
+        status_only,
+        executor,
+        workers,
+        out,
+        slurm_flags,
+    } = args;
     use texsyn::sweep::{
         CommonArgs, PointState, SweepDir, local, lock::SweepLock, point_state, slurm_executor,
         table,

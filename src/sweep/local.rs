@@ -22,6 +22,9 @@ pub struct Task<'a> {
     pub shard: Option<(u32, u32)>,
 }
 
+/// Called as each task ends: the task, its outcome, its seconds.
+pub type OnTaskDone<'a> = dyn Fn(&Task, &Result<(), String>, f64) + Sync + 'a;
+
 /// Runs `tasks` with `workers` processes at once; calls `done` as each finishes (in
 /// completion order) with its outcome. Returns the failures by point index.
 pub fn run_tasks(
@@ -31,7 +34,7 @@ pub fn run_tasks(
     tasks: &[Task],
     workers: usize,
     common: &CommonArgs,
-    done: &(dyn Fn(&Task, &Result<(), String>, f64) + Sync),
+    done: &OnTaskDone,
 ) -> Failures {
     let next = AtomicUsize::new(0);
     let failures = Mutex::new(Failures::new());
