@@ -1,5 +1,6 @@
 //! Progress bars for long-running nodes: a bar appears only once a node has run for more
-//! than a second, so quick reruns print nothing but the final table.
+//! than a second, so quick reruns print nothing but the final table. The bar shows the time
+//! spent and an estimate of the time left (indicatif's, from the rate so far).
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
@@ -30,7 +31,7 @@ impl Progress {
         let bar = (mode == ProgressMode::Bars).then(|| {
             let b = ProgressBar::with_draw_target(Some(STEPS), ProgressDrawTarget::hidden());
             b.set_style(
-                ProgressStyle::with_template("{msg:>28} [{bar:40}] {percent:>3}% {elapsed}")
+                ProgressStyle::with_template("{msg:>28} [{bar:40}] {percent:>3}% {elapsed}, about {eta} left")
                     .unwrap_or_else(|_| ProgressStyle::default_bar())
                     .progress_chars("=> "),
             );
