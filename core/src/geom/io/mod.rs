@@ -5,6 +5,7 @@
 //! degenerate triangles with a warning, and reports anything else it cannot use as a
 //! [`MeshError`] that names the file, the place in it and the problem. No input makes it panic.
 
+mod fast_text;
 mod obj;
 mod off;
 mod ply;
