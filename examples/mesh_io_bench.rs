@@ -44,6 +44,18 @@ fn peak_rss() -> u64 {
     }
 }
 
+/// CPU seconds (user + system, all threads) this process has used.
+fn cpu_seconds() -> f64 {
+    // SAFETY: getrusage fills the struct it is given.
+    let u = unsafe {
+        let mut u: libc::rusage = std::mem::zeroed();
+        libc::getrusage(libc::RUSAGE_SELF, &mut u);
+        u
+    };
+    let t = |v: libc::timeval| v.tv_sec as f64 + v.tv_usec as f64 * 1e-6;
+    t(u.ru_utime) + t(u.ru_stime)
+}
+
 /// The mesh's own size: positions, triangles and colours as stored.
 fn mesh_bytes(m: &Mesh) -> usize {
     12 * m.positions.len() + 12 * m.triangles.len() + m.colors.as_ref().map_or(0, |c| 16 * c.len())
@@ -59,22 +71,25 @@ fn mesh_hash(m: &Mesh) -> String {
     h.finalize().to_hex()[..16].to_string()
 }
 
-/// Child: parse `path` `RUNS` times, print "seconds peak_bytes mesh_bytes hash".
+/// Child: parse `path` `RUNS` times, print "seconds cpu_seconds peak_bytes mesh_bytes hash".
 fn child(path: &Path) {
     let bytes = std::fs::read(path).unwrap();
     let mut times = Vec::new();
+    let mut cpu = Vec::new();
     let mut last = None;
     for _ in 0..runs() {
         drop(last.take());
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), cpu_seconds());
         let m = <Mesh as Import>::read(path, &bytes).unwrap();
         times.push(t.elapsed().as_secs_f64());
+        cpu.push(cpu_seconds() - c);
         last = Some(m);
     }
     let m = last.unwrap();
     println!(
-        "{} {} {} {}",
+        "{} {} {} {} {}",
         median(times),
+        median(cpu),
         peak_rss(),
         mesh_bytes(&m),
         mesh_hash(&m)
@@ -188,8 +203,10 @@ fn main() {
         ("big_binary.ply", |m| texsyn::geom::io::write_ply(m, None)),
         ("big.stl", write_stl),
     ];
-    println!("| read (parse + validate) | file MB | MB/s | s | peak RSS MB | peak / mesh | mesh hash |");
-    println!("|---|---|---|---|---|---|---|");
+    println!(
+        "| read (parse + validate) | file MB | MB/s (wall) | s (wall) | CPU s (all threads) | MB per CPU s | peak RSS MB | peak / mesh | mesh hash |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
     for (file, write) in files {
         let p = dir.join(file);
         if !p.is_file() {
@@ -204,20 +221,21 @@ fn main() {
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         let text = String::from_utf8(out.stdout).unwrap();
         let f: Vec<&str> = text.split_whitespace().collect();
-        let (secs, peak, mbytes): (f64, f64, f64) =
-            (f[0].parse().unwrap(), f[1].parse().unwrap(), f[2].parse().unwrap());
+        let num = |i: usize| f[i].parse::<f64>().unwrap();
+        let (secs, cpu, peak, mbytes) = (num(0), num(1), num(2), num(3));
         println!(
-            "| {file} | {:.1} | {:.0} | {secs:.3} | {:.0} | {:.1}× | {} |",
+            "| {file} | {:.1} | {:.0} | {secs:.3} | {cpu:.3} | {:.0} | {:.0} | {:.1}× | {} |",
             size / 1e6,
             size / 1e6 / secs,
+            size / 1e6 / cpu,
             peak / 1e6,
             peak / mbytes,
-            f[3]
+            f[4]
         );
     }
     println!();
-    println!("| write | file MB | MB/s | s | output hash |");
-    println!("|---|---|---|---|---|");
+    println!("| write | file MB | MB/s (wall) | s (wall) | CPU s | MB per CPU s | output hash |");
+    println!("|---|---|---|---|---|---|---|");
     let writers: [(&str, fn(&Mesh) -> Vec<u8>); 2] = [
         ("OBJ (write_obj, no uv)", |m| {
             texsyn::export::obj::write_obj(m, None, None, "m").into_bytes()
@@ -248,19 +266,22 @@ fn main() {
         .collect();
     for (what, write) in writers {
         let mut times = Vec::new();
+        let mut cpu = Vec::new();
         let mut last = Vec::new();
         for _ in 0..runs {
             drop(std::mem::take(&mut last));
-            let t = Instant::now();
+            let (t, c) = (Instant::now(), cpu_seconds());
             last = write(&mesh);
             times.push(t.elapsed().as_secs_f64());
+            cpu.push(cpu_seconds() - c);
         }
-        let secs = median(times);
+        let (secs, cpu) = (median(times), median(cpu));
         let size = last.len() as f64;
         println!(
-            "| {what} | {:.1} | {:.0} | {secs:.3} | {} |",
+            "| {what} | {:.1} | {:.0} | {secs:.3} | {cpu:.3} | {:.0} | {} |",
             size / 1e6,
             size / 1e6 / secs,
+            size / 1e6 / cpu,
             &blake3::hash(&last).to_hex()[..16]
         );
     }

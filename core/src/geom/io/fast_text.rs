@@ -150,7 +150,29 @@ pub(super) fn parse_i64(token: &[u8]) -> Option<i64> {
 /// rounded parser, straight to f32), or `None`.
 #[inline]
 pub(super) fn coord(token: &[u8]) -> Option<f32> {
-    super::parse::<f32>(token).filter(|x| x.is_finite())
+    parse_f32(token).filter(|x| x.is_finite())
+}
+
+/// `token` as `str::parse::<f32>` reads it (correctly rounded, NaN and infinities included).
+#[inline]
+pub(super) fn parse_f32(token: &[u8]) -> Option<f32> {
+    // Numbers are ASCII, so anything else fails the standard parser too; checking that is
+    // cheaper than a UTF-8 validation per token.
+    if !token.is_ascii() {
+        return None;
+    }
+    // SAFETY: ASCII is valid UTF-8.
+    let text = unsafe { std::str::from_utf8_unchecked(token) };
+    text.parse::<f32>().ok()
+}
+
+/// Fan-triangulates `corners` onto `triangles`, a triangle without the loop.
+#[inline]
+pub(super) fn fan(corners: &[u32], triangles: &mut Vec<[u32; 3]>) {
+    match *corners {
+        [a, b, c] => triangles.push([a, b, c]),
+        _ => super::fan(corners, triangles),
+    }
 }
 
 #[cfg(test)]

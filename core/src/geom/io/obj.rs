@@ -98,7 +98,7 @@ pub(super) fn read_fast(bytes: &[u8]) -> Option<Mesh> {
                     if corners.len() < 3 {
                         return None;
                     }
-                    fan(&corners, &mut part.triangles);
+                    fast_text::fan(&corners, &mut part.triangles);
                 }
                 _ => {}
             }

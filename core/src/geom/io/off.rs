@@ -121,7 +121,7 @@ pub(super) fn read_fast(bytes: &[u8]) -> Option<Mesh> {
                     }
                     corners.push(v as u32);
                 }
-                fan(&corners, &mut part.triangles);
+                fast_text::fan(&corners, &mut part.triangles);
             } else {
                 break;
             }

@@ -342,7 +342,7 @@ impl Body for Ascii<'_> {
         let token = self.token().ok_or(Miss::EndOfFile)?;
         // f32 properties are parsed as f32 so that they round once, like the other readers.
         let value = match ty {
-            Scalar::F32 => parse::<f32>(token).map(f64::from),
+            Scalar::F32 => fast_text::parse_f32(token).map(f64::from),
             Scalar::F64 => parse::<f64>(token),
             _ => fast_text::parse_i64(token).map(|i| i as f64),
         };
@@ -683,6 +683,17 @@ fn binary_int(ty: Scalar, bytes: &[u8], big_endian: bool) -> Option<i64> {
     })
 }
 
+/// A value of type `ty` at the start of `bytes` (which holds it), as [`Binary`] reads it.
+#[inline]
+fn binary_value(ty: Scalar, bytes: &[u8], big_endian: bool) -> f64 {
+    let mut body = Binary {
+        bytes,
+        pos: 0,
+        big_endian,
+    };
+    body.value(ty).unwrap_or(f64::NAN)
+}
+
 /// A well-formed binary body whose elements are either all scalars (a fixed record size: read
 /// in parallel slices) or a face element holding only an integer index list. `None` for
 /// anything else or any problem, for [`read_body`] to read or name.
@@ -711,15 +722,25 @@ fn read_binary_fast(header: &Header, bytes: &[u8], big_endian: bool) -> Option<M
                 .filter(|&end| end <= bytes.len())?;
             if element.name == "vertex" {
                 let data = &bytes[pos..end];
+                // Where each used property sits in a record.
+                let mut used = Vec::new();
+                let mut offset = 0;
+                for (&(_, role), &ty) in element.properties.iter().zip(&types) {
+                    if let Role::Vertex(slot) = role {
+                        used.push((offset, ty, slot));
+                    }
+                    offset += ty.size();
+                }
                 let decode = |record: &[u8]| {
-                    let mut body = Binary {
-                        bytes: record,
-                        pos: 0,
-                        big_endian,
-                    };
                     let mut vertex = NO_VERTEX;
-                    read_instance(element, 0, &mut body, nv, &mut vertex, &mut Vec::new(), &mut Vec::new())
-                        .ok()?;
+                    for &(offset, ty, slot) in &used {
+                        let v = binary_value(ty, &record[offset..], big_endian);
+                        vertex[slot] = if slot >= 3 && !ty.is_float() {
+                            v / 255.0
+                        } else {
+                            v
+                        };
+                    }
                     finish_vertex(vertex).ok()
                 };
                 // 64k vertices per task; results concatenated in order.
@@ -766,7 +787,7 @@ fn read_binary_fast(header: &Header, bytes: &[u8], big_endian: bool) -> Option<M
                 }
                 corners.push(v as u32);
             }
-            fan(&corners, &mut triangles);
+            fast_text::fan(&corners, &mut triangles);
         }
     }
     Some(Mesh::with_colors(
