@@ -96,18 +96,29 @@ struct Header {
     has_colors: bool,
 }
 
+/// The fast paths ([`read_ascii_fast`], [`read_binary_fast`]), and the reference reader for what
+/// they decline.
 pub(super) fn read(bytes: &[u8]) -> Result<Mesh, Fault> {
     let header = read_header(bytes)?;
     let fast = match header.format {
         Format::Ascii => read_ascii_fast(&header, &bytes[header.body..]),
         Format::Binary { big_endian } => read_binary_fast(&header, bytes, big_endian),
     };
-    if let Some(mesh) = fast {
-        return Ok(mesh);
+    match fast {
+        Some(mesh) => Ok(mesh),
+        None => read_body_reference(&header, bytes),
     }
+}
+
+/// The reference reader: one value at a time, naming the place of any problem.
+pub(super) fn read_reference(bytes: &[u8]) -> Result<Mesh, Fault> {
+    read_body_reference(&read_header(bytes)?, bytes)
+}
+
+fn read_body_reference(header: &Header, bytes: &[u8]) -> Result<Mesh, Fault> {
     match header.format {
         Format::Ascii => read_body(
-            &header,
+            header,
             Ascii {
                 bytes,
                 pos: header.body,
@@ -116,7 +127,7 @@ pub(super) fn read(bytes: &[u8]) -> Result<Mesh, Fault> {
             },
         ),
         Format::Binary { big_endian } => read_body(
-            &header,
+            header,
             Binary {
                 bytes,
                 pos: header.body,
