@@ -218,7 +218,11 @@ fn main() {
             .arg(&p)
             .output()
             .unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let text = String::from_utf8(out.stdout).unwrap();
         let f: Vec<&str> = text.split_whitespace().collect();
         let num = |i: usize| f[i].parse::<f64>().unwrap();
@@ -256,13 +260,15 @@ fn main() {
             })
         })
         .collect();
-    let with_uv = |m: &Mesh| {
-        texsyn::export::obj::write_obj(m, Some(&uv), Some("m.mtl"), "m").into_bytes()
-    };
+    let with_uv =
+        |m: &Mesh| texsyn::export::obj::write_obj(m, Some(&uv), Some("m.mtl"), "m").into_bytes();
     let writers: Vec<(&str, &dyn Fn(&Mesh) -> Vec<u8>)> = writers
         .iter()
         .map(|(w, f)| (*w, f as &dyn Fn(&Mesh) -> Vec<u8>))
-        .chain([("OBJ (write_obj, per-corner uv)", &with_uv as &dyn Fn(&Mesh) -> Vec<u8>)])
+        .chain([(
+            "OBJ (write_obj, per-corner uv)",
+            &with_uv as &dyn Fn(&Mesh) -> Vec<u8>,
+        )])
         .collect();
     for (what, write) in writers {
         let mut times = Vec::new();

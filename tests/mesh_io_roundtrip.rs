@@ -19,7 +19,10 @@ type Exact = (Vec<[u32; 3]>, Vec<[u32; 3]>, Option<Vec<[u32; 4]>>);
 
 fn exact(m: &Mesh) -> Exact {
     (
-        m.positions.iter().map(|p| p.to_array().map(f32::to_bits)).collect(),
+        m.positions
+            .iter()
+            .map(|p| p.to_array().map(f32::to_bits))
+            .collect(),
         m.triangles.clone(),
         m.colors
             .as_ref()

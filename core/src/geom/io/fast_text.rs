@@ -47,7 +47,11 @@ pub(super) fn map_pieces<'a, T: Send>(
     if pieces.len() <= 1 {
         pieces.iter().enumerate().map(|(i, p)| f(i, p)).collect()
     } else {
-        pieces.par_iter().enumerate().map(|(i, p)| f(i, p)).collect()
+        pieces
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| f(i, p))
+            .collect()
     }
 }
 
@@ -140,7 +144,9 @@ pub(super) fn parse_i64(token: &[u8]) -> Option<i64> {
         _ => (false, token),
     };
     if !digits.is_empty() && digits.len() <= 18 && digits.iter().all(u8::is_ascii_digit) {
-        let n = digits.iter().fold(0i64, |n, &d| n * 10 + i64::from(d - b'0'));
+        let n = digits
+            .iter()
+            .fold(0i64, |n, &d| n * 10 + i64::from(d - b'0'));
         return Some(if negative { -n } else { n });
     }
     super::parse(token)
@@ -182,7 +188,12 @@ mod tests {
     #[test]
     fn pieces_end_at_line_ends_and_cover_the_file() {
         let line = b"0.125 -3 7\n";
-        let bytes: Vec<u8> = line.iter().copied().cycle().take(line.len() * 300_000).collect();
+        let bytes: Vec<u8> = line
+            .iter()
+            .copied()
+            .cycle()
+            .take(line.len() * 300_000)
+            .collect();
         let p = pieces(&bytes);
         assert!(p.len() > 2);
         assert_eq!(p.concat(), bytes);

@@ -35,7 +35,9 @@ pub(super) fn read_fast(bytes: &[u8]) -> Option<Mesh> {
     let pieces = fast_text::pieces(bytes);
     // Pass 1: the vertices in each piece.
     let counts = fast_text::map_pieces(&pieces, |_, piece| {
-        fast_text::lines(piece).filter(|l| is_vertex_line(l)).count()
+        fast_text::lines(piece)
+            .filter(|l| is_vertex_line(l))
+            .count()
     });
     let mut before = Vec::with_capacity(counts.len());
     let mut total = 0usize;
@@ -73,7 +75,8 @@ pub(super) fn read_fast(bytes: &[u8]) -> Option<Mesh> {
                     if n < 3 {
                         return None;
                     }
-                    part.positions.push(Vec3::new(values[0], values[1], values[2]));
+                    part.positions
+                        .push(Vec3::new(values[0], values[1], values[2]));
                     if n == 6 {
                         part.colors.resize(part.positions.len() - 1, [1.0; 4]);
                         part.colors.push(

@@ -459,9 +459,8 @@ fn read_instance(
     corners: &mut Vec<u32>,
 ) -> Result<(), Fault> {
     let mark = body.mark();
-    let fail = |body: &dyn Body, message: String| {
-        Fault::new(body.locate(&element.name, i, mark), message)
-    };
+    let fail =
+        |body: &dyn Body, message: String| Fault::new(body.locate(&element.name, i, mark), message);
     let miss = |body: &dyn Body, miss: Miss| {
         let message = match miss {
             Miss::EndOfFile => format!(
@@ -585,10 +584,9 @@ fn read_ascii_fast(header: &Header, body: &[u8]) -> Option<Mesh> {
     }
     let pieces = fast_text::pieces(body);
     let blank = |l: &[u8]| Tokens::<false>::new(l).is_done();
-    let counts =
-        fast_text::map_pieces(&pieces, |_, piece| {
-            fast_text::lines(piece).filter(|l| !blank(l)).count()
-        });
+    let counts = fast_text::map_pieces(&pieces, |_, piece| {
+        fast_text::lines(piece).filter(|l| !blank(l)).count()
+    });
     if counts.iter().sum::<usize>() < records {
         return None;
     }
@@ -782,7 +780,11 @@ fn read_binary_fast(header: &Header, bytes: &[u8], big_endian: bool) -> Option<M
         if count.is_float() || item.is_float() {
             return None;
         }
-        triangles.reserve(capacity(element.count, bytes.len() - pos, 1 + 3 * item.size()));
+        triangles.reserve(capacity(
+            element.count,
+            bytes.len() - pos,
+            1 + 3 * item.size(),
+        ));
         for _ in 0..element.count {
             let n = binary_int(count, bytes.get(pos..)?, big_endian)?;
             pos += count.size();
