@@ -22,6 +22,10 @@ use std::time::Instant;
 use texsyn::geom::Mesh;
 use texsyn::methods::Import;
 
+/// A mesh writer: what the bench times, or what makes its input files.
+type Writer = fn(&Mesh) -> Vec<u8>;
+type DynWriter<'a> = &'a dyn Fn(&Mesh) -> Vec<u8>;
+
 fn runs() -> usize {
     std::env::var("RUNS")
         .ok()
@@ -72,7 +76,10 @@ fn mesh_hash(m: &Mesh) -> String {
 }
 
 /// Child: parse `path` `RUNS` times, print "seconds cpu_seconds peak_bytes mesh_bytes hash".
-fn child(path: &Path) {
+/// `reference`: with the one-line-at-a-time reference readers (what the fast paths replaced)
+/// and the import node's coordinate check, for a before/after comparison on the same machine
+/// at the same time.
+fn child(path: &Path, reference: bool) {
     let bytes = std::fs::read(path).unwrap();
     let mut times = Vec::new();
     let mut cpu = Vec::new();
@@ -80,7 +87,13 @@ fn child(path: &Path) {
     for _ in 0..runs() {
         drop(last.take());
         let (t, c) = (Instant::now(), cpu_seconds());
-        let m = <Mesh as Import>::read(path, &bytes).unwrap();
+        let m = if reference {
+            let m = texsyn::geom::io::read_mesh_bytes_reference(path, &bytes).unwrap();
+            assert!(m.positions.iter().all(|p| p.abs().max_element() <= 1e15));
+            m
+        } else {
+            <Mesh as Import>::read(path, &bytes).unwrap()
+        };
         times.push(t.elapsed().as_secs_f64());
         cpu.push(cpu_seconds() - c);
         last = Some(m);
@@ -178,8 +191,8 @@ fn big_mesh() -> (Mesh, String) {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    if args.len() == 3 && args[1] == "--child" {
-        child(Path::new(&args[2]));
+    if args.len() == 3 && args[1].starts_with("--child") {
+        child(Path::new(&args[2]), args[1] == "--child-reference");
         return;
     }
     let runs = runs();
@@ -194,7 +207,7 @@ fn main() {
         mesh_bytes(&mesh) as f64 / 1e6,
         rayon::current_num_threads()
     );
-    let files: [(&str, fn(&Mesh) -> Vec<u8>); 5] = [
+    let files: [(&str, Writer); 5] = [
         ("big.off", write_off),
         ("big.obj", |m| {
             texsyn::export::obj::write_obj(m, None, None, "m").into_bytes()
@@ -207,14 +220,27 @@ fn main() {
         "| read (parse + validate) | file MB | MB/s (wall) | s (wall) | CPU s (all threads) | MB per CPU s | peak RSS MB | peak / mesh | mesh hash |"
     );
     println!("|---|---|---|---|---|---|---|---|---|");
-    for (file, write) in files {
+    let readers = files
+        .iter()
+        .map(|&(file, write)| (file, write, "--child"))
+        .chain(
+            files[..4]
+                .iter()
+                .map(|&(file, write)| (file, write, "--child-reference")),
+        );
+    for (file, write, how) in readers {
         let p = dir.join(file);
         if !p.is_file() {
             std::fs::write(&p, write(&mesh)).unwrap();
         }
+        let file = if how == "--child" {
+            file.to_string()
+        } else {
+            format!("{file} (reference reader)")
+        };
         let size = std::fs::metadata(&p).unwrap().len() as f64;
         let out = std::process::Command::new(std::env::current_exe().unwrap())
-            .arg("--child")
+            .arg(how)
             .arg(&p)
             .output()
             .unwrap();
@@ -240,7 +266,7 @@ fn main() {
     println!();
     println!("| write | file MB | MB/s (wall) | s (wall) | CPU s | MB per CPU s | output hash |");
     println!("|---|---|---|---|---|---|---|");
-    let writers: [(&str, fn(&Mesh) -> Vec<u8>); 2] = [
+    let writers: [(&str, Writer); 2] = [
         ("OBJ (write_obj, no uv)", |m| {
             texsyn::export::obj::write_obj(m, None, None, "m").into_bytes()
         }),
@@ -262,9 +288,9 @@ fn main() {
         .collect();
     let with_uv =
         |m: &Mesh| texsyn::export::obj::write_obj(m, Some(&uv), Some("m.mtl"), "m").into_bytes();
-    let writers: Vec<(&str, &dyn Fn(&Mesh) -> Vec<u8>)> = writers
+    let writers: Vec<(&str, DynWriter)> = writers
         .iter()
-        .map(|(w, f)| (*w, f as &dyn Fn(&Mesh) -> Vec<u8>))
+        .map(|(w, f)| (*w, f as DynWriter))
         .chain([(
             "OBJ (write_obj, per-corner uv)",
             &with_uv as &dyn Fn(&Mesh) -> Vec<u8>,

@@ -101,7 +101,7 @@ fn exact_digits(x: f32) -> Option<usize> {
         }
         u128::from(m) * 5u128.pow((-j) as u32)
     };
-    while significand % 10 == 0 {
+    while significand.is_multiple_of(10) {
         significand /= 10;
     }
     let digits = significand.checked_ilog10()? as usize + 1;

@@ -692,6 +692,9 @@ fn binary_int(ty: Scalar, bytes: &[u8], big_endian: bool) -> Option<i64> {
     })
 }
 
+/// A vertex's position and colour, decoded from a binary record.
+type Decoded = (Vec3, [f32; 4]);
+
 /// A value of type `ty` at the start of `bytes` (which holds it), as [`Binary`] reads it.
 #[inline]
 fn binary_value(ty: Scalar, bytes: &[u8], big_endian: bool) -> f64 {
@@ -753,7 +756,7 @@ fn read_binary_fast(header: &Header, bytes: &[u8], big_endian: bool) -> Option<M
                     finish_vertex(vertex).ok()
                 };
                 // 64k vertices per task; results concatenated in order.
-                let parts: Vec<Option<Vec<(Vec3, [f32; 4])>>> = data
+                let parts: Vec<Option<Vec<Decoded>>> = data
                     .par_chunks(size.max(1) << 16)
                     .map(|chunk| chunk.chunks_exact(size).map(decode).collect())
                     .collect();
