@@ -291,10 +291,7 @@ fn main() {
     let writers: Vec<(&str, DynWriter)> = writers
         .iter()
         .map(|(w, f)| (*w, f as DynWriter))
-        .chain([(
-            "OBJ (write_obj, per-corner uv)",
-            &with_uv as &dyn Fn(&Mesh) -> Vec<u8>,
-        )])
+        .chain([("OBJ (write_obj, per-corner uv)", &with_uv as DynWriter)])
         .collect();
     for (what, write) in writers {
         let mut times = Vec::new();

@@ -603,14 +603,25 @@ fn read_ascii_fast(header: &Header, body: &[u8]) -> Option<Mesh> {
         colors: Vec<[f32; 4]>,
         triangles: Vec<[u32; 3]>,
     }
+    // How many of records `from..to` are instances of the element named `name`.
+    let overlap = |name: &str, from: usize, to: usize| {
+        starts
+            .iter()
+            .filter(|(_, e)| e.name == name)
+            .map(|&(s, e)| to.min(s + e.count).saturating_sub(from.max(s)))
+            .sum::<usize>()
+    };
     let parts = fast_text::map_pieces(&pieces, |i, piece| {
         let mut record = firsts[i];
+        let end = (record + counts[i]).min(records);
+        let vertices = overlap("vertex", record, end);
         let mut part = Part {
-            positions: Vec::new(),
-            colors: Vec::new(),
-            triangles: Vec::new(),
+            positions: Vec::with_capacity(vertices),
+            colors: Vec::with_capacity(if header.has_colors { vertices } else { 0 }),
+            triangles: Vec::with_capacity(overlap("face", record, end)),
         };
         let mut corners: Vec<u32> = Vec::with_capacity(8);
+        let is_vertex: Vec<bool> = starts.iter().map(|(_, e)| e.name == "vertex").collect();
         // The element of `record`: the last that starts at or before it.
         let mut e = starts.iter().rposition(|&(s, _)| s <= record)?;
         for line in fast_text::lines(piece) {
@@ -644,7 +655,7 @@ fn read_ascii_fast(header: &Header, body: &[u8]) -> Option<Mesh> {
             if ascii.token().is_some() {
                 return None;
             }
-            if element.name == "vertex" {
+            if is_vertex[e] {
                 let (p, c) = finish_vertex(vertex).ok()?;
                 part.positions.push(p);
                 if header.has_colors {
