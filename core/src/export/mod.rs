@@ -3,6 +3,7 @@
 //! Writers return bytes or strings and never touch the file system, so the pipeline can hash
 //! and store what they produce. Output is deterministic: fixed formatting, fixed key order.
 
+pub mod decimal;
 pub mod exr;
 pub mod glb;
 pub mod obj;

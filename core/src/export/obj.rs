@@ -1,12 +1,69 @@
 //! Wavefront OBJ and MTL writers.
 //!
-//! Numbers are written with Rust's `{}` for `f32` (the shortest text that reads back to the
-//! same value), so files are deterministic and round-trip exactly.
+//! Numbers are written as Rust's `{}` prints them (for `f32`, the shortest text that reads back
+//! to the same value; see [`super::decimal`]), so files are deterministic and round-trip
+//! exactly. The lines are formatted in parallel blocks and joined in order: the text does not
+//! depend on the thread count.
 
+use super::decimal::{push_f32, push_u64};
 use crate::geom::Mesh;
 use glam::Vec2;
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::fmt::Write;
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// Items per parallel block, and blocks formatted at once (what is held besides the output).
+const BLOCK: usize = 1 << 14;
+const WINDOW: usize = 16;
+
+/// Appends one line per item of `items`, formatted by `line(global index, item, out)` in
+/// parallel blocks, in order.
+fn par_lines<T: Sync>(
+    items: &[T],
+    out: &mut Vec<u8>,
+    line: impl Fn(usize, &T, &mut Vec<u8>) + Sync,
+) {
+    for (w, window) in items.chunks(BLOCK * WINDOW).enumerate() {
+        let blocks: Vec<Vec<u8>> = window
+            .par_chunks(BLOCK)
+            .enumerate()
+            .map(|(b, block)| {
+                let first = w * BLOCK * WINDOW + b * BLOCK;
+                let mut text = Vec::with_capacity(block.len() * 48);
+                for (k, item) in block.iter().enumerate() {
+                    line(first + k, item, &mut text);
+                }
+                text
+            })
+            .collect();
+        for b in blocks {
+            out.extend_from_slice(&b);
+        }
+    }
+}
+
+/// A multiplicative hash for the texture-coordinate index (Fx-style: the keys are two bit
+/// patterns, not attacker-chosen, and lookups are most of the writer's serial work).
+#[derive(Default)]
+struct PairHasher(u64);
+
+impl Hasher for PairHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u32(&mut self, n: u32) {
+        self.write_u64(u64::from(n));
+    }
+    fn write_u64(&mut self, n: u64) {
+        self.0 = (self.0.rotate_left(5) ^ n).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
 
 /// Writes `mesh` as OBJ text: every vertex (`v`, in order, so vertex numbers are kept), the
 /// distinct texture coordinates (`vt`, deduplicated by exact bit equality, in order of first
@@ -21,18 +78,28 @@ pub fn write_obj(
     material: &str,
 ) -> String {
     let corner_uv = corner_uv.filter(|c| c.len() == mesh.triangles.len());
-    let mut out = String::with_capacity(mesh.positions.len() * 32 + mesh.triangles.len() * 40);
-    out.push_str("# texsyn\n");
+    let mut head = String::from("# texsyn\n");
     if let Some(m) = mtl_file {
-        let _ = writeln!(out, "mtllib {m}");
+        let _ = writeln!(head, "mtllib {m}");
     }
-    for p in &mesh.positions {
-        let _ = writeln!(out, "v {} {} {}", p.x, p.y, p.z);
-    }
-    // Index (1-based) of each face corner's vt.
+    let mut out = head.into_bytes();
+    out.reserve(mesh.positions.len() * 32 + mesh.triangles.len() * 40);
+    par_lines(&mesh.positions, &mut out, |_, p, out| {
+        out.extend_from_slice(b"v ");
+        push_f32(out, p.x);
+        out.push(b' ');
+        push_f32(out, p.y);
+        out.push(b' ');
+        push_f32(out, p.z);
+        out.push(b'\n');
+    });
+    // Index (1-based) of each face corner's vt, and the distinct coordinates in order of
+    // first use.
     let mut corner_vt: Vec<[u32; 3]> = Vec::new();
+    let mut distinct: Vec<Vec2> = Vec::new();
     if let Some(uvs) = corner_uv {
-        let mut index: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut index: HashMap<(u32, u32), u32, BuildHasherDefault<PairHasher>> =
+            HashMap::default();
         corner_vt.reserve(uvs.len());
         for c in uvs {
             let mut vt = [0u32; 3];
@@ -40,28 +107,36 @@ pub fn write_obj(
                 let key = (c[k].x.to_bits(), c[k].y.to_bits());
                 let next = index.len() as u32 + 1;
                 vt[k] = *index.entry(key).or_insert_with(|| {
-                    let _ = writeln!(out, "vt {} {}", c[k].x, c[k].y);
+                    distinct.push(c[k]);
                     next
                 });
             }
             corner_vt.push(vt);
         }
     }
+    par_lines(&distinct, &mut out, |_, uv, out| {
+        out.extend_from_slice(b"vt ");
+        push_f32(out, uv.x);
+        out.push(b' ');
+        push_f32(out, uv.y);
+        out.push(b'\n');
+    });
     if mtl_file.is_some() {
-        let _ = writeln!(out, "usemtl {material}");
+        out.extend_from_slice(format!("usemtl {material}\n").as_bytes());
     }
-    for (f, t) in mesh.triangles.iter().enumerate() {
-        let [a, b, c] = t.map(|v| v as u64 + 1);
-        match corner_vt.get(f) {
-            Some([ta, tb, tc]) => {
-                let _ = writeln!(out, "f {a}/{ta} {b}/{tb} {c}/{tc}");
-            }
-            None => {
-                let _ = writeln!(out, "f {a} {b} {c}");
+    par_lines(&mesh.triangles, &mut out, |f, t, out| {
+        out.push(b'f');
+        for k in 0..3 {
+            out.push(b' ');
+            push_u64(out, t[k] as u64 + 1);
+            if let Some(vt) = corner_vt.get(f) {
+                out.push(b'/');
+                push_u64(out, vt[k].into());
             }
         }
-    }
-    out
+        out.push(b'\n');
+    });
+    String::from_utf8(out).expect("OBJ text is the given names and ASCII numbers")
 }
 
 /// Texture files of a material, by name relative to the MTL file. Default: none.

@@ -10,11 +10,133 @@
 //! first use and drops unreferenced ones, and texsyn must keep the file's vertex numbering
 //! (configs name vertices by index). The tests compare this reader with tobj.
 
+use super::fast_text::{self, Tokens};
 use super::{Fault, coord, fan, lines, out_of_range, parse, show, tokens};
 use crate::geom::Mesh;
 use glam::Vec3;
 
+/// The fast path ([`read_fast`]), and the reference reader for what it declines.
 pub(super) fn read(bytes: &[u8]) -> Result<Mesh, Fault> {
+    match read_fast(bytes) {
+        Some(mesh) => Ok(mesh),
+        None => read_reference(bytes),
+    }
+}
+
+/// Whether a line is a vertex (`v`) line: what pass 1 counts, so that relative indices in
+/// any piece know how many vertices precede them.
+fn is_vertex_line(line: &[u8]) -> bool {
+    Tokens::<true>::new(line).next() == Some(b"v")
+}
+
+/// A well-formed OBJ read in parallel pieces of whole lines (see [`fast_text`]); `None` at
+/// anything [`read_reference`] would reject, for it to name.
+pub(super) fn read_fast(bytes: &[u8]) -> Option<Mesh> {
+    let pieces = fast_text::pieces(bytes);
+    // Pass 1: the vertices in each piece.
+    let counts = fast_text::map_pieces(&pieces, |_, piece| {
+        fast_text::lines(piece)
+            .filter(|l| is_vertex_line(l))
+            .count()
+    });
+    let mut before = Vec::with_capacity(counts.len());
+    let mut total = 0usize;
+    for c in &counts {
+        before.push(total);
+        total += c;
+    }
+
+    struct Part {
+        positions: Vec<Vec3>,
+        /// Colours of this piece's vertices up to its last coloured one (white before that).
+        colors: Vec<[f32; 4]>,
+        triangles: Vec<[u32; 3]>,
+        largest: Option<u32>,
+    }
+    // Pass 2: each piece's vertices and faces.
+    let parts = fast_text::map_pieces(&pieces, |i, piece| {
+        let mut part = Part {
+            positions: Vec::with_capacity(counts[i]),
+            colors: Vec::new(),
+            triangles: Vec::with_capacity(2 * counts[i]),
+            largest: None,
+        };
+        let mut corners: Vec<u32> = Vec::with_capacity(8);
+        for line in fast_text::lines(piece) {
+            let mut t = Tokens::<true>::new(line);
+            match t.next() {
+                Some(b"v") => {
+                    let mut values = [0.0f32; 6];
+                    let mut n = 0;
+                    for tok in t.take(6) {
+                        values[n] = fast_text::coord(tok)?;
+                        n += 1;
+                    }
+                    if n < 3 {
+                        return None;
+                    }
+                    part.positions
+                        .push(Vec3::new(values[0], values[1], values[2]));
+                    if n == 6 {
+                        part.colors.resize(part.positions.len() - 1, [1.0; 4]);
+                        part.colors.push(
+                            [values[3], values[4], values[5], 1.0].map(|c| c.clamp(0.0, 1.0)),
+                        );
+                    }
+                }
+                Some(b"f") => {
+                    corners.clear();
+                    let so_far = (before[i] + part.positions.len()) as i64;
+                    for tok in t {
+                        let v = tok.split(|&b| b == b'/').next().unwrap_or_default();
+                        let index = match fast_text::parse_i64(v)? {
+                            0 => return None,
+                            i if i < 0 => so_far + i,
+                            i => i - 1,
+                        };
+                        let index = u32::try_from(index).ok()?;
+                        part.largest = part.largest.max(Some(index));
+                        corners.push(index);
+                    }
+                    if corners.len() < 3 {
+                        return None;
+                    }
+                    fast_text::fan(&corners, &mut part.triangles);
+                }
+                _ => {}
+            }
+        }
+        Some(part)
+    });
+    let parts: Vec<Part> = parts.into_iter().collect::<Option<_>>()?;
+    if parts
+        .iter()
+        .filter_map(|p| p.largest)
+        .any(|l| l as usize >= total)
+    {
+        return None;
+    }
+    let any_colors = parts.iter().any(|p| !p.colors.is_empty());
+    let mut positions = Vec::with_capacity(total);
+    let mut colors = Vec::with_capacity(if any_colors { total } else { 0 });
+    let mut triangles = Vec::with_capacity(parts.iter().map(|p| p.triangles.len()).sum());
+    for part in parts {
+        positions.extend_from_slice(&part.positions);
+        if any_colors {
+            colors.extend_from_slice(&part.colors);
+            colors.resize(positions.len(), [1.0; 4]);
+        }
+        triangles.extend_from_slice(&part.triangles);
+    }
+    Some(Mesh::with_colors(
+        positions,
+        triangles,
+        any_colors.then_some(colors),
+    ))
+}
+
+/// The reference reader: one line at a time, naming the line of any problem.
+pub(super) fn read_reference(bytes: &[u8]) -> Result<Mesh, Fault> {
     let mut positions = Vec::new();
     let mut colors: Vec<[f32; 4]> = Vec::new();
     let mut triangles = Vec::new();

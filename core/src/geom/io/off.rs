@@ -7,11 +7,147 @@
 //! unparsable or non-finite number, a face of fewer than 3 vertices, a vertex index out of
 //! range, and a file that ends before the declared vertex or face counts.
 
+use super::fast_text::{self, Tokens};
 use super::{Fault, capacity, coord, fan, lines, out_of_range, parse, show, tokens};
 use crate::geom::Mesh;
 use glam::Vec3;
 
+/// The fast path ([`read_fast`]), and the reference reader for what it declines.
 pub(super) fn read(bytes: &[u8]) -> Result<Mesh, Fault> {
+    match read_fast(bytes) {
+        Some(mesh) => Ok(mesh),
+        None => read_reference(bytes),
+    }
+}
+
+/// A well-formed OFF read in parallel pieces of whole lines (see [`fast_text`]); `None` at
+/// anything [`read_reference`] would reject, for it to name.
+pub(super) fn read_fast(bytes: &[u8]) -> Option<Mesh> {
+    // The header: the first non-blank line, then the counts on it or on the next one.
+    let mut pos = 0;
+    let mut next_line = || {
+        while pos < bytes.len() {
+            let end = memchr::memchr(b'\n', &bytes[pos..]).map_or(bytes.len(), |p| pos + p);
+            let line = &bytes[pos..end];
+            pos = (end + 1).min(bytes.len());
+            if !Tokens::<true>::new(line).is_done() {
+                return Some(line);
+            }
+        }
+        None
+    };
+    let mut head = Tokens::<true>::new(next_line()?);
+    let (has_normals, has_colors) = match head.next()? {
+        b"OFF" => (false, false),
+        b"COFF" => (false, true),
+        b"NOFF" => (true, false),
+        b"CNOFF" | b"NCOFF" => (true, true),
+        _ => return None,
+    };
+    if head.is_done() {
+        head = Tokens::<true>::new(next_line()?);
+    }
+    let nv = fast_text::parse_usize(head.next()?)?;
+    let nf = fast_text::parse_usize(head.next()?)?;
+    if nv > u32::MAX as usize {
+        return None;
+    }
+    let body = &bytes[pos..];
+
+    // Pass 1: the records (non-blank lines) in each piece.
+    let pieces = fast_text::pieces(body);
+    let counts = fast_text::map_pieces(&pieces, |_, piece| {
+        fast_text::lines(piece)
+            .filter(|l| !Tokens::<true>::new(l).is_done())
+            .count()
+    });
+    let total: usize = counts.iter().sum();
+    if total < nv.checked_add(nf)? {
+        return None;
+    }
+    let firsts: Vec<usize> = counts
+        .iter()
+        .scan(0, |acc, &c| {
+            let first = *acc;
+            *acc += c;
+            Some(first)
+        })
+        .collect();
+
+    // Pass 2: each piece's vertices and faces, knowing which record it starts at.
+    struct Part {
+        positions: Vec<Vec3>,
+        colors: Vec<[f32; 4]>,
+        triangles: Vec<[u32; 3]>,
+    }
+    let parts = fast_text::map_pieces(&pieces, |i, piece| {
+        let mut record = firsts[i];
+        let vertices = nv.saturating_sub(record).min(counts[i]);
+        let mut part = Part {
+            positions: Vec::with_capacity(vertices),
+            colors: Vec::with_capacity(if has_colors { vertices } else { 0 }),
+            triangles: Vec::with_capacity(2 * (counts[i] - vertices)),
+        };
+        let mut corners: Vec<u32> = Vec::with_capacity(8);
+        for line in fast_text::lines(piece) {
+            let mut t = Tokens::<true>::new(line);
+            if t.is_done() {
+                continue;
+            }
+            if record < nv {
+                let mut p = [0.0f32; 3];
+                for x in &mut p {
+                    *x = fast_text::coord(t.next()?)?;
+                }
+                part.positions.push(Vec3::from(p));
+                if has_normals {
+                    for _ in 0..3 {
+                        t.next()?;
+                    }
+                }
+                if has_colors {
+                    part.colors.push(color(t).ok()?);
+                }
+            } else if record < nv + nf {
+                let n = fast_text::parse_usize(t.next()?)?;
+                if n < 3 {
+                    return None;
+                }
+                corners.clear();
+                for _ in 0..n {
+                    let v = fast_text::parse_usize(t.next()?)?;
+                    if v >= nv {
+                        return None;
+                    }
+                    corners.push(v as u32);
+                }
+                fast_text::fan(&corners, &mut part.triangles);
+            } else {
+                break;
+            }
+            record += 1;
+        }
+        Some(part)
+    });
+    let parts: Vec<Part> = parts.into_iter().collect::<Option<_>>()?;
+    let concat = |f: fn(&Part) -> usize| parts.iter().map(f).sum::<usize>();
+    let mut positions = Vec::with_capacity(concat(|p| p.positions.len()));
+    let mut colors = Vec::with_capacity(concat(|p| p.colors.len()));
+    let mut triangles = Vec::with_capacity(concat(|p| p.triangles.len()));
+    for part in parts {
+        positions.extend_from_slice(&part.positions);
+        colors.extend_from_slice(&part.colors);
+        triangles.extend_from_slice(&part.triangles);
+    }
+    Some(Mesh::with_colors(
+        positions,
+        triangles,
+        has_colors.then_some(colors),
+    ))
+}
+
+/// The reference reader: one line at a time, naming the line of any problem.
+pub(super) fn read_reference(bytes: &[u8]) -> Result<Mesh, Fault> {
     // Blank and comment-only lines carry nothing.
     let mut lines = lines(bytes).filter(|(_, l)| tokens(l).next().is_some());
     let last_line = || bytes.split(|&b| b == b'\n').count() - usize::from(bytes.ends_with(b"\n"));

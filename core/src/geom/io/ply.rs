@@ -10,9 +10,11 @@
 //! than 3 vertices, and a file shorter than the header promises (naming the line for ascii, or
 //! the element, its index and its byte offset for binary).
 
+use super::fast_text::{self, Tokens};
 use super::{Fault, Location, capacity, fan, out_of_range, parse, show, tokens};
 use crate::geom::Mesh;
 use glam::Vec3;
+use rayon::prelude::*;
 use std::fmt::Write as _;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -94,11 +96,29 @@ struct Header {
     has_colors: bool,
 }
 
+/// The fast paths ([`read_ascii_fast`], [`read_binary_fast`]), and the reference reader for what
+/// they decline.
 pub(super) fn read(bytes: &[u8]) -> Result<Mesh, Fault> {
     let header = read_header(bytes)?;
+    let fast = match header.format {
+        Format::Ascii => read_ascii_fast(&header, &bytes[header.body..]),
+        Format::Binary { big_endian } => read_binary_fast(&header, bytes, big_endian),
+    };
+    match fast {
+        Some(mesh) => Ok(mesh),
+        None => read_body_reference(&header, bytes),
+    }
+}
+
+/// The reference reader: one value at a time, naming the place of any problem.
+pub(super) fn read_reference(bytes: &[u8]) -> Result<Mesh, Fault> {
+    read_body_reference(&read_header(bytes)?, bytes)
+}
+
+fn read_body_reference(header: &Header, bytes: &[u8]) -> Result<Mesh, Fault> {
     match header.format {
         Format::Ascii => read_body(
-            &header,
+            header,
             Ascii {
                 bytes,
                 pos: header.body,
@@ -107,7 +127,7 @@ pub(super) fn read(bytes: &[u8]) -> Result<Mesh, Fault> {
             },
         ),
         Format::Binary { big_endian } => read_body(
-            &header,
+            header,
             Binary {
                 bytes,
                 pos: header.body,
@@ -333,9 +353,9 @@ impl Body for Ascii<'_> {
         let token = self.token().ok_or(Miss::EndOfFile)?;
         // f32 properties are parsed as f32 so that they round once, like the other readers.
         let value = match ty {
-            Scalar::F32 => parse::<f32>(token).map(f64::from),
+            Scalar::F32 => fast_text::parse_f32(token).map(f64::from),
             Scalar::F64 => parse::<f64>(token),
-            _ => parse::<i64>(token).map(|i| i as f64),
+            _ => fast_text::parse_i64(token).map(|i| i as f64),
         };
         value.ok_or_else(|| Miss::Bad(format!("cannot parse {} as {ty:?}", show(token))))
     }
@@ -423,6 +443,89 @@ impl Body for Binary<'_> {
     }
 }
 
+/// The vertex being read: x, y, z, red, green, blue, alpha; colours already scaled to [0, 1].
+type VertexSlots = [f64; 7];
+const NO_VERTEX: VertexSlots = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0];
+
+/// Reads instance `i` of `element` from `body`: its vertex slots into `vertex`, its face (fan-
+/// triangulated) onto `triangles`. `nv` is the vertex count, for the index range.
+fn read_instance(
+    element: &Element,
+    i: usize,
+    body: &mut impl Body,
+    nv: usize,
+    vertex: &mut VertexSlots,
+    triangles: &mut Vec<[u32; 3]>,
+    corners: &mut Vec<u32>,
+) -> Result<(), Fault> {
+    let mark = body.mark();
+    let fail =
+        |body: &dyn Body, message: String| Fault::new(body.locate(&element.name, i, mark), message);
+    let miss = |body: &dyn Body, miss: Miss| {
+        let message = match miss {
+            Miss::EndOfFile => format!(
+                "truncated: the file ends inside {} {i} (the header declares {})",
+                element.name, element.count
+            ),
+            Miss::Bad(m) => m,
+        };
+        fail(body, message)
+    };
+    for &(kind, role) in &element.properties {
+        match kind {
+            Kind::Scalar(ty) => {
+                let v = body.value(ty).map_err(|m| miss(body, m))?;
+                if let Role::Vertex(slot) = role {
+                    vertex[slot] = if slot >= 3 && !ty.is_float() {
+                        v / 255.0
+                    } else {
+                        v
+                    };
+                }
+            }
+            Kind::List { count, item } => {
+                let n = body.value(count).map_err(|m| miss(body, m))?;
+                if n < 0.0 || n.fract() != 0.0 {
+                    return Err(fail(body, format!("invalid list length {n}")));
+                }
+                let n = n as usize;
+                if role != Role::FaceIndices {
+                    body.skip(item, n).map_err(|m| miss(body, m))?;
+                    continue;
+                }
+                if n < 3 {
+                    return Err(fail(body, super::unsupported_face_size(n)));
+                }
+                corners.clear();
+                for _ in 0..n {
+                    let v = body.value(item).map_err(|m| miss(body, m))?;
+                    if v.fract() != 0.0 {
+                        let message = format!("vertex index {v} is not an integer");
+                        return Err(fail(body, message));
+                    }
+                    if !(0.0..nv as f64).contains(&v) {
+                        return Err(fail(body, out_of_range(v, nv)));
+                    }
+                    corners.push(v as u32);
+                }
+                fan(corners, triangles);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A vertex's position and colour as the mesh stores them, or the coordinates if one is NaN or
+/// infinite.
+fn finish_vertex(vertex: VertexSlots) -> Result<(Vec3, [f32; 4]), [f32; 3]> {
+    let [x, y, z, r, g, b, a] = vertex.map(|v| v as f32);
+    if ![x, y, z].iter().all(|c| c.is_finite()) {
+        return Err([x, y, z]);
+    }
+    Ok((Vec3::new(x, y, z), [r, g, b, a].map(|c| c.clamp(0.0, 1.0))))
+}
+
+/// The reference reader of a body: one value at a time, naming the place of any problem.
 fn read_body(header: &Header, mut body: impl Body) -> Result<Mesh, Fault> {
     let nv = header.vertex_count;
     let available = body.available();
@@ -441,76 +544,284 @@ fn read_body(header: &Header, mut body: impl Body) -> Result<Mesh, Fault> {
         let is_vertex = element.name == "vertex";
         for i in 0..element.count {
             let mark = body.mark();
-            let fail = |body: &dyn Body, message: String| {
-                Fault::new(body.locate(&element.name, i, mark), message)
-            };
-            let miss = |body: &dyn Body, miss: Miss| {
-                let message = match miss {
-                    Miss::EndOfFile => format!(
-                        "truncated: the file ends inside {} {i} (the header declares {})",
-                        element.name, element.count
-                    ),
-                    Miss::Bad(m) => m,
-                };
-                fail(body, message)
-            };
-            // x, y, z, red, green, blue, alpha; colours already scaled to [0, 1].
-            let mut vertex = [0.0f64, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0];
-            for &(kind, role) in &element.properties {
-                match kind {
-                    Kind::Scalar(ty) => {
-                        let v = body.value(ty).map_err(|m| miss(&body, m))?;
-                        if let Role::Vertex(slot) = role {
-                            vertex[slot] = if slot >= 3 && !ty.is_float() {
-                                v / 255.0
-                            } else {
-                                v
-                            };
-                        }
-                    }
-                    Kind::List { count, item } => {
-                        let n = body.value(count).map_err(|m| miss(&body, m))?;
-                        if n < 0.0 || n.fract() != 0.0 {
-                            return Err(fail(&body, format!("invalid list length {n}")));
-                        }
-                        let n = n as usize;
-                        if role != Role::FaceIndices {
-                            body.skip(item, n).map_err(|m| miss(&body, m))?;
-                            continue;
-                        }
-                        if n < 3 {
-                            return Err(fail(&body, super::unsupported_face_size(n)));
-                        }
-                        corners.clear();
-                        for _ in 0..n {
-                            let v = body.value(item).map_err(|m| miss(&body, m))?;
-                            if v.fract() != 0.0 {
-                                let message = format!("vertex index {v} is not an integer");
-                                return Err(fail(&body, message));
-                            }
-                            if !(0.0..nv as f64).contains(&v) {
-                                return Err(fail(&body, out_of_range(v, nv)));
-                            }
-                            corners.push(v as u32);
-                        }
-                        fan(&corners, &mut triangles);
-                    }
-                }
-            }
+            let mut vertex = NO_VERTEX;
+            read_instance(
+                element,
+                i,
+                &mut body,
+                nv,
+                &mut vertex,
+                &mut triangles,
+                &mut corners,
+            )?;
             if is_vertex {
-                let [x, y, z, r, g, b, a] = vertex.map(|v| v as f32);
-                if ![x, y, z].iter().all(|c| c.is_finite()) {
+                let (p, c) = finish_vertex(vertex).map_err(|[x, y, z]| {
                     let message = format!("NaN or infinite coordinate ({x}, {y}, {z})");
-                    return Err(fail(&body, message));
-                }
-                positions.push(Vec3::new(x, y, z));
+                    Fault::new(body.locate(&element.name, i, mark), message)
+                })?;
+                positions.push(p);
                 if let Some(colors) = &mut colors {
-                    colors.push([r, g, b, a].map(|c| c.clamp(0.0, 1.0)));
+                    colors.push(c);
                 }
             }
         }
     }
     Ok(Mesh::with_colors(positions, triangles, colors))
+}
+
+/// A well-formed ascii body read in parallel pieces of whole lines (see [`fast_text`]), on the
+/// bet that each element instance is one line, as every writer makes it: each line must hold
+/// exactly one instance's values. `None` where the bet or the file fails, for
+/// [`read_body`] to read or to name the problem.
+fn read_ascii_fast(header: &Header, body: &[u8]) -> Option<Mesh> {
+    let nv = header.vertex_count;
+    // The instances in file order: (first record, element), elements with properties only.
+    let mut starts = Vec::new();
+    let mut records = 0usize;
+    for element in header.elements.iter().filter(|e| !e.properties.is_empty()) {
+        starts.push((records, element));
+        records = records.checked_add(element.count)?;
+    }
+    let pieces = fast_text::pieces(body);
+    let blank = |l: &[u8]| Tokens::<false>::new(l).is_done();
+    let counts = fast_text::map_pieces(&pieces, |_, piece| {
+        fast_text::lines(piece).filter(|l| !blank(l)).count()
+    });
+    if counts.iter().sum::<usize>() < records {
+        return None;
+    }
+    let firsts: Vec<usize> = counts
+        .iter()
+        .scan(0, |acc, &c| {
+            let first = *acc;
+            *acc += c;
+            Some(first)
+        })
+        .collect();
+    struct Part {
+        positions: Vec<Vec3>,
+        colors: Vec<[f32; 4]>,
+        triangles: Vec<[u32; 3]>,
+    }
+    // How many of records `from..to` are instances of the element named `name`.
+    let overlap = |name: &str, from: usize, to: usize| {
+        starts
+            .iter()
+            .filter(|(_, e)| e.name == name)
+            .map(|&(s, e)| to.min(s + e.count).saturating_sub(from.max(s)))
+            .sum::<usize>()
+    };
+    let parts = fast_text::map_pieces(&pieces, |i, piece| {
+        let mut record = firsts[i];
+        let end = (record + counts[i]).min(records);
+        let vertices = overlap("vertex", record, end);
+        let mut part = Part {
+            positions: Vec::with_capacity(vertices),
+            colors: Vec::with_capacity(if header.has_colors { vertices } else { 0 }),
+            triangles: Vec::with_capacity(overlap("face", record, end)),
+        };
+        let mut corners: Vec<u32> = Vec::with_capacity(8);
+        let is_vertex: Vec<bool> = starts.iter().map(|(_, e)| e.name == "vertex").collect();
+        // The element of `record`: the last that starts at or before it.
+        let mut e = starts.iter().rposition(|&(s, _)| s <= record)?;
+        for line in fast_text::lines(piece) {
+            if blank(line) {
+                continue;
+            }
+            if record >= records {
+                break;
+            }
+            while e + 1 < starts.len() && starts[e + 1].0 <= record {
+                e += 1;
+            }
+            let (first, element) = starts[e];
+            let mut ascii = Ascii {
+                bytes: line,
+                pos: 0,
+                line: 0,
+                token_line: 0,
+            };
+            let mut vertex = NO_VERTEX;
+            read_instance(
+                element,
+                record - first,
+                &mut ascii,
+                nv,
+                &mut vertex,
+                &mut part.triangles,
+                &mut corners,
+            )
+            .ok()?;
+            if ascii.token().is_some() {
+                return None;
+            }
+            if is_vertex[e] {
+                let (p, c) = finish_vertex(vertex).ok()?;
+                part.positions.push(p);
+                if header.has_colors {
+                    part.colors.push(c);
+                }
+            }
+            record += 1;
+        }
+        Some(part)
+    });
+    let parts: Vec<Part> = parts.into_iter().collect::<Option<_>>()?;
+    let mut positions = Vec::with_capacity(nv);
+    let mut colors = Vec::with_capacity(if header.has_colors { nv } else { 0 });
+    let mut triangles = Vec::with_capacity(parts.iter().map(|p| p.triangles.len()).sum());
+    for part in parts {
+        positions.extend_from_slice(&part.positions);
+        colors.extend_from_slice(&part.colors);
+        triangles.extend_from_slice(&part.triangles);
+    }
+    Some(Mesh::with_colors(
+        positions,
+        triangles,
+        header.has_colors.then_some(colors),
+    ))
+}
+
+/// An integer of type `ty` at the start of `bytes`, or `None` for a float type or too few bytes.
+#[inline]
+fn binary_int(ty: Scalar, bytes: &[u8], big_endian: bool) -> Option<i64> {
+    fn get<const N: usize>(bytes: &[u8], big_endian: bool) -> Option<[u8; N]> {
+        let mut a: [u8; N] = bytes.get(..N)?.try_into().ok()?;
+        if big_endian {
+            a.reverse();
+        }
+        Some(a)
+    }
+    Some(match ty {
+        Scalar::I8 => i8::from_le_bytes(get(bytes, big_endian)?).into(),
+        Scalar::U8 => u8::from_le_bytes(get(bytes, big_endian)?).into(),
+        Scalar::I16 => i16::from_le_bytes(get(bytes, big_endian)?).into(),
+        Scalar::U16 => u16::from_le_bytes(get(bytes, big_endian)?).into(),
+        Scalar::I32 => i32::from_le_bytes(get(bytes, big_endian)?).into(),
+        Scalar::U32 => u32::from_le_bytes(get(bytes, big_endian)?).into(),
+        Scalar::F32 | Scalar::F64 => return None,
+    })
+}
+
+/// A vertex's position and colour, decoded from a binary record.
+type Decoded = (Vec3, [f32; 4]);
+
+/// A value of type `ty` at the start of `bytes` (which holds it), as [`Binary`] reads it.
+#[inline]
+fn binary_value(ty: Scalar, bytes: &[u8], big_endian: bool) -> f64 {
+    let mut body = Binary {
+        bytes,
+        pos: 0,
+        big_endian,
+    };
+    body.value(ty).unwrap_or(f64::NAN)
+}
+
+/// A well-formed binary body whose elements are either all scalars (a fixed record size: read
+/// in parallel slices) or a face element holding only an integer index list. `None` for
+/// anything else or any problem, for [`read_body`] to read or name.
+fn read_binary_fast(header: &Header, bytes: &[u8], big_endian: bool) -> Option<Mesh> {
+    let nv = header.vertex_count;
+    let mut pos = header.body;
+    let mut positions = Vec::new();
+    let mut colors = Vec::new();
+    let mut triangles = Vec::new();
+    let mut corners: Vec<u32> = Vec::with_capacity(8);
+    for element in header.elements.iter().filter(|e| !e.properties.is_empty()) {
+        let scalars: Option<Vec<Scalar>> = element
+            .properties
+            .iter()
+            .map(|&(k, _)| match k {
+                Kind::Scalar(ty) => Some(ty),
+                Kind::List { .. } => None,
+            })
+            .collect();
+        if let Some(types) = scalars {
+            let size: usize = types.iter().map(|t| t.size()).sum();
+            let end = element
+                .count
+                .checked_mul(size)
+                .and_then(|n| n.checked_add(pos))
+                .filter(|&end| end <= bytes.len())?;
+            if element.name == "vertex" {
+                let data = &bytes[pos..end];
+                // Where each used property sits in a record.
+                let mut used = Vec::new();
+                let mut offset = 0;
+                for (&(_, role), &ty) in element.properties.iter().zip(&types) {
+                    if let Role::Vertex(slot) = role {
+                        used.push((offset, ty, slot));
+                    }
+                    offset += ty.size();
+                }
+                let decode = |record: &[u8]| {
+                    let mut vertex = NO_VERTEX;
+                    for &(offset, ty, slot) in &used {
+                        let v = binary_value(ty, &record[offset..], big_endian);
+                        vertex[slot] = if slot >= 3 && !ty.is_float() {
+                            v / 255.0
+                        } else {
+                            v
+                        };
+                    }
+                    finish_vertex(vertex).ok()
+                };
+                // 64k vertices per task; results concatenated in order.
+                let parts: Vec<Option<Vec<Decoded>>> = data
+                    .par_chunks(size.max(1) << 16)
+                    .map(|chunk| chunk.chunks_exact(size).map(decode).collect())
+                    .collect();
+                positions.reserve(element.count);
+                if header.has_colors {
+                    colors.reserve(element.count);
+                }
+                for part in parts {
+                    for (p, c) in part? {
+                        positions.push(p);
+                        if header.has_colors {
+                            colors.push(c);
+                        }
+                    }
+                }
+            }
+            pos = end;
+            continue;
+        }
+        // Only a face element with nothing but an integer index list.
+        let [(Kind::List { count, item }, Role::FaceIndices)] = element.properties[..] else {
+            return None;
+        };
+        if count.is_float() || item.is_float() {
+            return None;
+        }
+        triangles.reserve(capacity(
+            element.count,
+            bytes.len() - pos,
+            1 + 3 * item.size(),
+        ));
+        for _ in 0..element.count {
+            let n = binary_int(count, bytes.get(pos..)?, big_endian)?;
+            pos += count.size();
+            if n < 3 {
+                return None;
+            }
+            corners.clear();
+            for _ in 0..n {
+                let v = binary_int(item, bytes.get(pos..)?, big_endian)?;
+                pos += item.size();
+                if !(0..nv as i64).contains(&v) {
+                    return None;
+                }
+                corners.push(v as u32);
+            }
+            fast_text::fan(&corners, &mut triangles);
+        }
+    }
+    Some(Mesh::with_colors(
+        positions,
+        triangles,
+        header.has_colors.then_some(colors),
+    ))
 }
 
 /// Binary little-endian PLY: float `x y z`, then `red green blue alpha` as uchar when `colors`

@@ -13,6 +13,7 @@ use super::{Fault, Location, capacity, coord, fan, lines, show, tokens};
 use crate::geom::Mesh;
 use glam::Vec3;
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 const HEADER: usize = 84;
 const RECORD: usize = 50;
@@ -44,16 +45,38 @@ fn looks_ascii(bytes: &[u8]) -> bool {
         && bytes[..bytes.len().min(512)].iter().all(is_text)
 }
 
+/// A multiplicative (Fx-style) hash of a position's bits: welding is one lookup per corner, and
+/// the standard SipHash was most of a binary STL's reading time. The numbering does not depend
+/// on the hash (vertices are numbered in order of first appearance).
+#[derive(Default)]
+struct PositionHasher(u64);
+
+impl Hasher for PositionHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+    fn write_u64(&mut self, n: u64) {
+        self.0 = (self.0.rotate_left(5) ^ n).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
+
 /// Gives each distinct position one vertex, in order of first appearance.
 struct Welder {
-    index: HashMap<[u32; 3], u32>,
+    index: HashMap<[u32; 3], u32, BuildHasherDefault<PositionHasher>>,
     positions: Vec<Vec3>,
 }
 
 impl Welder {
     fn with_capacity(corners: usize) -> Self {
         Welder {
-            index: HashMap::with_capacity(corners / 4),
+            index: HashMap::with_capacity_and_hasher(corners / 4, Default::default()),
             positions: Vec::with_capacity(corners / 4),
         }
     }
