@@ -1128,6 +1128,9 @@ fn sweep_command(cli: &Cli, args: SweepArgs, cache_dir: &Path) -> Result<i32> {
                     slurm_executor::state_dir(&dir).display()
                 );
             }
+            for p in &todo {
+                dir.clear_reports(p, sweep.shards.unwrap_or(1));
+            }
             slurm_executor::run(&list, &dir, &todo, &cache_abs, &opts, &mut progress)?
         }
     } else {
@@ -1171,6 +1174,9 @@ fn sweep_command(cli: &Cli, args: SweepArgs, cache_dir: &Path) -> Result<i32> {
                 Err(e) => eprintln!("[{n}/{total}] {what} ({}): failed: {e}", task.point.label()),
             }
         };
+        for p in &todo {
+            dir.clear_reports(p, shards);
+        }
         let mut failures = Default::default();
         let mut ready: Vec<&texsyn::sweep::Point> = todo.clone();
         if shards > 1 {
@@ -1207,7 +1213,11 @@ fn sweep_command(cli: &Cli, args: SweepArgs, cache_dir: &Path) -> Result<i32> {
         &dir.root.join("results.json"),
         serde_json::to_string_pretty(&table)?.as_bytes(),
     )?;
-    let lock = SweepLock::of_reports(&sweep, &dir);
+    // The lock pins a whole, successful sweep; after a failure an older one would mislead.
+    let lock = SweepLock::of_reports(&sweep, &dir).filter(|_| failures.is_empty());
+    if lock.is_none() {
+        let _ = std::fs::remove_file(dir.root.join("sweep.lock"));
+    }
     if let Some(lock) = &lock {
         write_atomic(
             &dir.root.join("sweep.lock"),

@@ -279,7 +279,10 @@ impl<'a> Executor<'a> {
         let imports: Vec<usize> = (0..dag.nodes.len())
             .filter(|&i| dag.nodes[i].stage == super::Stage::Import)
             .collect();
-        self.lock_missing_imports(&imports);
+        // Planning (`status --shard`) computes and stores nothing: it takes no lock.
+        if !self.planning() {
+            self.lock_missing_imports(&imports);
+        }
         for &i in &imports {
             self.resolve(i)?;
         }

@@ -266,6 +266,13 @@ impl Sweep {
                 )));
             }
         }
+        if let Some(t) = &file.slurm {
+            use serde::Deserialize;
+            let opts = crate::slurm::SlurmOptions::deserialize(toml::Value::Table(t.clone()))
+                .map_err(|e| invalid(format!("[slurm]: {}", e.to_string().trim())))?;
+            opts.check()
+                .map_err(|e| invalid(format!("[slurm]: {e}")))?;
+        }
         if let Some(0) = file.shards {
             return Err(invalid("shards: must be at least 1".into()));
         }
@@ -396,21 +403,19 @@ fn range_values(r: &RangeSpec) -> Result<Vec<toml::Value>, String> {
         return Ok(vec![r.from.clone()]);
     }
     if let (Some(a), Some(b)) = (from_int, to_int)
-        && (b - a) % (n - 1) == 0
+        && let Some(span) = b.checked_sub(a)
+        && span % (n - 1) == 0
     {
-        let step = (b - a) / (n - 1);
+        let step = span / (n - 1);
         return Ok((0..n).map(|i| toml::Value::Integer(a + step * i)).collect());
     }
+    let m = (n - 1) as f64;
     Ok((0..n)
         .map(|i| {
-            let t = i as f64 / (n - 1) as f64;
-            // The ends exactly as written; between them, a lerp.
-            let x = if i == n - 1 {
-                to
-            } else {
-                from + (to - from) * t
-            };
-            toml::Value::Float(x)
+            // One rounding per term and one division: the ends exactly as written, and
+            // 0.1 (not 0.09999999999999999) for i = 1 of 0 to 1 in 11 steps.
+            let i = i as f64;
+            toml::Value::Float((from * (m - i) + to * i) / m)
         })
         .collect())
 }
@@ -542,6 +547,17 @@ impl SweepDir {
     }
 }
 
+impl SweepDir {
+    /// Removes the reports of a point about to run (its own and its shards'), so that a run
+    /// that fails leaves no earlier report to be taken for its result.
+    pub fn clear_reports(&self, point: &Point, shards: u32) {
+        let _ = std::fs::remove_file(self.report(point));
+        for i in 0..shards.max(1) {
+            let _ = std::fs::remove_file(self.shard_report(point, i));
+        }
+    }
+}
+
 /// A point's state before a sweep runs it.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case", tag = "state")]
@@ -570,9 +586,23 @@ pub fn point_state(
         .filter(|l| l.state != "cached")
         .map(|l| l.node.clone())
         .collect();
+    // The report must be of this very run: the same overrides, and node for node the keys
+    // the cache has now (so a base config edited since, or a code version bumped, is not
+    // taken for done), and its outputs still in the point's folder.
+    let out = dir.point_out(point);
     let report = RunReport::read(&dir.report(point));
     let reported = report.is_some_and(|r| {
-        r.sets == point.sets && r.shard.is_none() && r.outputs.iter().all(|o| o.path.is_file())
+        r.sets == point.sets
+            && r.shard.is_none()
+            && r.nodes.len() == lines.len()
+            && r.nodes.iter().zip(&lines).all(|(n, l)| {
+                n.node == l.node && l.key.as_deref() == Some(n.key.as_str())
+            })
+            && r.outputs.iter().all(|o| {
+                o.path
+                    .file_name()
+                    .is_some_and(|name| out.join(name).is_file())
+            })
     });
     Ok(if nodes.is_empty() && reported {
         PointState::Done
@@ -693,6 +723,18 @@ mod tests {
             .unwrap();
         let v: Vec<String> = s.points.iter().map(|p| p.values[0].1.to_string()).collect();
         assert_eq!(v, ["0.0", "0.5", "1.0", "1.5", "2.0"]);
+        let s = sweep("base = \"b.toml\"\n[axes]\n\"a.x\" = { from = 0, to = 1, steps = 11 }\n")
+            .unwrap();
+        assert_eq!(s.points[1].values[0].1.to_string(), "0.1");
+        assert_eq!(s.points[3].values[0].1.to_string(), "0.3");
+        // No overflow on extreme ends: floats then.
+        let s = sweep(&format!(
+            "base = \"b.toml\"\n[axes]\n\"a.x\" = {{ from = {}, to = {}, steps = 3 }}\n",
+            i64::MIN,
+            i64::MAX
+        ))
+        .unwrap();
+        assert_eq!(s.points.len(), 3);
         let s = sweep("base = \"b.toml\"\n[axes]\n\"a.x\" = { from = 1, to = 100, steps = 100 }\n")
             .unwrap();
         assert_eq!(s.points.len(), 100);
@@ -737,5 +779,7 @@ mod tests {
         assert!(m.contains("bogus"), "{m}");
         let m = e("base = \"b.toml\"\n[axes]\n\"a..x\" = [1]\n");
         assert!(m.contains("empty part"), "{m}");
+        let m = e("base = \"b.toml\"\n[slurm]\ntime = \"soon\"\n[axes]\n\"a.x\" = [1]\n");
+        assert!(m.contains("[slurm]") && m.contains("time"), "{m}");
     }
 }

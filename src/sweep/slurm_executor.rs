@@ -100,8 +100,14 @@ pub fn run(
     progress: &mut dyn FnMut(&[TaskOutcome]),
 ) -> Result<Failures, slurm::SlurmError> {
     let state = state_dir(dir);
-    // The nodes must see the cache (and the sweep's folder, where reports are written).
+    // The nodes must see the cache, and the sweep's folder, where the tasks write their
+    // reports, exit status and logs.
     slurm::probe_shared_folder(cache, opts)?;
+    std::fs::create_dir_all(&dir.root).map_err(|source| slurm::SlurmError::State {
+        dir: dir.root.clone(),
+        why: format!("cannot create it: {source}"),
+    })?;
+    slurm::probe_shared_folder(&dir.root, opts)?;
     let mains: Vec<usize> = todo.iter().map(|p| list.main_task(p)).collect();
     if list.shards > 1 {
         let shards: Vec<usize> = todo.iter().flat_map(|p| list.shard_tasks(p)).collect();
@@ -126,6 +132,24 @@ pub fn run(
                 .map(|e| format!("{e}; "))
                 .unwrap_or_default();
             failures.insert(p.index, format!("{why}{o}"));
+        }
+    }
+    // The gathers wait for the whole shard array: one failed shard cancels every gather. Say
+    // so where a point's own shards succeeded, naming the shard that failed.
+    if list.shards > 1 {
+        let failed_shard = todo
+            .iter()
+            .flat_map(|p| list.shard_tasks(p))
+            .map(|i| &outcomes[i])
+            .find(|o| !o.status.succeeded())
+            .map(|o| o.to_string());
+        if let Some(shard) = failed_shard {
+            for p in todo {
+                let own = list.shard_tasks(p).all(|i| outcomes[i].status.succeeded());
+                if let (true, Some(f)) = (own, failures.get_mut(&p.index)) {
+                    *f = format!("{f} (its gather was cancelled because a shard failed: {shard})");
+                }
+            }
         }
     }
     Ok(failures)
