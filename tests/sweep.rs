@@ -314,3 +314,58 @@ fn bad_sweeps_are_refused_before_anything_runs() {
         stderr(&o)
     );
 }
+
+#[test]
+fn an_edited_base_reruns_its_points_and_a_failed_rerun_leaves_no_lock() {
+    let t = tempfile::tempdir().unwrap();
+    let leopard = repo().join("configs/assets/leopard.png");
+    std::fs::copy(&leopard, t.path().join("ex.png")).unwrap();
+    let base = |continuation: f64| {
+        std::fs::write(
+            t.path().join("base.toml"),
+            format!(
+                "method = \"synth2d\"\n[inputs]\nexemplar = {:?}\n[synthesize]\nwidth = 64\nheight = 64\ncontinuation = {continuation:?}\n",
+                leopard.to_str().unwrap()
+            ),
+        )
+        .unwrap()
+    };
+    std::fs::write(
+        t.path().join("s.toml"),
+        "base = \"base.toml\"\n[axes]\n\"inputs.exemplar\" = [\"ex.png\", \"ex.png\"]\n\"synthesize.seed\" = [1]\n",
+    )
+    .unwrap();
+    let args = ["sweep", "s.toml", "--cache", "c", "--out", "out"];
+    let synth_hashes = || {
+        csv_rows(&t.path().join("out/results.csv"))
+            .iter()
+            .map(|r| r["synthesize hash"].clone())
+            .collect::<Vec<_>>()
+    };
+    base(300.0);
+    succeeded(texsyn(&args, t.path()));
+    let first = synth_hashes();
+    assert!(t.path().join("out/sweep.lock").exists());
+    // Edited: both points run again, with other results.
+    base(50.0);
+    let o = succeeded(texsyn(&args, t.path()));
+    assert!(stdout(&o).contains("(2 run now)"), "{}", stdout(&o));
+    assert_ne!(synth_hashes(), first);
+    // Reverted: every node is cached, but the reports are the edited run's, so both points
+    // run again (from the cache) and the table is the first run's again.
+    base(300.0);
+    let o = succeeded(texsyn(&args, t.path()));
+    assert!(stdout(&o).contains("(2 run now)"), "{}", stdout(&o));
+    assert_eq!(synth_hashes(), first);
+    // A rerun that fails leaves no lock of an earlier run behind.
+    std::fs::write(t.path().join("ex.png"), b"not a png").unwrap();
+    base(50.0);
+    let o = texsyn(&args, t.path());
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(!t.path().join("out/sweep.lock").exists());
+    assert!(
+        csv_rows(&t.path().join("out/results.csv"))
+            .iter()
+            .all(|r| r["state"] == "failed")
+    );
+}

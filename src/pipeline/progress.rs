@@ -31,9 +31,11 @@ impl Progress {
         let bar = (mode == ProgressMode::Bars).then(|| {
             let b = ProgressBar::with_draw_target(Some(STEPS), ProgressDrawTarget::hidden());
             b.set_style(
-                ProgressStyle::with_template("{msg:>28} [{bar:40}] {percent:>3}% {elapsed}, about {eta} left")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar())
-                    .progress_chars("=> "),
+                ProgressStyle::with_template(
+                    "{msg:>28} [{bar:40}] {percent:>3}% {elapsed}, about {eta} left",
+                )
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
             );
             b.set_message(label.to_owned());
             b

@@ -270,8 +270,7 @@ impl Sweep {
             use serde::Deserialize;
             let opts = crate::slurm::SlurmOptions::deserialize(toml::Value::Table(t.clone()))
                 .map_err(|e| invalid(format!("[slurm]: {}", e.to_string().trim())))?;
-            opts.check()
-                .map_err(|e| invalid(format!("[slurm]: {e}")))?;
+            opts.check().map_err(|e| invalid(format!("[slurm]: {e}")))?;
         }
         if let Some(0) = file.shards {
             return Err(invalid("shards: must be at least 1".into()));
@@ -595,9 +594,10 @@ pub fn point_state(
         r.sets == point.sets
             && r.shard.is_none()
             && r.nodes.len() == lines.len()
-            && r.nodes.iter().zip(&lines).all(|(n, l)| {
-                n.node == l.node && l.key.as_deref() == Some(n.key.as_str())
-            })
+            && r.nodes
+                .iter()
+                .zip(&lines)
+                .all(|(n, l)| n.node == l.node && l.key.as_deref() == Some(n.key.as_str()))
             && r.outputs.iter().all(|o| {
                 o.path
                     .file_name()
