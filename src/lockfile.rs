@@ -124,6 +124,18 @@ impl fmt::Display for Difference {
     }
 }
 
+/// A lock file's text (a regular file of UTF-8: a FIFO or device is refused, not read).
+pub fn read_text(path: &Path) -> Result<String, LockError> {
+    let bytes = crate::geom::io::read_regular_file(path).map_err(|source| LockError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    String::from_utf8(bytes).map_err(|e| LockError::NotText {
+        path: path.to_owned(),
+        byte: e.utf8_error().valid_up_to(),
+    })
+}
+
 /// A 64-digit lowercase hex string (a blake3 hash as texsyn prints it).
 fn is_hash(s: &str) -> bool {
     s.len() == 64 && s.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
@@ -132,15 +144,7 @@ fn is_hash(s: &str) -> bool {
 impl LockFile {
     /// Reads and parses `path` (a regular file: a FIFO or device is refused, not read).
     pub fn read(path: &Path) -> Result<LockFile, LockError> {
-        let bytes = crate::geom::io::read_regular_file(path).map_err(|source| LockError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        let text = std::str::from_utf8(&bytes).map_err(|e| LockError::NotText {
-            path: path.to_owned(),
-            byte: e.valid_up_to(),
-        })?;
-        LockFile::parse(text, path)
+        LockFile::parse(&read_text(path)?, path)
     }
 
     /// Parses lock-file text; `path` only names the file in errors. Blank lines and `#`

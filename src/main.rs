@@ -583,23 +583,9 @@ fn real_main() -> Result<i32> {
                     }))?
                 );
             }
-            for d in &result.damaged {
-                eprintln!(
-                    "damaged: {}: {} ({}); recomputed and replaced",
-                    d.node,
-                    d.path.display(),
-                    d.problem
-                );
-            }
-            for p in &problems {
-                eprintln!("mismatch: {p}");
-            }
+            print_verify_problems(&result.damaged, &problems, lockfile);
             if !problems.is_empty() {
-                eprintln!(
-                    "{} mismatch(es) against {}",
-                    problems.len(),
-                    lockfile.display()
-                );
+                // Named above.
             } else if !result.damaged.is_empty() {
                 eprintln!(
                     "{} damaged cache object(s), recomputed and replaced; all {} artifacts now match {}",
@@ -789,6 +775,33 @@ fn real_main() -> Result<i32> {
             }
             Ok(0)
         }
+    }
+}
+
+/// `verify`'s report on stderr: each damaged object (already recomputed and replaced), each
+/// mismatch, and how many mismatches there were.
+fn print_verify_problems(
+    damaged: &[pipeline::executor::Damage],
+    problems: &[String],
+    lockfile: &Path,
+) {
+    for d in damaged {
+        eprintln!(
+            "damaged: {}: {} ({}); recomputed and replaced",
+            d.node,
+            d.path.display(),
+            d.problem
+        );
+    }
+    for p in problems {
+        eprintln!("mismatch: {p}");
+    }
+    if !problems.is_empty() {
+        eprintln!(
+            "{} mismatch(es) against {}",
+            problems.len(),
+            lockfile.display()
+        );
     }
 }
 
@@ -1362,24 +1375,8 @@ fn sweep_verify(
             }))?
         );
     }
-    for d in &damaged {
-        eprintln!(
-            "damaged: {}: {} ({}); recomputed and replaced",
-            d.node,
-            d.path.display(),
-            d.problem
-        );
-    }
-    for p in &problems {
-        eprintln!("mismatch: {p}");
-    }
-    if !problems.is_empty() {
-        eprintln!(
-            "{} mismatch(es) against {}",
-            problems.len(),
-            lockfile.display()
-        );
-    } else if !cli.quiet && !cli.json {
+    print_verify_problems(&damaged, &problems, lockfile);
+    if problems.is_empty() && !cli.quiet && !cli.json {
         println!(
             "verified: {} points, {artifacts} artifacts match {}",
             sweep.points.len(),

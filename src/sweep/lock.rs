@@ -41,15 +41,7 @@ impl SweepLock {
     }
 
     pub fn read(path: &Path) -> Result<SweepLock, LockError> {
-        let bytes = crate::geom::io::read_regular_file(path).map_err(|source| LockError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        let text = std::str::from_utf8(&bytes).map_err(|e| LockError::NotText {
-            path: path.to_owned(),
-            byte: e.valid_up_to(),
-        })?;
-        Self::parse(text, path)
+        Self::parse(&crate::lockfile::read_text(path)?, path)
     }
 
     pub fn parse(text: &str, path: &Path) -> Result<SweepLock, LockError> {
