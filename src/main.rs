@@ -532,7 +532,15 @@ fn real_main() -> Result<i32> {
             if Sweep::is_sweep_file(config) {
                 return sweep_verify(config, lockfile, sets, *fresh, &cache_dir, progress, &cli);
             }
-            let lock = LockFile::read(lockfile)?;
+            let text = texsyn::lockfile::read_text(lockfile)?;
+            if texsyn::sweep::lock::SweepLock::is_sweep_lock(&text) {
+                bail!(
+                    "{} is a sweep's lock, and {} is not a sweep: verify the sweep file with it",
+                    lockfile.display(),
+                    config.display()
+                );
+            }
+            let lock = LockFile::parse(&text, lockfile)?;
             // The lock's recorded overrides first, so the command line's own win.
             let sets: Vec<String> = lock.sets.iter().chain(sets.iter()).cloned().collect();
             let plan = load_plan(config, &sets)?;

@@ -131,6 +131,22 @@ fn the_tables_hashes_equal_those_of_the_points_run_one_by_one() {
         t.path(),
     ));
     assert!(stdout(&o).contains("3 points"), "{}", stdout(&o));
+    // The sweep's lock with the base config instead of the sweep: said so.
+    let o = texsyn(
+        &[
+            "verify",
+            repo().join("configs/synth2d.toml").to_str().unwrap(),
+            lock.to_str().unwrap(),
+            "--cache",
+            "c1",
+        ],
+        t.path(),
+    );
+    assert!(
+        o.status.code() == Some(1) && stderr(&o).contains("is a sweep's lock"),
+        "{}",
+        stderr(&o)
+    );
     let text = std::fs::read_to_string(&lock).unwrap();
     let synth = rows[1]["synthesize hash"].clone();
     std::fs::write(&lock, text.replace(&synth, &"0".repeat(64))).unwrap();
