@@ -192,29 +192,41 @@ fn a_two_shard_solid_through_slurm_gathers_to_the_unsharded_result() {
     }
     let t = folder();
     let base = repo().join("configs/solid_trivial.toml");
+    let elephant = repo().join("configs/assets/elephant.off");
+    // Point 1's mesh is broken: its shards fail, and only its own gather may be cancelled.
+    std::fs::write(t.path().join("bad.off"), b"OFF\nnot a mesh\n").unwrap();
     let sweep = write(
         t.path(),
         "s.toml",
         format!(
-            "base = {:?}\nshards = 2\n{SLURM}[axes]\n\"parameterize.resolution\" = [80]\n\"reconstruct.atlas_size\" = [512]\n",
-            base.to_str().unwrap()
+            "base = {:?}\nshards = 2\n{SLURM}[axes]\n\"parameterize.resolution\" = [80]\n\"reconstruct.atlas_size\" = [512]\n\"inputs.mesh\" = [{:?}, \"bad.off\"]\n",
+            base.to_str().unwrap(),
+            elephant.to_str().unwrap()
         ),
     );
-    let o = succeeded(texsyn(
-        &[
-            "sweep",
-            sweep.to_str().unwrap(),
-            "--executor",
-            "slurm",
-            "--out",
-            "out",
-            "--cache",
-            "cache",
-        ],
-        t.path(),
-    ));
-    assert!(stdout(&o).contains("3 tasks"), "{}", stdout(&o));
-    // Both shards ran as Slurm tasks and wrote their reports.
+    let args = [
+        "sweep",
+        sweep.to_str().unwrap(),
+        "--executor",
+        "slurm",
+        "--out",
+        "out",
+        "--cache",
+        "cache",
+    ];
+    let o = texsyn(&args, t.path());
+    assert_eq!(o.status.code(), Some(1), "{}{}", stdout(&o), stderr(&o));
+    assert!(
+        stdout(&o).contains("2 points to Slurm (6 tasks)"),
+        "{}",
+        stdout(&o)
+    );
+    let err = stderr(&o);
+    assert!(
+        err.contains("point 1 failed") && err.contains("shard") && !err.contains("point 0 failed"),
+        "{err}"
+    );
+    // Both of point 0's shards ran as Slurm tasks and wrote their reports.
     for s in 0..2 {
         let r = t.path().join(format!("out/reports/000.shard{s}.json"));
         assert!(r.is_file(), "{}", r.display());
@@ -233,23 +245,40 @@ fn a_two_shard_solid_through_slurm_gathers_to_the_unsharded_result() {
         ],
         t.path(),
     ));
-    let gathered = &hashes(&t.path().join("out/results.csv"))[0];
-    let mut compared = 0;
-    for line in stdout(&one).lines().filter(|l| !l.starts_with('#')) {
-        let f: Vec<&str> = line.split_whitespace().collect();
-        assert_eq!(gathered[f[0]], f[2], "{}", f[0]);
-        compared += 1;
-    }
-    assert!(compared >= 6, "{}", stdout(&one));
-    // The gather computed no brick: every one came from the shards.
-    let r: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(t.path().join("out/reports/000.json")).unwrap())
-            .unwrap();
-    let synth = r["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|n| n["node"] == "synthesize")
+    let check = |point: usize| {
+        let gathered = &hashes(&t.path().join("out/results.csv"))[point];
+        let mut compared = 0;
+        for line in stdout(&one).lines().filter(|l| !l.starts_with('#')) {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            assert_eq!(gathered[f[0]], f[2], "point {point}: {}", f[0]);
+            compared += 1;
+        }
+        assert!(compared >= 6, "{}", stdout(&one));
+        // The gather computed no brick: every one came from the shards.
+        let r: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(t.path().join(format!("out/reports/{point:03}.json"))).unwrap(),
+        )
         .unwrap();
-    assert_eq!(synth["pieces"]["computed"], 0, "{synth}");
+        let synth = r["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["node"] == "synthesize")
+            .unwrap();
+        // (Point 1's mesh is point 0's, so its whole synthesis may be found cached.)
+        assert!(
+            synth["status"] == "cached" || synth["pieces"]["computed"] == 0,
+            "{synth}"
+        );
+    };
+    check(0);
+    // Mended, the rerun submits point 1 alone; the same mesh gives the same result.
+    std::fs::copy(&elephant, t.path().join("bad.off")).unwrap();
+    let o = succeeded(texsyn(&args, t.path()));
+    assert!(
+        stdout(&o).contains("submitting 1 points to Slurm (3 tasks)"),
+        "{}",
+        stdout(&o)
+    );
+    check(1);
 }

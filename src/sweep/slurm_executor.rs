@@ -1,6 +1,6 @@
 //! The Slurm executor: a sweep's points as one `sbatch` job array (and, for a sharded solid,
-//! the shards as one array and the gathers as a second array that starts when the first has
-//! succeeded), each task the same `texsyn run` the local executor starts, on the same cache.
+//! the shards as one array and each point's gather as a job that starts when that point's
+//! shards have succeeded), each task the same `texsyn run` the local executor starts, on the same cache.
 //!
 //! The array's state lives in `OUT/slurm/` (see [`crate::slurm`]), so a sweep whose client was
 //! killed is re-attached by running the same `texsyn sweep` again: it waits for the tasks
@@ -112,7 +112,16 @@ pub fn run(
     if list.shards > 1 {
         let shards: Vec<usize> = todo.iter().flat_map(|p| list.shard_tasks(p)).collect();
         let array = slurm::submit_array(&state, &list.tasks, &shards, opts, None)?;
-        slurm::submit_array(&state, &list.tasks, &mains, opts, Some(&array))?;
+        // Each point's gather waits for its own shards only (`afterok:A_i:A_j`), so a failed
+        // shard cancels its own point's gather and no other.
+        for p in todo {
+            let own: Vec<String> = list
+                .shard_tasks(p)
+                .map(|i| format!("{array}_{i}"))
+                .collect();
+            let after = slurm::JobId(own.join(":"));
+            slurm::submit_single(&state, &list.tasks, list.main_task(p), opts, Some(&after))?;
+        }
     } else {
         slurm::submit_array(&state, &list.tasks, &mains, opts, None)?;
     }
@@ -132,24 +141,6 @@ pub fn run(
                 .map(|e| format!("{e}; "))
                 .unwrap_or_default();
             failures.insert(p.index, format!("{why}{o}"));
-        }
-    }
-    // The gathers wait for the whole shard array: one failed shard cancels every gather. Say
-    // so where a point's own shards succeeded, naming the shard that failed.
-    if list.shards > 1 {
-        let failed_shard = todo
-            .iter()
-            .flat_map(|p| list.shard_tasks(p))
-            .map(|i| &outcomes[i])
-            .find(|o| !o.status.succeeded())
-            .map(|o| o.to_string());
-        if let Some(shard) = failed_shard {
-            for p in todo {
-                let own = list.shard_tasks(p).all(|i| outcomes[i].status.succeeded());
-                if let (true, Some(f)) = (own, failures.get_mut(&p.index)) {
-                    *f = format!("{f} (its gather was cancelled because a shard failed: {shard})");
-                }
-            }
         }
     }
     Ok(failures)
