@@ -929,6 +929,16 @@ pub fn to_resubmit(state_dir: &Path) -> Result<Vec<usize>, SlurmError> {
         .collect())
 }
 
+/// The cluster's `MaxArraySize` (`scontrol show config`): array task indices must be below
+/// it. `None` when scontrol does not say.
+pub fn max_array_size() -> Result<Option<usize>, SlurmError> {
+    let out = run_tool("scontrol", &[OsStr::new("show"), OsStr::new("config")])?;
+    Ok(out.lines().find_map(|l| {
+        let (k, v) = l.split_once('=')?;
+        (k.trim() == "MaxArraySize").then(|| v.trim().parse().ok())?
+    }))
+}
+
 /// A random hex token (for the probe's marker): time, process id and a counter hashed.
 fn random_token() -> String {
     use std::sync::atomic::{AtomicU64, Ordering};

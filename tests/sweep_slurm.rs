@@ -282,3 +282,41 @@ fn a_two_shard_solid_through_slurm_gathers_to_the_unsharded_result() {
     );
     check(1);
 }
+
+#[test]
+fn a_sweep_beyond_the_clusters_max_array_size_is_refused_before_submitting() {
+    if !cluster("slurm MaxArraySize") {
+        return;
+    }
+    let t = folder();
+    let base = repo().join("configs/synth2d.toml");
+    // The local cluster keeps Slurm's default MaxArraySize, 1001: indices 0 to 1000.
+    let sweep = write(
+        t.path(),
+        "s.toml",
+        format!(
+            "base = {:?}\n[axes]\n\"synthesize.seed\" = {{ from = 1, to = 1002, steps = 1002 }}\n",
+            base.to_str().unwrap()
+        ),
+    );
+    let o = texsyn(
+        &[
+            "sweep",
+            sweep.to_str().unwrap(),
+            "--executor",
+            "slurm",
+            "--out",
+            "out",
+            "--cache",
+            "cache",
+        ],
+        t.path(),
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
+    assert!(
+        stderr(&o).contains("MaxArraySize is 1001") && stderr(&o).contains("1001"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!t.path().join("out/slurm/submissions.json").exists());
+}

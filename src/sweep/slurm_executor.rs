@@ -100,6 +100,22 @@ pub fn run(
     progress: &mut dyn FnMut(&[TaskOutcome]),
 ) -> Result<Failures, slurm::SlurmError> {
     let state = state_dir(dir);
+    // An array's task indices must be below the cluster's MaxArraySize: say so before any
+    // job is submitted, rather than after the shards' array.
+    let highest = todo.iter().map(|p| list.main_task(p)).max().unwrap_or(0);
+    if let Some(max) = slurm::max_array_size()?
+        && highest >= max
+    {
+        return Err(slurm::SlurmError::State {
+            dir: state,
+            why: format!(
+                "the sweep needs array task index {highest}, but this cluster's MaxArraySize is \
+                 {max} (indices 0 to {}): split the sweep into smaller sweeps, or raise \
+                 MaxArraySize in slurm.conf",
+                max - 1
+            ),
+        });
+    }
     // The nodes must see the cache, and the sweep's folder, where the tasks write their
     // reports, exit status and logs.
     slurm::probe_shared_folder(cache, opts)?;
