@@ -31,6 +31,23 @@ fn write(dir: &Path, name: &str, text: String) -> PathBuf {
     p
 }
 
+/// `texsyn sweep SWEEP --executor slurm` into `out`, on the cache `cache`.
+fn slurm_args(sweep: &Path) -> Vec<String> {
+    let sweep = sweep.to_str().unwrap().to_owned();
+    [
+        "sweep",
+        &sweep,
+        "--executor",
+        "slurm",
+        "--out",
+        "out",
+        "--cache",
+        "cache",
+    ]
+    .map(str::to_owned)
+    .to_vec()
+}
+
 /// Node → content hash, per point, from a sweep's results.csv.
 fn hashes(csv: &Path) -> Vec<HashMap<String, String>> {
     let text = std::fs::read_to_string(csv).unwrap();
@@ -147,18 +164,10 @@ fn a_slurm_sweep_whose_client_was_killed_is_reattached_and_finishes() {
             base.to_str().unwrap()
         ),
     );
-    let args = [
-        "sweep",
-        sweep.to_str().unwrap(),
-        "--executor",
-        "slurm",
-        "--out",
-        "out",
-        "--cache",
-        "cache",
-    ];
+    let args = slurm_args(&sweep);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let mut client = std::process::Command::new(env!("CARGO_BIN_EXE_texsyn"))
-        .args(args)
+        .args(&args)
         .current_dir(t.path())
         .stdout(std::process::Stdio::null())
         .spawn()
@@ -204,16 +213,8 @@ fn a_two_shard_solid_through_slurm_gathers_to_the_unsharded_result() {
             elephant.to_str().unwrap()
         ),
     );
-    let args = [
-        "sweep",
-        sweep.to_str().unwrap(),
-        "--executor",
-        "slurm",
-        "--out",
-        "out",
-        "--cache",
-        "cache",
-    ];
+    let args = slurm_args(&sweep);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let o = texsyn(&args, t.path());
     assert_eq!(o.status.code(), Some(1), "{}{}", stdout(&o), stderr(&o));
     assert!(
@@ -299,19 +300,9 @@ fn a_sweep_beyond_the_clusters_max_array_size_is_refused_before_submitting() {
             base.to_str().unwrap()
         ),
     );
-    let o = texsyn(
-        &[
-            "sweep",
-            sweep.to_str().unwrap(),
-            "--executor",
-            "slurm",
-            "--out",
-            "out",
-            "--cache",
-            "cache",
-        ],
-        t.path(),
-    );
+    let args = slurm_args(&sweep);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = texsyn(&args, t.path());
     assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
     assert!(
         stderr(&o).contains("MaxArraySize is 1001") && stderr(&o).contains("1001"),

@@ -55,6 +55,19 @@ pub(super) fn map_pieces<'a, T: Send>(
     }
 }
 
+/// The index of each piece's first record, from the records each piece holds (an exclusive
+/// prefix sum), so pieces parsed in parallel know where they start.
+pub(super) fn firsts(counts: &[usize]) -> Vec<usize> {
+    counts
+        .iter()
+        .scan(0, |acc, &c| {
+            let first = *acc;
+            *acc += c;
+            Some(first)
+        })
+        .collect()
+}
+
 /// The lines of `bytes` (split at `\n`, the `\n` not included).
 pub(super) fn lines(bytes: &[u8]) -> impl Iterator<Item = &[u8]> {
     let mut rest = Some(bytes);

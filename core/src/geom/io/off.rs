@@ -65,14 +65,7 @@ pub(super) fn read_fast(bytes: &[u8]) -> Option<Mesh> {
     if total < nv.checked_add(nf)? {
         return None;
     }
-    let firsts: Vec<usize> = counts
-        .iter()
-        .scan(0, |acc, &c| {
-            let first = *acc;
-            *acc += c;
-            Some(first)
-        })
-        .collect();
+    let firsts = fast_text::firsts(&counts);
 
     // Pass 2: each piece's vertices and faces, knowing which record it starts at.
     struct Part {

@@ -590,14 +590,7 @@ fn read_ascii_fast(header: &Header, body: &[u8]) -> Option<Mesh> {
     if counts.iter().sum::<usize>() < records {
         return None;
     }
-    let firsts: Vec<usize> = counts
-        .iter()
-        .scan(0, |acc, &c| {
-            let first = *acc;
-            *acc += c;
-            Some(first)
-        })
-        .collect();
+    let firsts = fast_text::firsts(&counts);
     struct Part {
         positions: Vec<Vec3>,
         colors: Vec<[f32; 4]>,
