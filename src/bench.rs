@@ -16,6 +16,7 @@ use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+mod big_jump_maps;
 mod feature_aligned;
 mod graph_matching;
 mod score;
@@ -142,6 +143,14 @@ pub fn run_all(runs: usize) -> Result<String> {
             None => notes.push("the shared data is missing: no score rows".into()),
         }
         notes.push("TEXSYN_BENCH_ONLY=score: only the score rows".into());
+        return Ok(table(runs, &rows, "", &notes));
+    }
+    if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("big_jump_maps") {
+        match &data {
+            Some(d) => big_jump_maps::rows(repo, d, runs, &mut rows)?,
+            None => notes.push("the shared data is missing: no 1.4M-triangle row".into()),
+        }
+        notes.push("TEXSYN_BENCH_ONLY=big_jump_maps: only the 1.4M-triangle jump-map row".into());
         return Ok(table(runs, &rows, "", &notes));
     }
     if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("feature_aligned") {
