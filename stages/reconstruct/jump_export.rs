@@ -94,7 +94,8 @@ pub fn export_jump_textured(
             },
         });
     }
-    let mut files = export_textured_mesh(mesh, &single, size, &surfaces, p, progress)?;
+    let layout = chart_layout(&mesh.triangles, param, addresses, &single);
+    let mut files = export_textured_mesh(mesh, &single, &layout, size, &surfaces, p, progress)?;
     let ramp = colour_ramp(size.0, size.1);
     let opts = crate::render::ViewOptions {
         size: p.preview_size,
@@ -108,6 +109,63 @@ pub fn export_jump_textured(
     let view = crate::render::render_views(mesh, &shader, &opts);
     files.push(("patches.png".into(), encode_png(&view, false)));
     Ok(files)
+}
+
+/// How far (texels, plus a fraction of the edge) the walk's addresses along an edge may stray
+/// from the edge's offset and still count as one patch: the walk sets each vertex from one
+/// neighbour exactly (§4.2.5's continuation), and the other edges of a patch agree up to the
+/// offsets' own inconsistency, while a jump lands at least the jump map's exclusion radius
+/// away.
+const CONTINUITY_TEXELS: f32 = 0.5;
+const CONTINUITY_FRACTION: f32 = 0.25;
+
+/// The chart layout of the atlas: a face inside a patch of the walk (every edge's address
+/// difference agrees with its offset) is laid at its vertices' own addresses, so that the faces
+/// of a patch share their corners and stay together in one chart; a face across a jump keeps
+/// its single set's shape, alone or laid against a neighbouring chart.
+pub fn chart_layout(
+    triangles: &[[u32; 3]],
+    param: &ParamParts,
+    addresses: &[Vec2],
+    single: &[[Vec2; 3]],
+) -> Vec<[Vec2; 3]> {
+    use rayon::prelude::*;
+    if std::env::var_os("TEXSYN_DEBUG_CHARTS").is_some() {
+        let mut errs: Vec<f32> = Vec::new();
+        for t in triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                if let Some(o) = param.offset(a, b) {
+                    let d = addresses[b as usize] - addresses[a as usize];
+                    errs.push((d - o).length() / o.length().max(1e-6));
+                }
+            }
+        }
+        errs.sort_by(|a, b| a.total_cmp(b));
+        let q = |f: f32| errs[((errs.len() - 1) as f32 * f) as usize];
+        eprintln!("relative edge error quantiles: 10% {} 50% {} 70% {} 80% {} 90% {} 95% {}", q(0.1), q(0.5), q(0.7), q(0.8), q(0.9), q(0.95));
+    }
+    triangles
+        .par_iter()
+        .zip(single)
+        .map(|(t, own)| {
+            let continuous = (0..3).all(|k| {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                match param.offset(a, b) {
+                    Some(o) => {
+                        let d = addresses[b as usize] - addresses[a as usize];
+                        (d - o).length() <= CONTINUITY_TEXELS + CONTINUITY_FRACTION * o.length()
+                    }
+                    None => false,
+                }
+            });
+            if continuous {
+                t.map(|v| addresses[v as usize])
+            } else {
+                *own
+            }
+        })
+        .collect()
 }
 
 /// An image whose colour encodes the texel address (red along x, green along y, blue in a

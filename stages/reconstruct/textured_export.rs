@@ -4,30 +4,41 @@
 //!   (`<name>.<ext>`): one set of corner coordinates into the exemplar itself, so no new
 //!   texture memory is needed (the paper's point), at the price of visible patch seams in
 //!   ordinary viewers that cannot blend three coordinate sets.
-//! - `textured.glb`: the blended result baked into a per-triangle atlas (`baked_<map>.png`),
-//!   with the normal map re-expressed in the atlas's tangent frames and the roughness map in
-//!   glTF's metallic-roughness slot, so Blender and three.js show what texsyn renders.
+//! - `textured.glb` and `baked.obj` + `baked.mtl`: the blended result baked into a chart atlas
+//!   ([`crate::render::chart_atlas`]) of one or more pages (`baked_<map>.png`, or
+//!   `baked_<map>_<page>.png` when there are several), one glTF primitive and one OBJ
+//!   `usemtl` per page, with the normal map re-expressed in the atlas's tangent frames and the
+//!   roughness map in glTF's metallic-roughness slot, so Blender and three.js show what texsyn
+//!   renders.
 //! - `preview.png`: three views drawn with the blending shader by texsyn's rasterizer.
 //!
 //! Surfaces are exported in the order given; the first is the base colour.
 
 use crate::check::{ParamError, check_range};
-use crate::export::glb::{GlbMaterial, GlbMesh, write_glb};
-use crate::export::obj::{MtlMaps, write_mtl, write_obj};
+use crate::export::glb::{GlbMaterial, GlbMesh, GlbPrimitive, write_glb};
+use crate::export::obj::{MtlMaps, write_mtl, write_obj, write_obj_materials};
 use crate::geom::Mesh;
 use crate::image::texel_to_uv;
-use crate::render::atlas::{Atlas, AtlasError, bake, build_atlas};
+use crate::render::chart_atlas::{ChartAtlas, ChartAtlasError, bake_page, build_chart_atlas};
 use crate::render::shader::SurfaceShader;
 use crate::render::views::{ViewOptions, render_views};
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 
+/// Range of `reconstruct.texel_density`.
+pub const TEXEL_DENSITY_RANGE: (f32, f32) = (0.25, 16.0);
+
 /// `[reconstruct]` parameters of textured-mesh exports.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ExportParams {
-    /// Side of the baked atlas textures in the .glb, 64..=8192. Default: 2048.
+    /// Largest side of a baked atlas page, 64..=8192: a texture that does not fit one page is
+    /// spread over several. Default: 8192.
     pub atlas_size: u32,
+    /// Atlas texels per exemplar texel (at `parameterize.scale`), 0.25..=16: 1 keeps the
+    /// exemplar's own detail; more gives the blend's sub-texel detail room, less gives smaller
+    /// files. Default: 1.
+    pub texel_density: f32,
     /// Side of each of the three preview views, 16..=4096. Default: 512.
     pub preview_size: u32,
     /// The mesh's up direction, for the preview. Default: [0, 1, 0].
@@ -37,7 +48,8 @@ pub struct ExportParams {
 impl Default for ExportParams {
     fn default() -> Self {
         ExportParams {
-            atlas_size: 2048,
+            atlas_size: 8192,
+            texel_density: 1.0,
             preview_size: 512,
             up: [0.0, 1.0, 0.0],
         }
@@ -47,6 +59,8 @@ impl Default for ExportParams {
 impl ExportParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("reconstruct.atlas_size", self.atlas_size, 64, 8192)?;
+        let (lo, hi) = TEXEL_DENSITY_RANGE;
+        check_range("reconstruct.texel_density", self.texel_density, lo, hi)?;
         check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
         let up = Vec3::from(self.up);
         if !up.is_finite() || up.length() < 1e-12 {
@@ -80,19 +94,53 @@ fn file_name(surface: &str, ext: &str) -> String {
     }
 }
 
+/// The file of page `page` of `pages` of a baked surface.
+fn baked_name(surface: &str, page: usize, pages: usize) -> String {
+    if pages == 1 {
+        format!("baked_{surface}.png")
+    } else {
+        format!("baked_{surface}_{page}.png")
+    }
+}
+
 /// Why the export files could not be built.
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
-    /// The mesh does not fit an atlas of `reconstruct.atlas_size`.
-    #[error("reconstruct.atlas_size: {0}")]
-    Atlas(#[from] AtlasError),
+    /// A face does not fit a page at this density.
+    #[error("{0}")]
+    Atlas(String),
+}
+
+impl ExportError {
+    fn of_atlas(e: ChartAtlasError, p: &ExportParams) -> Self {
+        let Some(shrink) = e.shrink_to_fit() else {
+            return ExportError::Atlas(format!("reconstruct: {e}"));
+        };
+        let fits = p.texel_density as f64 * shrink;
+        let advice = if fits >= TEXEL_DENSITY_RANGE.0 as f64 {
+            // Two decimals, rounded down, so that the value named does fit.
+            let v = ((fits * 100.0).floor() / 100.0).max(TEXEL_DENSITY_RANGE.0 as f64);
+            format!("use reconstruct.texel_density ≤ {v:.2}")
+        } else if p.atlas_size < 8192 {
+            "raise reconstruct.atlas_size (at most 8192) or lower parameterize.scale".into()
+        } else {
+            "lower parameterize.scale: the triangles are too large for any page".into()
+        };
+        ExportError::Atlas(format!(
+            "reconstruct.texel_density = {}: {e} of reconstruct.atlas_size = {}; {advice}",
+            p.texel_density, p.atlas_size
+        ))
+    }
 }
 
 /// Builds every export file. `single_set` holds one corner-coordinate set per face in texel
-/// addresses of an exemplar of size `exemplar` (for the OBJ).
+/// addresses of an exemplar of size `exemplar` (for the OBJ); `layout` per face corner
+/// positions in exemplar texels where faces that share an edge continuously share its two
+/// points (the chart atlas keeps those faces together), scaled by `texel_density` here.
 pub fn export_textured_mesh<S: SurfaceShader>(
     mesh: &Mesh,
     single_set: &[[Vec2; 3]],
+    layout: &[[Vec2; 3]],
     exemplar: (u32, u32),
     surfaces: &[ExportSurface<S>],
     p: &ExportParams,
@@ -125,47 +173,99 @@ pub fn export_textured_mesh<S: SurfaceShader>(
     }
     progress(0.05);
 
-    let atlas = build_atlas(mesh, p.atlas_size)?;
-    let frames = TangentFrames::new(mesh, single_set, &atlas);
-    let mut material = GlbMaterial {
-        double_sided: true,
-        ..Default::default()
-    };
-    for (k, s) in surfaces.iter().enumerate() {
-        let baked = if s.name == "normal" {
-            bake(
-                &atlas,
-                mesh,
-                &NormalRebase {
-                    inner: &s.shader,
-                    frames: &frames,
-                },
-            )
-        } else {
-            bake(&atlas, mesh, &s.shader)
+    let density = p.texel_density;
+    let scaled: Vec<[Vec2; 3]> = layout.iter().map(|t| t.map(|q| q * density)).collect();
+    let atlas = build_chart_atlas(mesh, &scaled, p.atlas_size)
+        .map_err(|e| ExportError::of_atlas(e, p))?;
+    drop(scaled);
+    let pages = atlas.pages.len();
+    tracing::info!(
+        "reconstruct: {} charts on {pages} page(s) ({}) at {density} atlas texels per exemplar texel",
+        atlas.charts,
+        atlas
+            .pages
+            .iter()
+            .map(|[w, h]| format!("{w}×{h}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    progress(0.15);
+    let frames = TangentFrames::new(mesh, single_set, &atlas.corner_uv);
+    let mut materials: Vec<GlbMaterial> = Vec::with_capacity(pages);
+    let mut baked_mtl = String::new();
+    for page in 0..pages {
+        let rebased = find("normal").map(|s| NormalRebase {
+            inner: &s.shader,
+            frames: &frames,
+        });
+        let shaders: Vec<&dyn SurfaceShader> = surfaces
+            .iter()
+            .map(|s| match (&rebased, s.name.as_str()) {
+                (Some(r), "normal") => r as &dyn SurfaceShader,
+                _ => &s.shader as &dyn SurfaceShader,
+            })
+            .collect();
+        let baked = bake_page(&atlas, page, mesh, &shaders);
+        let mut material = GlbMaterial {
+            name: format!("texsyn_page{page}"),
+            double_sided: true,
+            ..Default::default()
         };
-        let png = encode_png(&baked, false);
-        match s.name.as_str() {
-            _ if k == 0 => material.base_color_png = Some(png.clone()),
-            "normal" => material.normal_png = Some(png.clone()),
-            "roughness" => {
-                // glTF reads roughness from green and metalness from blue.
-                let mut mr = baked.clone();
-                for px in mr.pixels_mut() {
-                    px.0 = [0, px.0[0], 0, 255];
+        let mut page_maps = MtlMaps::default();
+        for (k, (s, img)) in surfaces.iter().zip(baked).enumerate() {
+            let png = encode_png(&img, false);
+            let name = baked_name(&s.name, page, pages);
+            match s.name.as_str() {
+                _ if k == 0 => {
+                    material.base_color_png = Some(png.clone());
+                    page_maps.diffuse = Some(name.clone());
                 }
-                material.metallic_roughness_png = Some(encode_png(&mr, false));
+                "normal" => {
+                    material.normal_png = Some(png.clone());
+                    page_maps.normal = Some(name.clone());
+                }
+                "roughness" => {
+                    // glTF reads roughness from green and metalness from blue.
+                    let mut mr = img;
+                    for px in mr.pixels_mut() {
+                        px.0 = [0, px.0[0], 0, 255];
+                    }
+                    material.metallic_roughness_png = Some(encode_png(&mr, false));
+                    page_maps.roughness = Some(name.clone());
+                }
+                "height" => page_maps.height = Some(name.clone()),
+                _ => {}
             }
-            _ => {}
+            files.push((name, png));
         }
-        files.push((format!("baked_{}.png", s.name), png));
-        progress(0.1 + 0.6 * (k + 1) as f32 / surfaces.len() as f32);
+        baked_mtl.push_str(&write_mtl(&material.name, &page_maps));
+        materials.push(material);
+        progress(0.15 + 0.55 * (page + 1) as f32 / pages as f32);
     }
+    let names: Vec<String> = materials.iter().map(|m| m.name.clone()).collect();
+    // OBJ texture coordinates have v up.
+    let obj_uv: Vec<[Vec2; 3]> = atlas
+        .corner_uv
+        .iter()
+        .map(|t| t.map(|q| Vec2::new(q.x, 1.0 - q.y)))
+        .collect();
+    files.push((
+        "baked.obj".into(),
+        write_obj_materials(
+            mesh,
+            Some(&obj_uv),
+            Some("baked.mtl"),
+            &names,
+            Some(&atlas.face_page),
+        )
+        .into_bytes(),
+    ));
+    files.push(("baked.mtl".into(), baked_mtl.into_bytes()));
     files.push((
         "textured.glb".into(),
-        write_glb(&glb_mesh(mesh, &atlas, &frames, material)),
+        write_glb(&glb_mesh(mesh, &atlas, &frames, materials)),
     ));
-    progress(0.75);
+    progress(0.8);
 
     if let Some(base) = surfaces.first() {
         let opts = ViewOptions {
@@ -202,7 +302,7 @@ fn gradient_frame(p: [Vec3; 3], t: [Vec2; 3]) -> Option<(Vec3, Vec3)> {
 }
 
 impl TangentFrames {
-    fn new(mesh: &Mesh, set: &[[Vec2; 3]], atlas: &Atlas) -> Self {
+    fn new(mesh: &Mesh, set: &[[Vec2; 3]], atlas_uv: &[[Vec2; 3]]) -> Self {
         let mut exemplar = Vec::with_capacity(mesh.triangles.len());
         let mut at = Vec::with_capacity(mesh.triangles.len());
         for (f, t) in mesh.triangles.iter().enumerate() {
@@ -218,7 +318,7 @@ impl TangentFrames {
                 .map(|(x, y)| ortho(x, -y))
                 .unwrap_or((Vec3::ZERO, Vec3::ZERO));
             exemplar.push((ex, ey, n));
-            let (ax, ay) = gradient_frame(p, atlas.corner_uv[f])
+            let (ax, ay) = gradient_frame(p, atlas_uv[f])
                 .map(|(x, y)| ortho(x, -y))
                 .unwrap_or((Vec3::ZERO, Vec3::ZERO));
             at.push((ax, ay));
@@ -251,42 +351,92 @@ impl<S: SurfaceShader> SurfaceShader for NormalRebase<'_, S> {
     }
 }
 
-fn glb_mesh(mesh: &Mesh, atlas: &Atlas, frames: &TangentFrames, material: GlbMaterial) -> GlbMesh {
+/// The .glb's mesh: one vertex per (mesh vertex, atlas coordinates) pair, so vertices are
+/// shared inside charts and split along their borders; the tangent of a vertex is the mean of
+/// its faces' atlas frames (smooth inside a chart, as normal-mapped meshes expect); one
+/// primitive per page.
+fn glb_mesh(
+    mesh: &Mesh,
+    atlas: &ChartAtlas,
+    frames: &TangentFrames,
+    materials: Vec<GlbMaterial>,
+) -> GlbMesh {
     let normals = mesh.vertex_normals();
-    let corners = mesh.triangles.len() * 3;
-    let mut positions = Vec::with_capacity(corners);
-    let mut vnormals = Vec::with_capacity(corners);
-    // Tangents only matter to a normal map (the validator flags unused ones).
-    let want_tangents = material.normal_png.is_some();
-    let mut tangents = Vec::with_capacity(if want_tangents { corners } else { 0 });
-    let mut uv = Vec::with_capacity(corners);
-    for (f, t) in mesh.triangles.iter().enumerate() {
-        let (ax, ay) = frames.atlas[f];
-        let n_face = frames.exemplar[f].2;
-        for c in 0..3 {
-            let v = t[c] as usize;
-            positions.push(mesh.positions[v]);
-            let n = if normals[v] != Vec3::ZERO {
-                normals[v]
-            } else {
-                n_face
-            };
-            vnormals.push(n);
-            // glTF: bitangent = cross(normal, tangent.xyz) * w.
-            let tan = (ax - ax.dot(n) * n).normalize_or_zero();
-            let w = if n.cross(tan).dot(ay) < 0.0 {
-                -1.0
-            } else {
-                1.0
-            };
-            tangents.push(if tan == Vec3::ZERO {
-                Vec4::new(1.0, 0.0, 0.0, 1.0)
-            } else {
-                tan.extend(w)
-            });
-            uv.push(atlas.corner_uv[f][c]);
-        }
+    let faces = mesh.triangles.len();
+    // Corners sorted by (vertex, uv bits): equal keys share one glTF vertex.
+    let mut corners: Vec<(u32, u32, u32, u32)> = (0..faces * 3)
+        .map(|c| {
+            let (f, k) = (c / 3, c % 3);
+            let uv = atlas.corner_uv[f][k];
+            (mesh.triangles[f][k], uv.x.to_bits(), uv.y.to_bits(), c as u32)
+        })
+        .collect();
+    {
+        use rayon::prelude::*;
+        corners.par_sort_unstable();
     }
+    let mut corner_vertex = vec![0u32; faces * 3];
+    let mut positions = Vec::new();
+    let mut vnormals = Vec::new();
+    let mut tangent_sum: Vec<Vec3> = Vec::new();
+    let mut handedness: Vec<f32> = Vec::new();
+    let mut uv = Vec::new();
+    let mut i = 0;
+    while i < corners.len() {
+        let (v, ux, uy, _) = corners[i];
+        let id = positions.len() as u32;
+        let vu = v as usize;
+        let n_face = frames.exemplar[corners[i].3 as usize / 3].2;
+        let n = if normals[vu] != Vec3::ZERO {
+            normals[vu]
+        } else {
+            n_face
+        };
+        positions.push(mesh.positions[vu]);
+        vnormals.push(n);
+        uv.push(Vec2::new(f32::from_bits(ux), f32::from_bits(uy)));
+        let mut tsum = Vec3::ZERO;
+        let mut wsum = 0.0f32;
+        while i < corners.len() && (corners[i].0, corners[i].1, corners[i].2) == (v, ux, uy) {
+            let c = corners[i].3 as usize;
+            corner_vertex[c] = id;
+            let (ax, ay) = frames.atlas[c / 3];
+            let tan = (ax - ax.dot(n) * n).normalize_or_zero();
+            tsum += tan;
+            // glTF: bitangent = cross(normal, tangent.xyz) * w.
+            wsum += if n.cross(tan).dot(ay) < 0.0 { -1.0 } else { 1.0 };
+            i += 1;
+        }
+        tangent_sum.push(tsum);
+        handedness.push(if wsum < 0.0 { -1.0 } else { 1.0 });
+    }
+    // Tangents only matter to a normal map (the validator flags unused ones).
+    let want_tangents = materials.iter().any(|m| m.normal_png.is_some());
+    let tangents = if want_tangents {
+        tangent_sum
+            .iter()
+            .zip(&handedness)
+            .map(|(t, &w)| {
+                let t = t.normalize_or_zero();
+                if t == Vec3::ZERO {
+                    Vec4::new(1.0, 0.0, 0.0, 1.0)
+                } else {
+                    t.extend(w)
+                }
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let mut per_page: Vec<Vec<u32>> = vec![Vec::new(); materials.len().max(1)];
+    for f in 0..faces {
+        let page = atlas.face_page[f] as usize;
+        per_page[page].extend_from_slice(&corner_vertex[3 * f..3 * f + 3]);
+    }
+    let mut materials = materials.into_iter();
+    let mut pages = per_page.into_iter();
+    let material = materials.next().unwrap_or_default();
+    let indices = pages.next().unwrap_or_default();
     GlbMesh {
         name: "texsyn".into(),
         positions,
@@ -295,8 +445,12 @@ fn glb_mesh(mesh: &Mesh, atlas: &Atlas, frames: &TangentFrames, material: GlbMat
         texcoords: vec![uv],
         colors: None,
         extra: Vec::new(),
-        indices: (0..corners as u32).collect(),
+        indices,
         material,
+        more_primitives: pages
+            .zip(materials)
+            .map(|(indices, material)| GlbPrimitive { indices, material })
+            .collect(),
     }
 }
 
@@ -321,15 +475,12 @@ mod tests {
             Vec2::new(0.0, 0.0),
         ]];
         // Atlas: u along world +y, v (down the image) along world +x: image up is world -x.
-        let atlas = Atlas {
-            size: 64,
-            corner_uv: vec![[
-                Vec2::new(0.0, 0.0),
-                Vec2::new(0.0, 0.5),
-                Vec2::new(0.5, 0.0),
-            ]],
-        };
-        let frames = TangentFrames::new(&mesh, &set, &atlas);
+        let atlas_uv = vec![[
+            Vec2::new(0.0, 0.0),
+            Vec2::new(0.0, 0.5),
+            Vec2::new(0.5, 0.0),
+        ]];
+        let frames = TangentFrames::new(&mesh, &set, &atlas_uv);
         // A normal tilted towards exemplar +X, i.e. world +x.
         let tilt = Vec3::new(0.6, 0.0, 0.8);
         let inner = ConstantShader((tilt + Vec3::ONE) * 0.5);

@@ -1,4 +1,5 @@
-//! Binary glTF 2.0 (`.glb`) writer: one mesh, one primitive, one material, textures embedded.
+//! Binary glTF 2.0 (`.glb`) writer: one mesh, one or more primitives sharing its vertex arrays
+//! (one material each, e.g. one per atlas page), textures embedded.
 //!
 //! Layout: a 12-byte header, a JSON chunk (padded with spaces) and a BIN chunk (padded with
 //! zeros). Every array and image is its own bufferView, starting on a 4-byte boundary. The JSON
@@ -76,6 +77,17 @@ pub struct GlbMesh {
     /// Custom attributes (VEC3 float).
     pub extra: Vec<GlbAttribute>,
     /// Triangle list, three indices per triangle.
+    pub indices: Vec<u32>,
+    pub material: GlbMaterial,
+    /// Further primitives over the same vertex arrays, each with its own material (one per
+    /// page of a multi-page atlas). Default: none.
+    pub more_primitives: Vec<GlbPrimitive>,
+}
+
+/// A primitive of a [`GlbMesh`] beyond the first: its triangles and their material.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct GlbPrimitive {
+    /// Triangle list, three indices per triangle (into the mesh's vertex arrays).
     pub indices: Vec<u32>,
     pub material: GlbMaterial,
 }
@@ -199,23 +211,31 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
         );
         assert_eq!(a.values.len(), nv, "{}: wrong length", a.name);
     }
-    assert!(
-        scene.indices.len().is_multiple_of(3),
-        "indices: not a triangle list"
-    );
-    assert!(
-        scene.indices.iter().all(|&i| (i as usize) < nv),
-        "index out of range"
-    );
-    let mat = &scene.material;
-    let textured = mat.base_color_png.is_some()
-        || mat.normal_png.is_some()
-        || mat.metallic_roughness_png.is_some();
-    assert!(
-        !textured || (mat.texcoord as usize) < scene.texcoords.len(),
-        "textures use TEXCOORD_{} which is missing",
-        mat.texcoord
-    );
+    let primitives: Vec<(&[u32], &GlbMaterial)> =
+        std::iter::once((scene.indices.as_slice(), &scene.material))
+            .chain(
+                scene
+                    .more_primitives
+                    .iter()
+                    .map(|p| (p.indices.as_slice(), &p.material)),
+            )
+            .filter(|(idx, _)| !idx.is_empty())
+            .collect();
+    for (indices, mat) in &primitives {
+        assert!(indices.len().is_multiple_of(3), "indices: not a triangle list");
+        assert!(
+            indices.iter().all(|&i| (i as usize) < nv),
+            "index out of range"
+        );
+        let textured = mat.base_color_png.is_some()
+            || mat.normal_png.is_some()
+            || mat.metallic_roughness_png.is_some();
+        assert!(
+            !textured || (mat.texcoord as usize) < scene.texcoords.len(),
+            "textures use TEXCOORD_{} which is missing",
+            mat.texcoord
+        );
+    }
 
     let mut b = Builder::default();
     let mut root = Map::new();
@@ -231,7 +251,7 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
     }
 
     // glTF forbids empty accessors: an empty mesh is a scene with one empty node.
-    if nv > 0 && !scene.indices.is_empty() {
+    if nv > 0 && !primitives.is_empty() {
         node.insert("mesh".into(), json!(0));
         let mut attrs = Map::new();
         let pos: Vec<f32> = scene.positions.iter().flat_map(|p| p.to_array()).collect();
@@ -270,52 +290,54 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
             let v: Vec<f32> = a.values.iter().flat_map(|p| p.to_array()).collect();
             attrs.insert(a.name.clone(), json!(b.floats(&v, 3, "VEC3", false)));
         }
-        let indices = b.indices(&scene.indices);
         let mut mesh = Map::new();
         if !scene.name.is_empty() {
             mesh.insert("name".into(), json!(scene.name));
         }
-        mesh.insert(
-            "primitives".into(),
-            json!([{ "attributes": attrs, "indices": indices, "material": 0, "mode": 4 }]),
-        );
-        root.insert("meshes".into(), json!([mesh]));
-
-        // Material and its embedded textures.
+        let mut prims = Vec::new();
+        let mut materials = Vec::new();
         let mut images = vec![];
         let mut textures = vec![];
-        let mut texture = |png: &Option<Vec<u8>>, b: &mut Builder| {
-            png.as_ref().map(|bytes| {
-                let view = b.view(bytes, None);
-                images.push(json!({ "bufferView": view, "mimeType": "image/png" }));
-                textures.push(json!({ "source": images.len() - 1, "sampler": 0 }));
-                json!({ "index": textures.len() - 1, "texCoord": mat.texcoord })
-            })
-        };
-        let base = texture(&mat.base_color_png, &mut b);
-        let normal = texture(&mat.normal_png, &mut b);
-        let mr = texture(&mat.metallic_roughness_png, &mut b);
-        let mut pbr = Map::new();
-        pbr.insert(
-            "baseColorFactor".into(),
-            json!(mat.base_color_factor.map(|x| clamp01(x, 1.0))),
-        );
-        pbr.insert("metallicFactor".into(), json!(clamp01(mat.metallic, 0.0)));
-        pbr.insert("roughnessFactor".into(), json!(clamp01(mat.roughness, 1.0)));
-        if let Some(t) = base {
-            pbr.insert("baseColorTexture".into(), t);
+        for (m, (indices, mat)) in primitives.iter().enumerate() {
+            let indices = b.indices(indices);
+            prims.push(json!({ "attributes": attrs, "indices": indices, "material": m, "mode": 4 }));
+            // The material and its embedded textures.
+            let mut texture = |png: &Option<Vec<u8>>, b: &mut Builder| {
+                png.as_ref().map(|bytes| {
+                    let view = b.view(bytes, None);
+                    images.push(json!({ "bufferView": view, "mimeType": "image/png" }));
+                    textures.push(json!({ "source": images.len() - 1, "sampler": 0 }));
+                    json!({ "index": textures.len() - 1, "texCoord": mat.texcoord })
+                })
+            };
+            let base = texture(&mat.base_color_png, &mut b);
+            let normal = texture(&mat.normal_png, &mut b);
+            let mr = texture(&mat.metallic_roughness_png, &mut b);
+            let mut pbr = Map::new();
+            pbr.insert(
+                "baseColorFactor".into(),
+                json!(mat.base_color_factor.map(|x| clamp01(x, 1.0))),
+            );
+            pbr.insert("metallicFactor".into(), json!(clamp01(mat.metallic, 0.0)));
+            pbr.insert("roughnessFactor".into(), json!(clamp01(mat.roughness, 1.0)));
+            if let Some(t) = base {
+                pbr.insert("baseColorTexture".into(), t);
+            }
+            if let Some(t) = mr {
+                pbr.insert("metallicRoughnessTexture".into(), t);
+            }
+            let mut mm = Map::new();
+            mm.insert("name".into(), json!(mat.name));
+            mm.insert("pbrMetallicRoughness".into(), Value::Object(pbr));
+            if let Some(t) = normal {
+                mm.insert("normalTexture".into(), t);
+            }
+            mm.insert("doubleSided".into(), json!(mat.double_sided));
+            materials.push(Value::Object(mm));
         }
-        if let Some(t) = mr {
-            pbr.insert("metallicRoughnessTexture".into(), t);
-        }
-        let mut m = Map::new();
-        m.insert("name".into(), json!(mat.name));
-        m.insert("pbrMetallicRoughness".into(), Value::Object(pbr));
-        if let Some(t) = normal {
-            m.insert("normalTexture".into(), t);
-        }
-        m.insert("doubleSided".into(), json!(mat.double_sided));
-        root.insert("materials".into(), json!([m]));
+        mesh.insert("primitives".into(), json!(prims));
+        root.insert("meshes".into(), json!([mesh]));
+        root.insert("materials".into(), json!(materials));
         if !images.is_empty() {
             root.insert("images".into(), json!(images));
             root.insert("textures".into(), json!(textures));

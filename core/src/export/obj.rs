@@ -77,7 +77,21 @@ pub fn write_obj(
     mtl_file: Option<&str>,
     material: &str,
 ) -> String {
+    write_obj_materials(mesh, corner_uv, mtl_file, &[material.to_string()], None)
+}
+
+/// [`write_obj`] with several materials: face `f` uses `materials[face_material[f]]` (all use
+/// the first without `face_material`). Faces are written grouped by material, one `usemtl`
+/// per group, in face order within a group; materials no face uses are skipped.
+pub fn write_obj_materials(
+    mesh: &Mesh,
+    corner_uv: Option<&[[Vec2; 3]]>,
+    mtl_file: Option<&str>,
+    materials: &[String],
+    face_material: Option<&[u32]>,
+) -> String {
     let corner_uv = corner_uv.filter(|c| c.len() == mesh.triangles.len());
+    let face_material = face_material.filter(|m| m.len() == mesh.triangles.len());
     let mut head = String::from("# texsyn\n");
     if let Some(m) = mtl_file {
         let _ = writeln!(head, "mtllib {m}");
@@ -121,10 +135,8 @@ pub fn write_obj(
         push_f32(out, uv.y);
         out.push(b'\n');
     });
-    if mtl_file.is_some() {
-        out.extend_from_slice(format!("usemtl {material}\n").as_bytes());
-    }
-    par_lines(&mesh.triangles, &mut out, |f, t, out| {
+    let face_line = |f: usize, out: &mut Vec<u8>| {
+        let t = mesh.triangles[f];
         out.push(b'f');
         for k in 0..3 {
             out.push(b' ');
@@ -135,7 +147,28 @@ pub fn write_obj(
             }
         }
         out.push(b'\n');
-    });
+    };
+    match face_material {
+        None => {
+            if mtl_file.is_some() {
+                let name = materials.first().map_or("default", |m| m.as_str());
+                out.extend_from_slice(format!("usemtl {name}\n").as_bytes());
+            }
+            par_lines(&mesh.triangles, &mut out, |f, _, out| face_line(f, out));
+        }
+        Some(fm) => {
+            for (m, name) in materials.iter().enumerate() {
+                let faces: Vec<usize> = (0..fm.len()).filter(|&f| fm[f] == m as u32).collect();
+                if faces.is_empty() {
+                    continue;
+                }
+                if mtl_file.is_some() {
+                    out.extend_from_slice(format!("usemtl {name}\n").as_bytes());
+                }
+                par_lines(&faces, &mut out, |_, &f, out| face_line(f, out));
+            }
+        }
+    }
     String::from_utf8(out).expect("OBJ text is the given names and ASCII numbers")
 }
 

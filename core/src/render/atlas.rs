@@ -377,7 +377,7 @@ fn square_meets_triangle(c: DVec2, g: f64, t: &[DVec2; 3]) -> bool {
 
 /// Barycentric coordinates of the point of triangle `t` nearest to `c` (of `c` itself when it
 /// is inside).
-fn nearest_barycentric(c: DVec2, t: &[DVec2; 3]) -> Vec3 {
+pub(crate) fn nearest_barycentric(c: DVec2, t: &[DVec2; 3]) -> Vec3 {
     let (v0, v1, v2) = (t[1] - t[0], t[2] - t[0], c - t[0]);
     let d = v0.perp_dot(v1);
     if d != 0.0 {
@@ -504,7 +504,7 @@ pub fn bake(atlas: &Atlas, mesh: &Mesh, shader: &dyn SurfaceShader) -> image::Rg
 }
 
 /// An sRGB-encoded colour component to 8 bits (clamped, NaN as 0).
-fn quantize(c: f32) -> u8 {
+pub(crate) fn quantize(c: f32) -> u8 {
     let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
     (c * 255.0 + 0.5) as u8
 }
@@ -512,6 +512,12 @@ fn quantize(c: f32) -> u8 {
 /// Grows the written texels (alpha != 0) into unwritten ones, `DILATE_PASSES` rings: each new
 /// texel gets the mean (rounded) of its written 8-neighbours from the previous pass.
 fn dilate(px: &mut [[u8; 4]], n: usize) {
+    dilate_rect(px, n, n)
+}
+
+/// [`dilate`] over a `w`×`h` image.
+pub(crate) fn dilate_rect(px: &mut [[u8; 4]], w: usize, h: usize) {
+    let n = w;
     for _ in 0..DILATE_PASSES {
         let prev = px.to_vec();
         px.par_chunks_mut(n).enumerate().for_each(|(y, row)| {
@@ -527,8 +533,8 @@ fn dilate(px: &mut [[u8; 4]], n: usize) {
                         if (dx, dy) == (0, 0)
                             || xx < 0
                             || yy < 0
-                            || xx >= n as i64
-                            || yy >= n as i64
+                            || xx >= w as i64
+                            || yy >= h as i64
                         {
                             continue;
                         }

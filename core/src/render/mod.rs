@@ -5,6 +5,7 @@
 //! - [`shader`]: what colour a surface has ([`SurfaceShader`]) and the usual implementations.
 //! - [`views`]: the three-view preview image ([`render_views`]).
 //! - [`atlas`]: a per-triangle texture atlas ([`build_atlas`]) and baking a shader into it
+//! - [`chart_atlas`]: charts of faces whose layouts agree, packed into pages ([`build_chart_atlas`]), and baking ([`bake_page`])
 //!   ([`bake`]).
 //! - [`load`]: the backend of the `render` command ([`render_mesh_file`]).
 //!
@@ -14,6 +15,7 @@
 //! do not depend on the platform's libm either.
 
 pub mod atlas;
+pub mod chart_atlas;
 pub mod load;
 pub mod raster;
 pub mod shader;
@@ -21,6 +23,7 @@ pub mod srgb;
 pub mod views;
 
 pub use atlas::{ATLAS_GUTTER, Atlas, AtlasError, bake, build_atlas};
+pub use chart_atlas::{ChartAtlas, ChartAtlasError, bake_page, build_chart_atlas};
 pub use load::{RenderError, render_mesh_file};
 pub use shader::{ConstantShader, CornerUvShader, SurfaceShader, VertexColorShader};
 pub use views::{ViewOptions, render_views};

@@ -1,0 +1,682 @@
+//! A texture atlas of *charts* spread over pages, and baking a [`SurfaceShader`] into it.
+//!
+//! The per-triangle atlas ([`super::atlas`]) gives every triangle its own region; at a million
+//! triangles the gutters alone outgrow any texture. Here the caller gives each face a 2D
+//! layout in texels at the density it wants (for jump maps, the walk's own texel addresses
+//! where they are continuous: Zelinka & Garland §4.2 make most of the surface one patch of the
+//! exemplar after another), and neighbouring faces whose layouts agree on their shared edge are
+//! kept together:
+//!
+//! 1. **Charts.** Faces joined across every edge where both layouts give the same two points
+//!    (and the same orientation) form candidate charts (union-find; a chart is named by its
+//!    lowest face).
+//! 2. **Injectivity.** Each candidate is grown breadth-first from its lowest face over an
+//!    occupancy grid of texel centres: a face whose centres are already owned by a face it
+//!    shares no vertex with (the layout folded over itself) or that would make the chart wider
+//!    than a page is left out, and the faces left out form the next round's candidates. Faces
+//!    smaller than a texel own no centre, so folds made only of them go unseen; they are
+//!    sub-texel and bake to what their neighbours bake to.
+//! 3. **Leaves.** A face that joins no neighbour (a seam face of the walk) is laid against one
+//!    neighbouring chart: its own layout moved by the similarity that puts its shared edge on
+//!    the chart's, if it stays on its side of that edge and claims free texels; otherwise it is
+//!    a chart of its own.
+//! 4. **Pages.** Chart bounding boxes plus a gutter are packed in shelves (tallest first) into
+//!    pages at most `max_page` wide and high, the shelf width chosen so that a page is about
+//!    square; a page is only as big as what it holds.
+//!
+//! Baking owns each texel centre to the lowest face that contains it, else (within
+//! [`ATLAS_GUTTER`] texels of a face, in L∞) to the face nearest to it, shaded at the
+//! nearest point of that face: gutters repeat the chart's border, so bilinear and mip-mapped
+//! sampling never reach a background colour. Ownership is an atomic minimum over a key that
+//! orders "inside" before "gutter", then distance, then face: the result does not depend on the
+//! thread count.
+
+use super::atlas::{ATLAS_GUTTER, dilate_rect, nearest_barycentric, quantize};
+use super::shader::SurfaceShader;
+use crate::geom::Mesh;
+use glam::{DVec2, Vec2};
+use rayon::prelude::*;
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Space around each chart's bounding box, in texels: the gutter, plus one texel so that a
+/// bilinear sample of the gutter's last texel never reads another chart.
+const CHART_MARGIN: f64 = ATLAS_GUTTER as f64 + 1.0;
+
+/// Texture coordinates for baking over one or more pages.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChartAtlas {
+    /// Width and height of each page, in texels.
+    pub pages: Vec<[u32; 2]>,
+    /// The page of each face.
+    pub face_page: Vec<u32>,
+    /// Corner texture coordinates per face on its page, glTF convention (u right, v down,
+    /// [0, 1]).
+    pub corner_uv: Vec<[Vec2; 3]>,
+    /// The chart of each face (charts numbered from 0 in page order).
+    pub face_chart: Vec<u32>,
+    /// How many charts.
+    pub charts: usize,
+}
+
+/// The atlas cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum ChartAtlasError {
+    #[error("a face's layout is not finite (face {face})")]
+    NotFinite { face: usize },
+    #[error("the layout has {faces} faces but the mesh has {mesh}")]
+    FaceCount { faces: usize, mesh: usize },
+    /// One face alone is wider than a page (with its margins) at the layout's density.
+    #[error("face {face} spans {extent:.0} texels, more than a {max_page}-texel page holds")]
+    FaceTooLarge {
+        face: usize,
+        extent: f64,
+        max_page: u32,
+    },
+}
+
+impl ChartAtlasError {
+    /// For [`ChartAtlasError::FaceTooLarge`]: the factor by which the density must shrink
+    /// for every face to fit a page.
+    pub fn shrink_to_fit(&self) -> Option<f64> {
+        match self {
+            ChartAtlasError::FaceTooLarge {
+                extent, max_page, ..
+            } => Some((*max_page as f64 - 2.0 * CHART_MARGIN - 1.0).max(1.0) / extent),
+            _ => None,
+        }
+    }
+}
+
+/// Signed area (twice) of a layout triangle.
+fn area2(t: &[DVec2; 3]) -> f64 {
+    (t[1] - t[0]).perp_dot(t[2] - t[0])
+}
+
+/// Texel centres strictly inside the triangle, as (x, y) cell indices. Strict, so that two
+/// faces sharing an edge never both own a centre on it.
+fn inside_centres(t: &[DVec2; 3], mut each: impl FnMut(i64, i64) -> bool) -> bool {
+    let lo = t[0].min(t[1]).min(t[2]);
+    let hi = t[0].max(t[1]).max(t[2]);
+    let sign = area2(t).signum();
+    if sign == 0.0 {
+        return true;
+    }
+    let (x0, x1) = ((lo.x - 0.5).ceil() as i64, (hi.x - 0.5).floor() as i64);
+    let (y0, y1) = ((lo.y - 0.5).ceil() as i64, (hi.y - 0.5).floor() as i64);
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            let c = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+            let inside = (0..3).all(|k| {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                sign * (b - a).perp_dot(c - a) > 0.0
+            });
+            if inside && !each(x, y) {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Union-find with the smallest index as root (so roots do not depend on union order).
+struct Dsu(Vec<u32>);
+
+impl Dsu {
+    fn find(&mut self, mut a: u32) -> u32 {
+        while self.0[a as usize] != a {
+            let p = self.0[a as usize];
+            self.0[a as usize] = self.0[p as usize];
+            a = p;
+        }
+        a
+    }
+    fn union(&mut self, a: u32, b: u32) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra != rb {
+            let (lo, hi) = (ra.min(rb), ra.max(rb));
+            self.0[hi as usize] = lo;
+        }
+    }
+}
+
+/// The faces across each edge: for face f and edge k (corners k, k+1), the neighbouring face
+/// and its edge index, when the edge has exactly two faces.
+fn edge_neighbours(mesh: &Mesh) -> Vec<[(u32, u8); 3]> {
+    let faces = mesh.triangles.len();
+    let mut half: Vec<(u32, u32, u32, u8)> = (0..faces)
+        .into_par_iter()
+        .flat_map_iter(|f| {
+            let t = mesh.triangles[f];
+            (0..3u8).map(move |k| {
+                let (a, b) = (t[k as usize], t[(k as usize + 1) % 3]);
+                (a.min(b), a.max(b), f as u32, k)
+            })
+        })
+        .collect();
+    half.par_sort_unstable();
+    let mut out = vec![[(u32::MAX, 0u8); 3]; faces];
+    let mut i = 0;
+    while i < half.len() {
+        let mut j = i + 1;
+        while j < half.len() && half[j].0 == half[i].0 && half[j].1 == half[i].1 {
+            j += 1;
+        }
+        if j - i == 2 && half[i].0 != half[i].1 {
+            let (f, k) = (half[i].2, half[i].3);
+            let (g, l) = (half[i + 1].2, half[i + 1].3);
+            if f != g {
+                out[f as usize][k as usize] = (g, l);
+                out[g as usize][l as usize] = (f, k);
+            }
+        }
+        i = j;
+    }
+    out
+}
+
+/// A chart being grown: its faces (with their chart-local layouts) and an occupancy grid.
+struct Grower<'a> {
+    mesh: &'a Mesh,
+    /// Grid origin (texel cell of index 0) and size.
+    origin: [i64; 2],
+    size: [usize; 2],
+    owner: Vec<u32>,
+    /// Largest chart extent (texels) that fits a page with its margin.
+    max_extent: f64,
+    lo: DVec2,
+    hi: DVec2,
+}
+
+impl<'a> Grower<'a> {
+    fn new(mesh: &'a Mesh, lo: DVec2, hi: DVec2, max_extent: f64) -> Self {
+        let origin = [lo.x.floor() as i64 - 1, lo.y.floor() as i64 - 1];
+        let size = [
+            (hi.x.ceil() as i64 + 2 - origin[0]).max(1) as usize,
+            (hi.y.ceil() as i64 + 2 - origin[1]).max(1) as usize,
+        ];
+        Grower {
+            mesh,
+            origin,
+            size,
+            owner: vec![u32::MAX; size[0] * size[1]],
+            max_extent,
+            lo: DVec2::INFINITY,
+            hi: DVec2::NEG_INFINITY,
+        }
+    }
+
+    fn shares_vertex(&self, f: u32, g: u32) -> bool {
+        let (a, b) = (self.mesh.triangles[f as usize], self.mesh.triangles[g as usize]);
+        a.iter().any(|v| b.contains(v))
+    }
+
+    /// Adds face `f` laid at `t` if it keeps the chart injective (as far as texel centres
+    /// tell) and within a page, or unconditionally if `force` (a chart's first face); returns
+    /// whether it was added.
+    fn try_add(&mut self, f: u32, t: &[DVec2; 3], force: bool) -> bool {
+        let lo = self.lo.min(t[0].min(t[1]).min(t[2]));
+        let hi = self.hi.max(t[0].max(t[1]).max(t[2]));
+        if !force && (hi - lo).max_element() > self.max_extent {
+            return false;
+        }
+        let mut cells = Vec::new();
+        let ok = inside_centres(t, |x, y| {
+            let (i, j) = (x - self.origin[0], y - self.origin[1]);
+            if i < 0 || j < 0 || i as usize >= self.size[0] || j as usize >= self.size[1] {
+                return force;
+            }
+            let cell = j as usize * self.size[0] + i as usize;
+            let o = self.owner[cell];
+            if !force && o != u32::MAX && o != f && !self.shares_vertex(o, f) {
+                return false;
+            }
+            cells.push(cell);
+            true
+        });
+        if !ok {
+            return false;
+        }
+        for c in cells {
+            if self.owner[c] == u32::MAX {
+                self.owner[c] = f;
+            }
+        }
+        self.lo = lo;
+        self.hi = hi;
+        true
+    }
+}
+
+/// One chart: its faces and their layout in chart coordinates (texels).
+struct Chart {
+    faces: Vec<u32>,
+    layout: Vec<[DVec2; 3]>,
+    lo: DVec2,
+    hi: DVec2,
+}
+
+/// Grows the charts of one candidate component (faces sorted ascending), with the leaves
+/// assigned to it; returns the charts and the faces left for the next round.
+fn grow_component(
+    mesh: &Mesh,
+    layout: &[[DVec2; 3]],
+    joins: &[[bool; 3]],
+    neighbours: &[[(u32, u8); 3]],
+    member: &dyn Fn(u32) -> bool,
+    faces: &[u32],
+    leaves: &[(u32, u8)],
+    max_extent: f64,
+) -> (Vec<Chart>, Vec<u32>) {
+    let mut lo = DVec2::INFINITY;
+    let mut hi = DVec2::NEG_INFINITY;
+    for &f in faces {
+        for p in layout[f as usize] {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    // Leaves may reach a little beyond the component's box.
+    let reach = leaves
+        .iter()
+        .map(|&(f, _)| {
+            let t = &layout[f as usize];
+            (t[1] - t[0])
+                .length()
+                .max((t[2] - t[1]).length())
+                .max((t[0] - t[2]).length())
+        })
+        .fold(0.0, f64::max);
+    let mut g = Grower::new(
+        mesh,
+        lo - DVec2::splat(reach),
+        hi + DVec2::splat(reach),
+        max_extent,
+    );
+    let mut added: Vec<u32> = Vec::new();
+    let mut chart_layout: Vec<[DVec2; 3]> = Vec::new();
+    let mut queued = std::collections::HashSet::new();
+    let mut queue = VecDeque::from([faces[0]]);
+    queued.insert(faces[0]);
+    while let Some(f) = queue.pop_front() {
+        if !g.try_add(f, &layout[f as usize], added.is_empty()) {
+            continue;
+        }
+        added.push(f);
+        chart_layout.push(layout[f as usize]);
+        for k in 0..3 {
+            let (n, _) = neighbours[f as usize][k];
+            if joins[f as usize][k] && member(n) && queued.insert(n) {
+                queue.push_back(n);
+            }
+        }
+    }
+    let in_chart: std::collections::HashMap<u32, usize> =
+        added.iter().enumerate().map(|(i, &f)| (f, i)).collect();
+    // Leaves: laid against the chart face across their edge `k`.
+    let mut singles = Vec::new();
+    for &(f, k) in leaves {
+        let (n, l) = neighbours[f as usize][k as usize];
+        let placed = in_chart.get(&n).and_then(|&i| {
+            let own = &layout[f as usize];
+            let theirs = &chart_layout[i];
+            // Edge k of f runs a → b; in n it is edge l, running b → a.
+            let (a, b) = (own[k as usize], own[(k as usize + 1) % 3]);
+            let (ca, cb) = (theirs[(l as usize + 1) % 3], theirs[l as usize]);
+            let (e, ce) = (b - a, cb - ca);
+            if e.length_squared() == 0.0 || ce.length_squared() == 0.0 {
+                return None;
+            }
+            // The similarity z ↦ ca + (z - a)·ce/e in complex arithmetic.
+            let rot = DVec2::new(e.dot(ce), e.perp_dot(ce)) / e.length_squared();
+            let map = |p: DVec2| ca + DVec2::new(rot.x * (p - a).x - rot.y * (p - a).y, rot.x * (p - a).y + rot.y * (p - a).x);
+            let t = own.map(map);
+            // It must lie on the other side of the shared edge from the chart face.
+            let apex = theirs[(l as usize + 2) % 3];
+            let side = |p: DVec2| ce.perp_dot(p - ca);
+            let opp = t[(k as usize + 2) % 3];
+            if side(opp) * side(apex) >= 0.0 || !g.try_add(f, &t, false) {
+                return None;
+            }
+            Some(t)
+        });
+        match placed {
+            Some(t) => {
+                added.push(f);
+                chart_layout.push(t);
+            }
+            None => singles.push(f),
+        }
+    }
+    let (lo, hi) = (g.lo, g.hi);
+    let mut charts = vec![Chart {
+        faces: added,
+        layout: chart_layout,
+        lo,
+        hi,
+    }];
+    for f in singles {
+        let t = layout[f as usize];
+        charts.push(Chart {
+            faces: vec![f],
+            layout: vec![t],
+            lo: t[0].min(t[1]).min(t[2]),
+            hi: t[0].max(t[1]).max(t[2]),
+        });
+    }
+    let taken: std::collections::HashSet<u32> =
+        charts.iter().flat_map(|c| c.faces.iter().copied()).collect();
+    let left = faces.iter().copied().filter(|f| !taken.contains(f)).collect();
+    (charts, left)
+}
+
+/// Builds the chart atlas of `mesh` from a per-face `layout` (corner positions in texels at
+/// the wanted density; faces are joined where their layouts agree on a shared edge), with
+/// pages at most `max_page` texels wide and high. Deterministic for any thread count.
+pub fn build_chart_atlas(
+    mesh: &Mesh,
+    layout: &[[Vec2; 3]],
+    max_page: u32,
+) -> Result<ChartAtlas, ChartAtlasError> {
+    let faces = mesh.triangles.len();
+    if layout.len() != faces {
+        return Err(ChartAtlasError::FaceCount {
+            faces: layout.len(),
+            mesh: faces,
+        });
+    }
+    if let Some(face) = layout
+        .iter()
+        .position(|t| !t.iter().all(|p| p.is_finite()))
+    {
+        return Err(ChartAtlasError::NotFinite { face });
+    }
+    let lay: Vec<[DVec2; 3]> = layout.par_iter().map(|t| t.map(|p| p.as_dvec2())).collect();
+    let neighbours = edge_neighbours(mesh);
+    let sign = |f: usize| area2(&lay[f]).signum();
+    // Joined edges: the neighbour has the same two points and the same orientation.
+    let joins: Vec<[bool; 3]> = (0..faces)
+        .into_par_iter()
+        .map(|f| {
+            let t = mesh.triangles[f];
+            std::array::from_fn(|k| {
+                let (g, l) = neighbours[f][k];
+                if g == u32::MAX || sign(f) == 0.0 || sign(f) != sign(g as usize) {
+                    return false;
+                }
+                let (g, l) = (g as usize, l as usize);
+                let u = mesh.triangles[g];
+                debug_assert_eq!(u[l], t[(k + 1) % 3]);
+                lay[f][k] == lay[g][(l + 1) % 3] && lay[f][(k + 1) % 3] == lay[g][l]
+            })
+        })
+        .collect();
+    let joined = |f: usize| joins[f].iter().any(|&j| j);
+    let max_extent = (max_page as f64 - 2.0 * CHART_MARGIN - 1.0).max(1.0);
+
+    // Leaves: faces joined to nobody, each given to the neighbouring joined face of lowest
+    // index (so to that face's component).
+    let mut leaf_of: Vec<Option<(u32, u8)>> = vec![None; faces];
+    for f in 0..faces {
+        if joined(f) {
+            continue;
+        }
+        let mut best: Option<(u32, u8)> = None;
+        for k in 0..3 {
+            let (g, _) = neighbours[f][k];
+            if g != u32::MAX && joined(g as usize) && best.is_none_or(|(b, _)| g < b) {
+                best = Some((g, k as u8));
+            }
+        }
+        leaf_of[f] = best.map(|(_, k)| (f as u32, k));
+    }
+
+    let mut charts: Vec<Chart> = Vec::new();
+    let mut pool: Vec<u32> = (0..faces as u32).filter(|&f| joined(f as usize)).collect();
+    let mut first_round = true;
+    while !pool.is_empty() {
+        let in_pool = {
+            let mut m = vec![false; faces];
+            for &f in &pool {
+                m[f as usize] = true;
+            }
+            m
+        };
+        let mut dsu = Dsu((0..faces as u32).collect());
+        for &f in &pool {
+            for k in 0..3 {
+                let (g, _) = neighbours[f as usize][k];
+                if joins[f as usize][k] && in_pool[g as usize] {
+                    dsu.union(f, g);
+                }
+            }
+        }
+        let mut groups: std::collections::BTreeMap<u32, Vec<u32>> = Default::default();
+        for &f in &pool {
+            groups.entry(dsu.find(f)).or_default().push(f);
+        }
+        let mut leaves: std::collections::BTreeMap<u32, Vec<(u32, u8)>> = Default::default();
+        if first_round {
+            for (f, l) in leaf_of.iter().enumerate() {
+                if let Some((_, k)) = l {
+                    let (g, _) = neighbours[f][*k as usize];
+                    leaves
+                        .entry(dsu.find(g))
+                        .or_default()
+                        .push((f as u32, *k));
+                }
+            }
+        }
+        let groups: Vec<(u32, Vec<u32>)> = groups.into_iter().collect();
+        let member = |f: u32| in_pool[f as usize];
+        let results: Vec<(Vec<Chart>, Vec<u32>)> = groups
+            .par_iter()
+            .map(|(root, fs)| {
+                let empty = Vec::new();
+                let lv = if first_round {
+                    leaves.get(root).unwrap_or(&empty)
+                } else {
+                    &empty
+                };
+                grow_component(mesh, &lay, &joins, &neighbours, &member, fs, lv, max_extent)
+            })
+            .collect();
+        let mut next = Vec::new();
+        for (c, left) in results {
+            charts.extend(c);
+            next.extend(left);
+        }
+        next.sort_unstable();
+        pool = next;
+        first_round = false;
+    }
+    // Faces joined to nobody and with no joined neighbour: charts of their own.
+    for f in 0..faces {
+        if !joined(f) && leaf_of[f].is_none() {
+            let t = lay[f];
+            charts.push(Chart {
+                faces: vec![f as u32],
+                layout: vec![t],
+                lo: t[0].min(t[1]).min(t[2]),
+                hi: t[0].max(t[1]).max(t[2]),
+            });
+        }
+    }
+    // A chart's name is its lowest face: order them so, for a layout independent of rounds.
+    charts.par_sort_unstable_by_key(|c| c.faces.iter().copied().min().unwrap_or(u32::MAX));
+    // Only a chart's forced first face can exceed a page; name the widest such face.
+    if let Some((face, extent)) = charts
+        .iter()
+        .filter(|c| (c.hi - c.lo).max_element() > max_extent)
+        .map(|c| (c.faces[0] as usize, (c.hi - c.lo).max_element()))
+        .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
+    {
+        return Err(ChartAtlasError::FaceTooLarge {
+            face,
+            extent,
+            max_page,
+        });
+    }
+    Ok(pack_pages(faces, &charts, max_page))
+}
+
+/// Shelf-packs the charts' boxes (plus margins) into pages.
+fn pack_pages(faces: usize, charts: &[Chart], max_page: u32) -> ChartAtlas {
+    let dims: Vec<[u32; 2]> = charts
+        .iter()
+        .map(|c| {
+            let e = (c.hi - c.lo).max(DVec2::ZERO);
+            [
+                (e.x + 2.0 * CHART_MARGIN).ceil() as u32,
+                (e.y + 2.0 * CHART_MARGIN).ceil() as u32,
+            ]
+        })
+        .collect();
+    let area: f64 = dims.iter().map(|d| d[0] as f64 * d[1] as f64).sum();
+    let widest = dims.iter().map(|d| d[0]).max().unwrap_or(1);
+    // Shelves waste some room: aim the width at a square page of 1.25× the charts' area.
+    let width = ((area * 1.25).sqrt().ceil() as u32)
+        .next_multiple_of(4)
+        .max(widest)
+        .min(max_page);
+    let mut order: Vec<usize> = (0..charts.len()).collect();
+    order.sort_by(|&a, &b| dims[b][1].cmp(&dims[a][1]).then(dims[b][0].cmp(&dims[a][0])).then(a.cmp(&b)));
+    let mut origin = vec![(0u32, [0u32; 2]); charts.len()];
+    let mut pages: Vec<[u32; 2]> = vec![[0, 0]];
+    let (mut x, mut y, mut shelf) = (0u32, 0u32, 0u32);
+    for &c in &order {
+        let [w, h] = dims[c];
+        if x + w > width {
+            y += shelf;
+            x = 0;
+            shelf = 0;
+        }
+        if y + h > max_page {
+            pages.push([0, 0]);
+            x = 0;
+            y = 0;
+            shelf = 0;
+        }
+        let p = pages.len() - 1;
+        origin[c] = (p as u32, [x, y]);
+        pages[p][0] = pages[p][0].max(x + w);
+        pages[p][1] = pages[p][1].max(y + h);
+        x += w;
+        shelf = shelf.max(h);
+    }
+    for p in &mut pages {
+        p[0] = p[0].max(1).next_multiple_of(4);
+        p[1] = p[1].max(1).next_multiple_of(4);
+    }
+    let mut face_page = vec![0u32; faces];
+    let mut corner_uv = vec![[Vec2::ZERO; 3]; faces];
+    let mut face_chart = vec![0u32; faces];
+    for (ci, c) in charts.iter().enumerate() {
+        let (p, [x0, y0]) = origin[ci];
+        let size = DVec2::new(pages[p as usize][0] as f64, pages[p as usize][1] as f64);
+        let shift = DVec2::new(x0 as f64, y0 as f64) + DVec2::splat(CHART_MARGIN) - c.lo;
+        for (&f, t) in c.faces.iter().zip(&c.layout) {
+            face_page[f as usize] = p;
+            face_chart[f as usize] = ci as u32;
+            corner_uv[f as usize] = t.map(|q| ((q + shift) / size).as_vec2());
+        }
+    }
+    ChartAtlas {
+        pages,
+        face_page,
+        corner_uv,
+        face_chart,
+        charts: charts.len(),
+    }
+}
+
+/// Bakes every shader into page `page` of the atlas: one image per shader (opaque,
+/// sRGB-encoded like the shaders' colours). Deterministic for any thread count.
+pub fn bake_page(
+    atlas: &ChartAtlas,
+    page: usize,
+    mesh: &Mesh,
+    shaders: &[&dyn SurfaceShader],
+) -> Vec<image::RgbaImage> {
+    let [w, h] = atlas.pages[page];
+    let (wu, hu) = (w as usize, h as usize);
+    let size = DVec2::new(w as f64, h as f64);
+    let g = ATLAS_GUTTER as f64;
+    let faces: Vec<u32> = (0..atlas.face_page.len().min(mesh.triangles.len()) as u32)
+        .filter(|&f| atlas.face_page[f as usize] == page as u32)
+        .collect();
+    let tri = |f: u32| atlas.corner_uv[f as usize].map(|uv| uv.as_dvec2() * size);
+    // Ownership keys: face (inside) < 2^63 | distance bits << 32 | face (gutter).
+    let keys: Vec<AtomicU64> = (0..wu * hu).map(|_| AtomicU64::new(u64::MAX)).collect();
+    faces.par_iter().for_each(|&f| {
+        let t = tri(f);
+        let lo = t[0].min(t[1]).min(t[2]) - DVec2::splat(g + 0.5);
+        let hi = t[0].max(t[1]).max(t[2]) + DVec2::splat(g - 0.5);
+        let (x0, x1) = (lo.x.ceil().max(0.0) as i64, hi.x.floor().min(size.x - 1.0) as i64);
+        let (y0, y1) = (lo.y.ceil().max(0.0) as i64, hi.y.floor().min(size.y - 1.0) as i64);
+        let sign = area2(&t).signum();
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let c = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                let inside = sign != 0.0
+                    && (0..3).all(|k| {
+                        let (a, b) = (t[k], t[(k + 1) % 3]);
+                        sign * (b - a).perp_dot(c - a) >= 0.0
+                    });
+                let key = if inside {
+                    f as u64
+                } else {
+                    let b = nearest_barycentric(c, &t).as_dvec3();
+                    let p = t[0] * b.x + t[1] * b.y + t[2] * b.z;
+                    let d = (p - c).abs().max_element();
+                    if d > g {
+                        continue;
+                    }
+                    (1u64 << 63) | (((p - c).length() as f32).to_bits() as u64) << 32 | f as u64
+                };
+                keys[y as usize * wu + x as usize].fetch_min(key, Ordering::Relaxed);
+            }
+        }
+    });
+    let keys: Vec<u64> = keys.into_iter().map(|k| k.into_inner()).collect();
+    shaders
+        .iter()
+        .map(|shader| {
+            let mut px = vec![[0u8; 4]; wu * hu];
+            px.par_chunks_mut(wu).enumerate().for_each(|(y, row)| {
+                for (x, out) in row.iter_mut().enumerate() {
+                    let key = keys[y * wu + x];
+                    if key == u64::MAX {
+                        continue;
+                    }
+                    let f = (key & 0xffff_ffff) as u32;
+                    let c = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                    let col = shader.albedo(f as usize, nearest_barycentric(c, &tri(f)));
+                    *out = [quantize(col.x), quantize(col.y), quantize(col.z), 255];
+                }
+            });
+            dilate_rect(&mut px, wu, hu);
+            let mut sum = [0u64; 3];
+            let mut count = 0u64;
+            for p in &px {
+                if p[3] != 0 {
+                    for k in 0..3 {
+                        sum[k] += p[k] as u64;
+                    }
+                    count += 1;
+                }
+            }
+            let mean = if count > 0 {
+                sum.map(|s| ((s + count / 2) / count) as u8)
+            } else {
+                [128; 3]
+            };
+            let mut img = image::RgbaImage::new(w, h);
+            img.par_chunks_mut(4).zip(px.par_iter()).for_each(|(o, p)| {
+                let c = if p[3] != 0 { [p[0], p[1], p[2]] } else { mean };
+                o.copy_from_slice(&[c[0], c[1], c[2], 255]);
+            });
+            img
+        })
+        .collect()
+}
