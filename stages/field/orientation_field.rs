@@ -634,4 +634,61 @@ mod tests {
                 .contains("field.anchors[0]")
         );
     }
+
+    /// A half-torus arc: a tube of radius 0.5 around the semicircle of radius 3 from
+    /// (−3, 0, 0) over (0, 3, 0) to (3, 0, 0); ring `r` at arc angle ψ = π r / (rings − 1).
+    fn arc_tube(rings: u32, segments: u32) -> Mesh {
+        let mut p = Vec::new();
+        for r in 0..rings {
+            let psi = std::f32::consts::PI * r as f32 / (rings - 1) as f32;
+            let out = Vec3::new(-psi.cos_pure(), psi.sin_pure(), 0.0);
+            for s in 0..segments {
+                let phi = 2.0 * std::f32::consts::PI * s as f32 / segments as f32;
+                p.push(3.0 * out + 0.5 * (phi.cos_pure() * out + phi.sin_pure() * Vec3::Z));
+            }
+        }
+        let idx = |r: u32, s: u32| r * segments + s % segments;
+        let mut t = Vec::new();
+        for r in 0..rings - 1 {
+            for s in 0..segments {
+                t.push([idx(r, s), idx(r + 1, s), idx(r + 1, s + 1)]);
+                t.push([idx(r, s), idx(r + 1, s + 1), idx(r, s + 1)]);
+            }
+        }
+        Mesh::new(p, t)
+    }
+
+    /// The default field on a mesh big enough for the iterative solver (AMG-preconditioned
+    /// conjugate gradients): source and sink at the ends of the longest axis (x), so the
+    /// field must run along the arc from its −x end to its +x end. Projecting the x axis (the
+    /// fallback where a potential is flat) differs from that on the tube's top and bottom.
+    #[test]
+    fn the_default_field_on_a_big_mesh_flows_along_the_arc_from_source_to_sink() {
+        let (rings, segments) = (600, 180);
+        let m = arc_tube(rings, segments);
+        assert!(
+            m.vertex_count() >= crate::linalg::IterativeParams::default().min_unknowns,
+            "the mesh must take the iterative path"
+        );
+        let f = orientation_field(&m, &FieldParams::default()).unwrap();
+        check_unit_tangent(&m, &f);
+        let mut checked = 0;
+        for r in 0..rings {
+            let psi = std::f32::consts::PI * r as f32 / (rings - 1) as f32;
+            if !(0.25..=0.75).contains(&(psi / std::f32::consts::PI)) {
+                continue;
+            }
+            let along = Vec3::new(psi.sin_pure(), psi.cos_pure(), 0.0);
+            for s in 0..segments {
+                let v = (r * segments + s) as usize;
+                assert!(
+                    f[v].dot(along) > 0.95,
+                    "ring {r} segment {s}: field {:?}, arc direction {along:?}",
+                    f[v]
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 40_000);
+    }
 }

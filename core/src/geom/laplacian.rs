@@ -6,7 +6,7 @@
 //! definiteness that the Cholesky solver needs.
 
 use super::Mesh;
-use crate::linalg::{SolveError, SpdSolver};
+use crate::linalg::{IterativeParams, SolveError, solve_spd};
 
 /// Symmetric edge weights as (i, j, w) with i < j, summed over the triangles sharing the edge.
 pub fn cotan_weights(mesh: &Mesh) -> Vec<(u32, u32, f64)> {
@@ -31,10 +31,28 @@ pub fn cotan_weights(mesh: &Mesh) -> Vec<(u32, u32, f64)> {
             }
         }
     }
-    w.sort_by_key(|x| (x.0, x.1));
+    // Order by (i, j) as a stable sort would, in linear time: bucket by i (a counting sort
+    // keeps the push order), then sort each short bucket stably by j.
+    let n = mesh.vertex_count();
+    let mut start = vec![0usize; n + 1];
+    for e in &w {
+        start[e.0 as usize + 1] += 1;
+    }
+    for i in 0..n {
+        start[i + 1] += start[i];
+    }
+    let mut sorted = vec![(0u32, 0u32, 0.0f64); w.len()];
+    let mut next = start.clone();
+    for e in w {
+        sorted[next[e.0 as usize]] = e;
+        next[e.0 as usize] += 1;
+    }
+    for i in 0..n {
+        sorted[start[i]..start[i + 1]].sort_by_key(|x| x.1);
+    }
     // Sum duplicates in sorted order: a fixed order, so the sums are deterministic.
-    let mut out: Vec<(u32, u32, f64)> = Vec::with_capacity(w.len() / 2 + 1);
-    for (i, j, x) in w {
+    let mut out: Vec<(u32, u32, f64)> = Vec::with_capacity(sorted.len() / 2 + 1);
+    for (i, j, x) in sorted {
         match out.last_mut() {
             Some(last) if last.0 == i && last.1 == j => last.2 += x,
             _ => out.push((i, j, x)),
@@ -51,12 +69,24 @@ pub fn cotan_weights(mesh: &Mesh) -> Vec<(u32, u32, f64)> {
 /// Solves the Laplace equation on the mesh for `k` scalar channels with the given vertices
 /// fixed to the given values (Dirichlet conditions). Vertices in a connected component with
 /// no fixed vertex get 0 (a tiny regularization keeps the system positive definite there).
-/// Returns `values[v * k + c]`.
+/// Returns `values[v * k + c]`. Big meshes are solved iteratively to a relative residual of
+/// 1e-8 ([`IterativeParams::default`], [`crate::linalg::solve_spd`]).
 pub fn harmonic_interpolate(
     mesh: &Mesh,
     weights: &[(u32, u32, f64)],
     fixed: &[(u32, Vec<f64>)],
     k: usize,
+) -> Result<Vec<f64>, SolveError> {
+    harmonic_interpolate_with(mesh, weights, fixed, k, &IterativeParams::default())
+}
+
+/// [`harmonic_interpolate`] with a choice of when and how tightly to solve iteratively.
+pub fn harmonic_interpolate_with(
+    mesh: &Mesh,
+    weights: &[(u32, u32, f64)],
+    fixed: &[(u32, Vec<f64>)],
+    k: usize,
+    params: &IterativeParams,
 ) -> Result<Vec<f64>, SolveError> {
     let n = mesh.vertex_count();
     let mut fixed_value: Vec<Option<&[f64]>> = vec![None; n];
@@ -107,8 +137,7 @@ pub fn harmonic_interpolate(
     }
     let mut out = vec![0.0f64; n * k];
     if count > 0 {
-        let solver = SpdSolver::new(count, &triplets)?;
-        solver.solve(&mut rhs, k);
+        solve_spd(count, &triplets, &mut rhs, k, params)?;
     }
     for v in 0..n {
         for c in 0..k {

@@ -4,7 +4,6 @@
 //! accepting it silently (jump maps and graph matching colour what they are given).
 
 use super::Mesh;
-use std::collections::HashMap;
 
 /// What is odd about a mesh. All zero for a clean manifold mesh.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -83,12 +82,15 @@ impl MeshHealth {
     }
 }
 
-/// Counts what is odd about `mesh` (see [`MeshHealth`]).
+/// Counts what is odd about `mesh` (see [`MeshHealth`]). Faces and edges are counted by
+/// sorting their keys (in parallel; counts do not depend on the order) rather than hashing:
+/// on a 1.4M-triangle mesh this is several times faster.
 pub fn mesh_health(mesh: &Mesh) -> MeshHealth {
+    use rayon::prelude::*;
     let mut h = MeshHealth::default();
     let mut used = vec![false; mesh.vertex_count()];
-    let mut faces: HashMap<[u32; 3], ()> = HashMap::with_capacity(mesh.triangles.len());
-    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.triangles.len() * 2);
+    let mut faces: Vec<[u32; 3]> = Vec::with_capacity(mesh.triangles.len());
+    let mut edges: Vec<u64> = Vec::with_capacity(mesh.triangles.len() * 3);
     for (f, t) in mesh.triangles.iter().enumerate() {
         for &v in t {
             if let Some(u) = used.get_mut(v as usize) {
@@ -104,18 +106,24 @@ pub fn mesh_health(mesh: &Mesh) -> MeshHealth {
         }
         let mut key = *t;
         key.sort_unstable();
-        if faces.insert(key, ()).is_some() {
-            h.duplicate_faces += 1;
-        }
+        faces.push(key);
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
             if a != b {
-                *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+                edges.push(((a.min(b) as u64) << 32) | a.max(b) as u64);
             }
         }
     }
-    h.non_manifold_edges = edges.values().filter(|&&n| n > 2).count();
-    h.boundary_edges = edges.values().filter(|&&n| n == 1).count();
+    faces.par_sort_unstable();
+    h.duplicate_faces = faces.windows(2).filter(|w| w[0] == w[1]).count();
+    edges.par_sort_unstable();
+    for run in edges.chunk_by(|a, b| a == b) {
+        match run.len() {
+            1 => h.boundary_edges += 1,
+            2 => {}
+            _ => h.non_manifold_edges += 1,
+        }
+    }
     h.unreferenced_vertices = used.iter().filter(|&&u| !u).count();
     h
 }

@@ -1,5 +1,7 @@
 //! Sparse linear algebra: a symmetric positive definite solver that keeps its factorization
-//! (faer's sparse Cholesky), so several right-hand sides reuse one factorization.
+//! (faer's sparse Cholesky), so several right-hand sides reuse one factorization; and, for
+//! systems too big to factorize quickly, conjugate gradients preconditioned by algebraic
+//! multigrid ([`amg_pcg`]), chosen by size in [`solve_spd`].
 //!
 //! Always faer's *simplicial* factorization, never its supernodal one: the supernodal
 //! kernels pick SIMD code (AVX2 with FMA, or not) by the CPU at run time, so the last bits
@@ -15,6 +17,9 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMat, SymbolicSparseColMatRef, Triplet};
 use std::sync::Arc;
+
+pub mod amg_pcg;
+pub use amg_pcg::IterativeParams;
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveError {
@@ -126,6 +131,42 @@ impl SpdSolver {
     pub fn solve(&self, rhs: &mut [f64], k: usize) {
         self.factor.solve(rhs, k)
     }
+}
+
+/// Solves A X = B in place for `k` right-hand sides stored column-major in `rhs` (length
+/// n·k), A the SPD matrix given by triplets as in [`SpdSolver::new`] (only row ≥ col read).
+/// Below `params.min_unknowns` unknowns by the exact Cholesky factorization; from there on
+/// by AMG-preconditioned conjugate gradients ([`amg_pcg`]) to `params.tolerance`, falling
+/// back to the factorization if the iteration does not converge. A simplicial factorization
+/// of a 700 000-vertex mesh Laplacian takes 13 s of CPU; the iteration a few tenths.
+pub fn solve_spd(
+    n: usize,
+    triplets: &[(usize, usize, f64)],
+    rhs: &mut [f64],
+    k: usize,
+    params: &IterativeParams,
+) -> Result<(), SolveError> {
+    if n >= params.min_unknowns {
+        match amg_pcg::solve(n, triplets, rhs, k, params)? {
+            Some(report) => {
+                tracing::debug!(
+                    "AMG-PCG: levels {:?}, iterations {:?}, relative residuals {:?}",
+                    report.level_sizes,
+                    report.iterations,
+                    report.relative_residuals
+                );
+                return Ok(());
+            }
+            None => tracing::warn!(
+                "AMG-PCG did not reach a relative residual of {:e} in {} iterations on {n} unknowns; \
+                 factorizing instead",
+                params.tolerance,
+                params.max_iterations
+            ),
+        }
+    }
+    SpdSolver::new(n, triplets)?.solve(rhs, k);
+    Ok(())
 }
 
 /// A sparse symmetric positive definite matrix whose off-diagonal entries are fixed and
