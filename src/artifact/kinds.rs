@@ -1,6 +1,7 @@
 //! The formats every method uses: meshes, images and file bundles (what reconstruct nodes
 //! export).
 
+use rayon::prelude::*;
 use super::{Artifact, ArtifactError, ArtifactWriter, ContentHash, Format, Kind, ReadOwned};
 use crate::geom::Mesh;
 use crate::image::{Image, ImageView};
@@ -192,13 +193,27 @@ fn write_bundle(files: &[(String, Vec<u8>)]) -> Vec<u8> {
         })
         .collect();
     let mut w = ArtifactWriter::new(Kind::FileBundle, &entries);
-    for (name, bytes) in files {
-        // Level 3, single-threaded: deterministic bytes for a given zstd version (pinned by
-        // Cargo.lock).
-        let packed = zstd::bulk::compress(bytes, 3).expect("zstd compression of memory");
+    let packed: Vec<Vec<u8>> = files.par_iter().map(|(_, b)| compress_file(b)).collect();
+    for ((name, _), packed) in files.iter().zip(packed) {
         w = w.array_bytes(name, packed);
     }
     w.finish()
+}
+
+/// Files above this size are compressed in pieces of it, in parallel.
+const BUNDLE_PIECE: usize = 16 << 20;
+
+/// One file, zstd level 3: one frame, or for a big file one frame per [`BUNDLE_PIECE`]
+/// compressed in parallel and concatenated (zstd decodes concatenated frames as one stream, so
+/// readers do not change). Each frame is made single-threaded: the bytes depend only on the
+/// input and the zstd version (pinned by Cargo.lock), not on the thread count.
+fn compress_file(bytes: &[u8]) -> Vec<u8> {
+    let frame = |b: &[u8]| zstd::bulk::compress(b, 3).expect("zstd compression of memory");
+    if bytes.len() <= BUNDLE_PIECE {
+        return frame(bytes);
+    }
+    let frames: Vec<Vec<u8>> = bytes.par_chunks(BUNDLE_PIECE).map(frame).collect();
+    frames.concat()
 }
 
 fn bundle_file(a: &Artifact, entry: &BundleEntry) -> Result<Vec<u8>, ArtifactError> {
@@ -214,6 +229,25 @@ fn bundle_file(a: &Artifact, entry: &BundleEntry) -> Result<Vec<u8>, ArtifactErr
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn big_bundle_files_round_trip_through_pieces() {
+        // Three pieces (the last short) of bytes that are not periodic in the piece size.
+        let big: Vec<u8> = (0..2 * BUNDLE_PIECE + 12345)
+            .map(|i| ((i * 2_654_435_761usize) >> 13) as u8 ^ (i / 1000) as u8)
+            .collect();
+        let files = vec![("small.txt".to_string(), b"hi".to_vec()), ("big.bin".to_string(), big.clone())];
+        let a = Artifact::from_bytes(write_bundle(&files)).unwrap();
+        let view = Bundle::decode(&a).unwrap();
+        assert_eq!(view.entries.len(), 2);
+        assert_eq!(view.file(&view.entries[1]).unwrap(), big);
+        assert_eq!(view.file(&view.entries[0]).unwrap(), b"hi");
+        // More than one frame was written, and the same bytes with one thread.
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        assert_eq!(one.install(|| write_bundle(&files)), write_bundle(&files));
+        assert!(compress_file(&big).len() > 0);
+        assert_ne!(compress_file(&big), zstd::bulk::compress(&big, 3).unwrap());
+    }
 
     #[test]
     fn mesh_round_trips_with_colors() {

@@ -130,21 +130,6 @@ pub fn chart_layout(
     single: &[[Vec2; 3]],
 ) -> Vec<[Vec2; 3]> {
     use rayon::prelude::*;
-    if std::env::var_os("TEXSYN_DEBUG_CHARTS").is_some() {
-        let mut errs: Vec<f32> = Vec::new();
-        for t in triangles {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                if let Some(o) = param.offset(a, b) {
-                    let d = addresses[b as usize] - addresses[a as usize];
-                    errs.push((d - o).length() / o.length().max(1e-6));
-                }
-            }
-        }
-        errs.sort_by(|a, b| a.total_cmp(b));
-        let q = |f: f32| errs[((errs.len() - 1) as f32 * f) as usize];
-        eprintln!("relative edge error quantiles: 10% {} 50% {} 70% {} 80% {} 90% {} 95% {}", q(0.1), q(0.5), q(0.7), q(0.8), q(0.9), q(0.95));
-    }
     triangles
         .par_iter()
         .zip(single)

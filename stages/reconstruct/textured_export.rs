@@ -147,6 +147,8 @@ pub fn export_textured_mesh<S: SurfaceShader>(
     progress: &dyn Fn(f32),
 ) -> Result<Vec<(String, Vec<u8>)>, ExportError> {
     let mut files: Vec<(String, Vec<u8>)> = Vec::new();
+    let clock = std::time::Instant::now();
+    let lap = |what: &str| tracing::debug!("reconstruct: {what} at {:.3} s", clock.elapsed().as_secs_f64());
     let (w, h) = exemplar;
     let uv: Vec<[Vec2; 3]> = single_set
         .iter()
@@ -172,6 +174,7 @@ pub fn export_textured_mesh<S: SurfaceShader>(
         files.push((file_name(&s.name, &s.extension), s.file.to_vec()));
     }
     progress(0.05);
+    lap("textured.obj");
 
     let density = p.texel_density;
     let scaled: Vec<[Vec2; 3]> = layout.iter().map(|t| t.map(|q| q * density)).collect();
@@ -190,6 +193,7 @@ pub fn export_textured_mesh<S: SurfaceShader>(
             .join(", ")
     );
     progress(0.15);
+    lap("chart atlas");
     let frames = TangentFrames::new(mesh, single_set, &atlas.corner_uv);
     let mut materials: Vec<GlbMaterial> = Vec::with_capacity(pages);
     let mut baked_mtl = String::new();
@@ -241,6 +245,7 @@ pub fn export_textured_mesh<S: SurfaceShader>(
         baked_mtl.push_str(&write_mtl(&material.name, &page_maps));
         materials.push(material);
         progress(0.15 + 0.55 * (page + 1) as f32 / pages as f32);
+        lap("page baked and encoded");
     }
     let names: Vec<String> = materials.iter().map(|m| m.name.clone()).collect();
     // OBJ texture coordinates have v up.
@@ -261,11 +266,13 @@ pub fn export_textured_mesh<S: SurfaceShader>(
         .into_bytes(),
     ));
     files.push(("baked.mtl".into(), baked_mtl.into_bytes()));
+    lap("baked.obj");
     files.push((
         "textured.glb".into(),
         write_glb(&glb_mesh(mesh, &atlas, &frames, materials)),
     ));
     progress(0.8);
+    lap("textured.glb");
 
     if let Some(base) = surfaces.first() {
         let opts = ViewOptions {
@@ -276,6 +283,7 @@ pub fn export_textured_mesh<S: SurfaceShader>(
         let preview = render_views(mesh, &base.shader, &opts);
         files.push(("preview.png".into(), encode_png(&preview, false)));
     }
+    lap("preview");
     progress(1.0);
     Ok(files)
 }

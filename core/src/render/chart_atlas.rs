@@ -93,32 +93,6 @@ fn area2(t: &[DVec2; 3]) -> f64 {
     (t[1] - t[0]).perp_dot(t[2] - t[0])
 }
 
-/// Texel centres strictly inside the triangle, as (x, y) cell indices. Strict, so that two
-/// faces sharing an edge never both own a centre on it.
-fn inside_centres(t: &[DVec2; 3], mut each: impl FnMut(i64, i64) -> bool) -> bool {
-    let lo = t[0].min(t[1]).min(t[2]);
-    let hi = t[0].max(t[1]).max(t[2]);
-    let sign = area2(t).signum();
-    if sign == 0.0 {
-        return true;
-    }
-    let (x0, x1) = ((lo.x - 0.5).ceil() as i64, (hi.x - 0.5).floor() as i64);
-    let (y0, y1) = ((lo.y - 0.5).ceil() as i64, (hi.y - 0.5).floor() as i64);
-    for y in y0..=y1 {
-        for x in x0..=x1 {
-            let c = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-            let inside = (0..3).all(|k| {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                sign * (b - a).perp_dot(c - a) > 0.0
-            });
-            if inside && !each(x, y) {
-                return false;
-            }
-        }
-    }
-    true
-}
-
 /// Union-find with the smallest index as root (so roots do not depend on union order).
 struct Dsu(Vec<u32>);
 
@@ -175,71 +149,128 @@ fn edge_neighbours(mesh: &Mesh) -> Vec<[(u32, u8); 3]> {
     out
 }
 
-/// A chart being grown: its faces (with their chart-local layouts) and an occupancy grid.
+/// How close (texels, L∞ from a face) another face's texels must be continuous with it: a
+/// bilinear sample at a face's border reads texels up to one away, and mip levels further.
+const CLEARANCE: f64 = 1.5;
+/// How far apart (texels, at the face's own density) the surface points two faces give the
+/// same texel may be and still count as continuous.
+const CONTINUITY_TOLERANCE: f64 = 1.0;
+
+/// A chart being grown: an owner grid of texel centres (the face that contains the centre, or
+/// failing that a face within [`CLEARANCE`] of it), so that a new face can be checked against
+/// the faces already near it.
 struct Grower<'a> {
     mesh: &'a Mesh,
     /// Grid origin (texel cell of index 0) and size.
     origin: [i64; 2],
     size: [usize; 2],
-    owner: Vec<u32>,
+    /// Owner face and whether the centre is inside it.
+    owner: Vec<(u32, bool)>,
     /// Largest chart extent (texels) that fits a page with its margin.
     max_extent: f64,
     lo: DVec2,
     hi: DVec2,
 }
 
+/// The surface point a layout position stands for on face `f` (barycentrics extended beyond
+/// the triangle on its plane), and the face's density in texels per world unit.
+fn surface_point(mesh: &Mesh, f: u32, t: &[DVec2; 3], c: DVec2) -> Option<(glam::DVec3, f64)> {
+    let d = area2(t);
+    if d == 0.0 {
+        return None;
+    }
+    let b1 = (c - t[0]).perp_dot(t[2] - t[0]) / d;
+    let b2 = (t[1] - t[0]).perp_dot(c - t[0]) / d;
+    let tri = mesh.triangles[f as usize];
+    let p = tri.map(|v| mesh.positions[v as usize].as_dvec3());
+    let area3 = (p[1] - p[0]).cross(p[2] - p[0]).length();
+    if area3 == 0.0 {
+        return None;
+    }
+    let point = p[0] + (p[1] - p[0]) * b1 + (p[2] - p[0]) * b2;
+    Some((point, (d.abs() / area3).sqrt()))
+}
+
 impl<'a> Grower<'a> {
     fn new(mesh: &'a Mesh, lo: DVec2, hi: DVec2, max_extent: f64) -> Self {
-        let origin = [lo.x.floor() as i64 - 1, lo.y.floor() as i64 - 1];
+        let pad = CLEARANCE.ceil() as i64 + 1;
+        let origin = [lo.x.floor() as i64 - pad, lo.y.floor() as i64 - pad];
         let size = [
-            (hi.x.ceil() as i64 + 2 - origin[0]).max(1) as usize,
-            (hi.y.ceil() as i64 + 2 - origin[1]).max(1) as usize,
+            (hi.x.ceil() as i64 + pad + 1 - origin[0]).max(1) as usize,
+            (hi.y.ceil() as i64 + pad + 1 - origin[1]).max(1) as usize,
         ];
         Grower {
             mesh,
             origin,
             size,
-            owner: vec![u32::MAX; size[0] * size[1]],
+            owner: vec![(u32::MAX, false); size[0] * size[1]],
             max_extent,
             lo: DVec2::INFINITY,
             hi: DVec2::NEG_INFINITY,
         }
     }
 
-    fn shares_vertex(&self, f: u32, g: u32) -> bool {
-        let (a, b) = (self.mesh.triangles[f as usize], self.mesh.triangles[g as usize]);
-        a.iter().any(|v| b.contains(v))
-    }
-
-    /// Adds face `f` laid at `t` if it keeps the chart injective (as far as texel centres
-    /// tell) and within a page, or unconditionally if `force` (a chart's first face); returns
-    /// whether it was added.
-    fn try_add(&mut self, f: u32, t: &[DVec2; 3], force: bool) -> bool {
+    /// Adds face `f` laid at `t` if the texels within [`CLEARANCE`] of it that other faces
+    /// already hold show the same surface (no fold, no unrelated face alongside) and the chart
+    /// stays within a page, or unconditionally if `force` (a chart's first face); returns
+    /// whether it was added. `layouts` gives the layout of an owner face.
+    fn try_add(
+        &mut self,
+        f: u32,
+        t: &[DVec2; 3],
+        force: bool,
+        layouts: &dyn Fn(u32) -> [DVec2; 3],
+    ) -> bool {
         let lo = self.lo.min(t[0].min(t[1]).min(t[2]));
         let hi = self.hi.max(t[0].max(t[1]).max(t[2]));
         if !force && (hi - lo).max_element() > self.max_extent {
             return false;
         }
-        let mut cells = Vec::new();
-        let ok = inside_centres(t, |x, y| {
-            let (i, j) = (x - self.origin[0], y - self.origin[1]);
-            if i < 0 || j < 0 || i as usize >= self.size[0] || j as usize >= self.size[1] {
-                return force;
+        let sign = area2(t).signum();
+        let (blo, bhi) = (
+            t[0].min(t[1]).min(t[2]) - DVec2::splat(CLEARANCE + 0.5),
+            t[0].max(t[1]).max(t[2]) + DVec2::splat(CLEARANCE - 0.5),
+        );
+        let mut claims: Vec<(usize, bool)> = Vec::new();
+        for y in blo.y.ceil() as i64..=bhi.y.floor() as i64 {
+            for x in blo.x.ceil() as i64..=bhi.x.floor() as i64 {
+                let (i, j) = (x - self.origin[0], y - self.origin[1]);
+                if i < 0 || j < 0 || i as usize >= self.size[0] || j as usize >= self.size[1] {
+                    if force {
+                        continue;
+                    }
+                    return false;
+                }
+                let c = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                let inside = sign != 0.0
+                    && (0..3).all(|k| sign * (t[(k + 1) % 3] - t[k]).perp_dot(c - t[k]) > 0.0);
+                if !inside {
+                    let b = nearest_barycentric(c, t).as_dvec3();
+                    let q = t[0] * b.x + t[1] * b.y + t[2] * b.z;
+                    if (q - c).abs().max_element() > CLEARANCE {
+                        continue;
+                    }
+                }
+                let cell = j as usize * self.size[0] + i as usize;
+                let (o, o_inside) = self.owner[cell];
+                if o != u32::MAX && o != f && !force {
+                    let mine = surface_point(self.mesh, f, t, c);
+                    let theirs = surface_point(self.mesh, o, &layouts(o), c);
+                    if let (Some((p, density)), Some((q, _))) = (mine, theirs) {
+                        if (p - q).length() * density > CONTINUITY_TOLERANCE {
+                            return false;
+                        }
+                    }
+                }
+                if inside || (o == u32::MAX) || (!o_inside && inside) {
+                    claims.push((cell, inside));
+                }
             }
-            let cell = j as usize * self.size[0] + i as usize;
-            let o = self.owner[cell];
-            if !force && o != u32::MAX && o != f && !self.shares_vertex(o, f) {
-                return false;
-            }
-            cells.push(cell);
-            true
-        });
-        if !ok {
-            return false;
         }
-        for c in cells {
-            if self.owner[c] == u32::MAX {
-                self.owner[c] = f;
+        for (c, inside) in claims {
+            let (o, o_inside) = self.owner[c];
+            if o == u32::MAX || (inside && !o_inside) {
+                self.owner[c] = (f, inside);
             }
         }
         self.lo = lo;
@@ -295,15 +326,19 @@ fn grow_component(
     );
     let mut added: Vec<u32> = Vec::new();
     let mut chart_layout: Vec<[DVec2; 3]> = Vec::new();
+    // Where each face of the chart is laid (leaves differ from their own layout).
+    let mut leaf_layout: std::collections::HashMap<u32, [DVec2; 3]> = Default::default();
     let mut queued = std::collections::HashSet::new();
     let mut queue = VecDeque::from([faces[0]]);
     queued.insert(faces[0]);
     while let Some(f) = queue.pop_front() {
-        if !g.try_add(f, &layout[f as usize], added.is_empty()) {
+        let placed = |o: u32| layout[o as usize];
+        if !g.try_add(f, &layout[f as usize], added.is_empty(), &placed) {
             continue;
         }
         added.push(f);
         chart_layout.push(layout[f as usize]);
+        leaf_layout.insert(f, layout[f as usize]);
         for k in 0..3 {
             let (n, _) = neighbours[f as usize][k];
             if joins[f as usize][k] && member(n) && queued.insert(n) {
@@ -335,7 +370,8 @@ fn grow_component(
             let apex = theirs[(l as usize + 2) % 3];
             let side = |p: DVec2| ce.perp_dot(p - ca);
             let opp = t[(k as usize + 2) % 3];
-            if side(opp) * side(apex) >= 0.0 || !g.try_add(f, &t, false) {
+            let placed = |o: u32| leaf_layout.get(&o).copied().unwrap_or(layout[o as usize]);
+            if side(opp) * side(apex) >= 0.0 || !g.try_add(f, &t, false, &placed) {
                 return None;
             }
             Some(t)
@@ -344,6 +380,7 @@ fn grow_component(
             Some(t) => {
                 added.push(f);
                 chart_layout.push(t);
+                leaf_layout.insert(f, t);
             }
             None => singles.push(f),
         }
@@ -679,4 +716,109 @@ pub fn bake_page(
             img
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::views::tests::uv_sphere;
+    use glam::Vec3;
+
+    /// Colour = a smooth function of the surface point: what a correct bake reproduces at any
+    /// point of any face, whatever chart or page it lands in.
+    struct PositionColour<'a>(&'a Mesh);
+    impl SurfaceShader for PositionColour<'_> {
+        fn albedo(&self, face: usize, bary: Vec3) -> Vec3 {
+            let t = self.0.triangles[face];
+            let p = self.0.positions[t[0] as usize] * bary.x
+                + self.0.positions[t[1] as usize] * bary.y
+                + self.0.positions[t[2] as usize] * bary.z;
+            p * 0.5 + Vec3::splat(0.5)
+        }
+    }
+
+    fn sample(img: &image::RgbaImage, uv: Vec2) -> Vec3 {
+        let (w, h) = (img.width() as f32, img.height() as f32);
+        let (x, y) = (uv.x * w - 0.5, uv.y * h - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let px = |i: f32, j: f32| {
+            let p = img.get_pixel(i.clamp(0.0, w - 1.0) as u32, j.clamp(0.0, h - 1.0) as u32);
+            Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32) / 255.0
+        };
+        (px(x0, y0) * (1.0 - fx) + px(x0 + 1.0, y0) * fx) * (1.0 - fy)
+            + (px(x0, y0 + 1.0) * (1.0 - fx) + px(x0 + 1.0, y0 + 1.0) * fx) * fy
+    }
+
+    /// A layout where neighbouring faces agree (the sphere's own (u, v) unrolled, in texels)
+    /// except along one meridian, plus per-face shapes there.
+    fn sphere_layout(mesh: &Mesh, texels: f32) -> Vec<[Vec2; 3]> {
+        mesh.triangles
+            .iter()
+            .map(|t| {
+                let p = t.map(|v| mesh.positions[v as usize]);
+                let ang = p.map(|q| q.z.atan2(q.x));
+                let wraps = ang.iter().any(|a| *a > 2.5) && ang.iter().any(|a| *a < -2.5);
+                let pole = p.iter().any(|q| q.y.abs() > 0.999);
+                if wraps || pole {
+                    // Its true shape, alone.
+                    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+                    let x = e1.normalize();
+                    let y = e1.cross(e2).cross(x).normalize();
+                    [Vec2::ZERO, Vec2::new(e1.dot(x), 0.0), Vec2::new(e2.dot(x), e2.dot(y))]
+                        .map(|q| q * texels)
+                } else {
+                    std::array::from_fn(|k| Vec2::new(ang[k], p[k].y.acos()) * texels)
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_face_bakes_to_its_own_colours_on_any_page() {
+        let (mesh, _) = uv_sphere(16, 32);
+        let mesh = Mesh::new(mesh.positions, mesh.triangles);
+        let layout = sphere_layout(&mesh, 40.0);
+        // Small pages: the charts spread over several.
+        let atlas = build_chart_atlas(&mesh, &layout, 96).unwrap();
+        assert!(atlas.pages.len() > 2, "{:?}", atlas.pages);
+        assert!(atlas.charts < mesh.triangles.len() / 4, "{} charts", atlas.charts);
+        let shader = PositionColour(&mesh);
+        let pages: Vec<image::RgbaImage> = (0..atlas.pages.len())
+            .map(|p| bake_page(&atlas, p, &mesh, &[&shader]).remove(0))
+            .collect();
+        let mut worst: f32 = 0.0;
+        for f in 0..mesh.triangles.len() {
+            for bary in [Vec3::splat(1.0 / 3.0), Vec3::new(0.6, 0.2, 0.2), Vec3::new(0.1, 0.45, 0.45)] {
+                let uv = atlas.corner_uv[f];
+                let at = uv[0] * bary.x + uv[1] * bary.y + uv[2] * bary.z;
+                let got = sample(&pages[atlas.face_page[f] as usize], at);
+                let want = shader.albedo(f, bary);
+                worst = worst.max((got - want).abs().max_element());
+            }
+        }
+        assert!(worst < 0.04, "worst colour error {worst}");
+    }
+
+    #[test]
+    fn bakes_do_not_depend_on_the_thread_count() {
+        let (mesh, _) = uv_sphere(12, 24);
+        let mesh = Mesh::new(mesh.positions, mesh.triangles);
+        let layout = sphere_layout(&mesh, 30.0);
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| {
+                    let atlas = build_chart_atlas(&mesh, &layout, 128).unwrap();
+                    let shader = PositionColour(&mesh);
+                    let pages: Vec<Vec<u8>> = (0..atlas.pages.len())
+                        .map(|p| bake_page(&atlas, p, &mesh, &[&shader]).remove(0).into_raw())
+                        .collect();
+                    (atlas, pages)
+                })
+        };
+        assert_eq!(run(1), run(3));
+    }
 }
