@@ -239,6 +239,31 @@ fn mib(b: Option<u64>) -> String {
         .unwrap_or_else(|| "?".into())
 }
 
+/// Fitted exponent and last step of a series of seconds, when it is long enough to fit.
+fn time_fit(sizes: &[f64], secs: &[Option<f64>]) -> (Option<f64>, String) {
+    let all: Option<Vec<f64>> = secs.iter().copied().collect();
+    let Some(s) = all.filter(|s| s.iter().any(|&v| v >= SHORTEST_FITTED)) else {
+        return (None, "–".into());
+    };
+    let (a, b) = (s[s.len() - 2], s[s.len() - 1]);
+    let step = if a > 0.0 {
+        format!("{:.1}", b / a)
+    } else {
+        "–".into()
+    };
+    (power_law_exponent(sizes, &s), step)
+}
+
+fn cells(v: &[Option<f64>], digits: usize) -> String {
+    v.iter()
+        .map(|s| {
+            s.map(|s| format!("{s:.digits$}"))
+                .unwrap_or_else(|| "?".into())
+        })
+        .collect::<Vec<_>>()
+        .join(" | ")
+}
+
 /// One method's table: a row per stage and one for the whole run.
 fn method_table(m: &Measured) -> String {
     let sizes: Vec<f64> = m.case.sizes.iter().map(|s| s.n).collect();
@@ -250,48 +275,41 @@ fn method_table(m: &Measured) -> String {
         m.case.unit,
         m.load.join(", ")
     );
-    t += "| stage | ";
-    t += &labels
-        .iter()
-        .map(|l| format!("s @ {l}"))
-        .collect::<Vec<_>>()
-        .join(" | ");
-    t += " | time exponent | last step × | ";
-    t += &labels
-        .iter()
-        .map(|l| format!("MiB @ {l}"))
-        .collect::<Vec<_>>()
-        .join(" | ");
-    t += " | memory exponent |\n|---|";
-    t += &"---:|".repeat(2 * labels.len() + 3);
-    t += "\n";
-    let row = |name: &str, secs: Vec<Option<f64>>, peaks: Vec<Option<u64>>| -> String {
-        let all_secs: Option<Vec<f64>> = secs.iter().copied().collect();
-        let k_time = all_secs
-            .as_ref()
-            .filter(|s| s.iter().any(|&v| v >= SHORTEST_FITTED))
-            .and_then(|s| power_law_exponent(&sizes, s));
-        let step = all_secs
-            .as_ref()
-            .filter(|s| s.iter().any(|&v| v >= SHORTEST_FITTED))
-            .and_then(|s| {
-                let (a, b) = (s[s.len() - 2], s[s.len() - 1]);
-                (a > 0.0).then(|| format!("{:.1}", b / a))
-            })
-            .unwrap_or_else(|| "–".into());
-        let mem: Option<Vec<f64>> = peaks.iter().map(|p| p.map(|b| b as f64)).collect();
-        let k_mem = mem.and_then(|m| power_law_exponent(&sizes, &m));
-        let mut r = format!("| {name} | ");
-        r += &secs
+    let heads = |what: &str| {
+        labels
             .iter()
-            .map(|s| s.map(|s| format!("{s:.2}")).unwrap_or_else(|| "?".into()))
+            .map(|l| format!("{what} @ {l}"))
             .collect::<Vec<_>>()
-            .join(" | ");
-        r += &format!(" | {} | {step} | ", fmt_exponent(k_time));
-        r += &peaks.iter().map(|&p| mib(p)).collect::<Vec<_>>().join(" | ");
-        r += &format!(" | {} |\n", fmt_exponent(k_mem));
-        r
+            .join(" | ")
     };
+    t += &format!(
+        "| stage | {} | {} | wall exponent | CPU exponent | CPU last step × | {} | memory exponent |\n|---|",
+        heads("wall s"),
+        heads("CPU s"),
+        heads("MiB")
+    );
+    t += &"---:|".repeat(3 * labels.len() + 4);
+    t += "\n";
+    let row =
+        |name: &str, wall: Vec<Option<f64>>, cpu: Vec<Option<f64>>, peaks: Vec<Option<u64>>| {
+            let (k_wall, _) = time_fit(&sizes, &wall);
+            let (k_cpu, step) = time_fit(&sizes, &cpu);
+            let mem: Option<Vec<f64>> = peaks.iter().map(|p| p.map(|b| b as f64)).collect();
+            let k_mem = mem.and_then(|m| power_law_exponent(&sizes, &m));
+            format!(
+                "| {name} | {} | {} | {} | {} | {step} | {} | {} |\n",
+                cells(&wall, 2),
+                cells(&cpu, 2),
+                fmt_exponent(k_wall),
+                fmt_exponent(k_cpu),
+                peaks
+                    .iter()
+                    .map(|&p| mib(p))
+                    .collect::<Vec<_>>()
+                    .join(" | "),
+                fmt_exponent(k_mem)
+            )
+        };
     // Stages in the first run's order (every run has the same DAG).
     for node in &m.reports[0].nodes {
         let per: Vec<_> = m
@@ -302,14 +320,19 @@ fn method_table(m: &Measured) -> String {
         t += &row(
             &node.node,
             per.iter().map(|n| n.map(|n| n.seconds)).collect(),
+            per.iter().map(|n| n.and_then(|n| n.cpu_seconds)).collect(),
             per.iter()
                 .map(|n| n.and_then(|n| n.peak_memory_bytes))
                 .collect(),
         );
     }
     t += &row(
-        "**whole run** (wall, process peak)",
+        "**whole run** (wall; CPU of the stages; process peak)",
         m.reports.iter().map(|r| Some(r.seconds)).collect(),
+        m.reports
+            .iter()
+            .map(|r| r.nodes.iter().map(|n| n.cpu_seconds).sum::<Option<f64>>())
+            .collect(),
         m.reports.iter().map(|r| r.peak_memory_bytes).collect(),
     );
     t
@@ -346,11 +369,13 @@ pub fn section(repo: &Path, data: Option<&Path>) -> Result<String> {
         "`TEXSYN_BENCH_ONLY=scaling cargo run --release -- bench` ({:.0} s in all here, {cores} \
 cores shared with other jobs). Each method runs as `texsyn run CONFIG --report FILE --set …` at \
 three sizes, each 4× the last, from an empty cache; the seconds and peak resident memory per stage \
-are the run report's (the process's peak while the stage ran, so it includes what earlier stages \
-left resident). The exponent k is the least-squares slope of log time (or log memory) against log \
-size: a run of size n takes about t(n₀)·(n/n₀)^k. \"Last step ×\" is the largest size's time over \
-the middle one's (4 for linear cost). No time exponent is fitted to stages under {SHORTEST_FITTED} s \
-at every size.\n",
+are the run report's: wall seconds, CPU seconds of the whole process (all threads) while the stage \
+ran, and the process's peak resident memory while it ran (so it includes what earlier stages left \
+resident). On a shared machine the CPU seconds are the steadier measure of a stage's work. The \
+exponent k is the least-squares slope of log time (or log memory) against log size: a run of size n \
+takes about t(n₀)·(n/n₀)^k. \"CPU last step ×\" is the largest size's CPU seconds over the middle \
+one's (4 for linear cost). No time exponent is fitted to stages under {SHORTEST_FITTED} s at every \
+size.\n",
         started.elapsed().as_secs_f64()
     );
     for m in &measured {
