@@ -227,8 +227,11 @@ fn selected(method: &str) -> bool {
     }
 }
 
-/// Times under this are mostly process noise: no exponent is fitted to them.
+/// Times under this are mostly process noise: no exponent is fitted to a stage this short at
+/// every size.
 const SHORTEST_FITTED: f64 = 0.05;
+/// Nor to one with a time under two ticks of the CPU clock (1/100 s) at any size.
+const SHORTEST_POINT: f64 = 0.02;
 
 fn fmt_exponent(k: Option<f64>) -> String {
     k.map(|k| format!("{k:.2}")).unwrap_or_else(|| "–".into())
@@ -242,16 +245,13 @@ fn mib(b: Option<u64>) -> String {
 /// Fitted exponent and last step of a series of seconds, when it is long enough to fit.
 fn time_fit(sizes: &[f64], secs: &[Option<f64>]) -> (Option<f64>, String) {
     let all: Option<Vec<f64>> = secs.iter().copied().collect();
-    let Some(s) = all.filter(|s| s.iter().any(|&v| v >= SHORTEST_FITTED)) else {
+    let Some(s) = all.filter(|s| {
+        s.iter().any(|&v| v >= SHORTEST_FITTED) && s.iter().all(|&v| v >= SHORTEST_POINT)
+    }) else {
         return (None, "–".into());
     };
     let (a, b) = (s[s.len() - 2], s[s.len() - 1]);
-    let step = if a > 0.0 {
-        format!("{:.1}", b / a)
-    } else {
-        "–".into()
-    };
-    (power_law_exponent(sizes, &s), step)
+    (power_law_exponent(sizes, &s), format!("{:.1}", b / a))
 }
 
 fn cells(v: &[Option<f64>], digits: usize) -> String {
@@ -375,7 +375,7 @@ resident). On a shared machine the CPU seconds are the steadier measure of a sta
 exponent k is the least-squares slope of log time (or log memory) against log size: a run of size n \
 takes about t(n₀)·(n/n₀)^k. \"CPU last step ×\" is the largest size's CPU seconds over the middle \
 one's (4 for linear cost). No time exponent is fitted to stages under {SHORTEST_FITTED} s at every \
-size.\n",
+size or under {SHORTEST_POINT} s at any.\n",
         started.elapsed().as_secs_f64()
     );
     for m in &measured {
