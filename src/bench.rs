@@ -19,6 +19,7 @@ use std::time::Instant;
 mod big_jump_maps;
 mod feature_aligned;
 mod graph_matching;
+pub mod scaling;
 mod score;
 mod sweep;
 
@@ -152,6 +153,10 @@ pub fn run_all(runs: usize) -> Result<String> {
         }
         notes.push("TEXSYN_BENCH_ONLY=big_jump_maps: only the 1.4M-triangle jump-map row".into());
         return Ok(table(runs, &rows, "", &notes));
+    }
+    if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("scaling") {
+        // Its own section (the tables of how cost grows), without the goal table.
+        return scaling::section(repo, data.as_deref());
     }
     if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("feature_aligned") {
         feature_aligned::rows(repo, runs, &mut rows)?;

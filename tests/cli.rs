@@ -335,6 +335,69 @@ fn synth2d_writes_an_image_of_the_requested_size() {
     assert_eq!((img.width(), img.height()), (100, 40));
 }
 
+/// CPU seconds (user + system) of this process's finished children.
+fn children_cpu_seconds() -> f64 {
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: getrusage writes into the struct we pass; RUSAGE_CHILDREN is valid.
+    assert_eq!(unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut u) }, 0);
+    let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    s(u.ru_utime) + s(u.ru_stime)
+}
+
+/// `cpu_seconds`: each node that ran says the CPU its process spent on it, a difference of the
+/// process's CPU clock: all nodes together are at most the child's whole CPU time (measured
+/// here by getrusage; the process's running total per node would add up to several times it);
+/// cached nodes say nothing.
+#[test]
+fn run_json_reports_the_cpu_each_node_that_ran_took() {
+    let t = tempfile::tempdir().unwrap();
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/demo.toml");
+    let run = || {
+        let o = common::cli::succeeded(common::cli::texsyn(
+            &[
+                "run",
+                demo.to_str().unwrap(),
+                "--cache",
+                "c",
+                "--out",
+                "o",
+                "--json",
+            ],
+            t.path(),
+        ));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    let before = children_cpu_seconds();
+    let first = run();
+    // Other tests' children may end meanwhile: this is an upper bound of the run's CPU.
+    let child_cpu = children_cpu_seconds() - before;
+    let nodes = first["nodes"].as_array().unwrap();
+    let cpu: Vec<f64> = nodes
+        .iter()
+        .map(|n| {
+            n["cpu_seconds"]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{}: ran, but no cpu_seconds", n["node"]))
+        })
+        .collect();
+    assert!(cpu.iter().all(|&c| c >= 0.0), "{cpu:?}");
+    let total: f64 = cpu.iter().sum();
+    // The nodes' clock ticks are 1/100 s: a tick per node of slack.
+    assert!(
+        total > 0.0 && total <= child_cpu + 0.01 * cpu.len() as f64,
+        "nodes {total} CPU s, the whole process {child_cpu} CPU s"
+    );
+    let again = run();
+    for n in again["nodes"].as_array().unwrap() {
+        assert_eq!(n["status"], "cached");
+        assert!(
+            n.get("cpu_seconds").is_none(),
+            "{}: cached, yet cpu_seconds",
+            n["node"]
+        );
+    }
+}
+
 #[test]
 fn run_json_reports_each_nodes_own_peak_memory() {
     let t = tempfile::tempdir().unwrap();

@@ -74,6 +74,10 @@ pub struct NodeReport {
     /// The process's peak resident memory while this node computed (Linux; nodes that ran).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub peak_memory_bytes: Option<u64>,
+    /// CPU seconds of the whole process (all threads) while this node computed (Linux; nodes
+    /// that ran): on a shared machine, a steadier measure of the node's work than `seconds`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cpu_seconds: Option<f64>,
 }
 
 #[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
@@ -120,6 +124,8 @@ struct State {
     pieces: Option<PieceReport>,
     /// Peak resident memory of the process while the node computed (nodes that ran).
     peak: Option<u64>,
+    /// CPU seconds of the process while the node computed (nodes that ran).
+    cpu: Option<f64>,
 }
 
 struct Executor<'a> {
@@ -239,6 +245,7 @@ impl State {
             content_hash: self.artifact.content_hash().to_hex(),
             pieces: self.pieces,
             peak_memory_bytes: self.peak,
+            cpu_seconds: self.cpu,
         }
     }
 }
@@ -446,6 +453,7 @@ impl Executor<'_> {
                         seconds: start.elapsed().as_secs_f64(),
                         pieces: None,
                         peak: None,
+                        cpu: None,
                     });
                     true
                 }
@@ -492,6 +500,7 @@ impl Executor<'_> {
                     seconds: start.elapsed().as_secs_f64(),
                     pieces: None,
                     peak: None,
+                    cpu: None,
                 });
                 Ok(())
             }
@@ -569,6 +578,7 @@ impl Executor<'_> {
         let progress = Progress::new(self.opts.progress, &node.name);
         let input_hashes = self.input_hashes(i);
         let peak;
+        let cpu_before = process_cpu_seconds();
         let (result, pieces) = {
             let inputs = node
                 .inputs
@@ -603,6 +613,7 @@ impl Executor<'_> {
                 .then_some(PieceReport { computed, reused });
             (result, pieces)
         };
+        let cpu = cpu_before.zip(process_cpu_seconds()).map(|(a, b)| b - a);
         progress.finish();
         if let Err(NodeError::Sharded { share, .. }) = result {
             self.stopped[i] = Stop::Sharded;
@@ -641,9 +652,23 @@ impl Executor<'_> {
             seconds: start.elapsed().as_secs_f64(),
             pieces,
             peak,
+            cpu,
         });
         Ok(())
     }
+}
+
+/// User + system CPU seconds of this process, all threads (`/proc/self/stat`, Linux; in clock
+/// ticks of 1/100 s, the USER_HZ of every Linux architecture). None elsewhere.
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (in parentheses, which may hold spaces): state is the
+    // first, utime the 12th, stime the 13th.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let mut f = rest.split_whitespace().skip(11);
+    let utime: u64 = f.next()?.parse().ok()?;
+    let stime: u64 = f.next()?.parse().ok()?;
+    Some((utime + stime) as f64 / 100.0)
 }
 
 /// What `run` would do, without doing it (like `make -n`).

@@ -484,6 +484,9 @@ pub struct ReportedNode {
     pub pieces: Option<ReportedPieces>,
     #[serde(default)]
     pub peak_memory_bytes: Option<u64>,
+    /// CPU seconds of the process while the node ran (reports written since it was added).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_seconds: Option<f64>,
 }
 
 #[derive(Debug, Clone, Copy, Deserialize, Serialize)]

@@ -248,13 +248,19 @@ pub fn grid_mesh(gi: &GeometryImage, positions: &[Vec3]) -> (Mesh, Vec<u32>) {
     }
     let mut vertex_of = vec![u32::MAX; n * n];
     let mut samples = Vec::new();
+    // Vertices standing for more than one sample (mates, on the border).
+    let mut merged = Vec::new();
     for k in 0..n * n {
         let r = rep(k) as usize;
         if vertex_of[r] == u32::MAX {
             vertex_of[r] = samples.len() as u32;
             samples.push(r as u32);
+            merged.push(false);
         }
         vertex_of[k] = vertex_of[r];
+        if r != k {
+            merged[vertex_of[r] as usize] = true;
+        }
     }
     let mut tris = Vec::with_capacity(2 * (n - 1) * (n - 1));
     for i in 0..n - 1 {
@@ -284,13 +290,21 @@ pub fn grid_mesh(gi: &GeometryImage, positions: &[Vec3]) -> (Mesh, Vec<u32>) {
             }
         }
     }
+    // Only a triangle with a merged vertex can come out twice: three distinct samples are three
+    // corners of one cell, and a cell's two triangles differ. Counting those alone keeps the
+    // count proportional to the border, not the whole grid (at 1025² the map of all 2 M
+    // triangles was a fifth of the reconstruct stage, and grew faster than linearly).
+    let on_merged = |t: &[u32; 3]| t.iter().any(|&v| merged[v as usize]);
     let mut count: std::collections::HashMap<[u32; 3], u32> = Default::default();
-    for t in &tris {
+    for t in tris.iter().filter(|t| on_merged(t)) {
         let mut key = *t;
         key.sort_unstable();
         *count.entry(key).or_default() += 1;
     }
     tris.retain(|t| {
+        if !on_merged(t) {
+            return true;
+        }
         let mut key = *t;
         key.sort_unstable();
         count[&key] == 1
