@@ -203,15 +203,17 @@ fn write_bundle(files: &[(String, Vec<u8>)]) -> Vec<u8> {
 /// Files above this size are compressed in pieces of it, in parallel.
 const BUNDLE_PIECE: usize = 16 << 20;
 
-/// One file, zstd level 3: one frame, or for a big file one frame per [`BUNDLE_PIECE`]
-/// compressed in parallel and concatenated (zstd decodes concatenated frames as one stream, so
-/// readers do not change). Each frame is made single-threaded: the bytes depend only on the
-/// input and the zstd version (pinned by Cargo.lock), not on the thread count.
+/// One file, zstd level 3: one frame, or for a big file one frame per [`BUNDLE_PIECE`] at
+/// level 1 (a million-triangle mesh's exports are hundreds of megabytes: level 3 took longer
+/// than making them) compressed in parallel and concatenated (zstd decodes concatenated frames
+/// as one stream, so readers do not change). Each frame is made single-threaded: the bytes
+/// depend only on the input and the zstd version (pinned by Cargo.lock), not on the thread
+/// count.
 fn compress_file(bytes: &[u8]) -> Vec<u8> {
-    let frame = |b: &[u8]| zstd::bulk::compress(b, 3).expect("zstd compression of memory");
     if bytes.len() <= BUNDLE_PIECE {
-        return frame(bytes);
+        return zstd::bulk::compress(bytes, 3).expect("zstd compression of memory");
     }
+    let frame = |b: &[u8]| zstd::bulk::compress(b, 1).expect("zstd compression of memory");
     let frames: Vec<Vec<u8>> = bytes.par_chunks(BUNDLE_PIECE).map(frame).collect();
     frames.concat()
 }

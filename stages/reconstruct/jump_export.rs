@@ -116,7 +116,7 @@ pub fn export_jump_textured(
 /// neighbour exactly (§4.2.5's continuation), and the other edges of a patch agree up to the
 /// offsets' own inconsistency, while a jump lands at least the jump map's exclusion radius
 /// away.
-const CONTINUITY_TEXELS: f32 = 0.5;
+const CONTINUITY_TEXELS: f32 = 0.1;
 const CONTINUITY_FRACTION: f32 = 0.25;
 
 /// The chart layout of the atlas: a face inside a patch of the walk (every edge's address

@@ -172,26 +172,32 @@ struct Grower<'a> {
     hi: DVec2,
 }
 
-/// The surface point a layout position stands for on face `f` (barycentrics extended beyond
-/// the triangle on its plane), and the face's density in texels per world unit.
-fn surface_point(mesh: &Mesh, f: u32, t: &[DVec2; 3], c: DVec2) -> Option<(glam::DVec3, f64)> {
-    let d = area2(t);
-    if d == 0.0 {
-        return None;
-    }
-    let b1 = (c - t[0]).perp_dot(t[2] - t[0]) / d;
-    let b2 = (t[1] - t[0]).perp_dot(c - t[0]) / d;
+/// The surface point of face `f` nearest (in the layout) to the layout position `c`, how far
+/// from `c` that is in texels, and the face's density in texels per world unit.
+fn nearest_surface_point(
+    mesh: &Mesh,
+    f: u32,
+    t: &[DVec2; 3],
+    c: DVec2,
+) -> Option<(glam::DVec3, f64, f64)> {
     let tri = mesh.triangles[f as usize];
     let p = tri.map(|v| mesh.positions[v as usize].as_dvec3());
     let area3 = (p[1] - p[0]).cross(p[2] - p[0]).length();
-    if area3 == 0.0 {
+    let d = area2(t).abs();
+    if area3 == 0.0 || d == 0.0 {
         return None;
     }
-    let point = p[0] + (p[1] - p[0]) * b1 + (p[2] - p[0]) * b2;
-    Some((point, (d.abs() / area3).sqrt()))
+    let b = nearest_barycentric(c, t).as_dvec3();
+    let q = t[0] * b.x + t[1] * b.y + t[2] * b.z;
+    Some((p[0] * b.x + p[1] * b.y + p[2] * b.z, (q - c).length(), (d / area3).sqrt()))
 }
 
 impl<'a> Grower<'a> {
+    fn shares_vertex(&self, f: u32, g: u32) -> bool {
+        let (a, b) = (self.mesh.triangles[f as usize], self.mesh.triangles[g as usize]);
+        a.iter().any(|v| b.contains(v))
+    }
+
     fn new(mesh: &'a Mesh, lo: DVec2, hi: DVec2, max_extent: f64) -> Self {
         let pad = CLEARANCE.ceil() as i64 + 1;
         let origin = [lo.x.floor() as i64 - pad, lo.y.floor() as i64 - pad];
@@ -244,20 +250,19 @@ impl<'a> Grower<'a> {
                 let c = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
                 let inside = sign != 0.0
                     && (0..3).all(|k| sign * (t[(k + 1) % 3] - t[k]).perp_dot(c - t[k]) > 0.0);
-                if !inside {
-                    let b = nearest_barycentric(c, t).as_dvec3();
-                    let q = t[0] * b.x + t[1] * b.y + t[2] * b.z;
-                    if (q - c).abs().max_element() > CLEARANCE {
-                        continue;
-                    }
-                }
+                // Every centre of the box grown by the clearance counts as near (a little
+                // more than the L∞ clearance at the corners; cheaper than the exact distance).
                 let cell = j as usize * self.size[0] + i as usize;
                 let (o, o_inside) = self.owner[cell];
-                if o != u32::MAX && o != f && !force {
-                    let mine = surface_point(self.mesh, f, t, c);
-                    let theirs = surface_point(self.mesh, o, &layouts(o), c);
-                    if let (Some((p, density)), Some((q, _))) = (mine, theirs) {
-                        if (p - q).length() * density > CONTINUITY_TOLERANCE {
+                // Faces that share a vertex meet continuously wherever their layouts agree,
+                // which is what joined them; any other owner is checked.
+                if o != u32::MAX && o != f && !force && !self.shares_vertex(o, f) {
+                    // Continuous faces put surface points about as far apart as the texel
+                    // is from each face; an unrelated face's are far apart.
+                    let mine = nearest_surface_point(self.mesh, f, t, c);
+                    let theirs = nearest_surface_point(self.mesh, o, &layouts(o), c);
+                    if let (Some((p, dp, density)), Some((q, dq, _))) = (mine, theirs) {
+                        if (p - q).length() * density > dp + dq + CONTINUITY_TOLERANCE {
                             return false;
                         }
                     }
@@ -298,6 +303,7 @@ fn grow_component(
     faces: &[u32],
     leaves: &[(u32, u8)],
     max_extent: f64,
+    queued: &[std::sync::atomic::AtomicBool],
 ) -> (Vec<Chart>, Vec<u32>) {
     let mut lo = DVec2::INFINITY;
     let mut hi = DVec2::NEG_INFINITY;
@@ -326,11 +332,11 @@ fn grow_component(
     );
     let mut added: Vec<u32> = Vec::new();
     let mut chart_layout: Vec<[DVec2; 3]> = Vec::new();
-    // Where each face of the chart is laid (leaves differ from their own layout).
+    // Where each leaf of the chart is laid (other faces lie at their own layout).
     let mut leaf_layout: std::collections::HashMap<u32, [DVec2; 3]> = Default::default();
-    let mut queued = std::collections::HashSet::new();
+    // Components are disjoint, so the flags of their faces are touched by one task each.
     let mut queue = VecDeque::from([faces[0]]);
-    queued.insert(faces[0]);
+    queued[faces[0] as usize].store(true, Ordering::Relaxed);
     while let Some(f) = queue.pop_front() {
         let placed = |o: u32| layout[o as usize];
         if !g.try_add(f, &layout[f as usize], added.is_empty(), &placed) {
@@ -338,10 +344,9 @@ fn grow_component(
         }
         added.push(f);
         chart_layout.push(layout[f as usize]);
-        leaf_layout.insert(f, layout[f as usize]);
         for k in 0..3 {
             let (n, _) = neighbours[f as usize][k];
-            if joins[f as usize][k] && member(n) && queued.insert(n) {
+            if joins[f as usize][k] && member(n) && !queued[n as usize].swap(true, Ordering::Relaxed) {
                 queue.push_back(n);
             }
         }
@@ -428,8 +433,11 @@ pub fn build_chart_atlas(
     {
         return Err(ChartAtlasError::NotFinite { face });
     }
+    let clock = std::time::Instant::now();
+    let lap = |what: &str| tracing::debug!("chart atlas: {what} at {:.3} s", clock.elapsed().as_secs_f64());
     let lay: Vec<[DVec2; 3]> = layout.par_iter().map(|t| t.map(|p| p.as_dvec2())).collect();
     let neighbours = edge_neighbours(mesh);
+    lap("edge neighbours");
     let sign = |f: usize| area2(&lay[f]).signum();
     // Joined edges: the neighbour has the same two points and the same orientation.
     let joins: Vec<[bool; 3]> = (0..faces)
@@ -506,6 +514,8 @@ pub fn build_chart_atlas(
         }
         let groups: Vec<(u32, Vec<u32>)> = groups.into_iter().collect();
         let member = |f: u32| in_pool[f as usize];
+        let queued: Vec<std::sync::atomic::AtomicBool> =
+            (0..faces).map(|_| std::sync::atomic::AtomicBool::new(false)).collect();
         let results: Vec<(Vec<Chart>, Vec<u32>)> = groups
             .par_iter()
             .map(|(root, fs)| {
@@ -515,7 +525,9 @@ pub fn build_chart_atlas(
                 } else {
                     &empty
                 };
-                grow_component(mesh, &lay, &joins, &neighbours, &member, fs, lv, max_extent)
+                grow_component(
+                    mesh, &lay, &joins, &neighbours, &member, fs, lv, max_extent, &queued,
+                )
             })
             .collect();
         let mut next = Vec::new();
@@ -524,6 +536,7 @@ pub fn build_chart_atlas(
             next.extend(left);
         }
         next.sort_unstable();
+        lap(&format!("a round: {} charts so far, {} faces left", charts.len(), next.len()));
         pool = next;
         first_round = false;
     }
