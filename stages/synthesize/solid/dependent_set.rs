@@ -106,11 +106,7 @@ pub fn dependent_set(
     }
     let total = schedule.corrections();
     assert!(total < 255, "at most 254 corrections per level");
-    let tlo = targets.iter().fold(IVec3::MAX, |a, t| a.min(t.0));
-    let thi = targets.iter().fold(IVec3::MIN, |a, t| a.max(t.1));
-    let grow = IVec3::splat(schedule.impact_distance(reach));
-    let lo = (tlo - grow).max(IVec3::ZERO);
-    let hi = (thi + grow).min(domain);
+    let (lo, hi) = dependent_box(schedule, domain, &targets, reach).expect("targets in the domain");
     let n = hi - lo;
     let mut grid = NeedGrid {
         lo,
@@ -223,6 +219,174 @@ pub fn dependent_set(
         });
     }
     grid
+}
+
+/// The box `[lo, hi)` that [`dependent_set`] allocates one byte per voxel of (its targets'
+/// bounding box grown by the impact distance, within the domain), or `None` when no target
+/// lies in the domain: what a caller bounds to bound that function's memory.
+pub fn dependent_box(
+    schedule: &Schedule,
+    domain: IVec3,
+    targets: &[(IVec3, IVec3)],
+    reach: i32,
+) -> Option<(IVec3, IVec3)> {
+    let clipped = targets
+        .iter()
+        .map(|&(lo, hi)| (lo.max(IVec3::ZERO), hi.min(domain)))
+        .filter(|(lo, hi)| hi.cmpgt(*lo).all());
+    let (tlo, thi) = clipped.fold((IVec3::MAX, IVec3::MIN), |(a, b), t| (a.min(t.0), b.max(t.1)));
+    if tlo.x > thi.x {
+        return None;
+    }
+    let grow = IVec3::splat(schedule.impact_distance(reach));
+    Some(((tlo - grow).max(IVec3::ZERO), (thi + grow).min(domain)))
+}
+
+const CHUNK_BITS: i32 = 3;
+/// Side of the chunks of a [`ChunkedNeed`] (and of the working values that follow it).
+pub const CHUNK: i32 = 1 << CHUNK_BITS;
+/// Voxels per chunk.
+pub const CHUNK_VOXELS: usize = (CHUNK * CHUNK * CHUNK) as usize;
+const NO_CHUNK: u32 = u32::MAX;
+
+/// A [`NeedGrid`] kept only in the `8³` chunks (aligned with the grid's box) that hold a
+/// needed voxel. The dense grid spans the bounding box of the dependent set, most of it empty
+/// for a surface; this keeps about one byte per needed voxel, so the dependent sets of every
+/// batch of every level can wait, planned, while the levels below are synthesized.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChunkedNeed {
+    /// The dense grid's box `[lo, lo + n)`; chunk `c` starts at `lo + 8c`.
+    pub lo: IVec3,
+    pub n: IVec3,
+    /// Chunks per axis.
+    cn: IVec3,
+    /// Per chunk of the box, its index in `origins`, or `NO_CHUNK`.
+    table: Vec<u32>,
+    /// First voxel of each kept chunk, z-major then y then x.
+    origins: Vec<IVec3>,
+    /// `CHUNK_VOXELS` bytes per kept chunk, x fastest; 0 outside the box.
+    bytes: Vec<u8>,
+}
+
+impl ChunkedNeed {
+    pub fn from_grid(g: &NeedGrid) -> ChunkedNeed {
+        let cn = (g.n + (CHUNK - 1)) / CHUNK;
+        let cn = cn.max(IVec3::ZERO);
+        // Kept chunks per chunk slab (z), in parallel, then concatenated in order.
+        let slabs: Vec<Vec<(IVec3, Vec<u8>)>> = (0..cn.z)
+            .into_par_iter()
+            .map(|cz| {
+                let mut out = Vec::new();
+                for cy in 0..cn.y {
+                    for cx in 0..cn.x {
+                        let c = IVec3::new(cx, cy, cz);
+                        let mut buf = vec![0u8; CHUNK_VOXELS];
+                        let mut any = false;
+                        let base = c * CHUNK;
+                        let w = (g.n.x - base.x).min(CHUNK) as usize;
+                        for z in 0..CHUNK.min(g.n.z - base.z) {
+                            for y in 0..CHUNK.min(g.n.y - base.y) {
+                                let i = g.index(g.lo + base + IVec3::new(0, y, z));
+                                let row = &g.need[i..i + w];
+                                any |= row.iter().any(|&b| b > 0);
+                                let o = ((z * CHUNK + y) * CHUNK) as usize;
+                                buf[o..o + w].copy_from_slice(row);
+                            }
+                        }
+                        if any {
+                            out.push((g.lo + base, buf));
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        let kept: usize = slabs.iter().map(Vec::len).sum();
+        let mut table = vec![NO_CHUNK; (cn.x * cn.y * cn.z) as usize];
+        let mut origins = Vec::with_capacity(kept);
+        let mut bytes = Vec::with_capacity(kept * CHUNK_VOXELS);
+        for (origin, buf) in slabs.into_iter().flatten() {
+            let c = (origin - g.lo) / CHUNK;
+            table[((c.z * cn.y + c.y) * cn.x + c.x) as usize] = origins.len() as u32;
+            origins.push(origin);
+            bytes.extend_from_slice(&buf);
+        }
+        ChunkedNeed {
+            lo: g.lo,
+            n: g.n,
+            cn,
+            table,
+            origins,
+            bytes,
+        }
+    }
+
+    /// The kept chunks' first voxels (chunk `k`'s voxels are slots `k·512 ..`).
+    pub fn origins(&self) -> &[IVec3] {
+        &self.origins
+    }
+
+    /// The needed-version bytes of kept chunk `k`, x fastest.
+    pub fn chunk(&self, k: usize) -> &[u8] {
+        &self.bytes[k * CHUNK_VOXELS..(k + 1) * CHUNK_VOXELS]
+    }
+
+    /// Voxels of the kept chunks: what working values over this set take room for.
+    pub fn chunk_voxels(&self) -> u64 {
+        self.bytes.len() as u64
+    }
+
+    /// The slot of `p` among the kept chunks' voxels, if its chunk is kept.
+    #[inline]
+    pub fn slot(&self, p: IVec3) -> Option<usize> {
+        let q = p - self.lo;
+        if !(q.cmpge(IVec3::ZERO).all() && q.cmplt(self.n).all()) {
+            return None;
+        }
+        let c = q / CHUNK;
+        let t = self.table[((c.z * self.cn.y + c.y) * self.cn.x + c.x) as usize];
+        if t == NO_CHUNK {
+            return None;
+        }
+        let m = q - c * CHUNK;
+        Some(t as usize * CHUNK_VOXELS + ((m.z * CHUNK + m.y) * CHUNK + m.x) as usize)
+    }
+
+    /// The slot of `p`, which must be in a kept chunk (the working values' reads: every
+    /// voxel a correction reads is in the dependent set).
+    #[inline]
+    pub fn slot_in_set(&self, p: IVec3) -> usize {
+        let q = p - self.lo;
+        debug_assert!(q.cmpge(IVec3::ZERO).all() && q.cmplt(self.n).all());
+        let c = q >> CHUNK_BITS;
+        let t = self.table[((c.z * self.cn.y + c.y) * self.cn.x + c.x) as usize];
+        debug_assert!(t != NO_CHUNK, "read of a voxel outside the dependent set");
+        let m = q & (CHUNK - 1);
+        t as usize * CHUNK_VOXELS + ((m.z * CHUNK + m.y) * CHUNK + m.x) as usize
+    }
+
+    /// The byte of `p` (0 where not needed).
+    #[inline]
+    pub fn get(&self, p: IVec3) -> u8 {
+        self.slot(p).map_or(0, |s| self.bytes[s])
+    }
+
+    /// Voxels synthesized (upsampled at least).
+    pub fn voxels(&self) -> u64 {
+        self.bytes.iter().filter(|&&x| x > 0).count() as u64
+    }
+
+    /// Corrections performed.
+    pub fn corrections(&self) -> u64 {
+        self.bytes.iter().map(|&x| x.saturating_sub(1) as u64).sum()
+    }
+}
+
+/// The offset of slot `m` of a chunk from the chunk's first voxel.
+#[inline]
+pub fn chunk_local(m: usize) -> IVec3 {
+    let m = m as i32;
+    IVec3::new(m % CHUNK, (m / CHUNK) % CHUNK, m / (CHUNK * CHUNK))
 }
 
 /// Dilation of a 0/1 mask over the box `[lo, lo + n)` by the cube of radius `r`; with
