@@ -149,7 +149,8 @@ fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused()
         err.contains("extract.size = 256") && err.contains("fits"),
         "{err}"
     );
-    // And for a solid's resolution (a surface request: 16 bytes per voxel of the cube bound).
+    // And for a solid's resolution (a surface request: 16 bytes per voxel of the cube bound up
+    // to the batch bound, and half a byte per voxel for the volume's masks).
     let out = texsyn(
         &[
             "run",

@@ -122,6 +122,8 @@ pub fn dependent_set(
         }
     }
     let stages = &schedule.stages;
+    // The dilation's two buffers, reused by every step (one allocation, not six per step).
+    let (mut mask, mut tmp) = (Vec::new(), Vec::new());
     for step in schedule.steps().iter().rev() {
         let threshold = 1 + step.version_after() as u8;
         // Active voxels whose new version is needed, and their bounding box.
@@ -158,7 +160,8 @@ pub fn dependent_set(
         let rhi = (ahi + IVec3::splat(reach + 1)).min(grid.lo + grid.n);
         let rn = rhi - rlo;
         let len = rn.x as usize * rn.y as usize * rn.z as usize;
-        let mut mask = vec![0u8; len];
+        mask.resize(len, 0);
+        // Both bits: the sources of the plain dilation (bit 0) and of the one within cells.
         mask.par_chunks_mut(rn.x as usize)
             .enumerate()
             .for_each(|(row, out)| {
@@ -167,16 +170,12 @@ pub fn dependent_set(
                 let start = grid.index(IVec3::new(rlo.x, y, z));
                 for (x, o) in out.iter_mut().enumerate() {
                     let p = IVec3::new(rlo.x + x as i32, y, z);
-                    *o = (grid.need[start + x] >= threshold && step.active(p)) as u8;
+                    *o = 3 * (grid.need[start + x] >= threshold && step.active(p)) as u8;
                 }
             });
         let barriers = &stages[step.stage].window.barriers;
-        let all = dilate(&mask, rlo, rn, reach, &[]);
-        let same_cell = if barriers.is_empty() {
-            None
-        } else {
-            Some(dilate(&mask, rlo, rn, reach, barriers))
-        };
+        dilate_both(&mut mask, &mut tmp, rlo, rn, reach, barriers);
+        let dilated = &mask;
         let latest: [u8; 8] = std::array::from_fn(|c| 1 + step.latest_for_class(c as u8) as u8);
         let start = 1 + step.stage_start as u8;
         let (gn, glo) = (grid.n, grid.lo);
@@ -203,10 +202,11 @@ pub fn dependent_set(
             let z = rlo.z + (r / rn.y as usize) as i32;
             let base = r * rn.x as usize;
             for (x, need) in row.iter_mut().enumerate() {
-                if all[base + x] == 0 {
+                let d = dilated[base + x];
+                if d & 1 == 0 {
                     continue;
                 }
-                let in_cell = same_cell.as_ref().is_none_or(|m| m[base + x] != 0);
+                let in_cell = barriers.is_empty() || d & 2 != 0;
                 let v = if in_cell {
                     latest[class_of(IVec3::new(rlo.x + x as i32, y, z)) as usize]
                 } else {
@@ -392,89 +392,114 @@ pub fn chunk_local(m: usize) -> IVec3 {
 /// Dilation of a 0/1 mask over the box `[lo, lo + n)` by the cube of radius `r`; with
 /// barriers, only within the cell (of every lattice) of each source voxel.
 pub fn dilate(mask: &[u8], lo: IVec3, n: IVec3, r: i32, barriers: &[Cells]) -> Vec<u8> {
+    let mut buf: Vec<u8> = mask.iter().map(|&m| 3 * (m != 0) as u8).collect();
+    dilate_both(&mut buf, &mut Vec::new(), lo, n, r, barriers);
+    let bit = if barriers.is_empty() { 1 } else { 2 };
+    buf.iter().map(|&d| (d & bit != 0) as u8).collect()
+}
+
+/// Two dilations of one box at once, in place in `buf` (`tmp` is scratch, resized): bit 0
+/// by the cube of radius `r`, bit 1 by the same cube cut to the cell of every lattice in
+/// `barriers` (the cell's window lies inside the cube's, so one pass over a window serves
+/// both). Each axis in turn ORs the window's rows or slabs; no buffer but the two is
+/// allocated, so a step of [`dependent_set`] costs two bytes per voxel of its region.
+pub fn dilate_both(
+    buf: &mut Vec<u8>,
+    tmp: &mut Vec<u8>,
+    lo: IVec3,
+    n: IVec3,
+    r: i32,
+    barriers: &[Cells],
+) {
     let dims = [n.x as usize, n.y as usize, n.z as usize];
-    let mut cur = mask.to_vec();
+    tmp.resize(buf.len(), 0);
     for axis in 0..3 {
         let origin = lo[axis];
-        let len = dims[axis];
-        // Window [a, b] (inclusive, local) per position along the axis.
-        let bounds: Vec<(usize, usize)> = (0..len as i32)
+        let len = dims[axis] as i32;
+        // Windows [a, b] (inclusive, local) per position along the axis: the cube's, then
+        // the cell's.
+        let bounds: Vec<[(usize, usize); 2]> = (0..len)
             .map(|i| {
                 let g = origin + i;
+                let clip = |a: i32, b: i32| {
+                    let a = (a - origin).max(0) as usize;
+                    let b = (b - origin).min(len - 1).max(0) as usize;
+                    (a, b)
+                };
                 let (mut a, mut b) = (g - r, g + r);
+                let all = clip(a, b);
                 for c in barriers {
                     let s = c.start(g);
                     a = a.max(s);
                     b = b.min(s + c.size - 1);
                 }
-                let a = (a - origin).max(0) as usize;
-                let b = ((b - origin).min(len as i32 - 1)).max(0) as usize;
-                (a, b)
+                [all, clip(a, b)]
             })
             .collect();
-        cur = dilate_axis(&cur, dims, axis, &bounds);
+        dilate_axis(buf, tmp, dims, axis, &bounds);
+        std::mem::swap(buf, tmp);
     }
-    cur
 }
 
-fn dilate_axis(src: &[u8], d: [usize; 3], axis: usize, bounds: &[(usize, usize)]) -> Vec<u8> {
-    let [nx, ny, nz] = d;
-    let mut out = vec![0u8; src.len()];
+/// `out` (bit 0) = OR of `src`'s bit 0 over the first window of each position along `axis`,
+/// (bit 1) = OR of bit 1 over the second.
+fn dilate_axis(
+    src: &[u8],
+    out: &mut [u8],
+    d: [usize; 3],
+    axis: usize,
+    bounds: &[[(usize, usize); 2]],
+) {
+    let [nx, ny, _] = d;
+    // ORs the window of rows (or slabs) `j` of `len` bytes at `at(j)` into `o`.
+    let or_window = |o: &mut [u8], [(a, b), (ca, cb)]: [(usize, usize); 2], at: &dyn Fn(usize) -> usize| {
+        o.fill(0);
+        if a > b {
+            return;
+        }
+        for j in a..=b {
+            let m = if ca <= j && j <= cb { 3 } else { 1 };
+            let s = &src[at(j)..at(j) + o.len()];
+            for (x, y) in o.iter_mut().zip(s) {
+                *x |= y & m;
+            }
+        }
+    };
     match axis {
         0 => {
             out.par_chunks_mut(nx)
                 .zip(src.par_chunks(nx))
-                .for_each(|(o, s)| {
-                    let mut pre = vec![0u32; nx + 1];
-                    for i in 0..nx {
-                        pre[i + 1] = pre[i] + s[i] as u32;
-                    }
-                    for (i, x) in o.iter_mut().enumerate() {
-                        let (a, b) = bounds[i];
-                        *x = (a <= b && pre[b + 1] > pre[a]) as u8;
-                    }
-                });
+                .for_each_init(
+                    || (vec![0u32; nx + 1], vec![0u32; nx + 1]),
+                    |(p0, p1), (o, s)| {
+                        for i in 0..nx {
+                            p0[i + 1] = p0[i] + (s[i] & 1) as u32;
+                            p1[i + 1] = p1[i] + (s[i] >> 1 & 1) as u32;
+                        }
+                        for (i, x) in o.iter_mut().enumerate() {
+                            let [(a, b), (ca, cb)] = bounds[i];
+                            let all = a <= b && p0[b + 1] > p0[a];
+                            let cell = ca <= cb && p1[cb + 1] > p1[ca];
+                            *x = all as u8 | (cell as u8) << 1;
+                        }
+                    },
+                );
         }
         1 => {
             let slab = nx * ny;
-            out.par_chunks_mut(slab)
-                .zip(src.par_chunks(slab))
-                .for_each(|(o, s)| {
-                    let mut pre = vec![0u32; (ny + 1) * nx];
-                    for y in 0..ny {
-                        for x in 0..nx {
-                            pre[(y + 1) * nx + x] = pre[y * nx + x] + s[y * nx + x] as u32;
-                        }
-                    }
-                    for y in 0..ny {
-                        let (a, b) = bounds[y];
-                        for x in 0..nx {
-                            o[y * nx + x] =
-                                (a <= b && pre[(b + 1) * nx + x] > pre[a * nx + x]) as u8;
-                        }
-                    }
-                });
-        }
-        _ => {
-            let slab = nx * ny;
-            let mut pre = vec![0u32; (nz + 1) * slab];
-            for z in 0..nz {
-                let (done, rest) = pre.split_at_mut((z + 1) * slab);
-                let prev = &done[z * slab..];
-                let next = &mut rest[..slab];
-                for i in 0..slab {
-                    next[i] = prev[i] + src[z * slab + i] as u32;
-                }
-            }
             out.par_chunks_mut(slab).enumerate().for_each(|(z, o)| {
-                let (a, b) = bounds[z];
-                for i in 0..slab {
-                    o[i] = (a <= b && pre[(b + 1) * slab + i] > pre[a * slab + i]) as u8;
+                for (y, row) in o.chunks_mut(nx).enumerate() {
+                    or_window(row, bounds[y], &|j| z * slab + j * nx);
                 }
             });
         }
+        _ => {
+            let slab = nx * ny;
+            out.par_chunks_mut(slab)
+                .enumerate()
+                .for_each(|(z, o)| or_window(o, bounds[z], &|j| j * slab));
+        }
     }
-    out
 }
 
 #[cfg(test)]
