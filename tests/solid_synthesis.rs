@@ -364,10 +364,13 @@ fn batches_bound_the_working_set_and_leave_every_brick_unchanged() {
     assert_eq!(all_bricks(&boxed, &store), all_bricks(&s, &whole));
 }
 
+/// Bricks by (level, coordinates).
+type Bricks = std::collections::HashMap<(u32, [i32; 3]), std::sync::Arc<Brick>>;
+
 /// A store that keeps its bricks only until released, and records how many levels it held.
 #[derive(Default)]
 struct ReleasingStore {
-    map: std::sync::Mutex<std::collections::HashMap<(u32, [i32; 3]), std::sync::Arc<Brick>>>,
+    map: std::sync::Mutex<Bricks>,
     most_levels: std::sync::atomic::AtomicUsize,
     released: std::sync::Mutex<Vec<u32>>,
 }
@@ -402,9 +405,7 @@ fn a_level_is_released_once_its_finer_level_is_done() {
     s.synthesize(&req, &store).unwrap();
     assert_eq!(*store.released.lock().unwrap(), vec![1, 2]);
     assert_eq!(
-        store
-            .most_levels
-            .load(std::sync::atomic::Ordering::Relaxed),
+        store.most_levels.load(std::sync::atomic::Ordering::Relaxed),
         2
     );
     let reference = MemoryBrickStore::new();

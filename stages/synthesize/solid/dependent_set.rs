@@ -234,7 +234,9 @@ pub fn dependent_box(
         .iter()
         .map(|&(lo, hi)| (lo.max(IVec3::ZERO), hi.min(domain)))
         .filter(|(lo, hi)| hi.cmpgt(*lo).all());
-    let (tlo, thi) = clipped.fold((IVec3::MAX, IVec3::MIN), |(a, b), t| (a.min(t.0), b.max(t.1)));
+    let (tlo, thi) = clipped.fold((IVec3::MAX, IVec3::MIN), |(a, b), t| {
+        (a.min(t.0), b.max(t.1))
+    });
     if tlo.x > thi.x {
         return None;
     }
@@ -452,19 +454,20 @@ fn dilate_axis(
 ) {
     let [nx, ny, _] = d;
     // ORs the window of rows (or slabs) `j` of `len` bytes at `at(j)` into `o`.
-    let or_window = |o: &mut [u8], [(a, b), (ca, cb)]: [(usize, usize); 2], at: &dyn Fn(usize) -> usize| {
-        o.fill(0);
-        if a > b {
-            return;
-        }
-        for j in a..=b {
-            let m = if ca <= j && j <= cb { 3 } else { 1 };
-            let s = &src[at(j)..at(j) + o.len()];
-            for (x, y) in o.iter_mut().zip(s) {
-                *x |= y & m;
+    let or_window =
+        |o: &mut [u8], [(a, b), (ca, cb)]: [(usize, usize); 2], at: &dyn Fn(usize) -> usize| {
+            o.fill(0);
+            if a > b {
+                return;
             }
-        }
-    };
+            for j in a..=b {
+                let m = if ca <= j && j <= cb { 3 } else { 1 };
+                let s = &src[at(j)..at(j) + o.len()];
+                for (x, y) in o.iter_mut().zip(s) {
+                    *x |= y & m;
+                }
+            }
+        };
     match axis {
         0 => {
             out.par_chunks_mut(nx)

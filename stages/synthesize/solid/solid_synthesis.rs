@@ -1213,7 +1213,8 @@ impl<'a> SolidSynthesis<'a> {
                     })?;
                     parents.bricks.insert(b, brick);
                 }
-                let (bricks, comparisons) = self.run_level(li, &batch.need, &parents, &batch.bricks);
+                let (bricks, comparisons) =
+                    self.run_level(li, &batch.need, &parents, &batch.bricks);
                 drop(parents);
                 for (b, brick) in batch.bricks.iter().zip(bricks) {
                     store.put(level, *b, Arc::new(brick));
