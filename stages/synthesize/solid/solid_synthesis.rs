@@ -75,8 +75,18 @@
 //! - On coarse levels the paper integrates the field along the neighbourhood's directions; here
 //!   every level samples with the centre voxel's frame (the paper's fine-level choice).
 //! - Working values live in 8³ chunks allocated only where the dependent set is; the
-//!   dependency bytes themselves are dense over the bounding box of a level's dependent set
-//!   (one byte per voxel), which bounds the request size in practice (a 512³ box is 128 MB).
+//!   dependency bytes are worked out densely over the bounding box of a batch's dependent set
+//!   (one byte per voxel, two more while dilating) and then kept in the same chunks.
+//!
+//! # Memory
+//!
+//! A level's missing bricks are synthesized in batches ([`BatchLimits`]): what is resident at
+//! once is one batch's dense box while it is planned, or one batch's working values (48 bytes
+//! per working voxel) while it is synthesized, plus the chunked plans of all batches (about a
+//! byte per working voxel) and the bricks of two levels (12 bytes per brick voxel; a level is
+//! released to the store once the next finer level is done). None of it grows with the
+//! volume beyond the bricks the request needs; at 1024 voxels the cow's surface fits in
+//! about 1 GB (BENCHMARKS.md).
 //! - The dependency stencil is the cube of radius `r = ⌊N_h √2 s_max + ½⌋` (`⌊N_h √2 s_max⌋ + 1`
 //!   with trilinear sampling), or the exact extent for a constant field (see
 //!   [`stencil_reach`]); the paper's `D = ⌈N√2⌉`.
