@@ -238,9 +238,9 @@ pub(crate) fn check_variant_memory(
 /// volume's voxel masks and their prefix sums are dense over the volume's box (at most
 /// `resolution³` voxels). A box request keeps its finest bricks (12 bytes a voxel) and needs
 /// about 16 bytes per voxel of that cube bound and 180 MB besides (the exemplar analysis);
-/// a section needs about 2 bytes per voxel and 80 MB. Measured (solid_trivial, elephant):
-/// surface 119 MB at 128, 272 MB at 256, 523 MB at 384; section 105 MB at 256, 163 MB at
-/// 384. The elephant's box fills about half its cube, so the cube bound stays within 2× for
+/// a section needs about half a byte per voxel and 48 MB (since its dependent sets are kept in
+/// chunks with no per-voxel lists: 72 MB measured at 384, 163 MB before). Measured
+/// (solid_trivial, elephant): surface 119 MB at 128, 272 MB at 256, 523 MB at 384. The elephant's box fills about half its cube, so the cube bound stays within 2× for
 /// slim and cubic shapes alike.
 ///
 /// A surface request synthesizes each level in batches whose working set is bounded
@@ -256,7 +256,7 @@ pub(crate) fn check_solid_memory(
 ) -> Result<(), MethodError> {
     use crate::stages::parameterize::volume_embedding::Request;
     let estimate: fn(u64) -> u64 = match request {
-        Request::Section { .. } => |r| 2 * r * r * r + (80 << 20),
+        Request::Section { .. } => |r| r * r * r / 2 + (48 << 20),
         Request::Box { .. } => |r| 16 * r * r * r + (180 << 20),
         Request::Surface => |r| (16 * r * r * r).min(1_200 << 20) + r * r * r / 2 + (180 << 20),
     };
