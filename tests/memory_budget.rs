@@ -31,8 +31,8 @@ fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused()
     // Runs in order of increasing peak, so the children's maximum is each run's own.
     let cases: [(&[&str], u64); 4] = [
         (
-            // A solid section: dense masks over the volume's box, 2 bytes per voxel of the
-            // cube bound (163 MB measured at 384).
+            // A solid section: dense masks over the volume's box, half a byte per voxel of the
+            // cube bound (72 MB measured at 384).
             &[
                 "run",
                 "configs/solid_trivial.toml",
@@ -41,7 +41,7 @@ fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused()
                 "--set",
                 "parameterize.request={kind=\"section\",point=[0.0,0.0,0.0],normal=[0.0,0.0,1.0]}",
             ],
-            2 * 384 * 384 * 384 + (80 << 20),
+            384 * 384 * 384 / 2 + (48 << 20),
         ),
         (
             &[
@@ -149,7 +149,8 @@ fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused()
         err.contains("extract.size = 256") && err.contains("fits"),
         "{err}"
     );
-    // And for a solid's resolution (a surface request: 16 bytes per voxel of the cube bound).
+    // And for a solid's resolution (a surface request: 16 bytes per voxel of the cube bound up
+    // to the batch bound, and half a byte per voxel for the volume's masks).
     let out = texsyn(
         &[
             "run",

@@ -14,8 +14,11 @@ use texsyn::random::counter_hash;
 use texsyn::stages::analyse_exemplar::candidate_triples::{
     AnalysisError, CandidateParams, SolidAnalysis, SolidAnalysisRef, Triple, analyse,
 };
+use texsyn::stages::synthesize::solid::dependent_set::{ChunkedNeed, dependent_set};
+use texsyn::stages::synthesize::solid::history_window::Schedule;
 use texsyn::stages::synthesize::solid::solid_synthesis::{
-    Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis, VoxelRequest,
+    BatchLimits, Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis,
+    VoxelRequest,
 };
 
 fn crop(img: &Image, x0: u32, y0: u32, w: u32, h: u32) -> Image {
@@ -291,6 +294,150 @@ fn voxels_are_the_same_whatever_else_was_requested_and_on_any_thread_count() {
         .map(|v| s.triple_at(&only_a, 3, v).unwrap())
         .collect();
     assert!(distinct.len() > 200, "{}", distinct.len());
+}
+
+/// A level split into batches (to bound the working memory) gives every brick, at every
+/// level, the bytes of the level done at once, on any thread count, and no batch's working
+/// values exceed the limit (unless one brick alone does).
+#[test]
+fn batches_bound_the_working_set_and_leave_every_brick_unchanged() {
+    let (_, a) = small();
+    let vol = cube(64);
+    let field = rotated_field(&vol, Quat::from_rotation_y(0.3));
+    let s = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
+    let req = VoxelRequest::plane(&vol, Vec3::splat(32.0), Vec3::new(0.3, 0.2, 1.0));
+    let whole = MemoryBrickStore::new();
+    let r_whole = s.synthesize(&req, &whole).unwrap();
+    let finest = r_whole.levels.len() - 1;
+    assert!(r_whole.levels.iter().all(|l| l.batches == 1));
+    // One brick's dependent set alone, at the finest level: the least a limit can hold.
+    let needed = &s.bricks_needed(&req)[finest];
+    let one = needed[needed.len() / 2];
+    let (lo, hi) = s.brick_box(one);
+    let single = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params())
+        .unwrap()
+        .with_batch_limits(BatchLimits {
+            box_voxels: u64::MAX,
+            chunk_voxels: u64::MAX,
+        });
+    let one_brick = single
+        .synthesize(&VoxelRequest::from_box(lo, hi), &MemoryBrickStore::new())
+        .unwrap();
+    let least = one_brick.levels[finest].largest_batch_voxels;
+    let limit = (r_whole.levels[finest].largest_batch_voxels / 3).max(2 * least);
+    assert!(limit < r_whole.levels[finest].largest_batch_voxels);
+    let limits = BatchLimits {
+        box_voxels: u64::MAX,
+        chunk_voxels: limit,
+    };
+    let batched = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params())
+        .unwrap()
+        .with_batch_limits(limits);
+    for threads in [1, 2] {
+        let store = MemoryBrickStore::new();
+        let r = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| batched.synthesize(&req, &store).unwrap());
+        let l = &r.levels[finest];
+        assert!(l.batches > 1, "{l:?}");
+        assert!(l.largest_batch_voxels <= limit, "{l:?}, limit {limit}");
+        // The overlap of the batches is synthesized twice: more work, never less.
+        assert!(l.voxels >= r_whole.levels[finest].voxels);
+        assert_eq!(
+            all_bricks(&batched, &store),
+            all_bricks(&s, &whole),
+            "{threads} threads"
+        );
+    }
+    // A box limit alone splits too (the dense box of a dependent set), to the same bricks.
+    let boxed = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params())
+        .unwrap()
+        .with_batch_limits(BatchLimits {
+            box_voxels: 20_000,
+            chunk_voxels: u64::MAX,
+        });
+    let store = MemoryBrickStore::new();
+    let r = boxed.synthesize(&req, &store).unwrap();
+    assert!(r.levels[finest].batches > 1);
+    assert_eq!(all_bricks(&boxed, &store), all_bricks(&s, &whole));
+}
+
+/// Bricks by (level, coordinates).
+type Bricks = std::collections::HashMap<(u32, [i32; 3]), std::sync::Arc<Brick>>;
+
+/// A store that keeps its bricks only until released, and records how many levels it held.
+#[derive(Default)]
+struct ReleasingStore {
+    map: std::sync::Mutex<Bricks>,
+    most_levels: std::sync::atomic::AtomicUsize,
+    released: std::sync::Mutex<Vec<u32>>,
+}
+
+impl BrickStore for ReleasingStore {
+    fn get(&self, level: u32, brick: [i32; 3]) -> Option<std::sync::Arc<Brick>> {
+        self.map.lock().unwrap().get(&(level, brick)).cloned()
+    }
+    fn put(&self, level: u32, brick: [i32; 3], b: std::sync::Arc<Brick>) {
+        let mut map = self.map.lock().unwrap();
+        map.insert((level, brick), b);
+        let levels: std::collections::BTreeSet<u32> = map.keys().map(|k| k.0).collect();
+        self.most_levels
+            .fetch_max(levels.len(), std::sync::atomic::Ordering::Relaxed);
+    }
+    fn release(&self, level: u32) {
+        self.map.lock().unwrap().retain(|k, _| k.0 != level);
+        self.released.lock().unwrap().push(level);
+    }
+}
+
+/// Each level is released as soon as the next finer one is done, so at most two levels are
+/// resident, the finest alone at the end, and the synthesis never reads a released brick
+/// (it would fail with a missing brick).
+#[test]
+fn a_level_is_released_once_its_finer_level_is_done() {
+    let (_, a) = small();
+    let (vol, field) = trivial_cube(48);
+    let s = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
+    let req = VoxelRequest::from_box([0, 0, 20], [48, 48, 21]);
+    let store = ReleasingStore::default();
+    s.synthesize(&req, &store).unwrap();
+    assert_eq!(*store.released.lock().unwrap(), vec![1, 2]);
+    assert_eq!(
+        store.most_levels.load(std::sync::atomic::Ordering::Relaxed),
+        2
+    );
+    let reference = MemoryBrickStore::new();
+    s.synthesize(&req, &reference).unwrap();
+    assert!(store.map.lock().unwrap().keys().all(|k| k.0 == 3));
+    for v in req.voxels() {
+        assert_eq!(s.triple_at(&store, 3, v), s.triple_at(&reference, 3, v));
+        assert!(s.triple_at(&store, 3, v).is_some());
+    }
+}
+
+/// The chunked form of a dependent set holds the same bytes as the dense one, in fewer
+/// voxels when the set is thin.
+#[test]
+fn chunked_dependent_sets_hold_the_dense_bytes() {
+    let domain = glam::IVec3::splat(64);
+    // Two small targets in opposite corners: a large box, a small set.
+    let targets = [
+        (glam::IVec3::splat(2), glam::IVec3::splat(6)),
+        (glam::IVec3::splat(56), glam::IVec3::splat(60)),
+    ];
+    let dense = dependent_set(&Schedule::dual_grid(2, true, 8), domain, &targets, 2);
+    let chunked = ChunkedNeed::from_grid(&dense);
+    for i in 0..dense.need.len() {
+        let p = dense.position(i);
+        assert_eq!(chunked.get(p), dense.need[i], "{p:?}");
+    }
+    assert_eq!(chunked.get(glam::IVec3::splat(-1)), 0);
+    assert_eq!(chunked.voxels(), dense.voxels());
+    assert_eq!(chunked.corrections(), dense.corrections());
+    assert!(chunked.voxels() > 0);
+    assert!(chunked.chunk_voxels() < dense.need.len() as u64 / 2);
 }
 
 #[test]

@@ -235,28 +235,36 @@ pub(crate) fn check_variant_memory(
 }
 
 /// A solid of `parameterize.resolution` voxels on its longest side (issue 11, item 9): the
-/// volume's voxel masks, their prefix sums and the dependent set's per-level masks are dense
-/// over the volume's box (at most `resolution³` voxels). A surface or box request needs about
-/// 16 bytes per voxel of that cube bound and 180 MB besides (the exemplar analysis, the
-/// bricks); a section needs about 2 bytes per voxel and 80 MB. Measured (solid_trivial,
-/// elephant): surface 119 MB at 128, 272 MB at 256, 523 MB at 384; section 105 MB at 256,
-/// 163 MB at 384. The elephant's box fills about half its cube, so the cube bound stays
-/// within 2× for slim and cubic shapes alike.
+/// volume's voxel masks and their prefix sums are dense over the volume's box (at most
+/// `resolution³` voxels). A box request keeps its finest bricks (12 bytes a voxel) and needs
+/// about 16 bytes per voxel of that cube bound and 180 MB besides (the exemplar analysis);
+/// a section needs about half a byte per voxel and 48 MB (since its dependent sets are kept in
+/// chunks with no per-voxel lists: 72 MB measured at 384, 163 MB before). Measured
+/// (solid_trivial, elephant): surface 119 MB at 128, 272 MB at 256, 523 MB at 384. The elephant's box fills about half its cube, so the cube bound stays within 2× for
+/// slim and cubic shapes alike.
+///
+/// A surface request synthesizes each level in batches whose working set is bounded
+/// (`BatchLimits` in `solid_synthesis.rs`: about 1.2 GiB with the resident bricks of two
+/// levels) and keeps only the surface's bricks: the same 16 bytes per voxel while that is
+/// smaller, never more than the batch bound, plus half a byte per voxel for the volume's
+/// masks. Measured on the cow (issue 15): 529 MB at 512, and at 1024 2.77 GB before
+/// batching, see BENCHMARKS.md for after.
 pub(crate) fn check_solid_memory(
     config: &Config,
     resolution: u32,
     request: &crate::stages::parameterize::volume_embedding::Request,
 ) -> Result<(), MethodError> {
     use crate::stages::parameterize::volume_embedding::Request;
-    let (per_voxel, base) = match request {
-        Request::Section { .. } => (2, 80 << 20),
-        Request::Surface | Request::Box { .. } => (16, 180 << 20),
+    let estimate: fn(u64) -> u64 = match request {
+        Request::Section { .. } => |r| r * r * r / 2 + (48 << 20),
+        Request::Box { .. } => |r| 16 * r * r * r + (180 << 20),
+        Request::Surface => |r| (16 * r * r * r).min(1_200 << 20) + r * r * r / 2 + (180 << 20),
     };
     check_memory(
         config,
         "parameterize.resolution",
         resolution as u64,
-        |r| per_voxel * r * r * r + base,
+        estimate,
         |r| r.to_string(),
     )
 }

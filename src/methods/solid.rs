@@ -337,6 +337,10 @@ impl BrickStore for PieceStore<'_, (u32, [i32; 3]), Brick> {
     fn put(&self, level: u32, brick: [i32; 3], b: Arc<Brick>) {
         PieceStore::put(self, &(level, brick), b)
     }
+    /// The level's bricks are in the cache: only the copies in memory go.
+    fn release(&self, level: u32) {
+        self.forget(|(l, _)| *l == level)
+    }
 }
 
 /// The analysis node's key: its parameters and which planes' images are transposed.

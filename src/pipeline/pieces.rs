@@ -104,6 +104,16 @@ where
         Some(piece)
     }
 
+    /// Drops the in-memory copies of the pieces whose coordinates `f` holds for (their cache
+    /// artifacts stay; a later [`PieceStore::get`] reads them back), so that a node keeps
+    /// resident only the pieces it still reads.
+    pub fn forget(&self, f: impl Fn(&K) -> bool) {
+        self.memory
+            .lock()
+            .expect("piece memory")
+            .retain(|k, _| !f(k));
+    }
+
     /// Stores a computed piece. A cache that cannot be written costs only reuse later, so
     /// it is a warning, not an error.
     pub fn put(&self, coords: &K, piece: Arc<F>) {

@@ -106,11 +106,7 @@ pub fn dependent_set(
     }
     let total = schedule.corrections();
     assert!(total < 255, "at most 254 corrections per level");
-    let tlo = targets.iter().fold(IVec3::MAX, |a, t| a.min(t.0));
-    let thi = targets.iter().fold(IVec3::MIN, |a, t| a.max(t.1));
-    let grow = IVec3::splat(schedule.impact_distance(reach));
-    let lo = (tlo - grow).max(IVec3::ZERO);
-    let hi = (thi + grow).min(domain);
+    let (lo, hi) = dependent_box(schedule, domain, &targets, reach).expect("targets in the domain");
     let n = hi - lo;
     let mut grid = NeedGrid {
         lo,
@@ -126,6 +122,8 @@ pub fn dependent_set(
         }
     }
     let stages = &schedule.stages;
+    // The dilation's two buffers, reused by every step (one allocation, not six per step).
+    let (mut mask, mut tmp) = (Vec::new(), Vec::new());
     for step in schedule.steps().iter().rev() {
         let threshold = 1 + step.version_after() as u8;
         // Active voxels whose new version is needed, and their bounding box.
@@ -162,7 +160,8 @@ pub fn dependent_set(
         let rhi = (ahi + IVec3::splat(reach + 1)).min(grid.lo + grid.n);
         let rn = rhi - rlo;
         let len = rn.x as usize * rn.y as usize * rn.z as usize;
-        let mut mask = vec![0u8; len];
+        mask.resize(len, 0);
+        // Both bits: the sources of the plain dilation (bit 0) and of the one within cells.
         mask.par_chunks_mut(rn.x as usize)
             .enumerate()
             .for_each(|(row, out)| {
@@ -171,16 +170,12 @@ pub fn dependent_set(
                 let start = grid.index(IVec3::new(rlo.x, y, z));
                 for (x, o) in out.iter_mut().enumerate() {
                     let p = IVec3::new(rlo.x + x as i32, y, z);
-                    *o = (grid.need[start + x] >= threshold && step.active(p)) as u8;
+                    *o = 3 * (grid.need[start + x] >= threshold && step.active(p)) as u8;
                 }
             });
         let barriers = &stages[step.stage].window.barriers;
-        let all = dilate(&mask, rlo, rn, reach, &[]);
-        let same_cell = if barriers.is_empty() {
-            None
-        } else {
-            Some(dilate(&mask, rlo, rn, reach, barriers))
-        };
+        dilate_both(&mut mask, &mut tmp, rlo, rn, reach, barriers);
+        let dilated = &mask;
         let latest: [u8; 8] = std::array::from_fn(|c| 1 + step.latest_for_class(c as u8) as u8);
         let start = 1 + step.stage_start as u8;
         let (gn, glo) = (grid.n, grid.lo);
@@ -207,10 +202,11 @@ pub fn dependent_set(
             let z = rlo.z + (r / rn.y as usize) as i32;
             let base = r * rn.x as usize;
             for (x, need) in row.iter_mut().enumerate() {
-                if all[base + x] == 0 {
+                let d = dilated[base + x];
+                if d & 1 == 0 {
                     continue;
                 }
-                let in_cell = same_cell.as_ref().is_none_or(|m| m[base + x] != 0);
+                let in_cell = barriers.is_empty() || d & 2 != 0;
                 let v = if in_cell {
                     latest[class_of(IVec3::new(rlo.x + x as i32, y, z)) as usize]
                 } else {
@@ -225,92 +221,288 @@ pub fn dependent_set(
     grid
 }
 
+/// The box `[lo, hi)` that [`dependent_set`] allocates one byte per voxel of (its targets'
+/// bounding box grown by the impact distance, within the domain), or `None` when no target
+/// lies in the domain: what a caller bounds to bound that function's memory.
+pub fn dependent_box(
+    schedule: &Schedule,
+    domain: IVec3,
+    targets: &[(IVec3, IVec3)],
+    reach: i32,
+) -> Option<(IVec3, IVec3)> {
+    let clipped = targets
+        .iter()
+        .map(|&(lo, hi)| (lo.max(IVec3::ZERO), hi.min(domain)))
+        .filter(|(lo, hi)| hi.cmpgt(*lo).all());
+    let (tlo, thi) = clipped.fold((IVec3::MAX, IVec3::MIN), |(a, b), t| {
+        (a.min(t.0), b.max(t.1))
+    });
+    if tlo.x > thi.x {
+        return None;
+    }
+    let grow = IVec3::splat(schedule.impact_distance(reach));
+    Some(((tlo - grow).max(IVec3::ZERO), (thi + grow).min(domain)))
+}
+
+const CHUNK_BITS: i32 = 3;
+/// Side of the chunks of a [`ChunkedNeed`] (and of the working values that follow it).
+pub const CHUNK: i32 = 1 << CHUNK_BITS;
+/// Voxels per chunk.
+pub const CHUNK_VOXELS: usize = (CHUNK * CHUNK * CHUNK) as usize;
+const NO_CHUNK: u32 = u32::MAX;
+
+/// A [`NeedGrid`] kept only in the `8³` chunks (aligned with the grid's box) that hold a
+/// needed voxel. The dense grid spans the bounding box of the dependent set, most of it empty
+/// for a surface; this keeps about one byte per needed voxel, so the dependent sets of every
+/// batch of every level can wait, planned, while the levels below are synthesized.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChunkedNeed {
+    /// The dense grid's box `[lo, lo + n)`; chunk `c` starts at `lo + 8c`.
+    pub lo: IVec3,
+    pub n: IVec3,
+    /// Chunks per axis.
+    cn: IVec3,
+    /// Per chunk of the box, its index in `origins`, or `NO_CHUNK`.
+    table: Vec<u32>,
+    /// First voxel of each kept chunk, z-major then y then x.
+    origins: Vec<IVec3>,
+    /// `CHUNK_VOXELS` bytes per kept chunk, x fastest; 0 outside the box.
+    bytes: Vec<u8>,
+}
+
+impl ChunkedNeed {
+    pub fn from_grid(g: &NeedGrid) -> ChunkedNeed {
+        let cn = (g.n + (CHUNK - 1)) / CHUNK;
+        let cn = cn.max(IVec3::ZERO);
+        // Kept chunks per chunk slab (z), in parallel, then concatenated in order.
+        let slabs: Vec<Vec<(IVec3, Vec<u8>)>> = (0..cn.z)
+            .into_par_iter()
+            .map(|cz| {
+                let mut out = Vec::new();
+                for cy in 0..cn.y {
+                    for cx in 0..cn.x {
+                        let c = IVec3::new(cx, cy, cz);
+                        let mut buf = vec![0u8; CHUNK_VOXELS];
+                        let mut any = false;
+                        let base = c * CHUNK;
+                        let w = (g.n.x - base.x).min(CHUNK) as usize;
+                        for z in 0..CHUNK.min(g.n.z - base.z) {
+                            for y in 0..CHUNK.min(g.n.y - base.y) {
+                                let i = g.index(g.lo + base + IVec3::new(0, y, z));
+                                let row = &g.need[i..i + w];
+                                any |= row.iter().any(|&b| b > 0);
+                                let o = ((z * CHUNK + y) * CHUNK) as usize;
+                                buf[o..o + w].copy_from_slice(row);
+                            }
+                        }
+                        if any {
+                            out.push((g.lo + base, buf));
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        let kept: usize = slabs.iter().map(Vec::len).sum();
+        let mut table = vec![NO_CHUNK; (cn.x * cn.y * cn.z) as usize];
+        let mut origins = Vec::with_capacity(kept);
+        let mut bytes = Vec::with_capacity(kept * CHUNK_VOXELS);
+        for (origin, buf) in slabs.into_iter().flatten() {
+            let c = (origin - g.lo) / CHUNK;
+            table[((c.z * cn.y + c.y) * cn.x + c.x) as usize] = origins.len() as u32;
+            origins.push(origin);
+            bytes.extend_from_slice(&buf);
+        }
+        ChunkedNeed {
+            lo: g.lo,
+            n: g.n,
+            cn,
+            table,
+            origins,
+            bytes,
+        }
+    }
+
+    /// The kept chunks' first voxels (chunk `k`'s voxels are slots `k·512 ..`).
+    pub fn origins(&self) -> &[IVec3] {
+        &self.origins
+    }
+
+    /// The needed-version bytes of kept chunk `k`, x fastest.
+    pub fn chunk(&self, k: usize) -> &[u8] {
+        &self.bytes[k * CHUNK_VOXELS..(k + 1) * CHUNK_VOXELS]
+    }
+
+    /// Voxels of the kept chunks: what working values over this set take room for.
+    pub fn chunk_voxels(&self) -> u64 {
+        self.bytes.len() as u64
+    }
+
+    /// The slot of `p` among the kept chunks' voxels, if its chunk is kept.
+    #[inline]
+    pub fn slot(&self, p: IVec3) -> Option<usize> {
+        let q = p - self.lo;
+        if !(q.cmpge(IVec3::ZERO).all() && q.cmplt(self.n).all()) {
+            return None;
+        }
+        let c = q / CHUNK;
+        let t = self.table[((c.z * self.cn.y + c.y) * self.cn.x + c.x) as usize];
+        if t == NO_CHUNK {
+            return None;
+        }
+        let m = q - c * CHUNK;
+        Some(t as usize * CHUNK_VOXELS + ((m.z * CHUNK + m.y) * CHUNK + m.x) as usize)
+    }
+
+    /// The slot of `p`, which must be in a kept chunk (the working values' reads: every
+    /// voxel a correction reads is in the dependent set).
+    #[inline]
+    pub fn slot_in_set(&self, p: IVec3) -> usize {
+        let q = p - self.lo;
+        debug_assert!(q.cmpge(IVec3::ZERO).all() && q.cmplt(self.n).all());
+        let c = q >> CHUNK_BITS;
+        let t = self.table[((c.z * self.cn.y + c.y) * self.cn.x + c.x) as usize];
+        debug_assert!(t != NO_CHUNK, "read of a voxel outside the dependent set");
+        let m = q & (CHUNK - 1);
+        t as usize * CHUNK_VOXELS + ((m.z * CHUNK + m.y) * CHUNK + m.x) as usize
+    }
+
+    /// The byte of `p` (0 where not needed).
+    #[inline]
+    pub fn get(&self, p: IVec3) -> u8 {
+        self.slot(p).map_or(0, |s| self.bytes[s])
+    }
+
+    /// Voxels synthesized (upsampled at least).
+    pub fn voxels(&self) -> u64 {
+        self.bytes.iter().filter(|&&x| x > 0).count() as u64
+    }
+
+    /// Corrections performed.
+    pub fn corrections(&self) -> u64 {
+        self.bytes.iter().map(|&x| x.saturating_sub(1) as u64).sum()
+    }
+}
+
+/// The offset of slot `m` of a chunk from the chunk's first voxel.
+#[inline]
+pub fn chunk_local(m: usize) -> IVec3 {
+    let m = m as i32;
+    IVec3::new(m % CHUNK, (m / CHUNK) % CHUNK, m / (CHUNK * CHUNK))
+}
+
 /// Dilation of a 0/1 mask over the box `[lo, lo + n)` by the cube of radius `r`; with
 /// barriers, only within the cell (of every lattice) of each source voxel.
 pub fn dilate(mask: &[u8], lo: IVec3, n: IVec3, r: i32, barriers: &[Cells]) -> Vec<u8> {
+    let mut buf: Vec<u8> = mask.iter().map(|&m| 3 * (m != 0) as u8).collect();
+    dilate_both(&mut buf, &mut Vec::new(), lo, n, r, barriers);
+    let bit = if barriers.is_empty() { 1 } else { 2 };
+    buf.iter().map(|&d| (d & bit != 0) as u8).collect()
+}
+
+/// Two dilations of one box at once, in place in `buf` (`tmp` is scratch, resized): bit 0
+/// by the cube of radius `r`, bit 1 by the same cube cut to the cell of every lattice in
+/// `barriers` (the cell's window lies inside the cube's, so one pass over a window serves
+/// both). Each axis in turn ORs the window's rows or slabs; no buffer but the two is
+/// allocated, so a step of [`dependent_set`] costs two bytes per voxel of its region.
+pub fn dilate_both(
+    buf: &mut Vec<u8>,
+    tmp: &mut Vec<u8>,
+    lo: IVec3,
+    n: IVec3,
+    r: i32,
+    barriers: &[Cells],
+) {
     let dims = [n.x as usize, n.y as usize, n.z as usize];
-    let mut cur = mask.to_vec();
+    tmp.resize(buf.len(), 0);
     for axis in 0..3 {
         let origin = lo[axis];
-        let len = dims[axis];
-        // Window [a, b] (inclusive, local) per position along the axis.
-        let bounds: Vec<(usize, usize)> = (0..len as i32)
+        let len = dims[axis] as i32;
+        // Windows [a, b] (inclusive, local) per position along the axis: the cube's, then
+        // the cell's.
+        let bounds: Vec<[(usize, usize); 2]> = (0..len)
             .map(|i| {
                 let g = origin + i;
+                let clip = |a: i32, b: i32| {
+                    let a = (a - origin).max(0) as usize;
+                    let b = (b - origin).min(len - 1).max(0) as usize;
+                    (a, b)
+                };
                 let (mut a, mut b) = (g - r, g + r);
+                let all = clip(a, b);
                 for c in barriers {
                     let s = c.start(g);
                     a = a.max(s);
                     b = b.min(s + c.size - 1);
                 }
-                let a = (a - origin).max(0) as usize;
-                let b = ((b - origin).min(len as i32 - 1)).max(0) as usize;
-                (a, b)
+                [all, clip(a, b)]
             })
             .collect();
-        cur = dilate_axis(&cur, dims, axis, &bounds);
+        dilate_axis(buf, tmp, dims, axis, &bounds);
+        std::mem::swap(buf, tmp);
     }
-    cur
 }
 
-fn dilate_axis(src: &[u8], d: [usize; 3], axis: usize, bounds: &[(usize, usize)]) -> Vec<u8> {
-    let [nx, ny, nz] = d;
-    let mut out = vec![0u8; src.len()];
+/// `out` (bit 0) = OR of `src`'s bit 0 over the first window of each position along `axis`,
+/// (bit 1) = OR of bit 1 over the second.
+fn dilate_axis(
+    src: &[u8],
+    out: &mut [u8],
+    d: [usize; 3],
+    axis: usize,
+    bounds: &[[(usize, usize); 2]],
+) {
+    let [nx, ny, _] = d;
+    // ORs the window of rows (or slabs) `j` of `len` bytes at `at(j)` into `o`.
+    let or_window =
+        |o: &mut [u8], [(a, b), (ca, cb)]: [(usize, usize); 2], at: &dyn Fn(usize) -> usize| {
+            o.fill(0);
+            if a > b {
+                return;
+            }
+            for j in a..=b {
+                let m = if ca <= j && j <= cb { 3 } else { 1 };
+                let s = &src[at(j)..at(j) + o.len()];
+                for (x, y) in o.iter_mut().zip(s) {
+                    *x |= y & m;
+                }
+            }
+        };
     match axis {
         0 => {
             out.par_chunks_mut(nx)
                 .zip(src.par_chunks(nx))
-                .for_each(|(o, s)| {
-                    let mut pre = vec![0u32; nx + 1];
-                    for i in 0..nx {
-                        pre[i + 1] = pre[i] + s[i] as u32;
-                    }
-                    for (i, x) in o.iter_mut().enumerate() {
-                        let (a, b) = bounds[i];
-                        *x = (a <= b && pre[b + 1] > pre[a]) as u8;
-                    }
-                });
+                .for_each_init(
+                    || (vec![0u32; nx + 1], vec![0u32; nx + 1]),
+                    |(p0, p1), (o, s)| {
+                        for i in 0..nx {
+                            p0[i + 1] = p0[i] + (s[i] & 1) as u32;
+                            p1[i + 1] = p1[i] + (s[i] >> 1 & 1) as u32;
+                        }
+                        for (i, x) in o.iter_mut().enumerate() {
+                            let [(a, b), (ca, cb)] = bounds[i];
+                            let all = a <= b && p0[b + 1] > p0[a];
+                            let cell = ca <= cb && p1[cb + 1] > p1[ca];
+                            *x = all as u8 | (cell as u8) << 1;
+                        }
+                    },
+                );
         }
         1 => {
             let slab = nx * ny;
-            out.par_chunks_mut(slab)
-                .zip(src.par_chunks(slab))
-                .for_each(|(o, s)| {
-                    let mut pre = vec![0u32; (ny + 1) * nx];
-                    for y in 0..ny {
-                        for x in 0..nx {
-                            pre[(y + 1) * nx + x] = pre[y * nx + x] + s[y * nx + x] as u32;
-                        }
-                    }
-                    for y in 0..ny {
-                        let (a, b) = bounds[y];
-                        for x in 0..nx {
-                            o[y * nx + x] =
-                                (a <= b && pre[(b + 1) * nx + x] > pre[a * nx + x]) as u8;
-                        }
-                    }
-                });
-        }
-        _ => {
-            let slab = nx * ny;
-            let mut pre = vec![0u32; (nz + 1) * slab];
-            for z in 0..nz {
-                let (done, rest) = pre.split_at_mut((z + 1) * slab);
-                let prev = &done[z * slab..];
-                let next = &mut rest[..slab];
-                for i in 0..slab {
-                    next[i] = prev[i] + src[z * slab + i] as u32;
-                }
-            }
             out.par_chunks_mut(slab).enumerate().for_each(|(z, o)| {
-                let (a, b) = bounds[z];
-                for i in 0..slab {
-                    o[i] = (a <= b && pre[(b + 1) * slab + i] > pre[a * slab + i]) as u8;
+                for (y, row) in o.chunks_mut(nx).enumerate() {
+                    or_window(row, bounds[y], &|j| z * slab + j * nx);
                 }
             });
         }
+        _ => {
+            let slab = nx * ny;
+            out.par_chunks_mut(slab)
+                .enumerate()
+                .for_each(|(z, o)| or_window(o, bounds[z], &|j| j * slab));
+        }
     }
-    out
 }
 
 #[cfg(test)]

@@ -75,13 +75,25 @@
 //! - On coarse levels the paper integrates the field along the neighbourhood's directions; here
 //!   every level samples with the centre voxel's frame (the paper's fine-level choice).
 //! - Working values live in 8³ chunks allocated only where the dependent set is; the
-//!   dependency bytes themselves are dense over the bounding box of a level's dependent set
-//!   (one byte per voxel), which bounds the request size in practice (a 512³ box is 128 MB).
+//!   dependency bytes are worked out densely over the bounding box of a batch's dependent set
+//!   (one byte per voxel, two more while dilating) and then kept in the same chunks.
+//!
+//! # Memory
+//!
+//! A level's missing bricks are synthesized in batches ([`BatchLimits`]): what is resident at
+//! once is one batch's dense box while it is planned, or one batch's working values (48 bytes
+//! per working voxel) while it is synthesized, plus the chunked plans of all batches (about a
+//! byte per working voxel) and the bricks of two levels (12 bytes per brick voxel; a level is
+//! released to the store once the next finer level is done). None of it grows with the
+//! volume beyond the bricks the request needs; at 1024 voxels the cow's surface fits in
+//! about 1 GB (BENCHMARKS.md).
 //! - The dependency stencil is the cube of radius `r = ⌊N_h √2 s_max + ½⌋` (`⌊N_h √2 s_max⌋ + 1`
 //!   with trilinear sampling), or the exact extent for a constant field (see
 //!   [`stencil_reach`]); the paper's `D = ⌈N√2⌉`.
 
-use super::dependent_set::{NeedGrid, dependent_set};
+use super::dependent_set::{
+    CHUNK_VOXELS, ChunkedNeed, NeedGrid, chunk_local, dependent_box, dependent_set,
+};
 use super::history_window::{HistoryWindow, Schedule};
 use crate::analyse_exemplar::candidate_triples::{SolidAnalysisRef, Triple, wrap};
 use crate::check::ParamError;
@@ -564,6 +576,10 @@ impl Brick {
 pub trait BrickStore {
     fn get(&self, level: u32, brick: [i32; 3]) -> Option<Arc<Brick>>;
     fn put(&self, level: u32, brick: [i32; 3], b: Arc<Brick>);
+    /// The synthesis will not read `level`'s bricks again (its finer level is done): a store
+    /// that keeps copies in memory next to a lasting one (the pipeline's cache) drops them
+    /// here. A store that is the only home of its bricks keeps them (the default).
+    fn release(&self, _level: u32) {}
 }
 
 /// Bricks by (level, brick coordinates).
@@ -635,6 +651,11 @@ pub struct LevelReport {
     pub comparisons: u64,
     /// Wall time.
     pub seconds: f64,
+    /// Batches the missing bricks were synthesized in (see [`BatchLimits`]).
+    pub batches: u64,
+    /// Working voxels (whole 8³ chunks) of the largest batch: what the level's working
+    /// values took room for at once.
+    pub largest_batch_voxels: u64,
 }
 
 /// What [`SolidSynthesis::synthesize`] did.
@@ -675,53 +696,26 @@ struct VoxelState {
     c: [f32; 3],
 }
 
-const CHUNK_BITS: i32 = 3;
-const CHUNK: i32 = 1 << CHUNK_BITS;
-const CHUNK_VOXELS: usize = (CHUNK * CHUNK * CHUNK) as usize;
-const NO_CHUNK: u32 = u32::MAX;
-
-/// Working values of one level over the needed voxels, in 8³ chunks allocated where needed.
-struct States {
-    lo: IVec3,
-    cn: IVec3,
-    table: Vec<u32>,
+/// Working values of one batch of a level, slot for slot with the kept chunks of its
+/// [`ChunkedNeed`]; `start` is the snapshot at the start of a stage with barriers.
+struct States<'n> {
+    need: &'n ChunkedNeed,
     cur: Vec<VoxelState>,
     start: Vec<VoxelState>,
 }
 
-impl States {
-    fn new(need: &NeedGrid) -> States {
-        let cn = (need.n + (CHUNK - 1)) / CHUNK;
-        let mut table = vec![NO_CHUNK; (cn.x * cn.y * cn.z).max(0) as usize];
-        let mut count = 0u32;
-        for (i, &x) in need.need.iter().enumerate() {
-            if x > 0 {
-                let c = (need.position(i) - need.lo) >> CHUNK_BITS;
-                let t = &mut table[((c.z * cn.y + c.y) * cn.x + c.x) as usize];
-                if *t == NO_CHUNK {
-                    *t = count;
-                    count += 1;
-                }
-            }
-        }
-        let len = count as usize * CHUNK_VOXELS;
+impl<'n> States<'n> {
+    fn new(need: &'n ChunkedNeed) -> States<'n> {
         States {
-            lo: need.lo,
-            cn,
-            table,
-            cur: vec![VoxelState::default(); len],
+            need,
+            cur: vec![VoxelState::default(); need.chunk_voxels() as usize],
             start: Vec::new(),
         }
     }
 
     #[inline]
     fn slot(&self, p: IVec3) -> usize {
-        let q = p - self.lo;
-        let c = q >> CHUNK_BITS;
-        let t = self.table[((c.z * self.cn.y + c.y) * self.cn.x + c.x) as usize];
-        debug_assert!(t != NO_CHUNK, "read of a voxel outside the dependent set");
-        let m = q & (CHUNK - 1);
-        t as usize * CHUNK_VOXELS + ((m.z * CHUNK + m.y) * CHUNK + m.x) as usize
+        self.need.slot_in_set(p)
     }
 }
 
@@ -761,11 +755,63 @@ fn brick_origin(m: i32, b: IVec3) -> IVec3 {
     b * m + IVec3::splat(m / 2)
 }
 
-/// One planned level: its needed and missing bricks and the dependent set of the missing ones.
+/// One planned level: its needed and missing bricks, the missing ones in batches.
 struct LevelPlan {
     needed: Vec<[i32; 3]>,
     missing: Vec<[i32; 3]>,
-    need: NeedGrid,
+    batches: Vec<Batch>,
+}
+
+impl LevelPlan {
+    fn voxels(&self) -> u64 {
+        self.batches.iter().map(|b| b.need.voxels()).sum()
+    }
+    fn corrections(&self) -> u64 {
+        self.batches.iter().map(|b| b.need.corrections()).sum()
+    }
+}
+
+/// Some of a level's missing bricks, synthesized together from their joint dependent set.
+struct Batch {
+    bricks: Vec<[i32; 3]>,
+    need: ChunkedNeed,
+    /// Bricks of the level below holding the parents of `need`'s voxels.
+    parents: Vec<[i32; 3]>,
+}
+
+/// How much of a level is synthesized at once. A level's missing bricks are split (halving
+/// their sorted list, x-major, so each part stays a slab of the volume) until each part's
+/// dependent set fits both limits, or is one brick. The halves' dependent sets overlap near
+/// the cut and the overlap is synthesized twice, to the same values (a brick is a pure
+/// function of its coordinates, see the module docs); the output does not depend on the
+/// limits.
+///
+/// What this bounds: planning a batch allocates its dependent set densely over its box
+/// (`box_voxels` bytes, and about eight more per voxel for a moment while dilating);
+/// synthesizing it holds two [`VoxelState`]s of 24 bytes per working voxel
+/// (`2 · 24 · chunk_voxels`), the corrections of one step (an eighth of them with
+/// subpasses), the batch's parent bricks and the bricks it makes. Between batches only the
+/// plans (about a byte per working voxel) and the bricks of the level being made and the
+/// level below stay resident; a level's bricks are released to the store once the next
+/// finer level is done.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BatchLimits {
+    /// Voxels of the dense box of a batch's dependent set.
+    pub box_voxels: u64,
+    /// Working voxels (kept 8³ chunks) of a batch.
+    pub chunk_voxels: u64,
+}
+
+impl Default for BatchLimits {
+    /// 64 Mi voxels of box and 16 Mi working voxels: about 0.6 GB for planning a batch and
+    /// 0.8 GB of working values. A 512-voxel cow's surface is one batch per level; at 1024 the
+    /// finest level is four.
+    fn default() -> Self {
+        BatchLimits {
+            box_voxels: 1 << 26,
+            chunk_voxels: 1 << 24,
+        }
+    }
 }
 
 /// The dependency stencil radius of each level: the largest per-axis offset, in voxels of the
@@ -843,6 +889,7 @@ pub struct SolidSynthesis<'a> {
     reach: Vec<i32>,
     /// `basis · mean` per (level, image), to project without centring.
     mean_proj: Vec<Vec<Vec<f32>>>,
+    limits: BatchLimits,
 }
 
 impl<'a> SolidSynthesis<'a> {
@@ -924,6 +971,7 @@ impl<'a> SolidSynthesis<'a> {
             schedules,
             reach,
             mean_proj,
+            limits: BatchLimits::default(),
         })
     }
 
@@ -956,6 +1004,12 @@ impl<'a> SolidSynthesis<'a> {
     /// and the benchmark's before/after counts).
     pub fn widen_reach(mut self, extra: i32) -> Self {
         self.reach.iter_mut().for_each(|r| *r += extra.max(0));
+        self
+    }
+
+    /// The same synthesis in batches of other sizes (the voxels do not change).
+    pub fn with_batch_limits(mut self, limits: BatchLimits) -> Self {
+        self.limits = limits;
         self
     }
 
@@ -1024,45 +1078,77 @@ impl<'a> SolidSynthesis<'a> {
     }
 
     /// Plans a request level by level from the finest: bricks needed, those missing from
-    /// `store` (all of them without a store), and the dependent set of the missing ones.
+    /// `store` (all of them without a store), and the missing ones in batches with their
+    /// dependent sets.
     fn plan(&self, request: &VoxelRequest, store: Option<&dyn BrickStore>) -> Vec<LevelPlan> {
         let levels = self.pyramid.levels;
         let mut plans: Vec<LevelPlan> = Vec::with_capacity(levels as usize);
         let mut needed = self.request_bricks(request);
         for level in (1..=levels).rev() {
-            let li = (level - 1) as usize;
             let missing: Vec<[i32; 3]> = needed
                 .iter()
                 .filter(|b| store.is_none_or(|s| s.get(level, **b).is_none()))
                 .copied()
                 .collect();
-            let targets: Vec<(IVec3, IVec3)> = missing
+            let batches = self.batches(level, &missing);
+            let mut below: Vec<[i32; 3]> = batches
                 .iter()
-                .map(|b| {
-                    let lo = brick_origin(self.m(), IVec3::from(*b));
-                    (lo, lo + self.m())
-                })
+                .flat_map(|b| b.parents.iter().copied())
                 .collect();
-            let need = dependent_set(
-                &self.schedules[li],
-                self.pyramid.level_dims(level),
-                &targets,
-                self.reach[li],
-            );
-            let below = if level > 1 {
-                self.parent_bricks(&need)
-            } else {
-                vec![]
-            };
+            below.sort_unstable();
+            below.dedup();
             plans.push(LevelPlan {
                 needed,
                 missing,
-                need,
+                batches,
             });
             needed = below;
         }
         plans.reverse();
         plans
+    }
+
+    /// `bricks` (sorted) of `level` in batches within the [`BatchLimits`], each with its
+    /// dependent set and parent bricks.
+    fn batches(&self, level: u32, bricks: &[[i32; 3]]) -> Vec<Batch> {
+        let li = (level - 1) as usize;
+        let m = self.m();
+        let targets: Vec<(IVec3, IVec3)> = bricks
+            .iter()
+            .map(|b| {
+                let lo = brick_origin(m, IVec3::from(*b));
+                (lo, lo + m)
+            })
+            .collect();
+        let (schedule, domain) = (&self.schedules[li], self.pyramid.level_dims(level));
+        let Some((lo, hi)) = dependent_box(schedule, domain, &targets, self.reach[li]) else {
+            return Vec::new();
+        };
+        let split = |bricks: &[[i32; 3]]| {
+            let (a, b) = bricks.split_at(bricks.len() / 2);
+            let mut out = self.batches(level, a);
+            out.extend(self.batches(level, b));
+            out
+        };
+        let n = (hi - lo).as_i64vec3();
+        if bricks.len() > 1 && (n.x * n.y * n.z) as u64 > self.limits.box_voxels {
+            return split(bricks);
+        }
+        let dense = dependent_set(schedule, domain, &targets, self.reach[li]);
+        let need = ChunkedNeed::from_grid(&dense);
+        if bricks.len() > 1 && need.chunk_voxels() > self.limits.chunk_voxels {
+            return split(bricks);
+        }
+        let parents = if level > 1 {
+            self.parent_bricks(&dense)
+        } else {
+            Vec::new()
+        };
+        vec![Batch {
+            bricks: bricks.to_vec(),
+            need,
+            parents,
+        }]
     }
 
     /// The dependent set of a request at brick granularity, per level (coarsest first),
@@ -1082,8 +1168,8 @@ impl<'a> SolidSynthesis<'a> {
             .enumerate()
             .map(|(li, p)| LevelDependency {
                 level: li as u32 + 1,
-                voxels: p.need.voxels(),
-                corrections: p.need.corrections(),
+                voxels: p.voxels(),
+                corrections: p.corrections(),
                 bricks: p.needed,
                 impact_distance: self.schedules[li].impact_distance(self.reach[li]),
             })
@@ -1125,27 +1211,33 @@ impl<'a> SolidSynthesis<'a> {
                 bricks_reused: (plan.needed.len() - plan.missing.len()) as u64,
                 ..Default::default()
             };
-            if !plan.missing.is_empty() {
+            for batch in &plan.batches {
                 let mut parents = Parents {
                     m: self.m(),
                     bricks: HashMap::new(),
                 };
-                if li > 0 {
-                    for b in self.parent_bricks(&plan.need) {
-                        let brick = store.get(level - 1, b).ok_or(SolidError::MissingBrick {
-                            level: level - 1,
-                            brick: b,
-                        })?;
-                        parents.bricks.insert(b, brick);
-                    }
+                for &b in &batch.parents {
+                    let brick = store.get(level - 1, b).ok_or(SolidError::MissingBrick {
+                        level: level - 1,
+                        brick: b,
+                    })?;
+                    parents.bricks.insert(b, brick);
                 }
-                let (bricks, comparisons) = self.run_level(li, &plan.need, &parents, &plan.missing);
-                for (b, brick) in plan.missing.iter().zip(bricks) {
+                let (bricks, comparisons) =
+                    self.run_level(li, &batch.need, &parents, &batch.bricks);
+                drop(parents);
+                for (b, brick) in batch.bricks.iter().zip(bricks) {
                     store.put(level, *b, Arc::new(brick));
                 }
-                lr.voxels = plan.need.voxels();
-                lr.corrections = plan.need.corrections();
-                lr.comparisons = comparisons;
+                lr.voxels += batch.need.voxels();
+                lr.corrections += batch.need.corrections();
+                lr.comparisons += comparisons;
+                lr.batches += 1;
+                lr.largest_batch_voxels = lr.largest_batch_voxels.max(batch.need.chunk_voxels());
+            }
+            // Nothing reads the level below again: its finer level is complete.
+            if level > 1 {
+                store.release(level - 1);
             }
             lr.seconds = t0.elapsed().as_secs_f64();
             report.levels.push(lr);
@@ -1260,43 +1352,40 @@ impl<'a> SolidSynthesis<'a> {
         tp.offset(round_v(d).into(), w, hh)
     }
 
-    /// Runs one level over the dependent set `need`; returns the bricks `out` (in order) and
-    /// the number of candidate comparisons.
+    /// Runs one batch of a level over its dependent set `need`; returns the bricks `out`
+    /// (in order) and the number of candidate comparisons. Work goes chunk by chunk of `need`
+    /// (no per-voxel lists): each step maps the chunks in parallel to their corrected voxels,
+    /// then commits them (disjoint slots, so in any order).
     fn run_level(
         &self,
         li: usize,
-        need: &NeedGrid,
+        need: &ChunkedNeed,
         parents: &Parents,
         out: &[[i32; 3]],
     ) -> (Vec<Brick>, u64) {
         let level = li as u32 + 1;
         let mut st = States::new(need);
-        let list: Vec<(IVec3, usize, u8)> = need
-            .need
-            .iter()
+        st.cur
+            .par_chunks_mut(CHUNK_VOXELS)
+            .zip(need.origins().par_iter())
             .enumerate()
-            .filter(|(_, x)| **x > 0)
-            .map(|(i, &x)| {
-                let p = need.position(i);
-                (p, st.slot(p), x)
-            })
-            .collect();
-        let base: Vec<Triple> = list
-            .par_iter()
-            .map(|&(v, _, _)| {
-                if li == 0 {
-                    self.init(v)
-                } else {
-                    self.upsample(li, v, parents)
+            .for_each(|(k, (dst, &origin))| {
+                for (m, (slot, &x)) in dst.iter_mut().zip(need.chunk(k)).enumerate() {
+                    if x == 0 {
+                        continue;
+                    }
+                    let v = origin + chunk_local(m);
+                    let t = if li == 0 {
+                        self.init(v)
+                    } else {
+                        self.upsample(li, v, parents)
+                    };
+                    *slot = VoxelState {
+                        t,
+                        c: self.analysis.colour(li, &t),
+                    };
                 }
-            })
-            .collect();
-        for (&(_, slot, _), t) in list.iter().zip(base) {
-            st.cur[slot] = VoxelState {
-                t,
-                c: self.analysis.colour(li, &t),
-            };
-        }
+            });
         let schedule = &self.schedules[li];
         let mut comparisons = 0u64;
         let mut stage = usize::MAX;
@@ -1309,27 +1398,39 @@ impl<'a> SolidSynthesis<'a> {
                 }
             }
             let threshold = 1 + step.version_after() as u8;
-            let active: Vec<(IVec3, usize)> = list
-                .iter()
-                .filter(|(v, _, x)| *x >= threshold && step.active(*v))
-                .map(|&(v, slot, _)| (v, slot))
-                .collect();
-            let results: Vec<(VoxelState, u32)> = active
+            let results: Vec<(Vec<(u16, VoxelState)>, u64)> = need
+                .origins()
                 .par_iter()
+                .enumerate()
                 .map_init(
                     || self.scratch(li),
-                    |sc, &(v, _)| self.correct(li, &st, window, v, sc),
+                    |sc, (k, &origin)| {
+                        let mut done = Vec::new();
+                        let mut c = 0u64;
+                        for (m, &x) in need.chunk(k).iter().enumerate() {
+                            let v = origin + chunk_local(m);
+                            if x >= threshold && step.active(v) {
+                                let (s, n) = self.correct(li, &st, window, v, sc);
+                                done.push((m as u16, s));
+                                c += n as u64;
+                            }
+                        }
+                        (done, c)
+                    },
                 )
                 .collect();
-            for (&(_, slot), (s, c)) in active.iter().zip(results) {
-                st.cur[slot] = s;
-                comparisons += c as u64;
+            for (k, (done, c)) in results.into_iter().enumerate() {
+                for (m, s) in done {
+                    st.cur[k * CHUNK_VOXELS + m as usize] = s;
+                }
+                comparisons += c;
             }
         }
+        st.start = Vec::new();
         let m = self.m();
         let dims = self.pyramid.level_dims(level);
         let bricks = out
-            .iter()
+            .par_iter()
             .map(|b| {
                 let lo = brick_origin(m, IVec3::from(*b));
                 let mut triples = Vec::with_capacity((m * m * m) as usize);
