@@ -84,7 +84,10 @@ fn a_texture_over_several_pages_opens_with_one_material_per_page() {
     for (k, p) in pages.iter().enumerate() {
         assert_eq!(p, &format!("baked_basecolor_{k}.png"));
         let img = image::open(out.path().join(p)).unwrap();
-        assert!(img.width() <= 128 && img.height() <= 128, "{p} is larger than a page");
+        assert!(
+            img.width() <= 128 && img.height() <= 128,
+            "{p} is larger than a page"
+        );
     }
 
     // The .glb: valid, one primitive and one material per page, each material's base colour
@@ -104,13 +107,19 @@ fn a_texture_over_several_pages_opens_with_one_material_per_page() {
             .as_u64()
             .unwrap() as usize;
         let image = json["textures"][tex]["source"].as_u64().unwrap() as usize;
-        let view = &json["bufferViews"][json["images"][image]["bufferView"].as_u64().unwrap() as usize];
+        let view =
+            &json["bufferViews"][json["images"][image]["bufferView"].as_u64().unwrap() as usize];
         let (off, len) = (
             view["byteOffset"].as_u64().unwrap() as usize,
             view["byteLength"].as_u64().unwrap() as usize,
         );
         let png = &glb[bin_start + off..bin_start + off + len];
-        assert_eq!(png, std::fs::read(out.path().join(&pages[k])).unwrap().as_slice());
+        assert_eq!(
+            png,
+            std::fs::read(out.path().join(&pages[k]))
+                .unwrap()
+                .as_slice()
+        );
     }
 
     // The OBJ: tobj splits it by `usemtl`, one model per page, every face once.
@@ -150,7 +159,12 @@ fn sample(img: &image::RgbImage, uv: Vec2) -> [f32; 3] {
         let j = j.clamp(0.0, h - 1.0) as u32;
         img.get_pixel(i, j).0.map(|c| c as f32 / 255.0)
     };
-    let (a, b, c, d) = (px(x0, y0), px(x0 + 1.0, y0), px(x0, y0 + 1.0), px(x0 + 1.0, y0 + 1.0));
+    let (a, b, c, d) = (
+        px(x0, y0),
+        px(x0 + 1.0, y0),
+        px(x0, y0 + 1.0),
+        px(x0 + 1.0, y0 + 1.0),
+    );
     std::array::from_fn(|k| {
         (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
     })
@@ -159,6 +173,9 @@ fn sample(img: &image::RgbImage, uv: Vec2) -> [f32; 3] {
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
+
+/// One face's view of an edge: its page and the edge's two ends there.
+type Side = (usize, Vec2, Vec2);
 
 /// Colour differences across the edges where one chart meets another (the two faces address
 /// different texels for the same point), against the same measure for pairs of unrelated
@@ -169,8 +186,8 @@ fn chart_borders_add_no_seams() {
     let cache = tempfile::tempdir().unwrap();
     let r = run_config(&demo(), &[], SMALL_PAGES, cache.path()).unwrap();
     let out = materialized(&r, "reconstruct");
-    let (models, _) = tobj::load_obj(out.path().join("baked.obj"), &tobj::LoadOptions::default())
-        .unwrap();
+    let (models, _) =
+        tobj::load_obj(out.path().join("baked.obj"), &tobj::LoadOptions::default()).unwrap();
     let pages: Vec<image::RgbImage> = page_files(out.path())
         .iter()
         .map(|p| image::open(out.path().join(p)).unwrap().to_rgb8())
@@ -178,7 +195,7 @@ fn chart_borders_add_no_seams() {
     // Edge (a, b), a < b → the sides that use it: (page, uv at a, uv at b). tobj numbers
     // each model's vertices on its own: vertices are named by their coordinates' bits.
     let mut names: HashMap<[u32; 3], u32> = HashMap::new();
-    let mut sides: HashMap<(u32, u32), Vec<(usize, Vec2, Vec2)>> = HashMap::new();
+    let mut sides: HashMap<(u32, u32), Vec<Side>> = HashMap::new();
     for m in &models {
         let global: Vec<u32> = m
             .mesh
@@ -186,7 +203,9 @@ fn chart_borders_add_no_seams() {
             .chunks(3)
             .map(|p| {
                 let next = names.len() as u32;
-                *names.entry([p[0].to_bits(), p[1].to_bits(), p[2].to_bits()]).or_insert(next)
+                *names
+                    .entry([p[0].to_bits(), p[1].to_bits(), p[2].to_bits()])
+                    .or_insert(next)
             })
             .collect();
         let page = m.mesh.material_id.unwrap();
@@ -213,13 +232,17 @@ fn chart_borders_add_no_seams() {
             continue; // a boundary, or inside a chart (the same texels on both sides)
         }
         for t in [0.25f32, 0.5, 0.75] {
-            let at = |(p, a, b): (usize, Vec2, Vec2)| sample(&pages[p], a + (b - a) * t);
+            let at = |(p, a, b): Side| sample(&pages[p], a + (b - a) * t);
             let (c0, c1) = (at(s[0]), at(s[1]));
             across.push(dist(c0, c1));
             points.push(c0);
         }
     }
-    assert!(across.len() > 100, "too few chart borders: {}", across.len());
+    assert!(
+        across.len() > 100,
+        "too few chart borders: {}",
+        across.len()
+    );
     // Unrelated pairs: each border point against one a fixed stride away.
     let n = points.len();
     let random: Vec<f32> = (0..n)
@@ -252,12 +275,19 @@ fn an_atlas_that_cannot_be_built_names_a_value_that_works() {
         .and_then(|s| s.split(|c: char| !(c.is_ascii_digit() || c == '.')).next())
         .and_then(|s| s.parse().ok())
         .unwrap_or_else(|| panic!("no value named in: {e}"));
-    assert!((0.25..=16.0).contains(&named), "{named} is outside the validator's range");
+    assert!(
+        (0.25..=16.0).contains(&named),
+        "{named} is outside the validator's range"
+    );
     let fixed = format!("reconstruct.texel_density={named}");
     run_config(
         &demo(),
         &[],
-        &["reconstruct.atlas_size=64", &fixed, "reconstruct.preview_size=32"],
+        &[
+            "reconstruct.atlas_size=64",
+            &fixed,
+            "reconstruct.preview_size=32",
+        ],
         cache.path(),
     )
     .unwrap_or_else(|e| panic!("the value the message named fails: {e}"));

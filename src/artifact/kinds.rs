@@ -1,11 +1,11 @@
 //! The formats every method uses: meshes, images and file bundles (what reconstruct nodes
 //! export).
 
-use rayon::prelude::*;
 use super::{Artifact, ArtifactError, ArtifactWriter, ContentHash, Format, Kind, ReadOwned};
 use crate::geom::Mesh;
 use crate::image::{Image, ImageView};
 use glam::Vec3;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 #[derive(Serialize, Deserialize)]
@@ -238,16 +238,21 @@ mod tests {
         let big: Vec<u8> = (0..2 * BUNDLE_PIECE + 12345)
             .map(|i| ((i * 2_654_435_761usize) >> 13) as u8 ^ (i / 1000) as u8)
             .collect();
-        let files = vec![("small.txt".to_string(), b"hi".to_vec()), ("big.bin".to_string(), big.clone())];
+        let files = vec![
+            ("small.txt".to_string(), b"hi".to_vec()),
+            ("big.bin".to_string(), big.clone()),
+        ];
         let a = Artifact::from_bytes(write_bundle(&files)).unwrap();
         let view = Bundle::decode(&a).unwrap();
         assert_eq!(view.entries.len(), 2);
         assert_eq!(view.file(&view.entries[1]).unwrap(), big);
         assert_eq!(view.file(&view.entries[0]).unwrap(), b"hi");
         // More than one frame was written, and the same bytes with one thread.
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
         assert_eq!(one.install(|| write_bundle(&files)), write_bundle(&files));
-        assert!(compress_file(&big).len() > 0);
         assert_ne!(compress_file(&big), zstd::bulk::compress(&big, 3).unwrap());
     }
 

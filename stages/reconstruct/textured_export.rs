@@ -148,7 +148,12 @@ pub fn export_textured_mesh<S: SurfaceShader>(
 ) -> Result<Vec<(String, Vec<u8>)>, ExportError> {
     let mut files: Vec<(String, Vec<u8>)> = Vec::new();
     let clock = std::time::Instant::now();
-    let lap = |what: &str| tracing::debug!("reconstruct: {what} at {:.3} s", clock.elapsed().as_secs_f64());
+    let lap = |what: &str| {
+        tracing::debug!(
+            "reconstruct: {what} at {:.3} s",
+            clock.elapsed().as_secs_f64()
+        )
+    };
     let (w, h) = exemplar;
     let uv: Vec<[Vec2; 3]> = single_set
         .iter()
@@ -178,8 +183,8 @@ pub fn export_textured_mesh<S: SurfaceShader>(
 
     let density = p.texel_density;
     let scaled: Vec<[Vec2; 3]> = layout.iter().map(|t| t.map(|q| q * density)).collect();
-    let atlas = build_chart_atlas(mesh, &scaled, p.atlas_size)
-        .map_err(|e| ExportError::of_atlas(e, p))?;
+    let atlas =
+        build_chart_atlas(mesh, &scaled, p.atlas_size).map_err(|e| ExportError::of_atlas(e, p))?;
     drop(scaled);
     let pages = atlas.pages.len();
     tracing::info!(
@@ -376,7 +381,12 @@ fn glb_mesh(
         .map(|c| {
             let (f, k) = (c / 3, c % 3);
             let uv = atlas.corner_uv[f][k];
-            (mesh.triangles[f][k], uv.x.to_bits(), uv.y.to_bits(), c as u32)
+            (
+                mesh.triangles[f][k],
+                uv.x.to_bits(),
+                uv.y.to_bits(),
+                c as u32,
+            )
         })
         .collect();
     {
@@ -412,7 +422,11 @@ fn glb_mesh(
             let tan = (ax - ax.dot(n) * n).normalize_or_zero();
             tsum += tan;
             // glTF: bitangent = cross(normal, tangent.xyz) * w.
-            wsum += if n.cross(tan).dot(ay) < 0.0 { -1.0 } else { 1.0 };
+            wsum += if n.cross(tan).dot(ay) < 0.0 {
+                -1.0
+            } else {
+                1.0
+            };
             i += 1;
         }
         tangent_sum.push(tsum);

@@ -222,7 +222,10 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
             .filter(|(idx, _)| !idx.is_empty())
             .collect();
     for (indices, mat) in &primitives {
-        assert!(indices.len().is_multiple_of(3), "indices: not a triangle list");
+        assert!(
+            indices.len().is_multiple_of(3),
+            "indices: not a triangle list"
+        );
         assert!(
             indices.iter().all(|&i| (i as usize) < nv),
             "index out of range"
@@ -300,7 +303,8 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
         let mut textures = vec![];
         for (m, (indices, mat)) in primitives.iter().enumerate() {
             let indices = b.indices(indices);
-            prims.push(json!({ "attributes": attrs, "indices": indices, "material": m, "mode": 4 }));
+            prims
+                .push(json!({ "attributes": attrs, "indices": indices, "material": m, "mode": 4 }));
             // The material and its embedded textures.
             let mut texture = |png: &Option<Vec<u8>>, b: &mut Builder| {
                 png.as_ref().map(|bytes| {

@@ -189,12 +189,19 @@ fn nearest_surface_point(
     }
     let b = nearest_barycentric(c, t).as_dvec3();
     let q = t[0] * b.x + t[1] * b.y + t[2] * b.z;
-    Some((p[0] * b.x + p[1] * b.y + p[2] * b.z, (q - c).length(), (d / area3).sqrt()))
+    Some((
+        p[0] * b.x + p[1] * b.y + p[2] * b.z,
+        (q - c).length(),
+        (d / area3).sqrt(),
+    ))
 }
 
 impl<'a> Grower<'a> {
     fn shares_vertex(&self, f: u32, g: u32) -> bool {
-        let (a, b) = (self.mesh.triangles[f as usize], self.mesh.triangles[g as usize]);
+        let (a, b) = (
+            self.mesh.triangles[f as usize],
+            self.mesh.triangles[g as usize],
+        );
         a.iter().any(|v| b.contains(v))
     }
 
@@ -238,6 +245,8 @@ impl<'a> Grower<'a> {
             t[0].max(t[1]).max(t[2]) + DVec2::splat(CLEARANCE - 0.5),
         );
         let mut claims: Vec<(usize, bool)> = Vec::new();
+        // Owners already found continuous with `f` (one check per owner, not per texel).
+        let mut continuous: Vec<u32> = Vec::new();
         for y in blo.y.ceil() as i64..=bhi.y.floor() as i64 {
             for x in blo.x.ceil() as i64..=bhi.x.floor() as i64 {
                 let (i, j) = (x - self.origin[0], y - self.origin[1]);
@@ -253,21 +262,27 @@ impl<'a> Grower<'a> {
                 // Every centre of the box grown by the clearance counts as near (a little
                 // more than the L∞ clearance at the corners; cheaper than the exact distance).
                 let cell = j as usize * self.size[0] + i as usize;
-                let (o, o_inside) = self.owner[cell];
+                let (o, _) = self.owner[cell];
                 // Faces that share a vertex meet continuously wherever their layouts agree,
                 // which is what joined them; any other owner is checked.
-                if o != u32::MAX && o != f && !force && !self.shares_vertex(o, f) {
+                if o != u32::MAX
+                    && o != f
+                    && !force
+                    && !continuous.contains(&o)
+                    && !self.shares_vertex(o, f)
+                {
                     // Continuous faces put surface points about as far apart as the texel
                     // is from each face; an unrelated face's are far apart.
                     let mine = nearest_surface_point(self.mesh, f, t, c);
                     let theirs = nearest_surface_point(self.mesh, o, &layouts(o), c);
-                    if let (Some((p, dp, density)), Some((q, dq, _))) = (mine, theirs) {
-                        if (p - q).length() * density > dp + dq + CONTINUITY_TOLERANCE {
-                            return false;
-                        }
+                    if let (Some((p, dp, density)), Some((q, dq, _))) = (mine, theirs)
+                        && (p - q).length() * density > dp + dq + CONTINUITY_TOLERANCE
+                    {
+                        return false;
                     }
+                    continuous.push(o);
                 }
-                if inside || (o == u32::MAX) || (!o_inside && inside) {
+                if inside || o == u32::MAX {
                     claims.push((cell, inside));
                 }
             }
@@ -294,6 +309,7 @@ struct Chart {
 
 /// Grows the charts of one candidate component (faces sorted ascending), with the leaves
 /// assigned to it; returns the charts and the faces left for the next round.
+#[allow(clippy::too_many_arguments)] // the builder's shared tables, passed down as they are
 fn grow_component(
     mesh: &Mesh,
     layout: &[[DVec2; 3]],
@@ -346,7 +362,10 @@ fn grow_component(
         chart_layout.push(layout[f as usize]);
         for k in 0..3 {
             let (n, _) = neighbours[f as usize][k];
-            if joins[f as usize][k] && member(n) && !queued[n as usize].swap(true, Ordering::Relaxed) {
+            if joins[f as usize][k]
+                && member(n)
+                && !queued[n as usize].swap(true, Ordering::Relaxed)
+            {
                 queue.push_back(n);
             }
         }
@@ -369,7 +388,12 @@ fn grow_component(
             }
             // The similarity z ↦ ca + (z - a)·ce/e in complex arithmetic.
             let rot = DVec2::new(e.dot(ce), e.perp_dot(ce)) / e.length_squared();
-            let map = |p: DVec2| ca + DVec2::new(rot.x * (p - a).x - rot.y * (p - a).y, rot.x * (p - a).y + rot.y * (p - a).x);
+            let map = |p: DVec2| {
+                ca + DVec2::new(
+                    rot.x * (p - a).x - rot.y * (p - a).y,
+                    rot.x * (p - a).y + rot.y * (p - a).x,
+                )
+            };
             let t = own.map(map);
             // It must lie on the other side of the shared edge from the chart face.
             let apex = theirs[(l as usize + 2) % 3];
@@ -406,9 +430,15 @@ fn grow_component(
             hi: t[0].max(t[1]).max(t[2]),
         });
     }
-    let taken: std::collections::HashSet<u32> =
-        charts.iter().flat_map(|c| c.faces.iter().copied()).collect();
-    let left = faces.iter().copied().filter(|f| !taken.contains(f)).collect();
+    let taken: std::collections::HashSet<u32> = charts
+        .iter()
+        .flat_map(|c| c.faces.iter().copied())
+        .collect();
+    let left = faces
+        .iter()
+        .copied()
+        .filter(|f| !taken.contains(f))
+        .collect();
     (charts, left)
 }
 
@@ -427,14 +457,16 @@ pub fn build_chart_atlas(
             mesh: faces,
         });
     }
-    if let Some(face) = layout
-        .iter()
-        .position(|t| !t.iter().all(|p| p.is_finite()))
-    {
+    if let Some(face) = layout.iter().position(|t| !t.iter().all(|p| p.is_finite())) {
         return Err(ChartAtlasError::NotFinite { face });
     }
     let clock = std::time::Instant::now();
-    let lap = |what: &str| tracing::debug!("chart atlas: {what} at {:.3} s", clock.elapsed().as_secs_f64());
+    let lap = |what: &str| {
+        tracing::debug!(
+            "chart atlas: {what} at {:.3} s",
+            clock.elapsed().as_secs_f64()
+        )
+    };
     let lay: Vec<[DVec2; 3]> = layout.par_iter().map(|t| t.map(|p| p.as_dvec2())).collect();
     let neighbours = edge_neighbours(mesh);
     lap("edge neighbours");
@@ -505,17 +537,15 @@ pub fn build_chart_atlas(
             for (f, l) in leaf_of.iter().enumerate() {
                 if let Some((_, k)) = l {
                     let (g, _) = neighbours[f][*k as usize];
-                    leaves
-                        .entry(dsu.find(g))
-                        .or_default()
-                        .push((f as u32, *k));
+                    leaves.entry(dsu.find(g)).or_default().push((f as u32, *k));
                 }
             }
         }
         let groups: Vec<(u32, Vec<u32>)> = groups.into_iter().collect();
         let member = |f: u32| in_pool[f as usize];
-        let queued: Vec<std::sync::atomic::AtomicBool> =
-            (0..faces).map(|_| std::sync::atomic::AtomicBool::new(false)).collect();
+        let queued: Vec<std::sync::atomic::AtomicBool> = (0..faces)
+            .map(|_| std::sync::atomic::AtomicBool::new(false))
+            .collect();
         let results: Vec<(Vec<Chart>, Vec<u32>)> = groups
             .par_iter()
             .map(|(root, fs)| {
@@ -526,7 +556,15 @@ pub fn build_chart_atlas(
                     &empty
                 };
                 grow_component(
-                    mesh, &lay, &joins, &neighbours, &member, fs, lv, max_extent, &queued,
+                    mesh,
+                    &lay,
+                    &joins,
+                    &neighbours,
+                    &member,
+                    fs,
+                    lv,
+                    max_extent,
+                    &queued,
                 )
             })
             .collect();
@@ -536,7 +574,11 @@ pub fn build_chart_atlas(
             next.extend(left);
         }
         next.sort_unstable();
-        lap(&format!("a round: {} charts so far, {} faces left", charts.len(), next.len()));
+        lap(&format!(
+            "a round: {} charts so far, {} faces left",
+            charts.len(),
+            next.len()
+        ));
         pool = next;
         first_round = false;
     }
@@ -590,7 +632,12 @@ fn pack_pages(faces: usize, charts: &[Chart], max_page: u32) -> ChartAtlas {
         .max(widest)
         .min(max_page);
     let mut order: Vec<usize> = (0..charts.len()).collect();
-    order.sort_by(|&a, &b| dims[b][1].cmp(&dims[a][1]).then(dims[b][0].cmp(&dims[a][0])).then(a.cmp(&b)));
+    order.sort_by(|&a, &b| {
+        dims[b][1]
+            .cmp(&dims[a][1])
+            .then(dims[b][0].cmp(&dims[a][0]))
+            .then(a.cmp(&b))
+    });
     let mut origin = vec![(0u32, [0u32; 2]); charts.len()];
     let mut pages: Vec<[u32; 2]> = vec![[0, 0]];
     let (mut x, mut y, mut shelf) = (0u32, 0u32, 0u32);
@@ -662,8 +709,14 @@ pub fn bake_page(
         let t = tri(f);
         let lo = t[0].min(t[1]).min(t[2]) - DVec2::splat(g + 0.5);
         let hi = t[0].max(t[1]).max(t[2]) + DVec2::splat(g - 0.5);
-        let (x0, x1) = (lo.x.ceil().max(0.0) as i64, hi.x.floor().min(size.x - 1.0) as i64);
-        let (y0, y1) = (lo.y.ceil().max(0.0) as i64, hi.y.floor().min(size.y - 1.0) as i64);
+        let (x0, x1) = (
+            lo.x.ceil().max(0.0) as i64,
+            hi.x.floor().min(size.x - 1.0) as i64,
+        );
+        let (y0, y1) = (
+            lo.y.ceil().max(0.0) as i64,
+            hi.y.floor().min(size.y - 1.0) as i64,
+        );
         let sign = area2(&t).signum();
         for y in y0..=y1 {
             for x in x0..=x1 {
@@ -734,6 +787,7 @@ pub fn bake_page(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::PureMath;
     use crate::render::views::tests::uv_sphere;
     use glam::Vec3;
 
@@ -770,7 +824,7 @@ mod tests {
             .iter()
             .map(|t| {
                 let p = t.map(|v| mesh.positions[v as usize]);
-                let ang = p.map(|q| q.z.atan2(q.x));
+                let ang = p.map(|q| q.z.atan2_pure(q.x));
                 let wraps = ang.iter().any(|a| *a > 2.5) && ang.iter().any(|a| *a < -2.5);
                 let pole = p.iter().any(|q| q.y.abs() > 0.999);
                 if wraps || pole {
@@ -778,10 +832,14 @@ mod tests {
                     let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
                     let x = e1.normalize();
                     let y = e1.cross(e2).cross(x).normalize();
-                    [Vec2::ZERO, Vec2::new(e1.dot(x), 0.0), Vec2::new(e2.dot(x), e2.dot(y))]
-                        .map(|q| q * texels)
+                    [
+                        Vec2::ZERO,
+                        Vec2::new(e1.dot(x), 0.0),
+                        Vec2::new(e2.dot(x), e2.dot(y)),
+                    ]
+                    .map(|q| q * texels)
                 } else {
-                    std::array::from_fn(|k| Vec2::new(ang[k], p[k].y.acos()) * texels)
+                    std::array::from_fn(|k| Vec2::new(ang[k], p[k].y.acos_pure()) * texels)
                 }
             })
             .collect()
@@ -795,14 +853,22 @@ mod tests {
         // Small pages: the charts spread over several.
         let atlas = build_chart_atlas(&mesh, &layout, 96).unwrap();
         assert!(atlas.pages.len() > 2, "{:?}", atlas.pages);
-        assert!(atlas.charts < mesh.triangles.len() / 4, "{} charts", atlas.charts);
+        assert!(
+            atlas.charts < mesh.triangles.len() / 4,
+            "{} charts",
+            atlas.charts
+        );
         let shader = PositionColour(&mesh);
         let pages: Vec<image::RgbaImage> = (0..atlas.pages.len())
             .map(|p| bake_page(&atlas, p, &mesh, &[&shader]).remove(0))
             .collect();
         let mut worst: f32 = 0.0;
         for f in 0..mesh.triangles.len() {
-            for bary in [Vec3::splat(1.0 / 3.0), Vec3::new(0.6, 0.2, 0.2), Vec3::new(0.1, 0.45, 0.45)] {
+            for bary in [
+                Vec3::splat(1.0 / 3.0),
+                Vec3::new(0.6, 0.2, 0.2),
+                Vec3::new(0.1, 0.45, 0.45),
+            ] {
                 let uv = atlas.corner_uv[f];
                 let at = uv[0] * bary.x + uv[1] * bary.y + uv[2] * bary.z;
                 let got = sample(&pages[atlas.face_page[f] as usize], at);
