@@ -252,6 +252,21 @@ pub fn export_textured_mesh<S: SurfaceShader>(
         progress(0.15 + 0.55 * (page + 1) as f32 / pages as f32);
         lap("page baked and encoded");
     }
+    // A .glb holds at most 4 GiB (32-bit lengths): refuse rather than write a broken file.
+    let textures: usize = materials
+        .iter()
+        .flat_map(|m| [&m.base_color_png, &m.normal_png, &m.metallic_roughness_png])
+        .map(|png| png.as_ref().map_or(0, |b| b.len()))
+        .sum();
+    let arrays = mesh.triangles.len() * 3 * (12 + 12 + 16 + 8 + 4);
+    if (textures + arrays) as u64 > u32::MAX as u64 - (64 << 20) {
+        return Err(ExportError::Atlas(format!(
+            "reconstruct.texel_density = {}: the .glb would hold {:.1} GiB of textures and arrays, \
+             more than a .glb can (4 GiB); use a lower reconstruct.texel_density",
+            p.texel_density,
+            (textures + arrays) as f64 / (1u64 << 30) as f64
+        )));
+    }
     let names: Vec<String> = materials.iter().map(|m| m.name.clone()).collect();
     // OBJ texture coordinates have v up.
     let obj_uv: Vec<[Vec2; 3]> = atlas

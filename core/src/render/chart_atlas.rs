@@ -379,9 +379,21 @@ fn grow_component(
         let placed = in_chart.get(&n).and_then(|&i| {
             let own = &layout[f as usize];
             let theirs = &chart_layout[i];
-            // Edge k of f runs a → b; in n it is edge l, running b → a.
-            let (a, b) = (own[k as usize], own[(k as usize + 1) % 3]);
-            let (ca, cb) = (theirs[(l as usize + 1) % 3], theirs[l as usize]);
+            // Edge k of f runs from vertex va to vb; find each in n by its index, so that
+            // inconsistently wound neighbours are mapped right too.
+            let (k, l) = (k as usize, l as usize);
+            let tf = mesh.triangles[f as usize];
+            let tn = mesh.triangles[n as usize];
+            let (va, vb) = (tf[k], tf[(k + 1) % 3]);
+            let (Some(ia), Some(ib)) = (
+                tn.iter().position(|&v| v == va),
+                tn.iter().position(|&v| v == vb),
+            ) else {
+                return None;
+            };
+            let (a, b) = (own[k], own[(k + 1) % 3]);
+            let (ca, cb) = (theirs[ia], theirs[ib]);
+            let _ = l;
             let (e, ce) = (b - a, cb - ca);
             if e.length_squared() == 0.0 || ce.length_squared() == 0.0 {
                 return None;
@@ -394,11 +406,14 @@ fn grow_component(
                     rot.x * (p - a).y + rot.y * (p - a).x,
                 )
             };
-            let t = own.map(map);
+            let mut t = own.map(map);
+            // The shared corners exactly where the chart has them (so they stay one vertex).
+            t[k] = ca;
+            t[(k + 1) % 3] = cb;
             // It must lie on the other side of the shared edge from the chart face.
-            let apex = theirs[(l as usize + 2) % 3];
+            let apex = theirs[3 - ia - ib];
             let side = |p: DVec2| ce.perp_dot(p - ca);
-            let opp = t[(k as usize + 2) % 3];
+            let opp = t[(k + 2) % 3];
             let placed = |o: u32| leaf_layout.get(&o).copied().unwrap_or(layout[o as usize]);
             if side(opp) * side(apex) >= 0.0 || !g.try_add(f, &t, false, &placed) {
                 return None;
@@ -467,7 +482,29 @@ pub fn build_chart_atlas(
             clock.elapsed().as_secs_f64()
         )
     };
+    // Pages are a multiple of 4 texels wide and high, and no larger than `max_page`.
+    let max_page = (max_page & !3).max(4);
     let lay: Vec<[DVec2; 3]> = layout.par_iter().map(|t| t.map(|p| p.as_dvec2())).collect();
+    let max_extent = (max_page as f64 - 2.0 * CHART_MARGIN - 1.0).max(1.0);
+    // A face wider than a page fails before any chart grows (the widest one is named).
+    if let Some((face, extent)) = lay
+        .par_iter()
+        .enumerate()
+        .map(|(f, t)| {
+            (
+                f,
+                (t[0].max(t[1]).max(t[2]) - t[0].min(t[1]).min(t[2])).max_element(),
+            )
+        })
+        .filter(|&(_, e)| e > max_extent)
+        .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
+    {
+        return Err(ChartAtlasError::FaceTooLarge {
+            face,
+            extent,
+            max_page,
+        });
+    }
     let neighbours = edge_neighbours(mesh);
     lap("edge neighbours");
     let sign = |f: usize| area2(&lay[f]).signum();
@@ -477,19 +514,19 @@ pub fn build_chart_atlas(
         .map(|f| {
             let t = mesh.triangles[f];
             std::array::from_fn(|k| {
-                let (g, l) = neighbours[f][k];
+                let (g, _) = neighbours[f][k];
                 if g == u32::MAX || sign(f) == 0.0 || sign(f) != sign(g as usize) {
                     return false;
                 }
-                let (g, l) = (g as usize, l as usize);
+                let g = g as usize;
+                // The same two vertices at the same two points, whatever the winding.
                 let u = mesh.triangles[g];
-                debug_assert_eq!(u[l], t[(k + 1) % 3]);
-                lay[f][k] == lay[g][(l + 1) % 3] && lay[f][(k + 1) % 3] == lay[g][l]
+                let at = |v: u32| u.iter().position(|&w| w == v).map(|i| lay[g][i]);
+                at(t[k]) == Some(lay[f][k]) && at(t[(k + 1) % 3]) == Some(lay[f][(k + 1) % 3])
             })
         })
         .collect();
     let joined = |f: usize| joins[f].iter().any(|&j| j);
-    let max_extent = (max_page as f64 - 2.0 * CHART_MARGIN - 1.0).max(1.0);
 
     // Leaves: faces joined to nobody, each given to the neighbouring joined face of lowest
     // index (so to that face's component).
@@ -877,6 +914,75 @@ mod tests {
             }
         }
         assert!(worst < 0.04, "worst colour error {worst}");
+    }
+
+    /// A flat strip laid along a spiral that overlaps itself after one turn: every shared
+    /// corner agrees, so only the fold check keeps the turns apart.
+    #[test]
+    fn a_layout_that_folds_over_itself_is_cut_and_every_face_keeps_its_colours() {
+        let (cols, rows) = (80u32, 3u32);
+        let mut positions = Vec::new();
+        for j in 0..=rows {
+            for i in 0..=cols {
+                positions.push(Vec3::new(
+                    i as f32 / cols as f32 * 2.0 - 1.0,
+                    j as f32 * 0.04,
+                    0.0,
+                ));
+            }
+        }
+        let id = |i: u32, j: u32| j * (cols + 1) + i;
+        let mut triangles = Vec::new();
+        for j in 0..rows {
+            for i in 0..cols {
+                triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let mesh = Mesh::new(positions, triangles);
+        // 96 texels of strip (x in [-1, 1], red 0 to 1) along circles of radius 8 to 11
+        // texels (50 to 69 around): the strip goes round about 1.6 times, and the turns that
+        // overlap differ by about half the red range.
+        let laid = |v: u32| {
+            let p = mesh.positions[v as usize];
+            let (x, y) = ((p.x + 1.0) * 48.0, p.y / 0.04);
+            let r = 8.0 + y;
+            let a = x / 8.0;
+            Vec2::new(40.0 + r * a.cos_pure(), 40.0 + r * a.sin_pure())
+        };
+        let layout: Vec<[Vec2; 3]> = mesh.triangles.iter().map(|t| t.map(laid)).collect();
+        let atlas = build_chart_atlas(&mesh, &layout, 256).unwrap();
+        assert!(atlas.charts >= 2, "the spiral was kept as one chart");
+        // No two faces of one chart claim the same texel centre with different colours: each
+        // face bakes to its own position colour wherever it lies.
+        let shader = PositionColour(&mesh);
+        let pages: Vec<image::RgbaImage> = (0..atlas.pages.len())
+            .map(|p| bake_page(&atlas, p, &mesh, &[&shader]).remove(0))
+            .collect();
+        let mut worst: f32 = 0.0;
+        for f in 0..mesh.triangles.len() {
+            let uv = atlas.corner_uv[f];
+            let at = (uv[0] + uv[1] + uv[2]) / 3.0;
+            let got = sample(&pages[atlas.face_page[f] as usize], at);
+            worst = worst.max(
+                (got - shader.albedo(f, Vec3::splat(1.0 / 3.0)))
+                    .abs()
+                    .max_element(),
+            );
+        }
+        assert!(worst < 0.03, "worst colour error {worst}");
+    }
+
+    #[test]
+    fn pages_stay_within_a_side_that_is_not_a_multiple_of_four() {
+        let (mesh, _) = uv_sphere(12, 24);
+        let mesh = Mesh::new(mesh.positions, mesh.triangles);
+        let layout = sphere_layout(&mesh, 30.0);
+        let atlas = build_chart_atlas(&mesh, &layout, 130).unwrap();
+        assert!(atlas.pages.len() > 1);
+        for [w, h] in &atlas.pages {
+            assert!(*w <= 130 && *h <= 130, "{w}×{h}");
+        }
     }
 
     #[test]
