@@ -477,9 +477,14 @@ pub fn bake(atlas: &Atlas, mesh: &Mesh, shader: &dyn SurfaceShader) -> image::Rg
             }
         });
 
-    dilate(&mut px, n as usize);
+    finish_bake(px, n, n)
+}
 
-    // Whatever is left: the mean colour (integer sums: exact, order-free).
+/// The image of a bake: written texels (alpha != 0) as they are, dilated a few rings into the
+/// unwritten ones, and whatever is left the mean colour (integer sums: exact, order-free), so
+/// bilinear and mip-mapped sampling never pick up a background colour.
+pub(crate) fn finish_bake(mut px: Vec<[u8; 4]>, w: u32, h: u32) -> image::RgbaImage {
+    dilate_rect(&mut px, w as usize, h as usize);
     let mut sum = [0u64; 3];
     let mut count = 0u64;
     for p in &px {
@@ -495,7 +500,7 @@ pub fn bake(atlas: &Atlas, mesh: &Mesh, shader: &dyn SurfaceShader) -> image::Rg
     } else {
         [128; 3]
     };
-    let mut out = image::RgbaImage::new(n, n);
+    let mut out = image::RgbaImage::new(w, h);
     out.par_chunks_mut(4).zip(px.par_iter()).for_each(|(o, p)| {
         let c = if p[3] != 0 { [p[0], p[1], p[2]] } else { mean };
         o.copy_from_slice(&[c[0], c[1], c[2], 255]);
@@ -511,11 +516,7 @@ pub(crate) fn quantize(c: f32) -> u8 {
 
 /// Grows the written texels (alpha != 0) into unwritten ones, `DILATE_PASSES` rings: each new
 /// texel gets the mean (rounded) of its written 8-neighbours from the previous pass.
-fn dilate(px: &mut [[u8; 4]], n: usize) {
-    dilate_rect(px, n, n)
-}
-
-/// [`dilate`] over a `w`×`h` image.
+/// The image is `w`×`h`.
 pub(crate) fn dilate_rect(px: &mut [[u8; 4]], w: usize, h: usize) {
     let n = w;
     for _ in 0..DILATE_PASSES {

@@ -31,7 +31,7 @@
 //! orders "inside" before "gutter", then distance, then face: the result does not depend on the
 //! thread count.
 
-use super::atlas::{ATLAS_GUTTER, dilate_rect, nearest_barycentric, quantize};
+use super::atlas::{ATLAS_GUTTER, finish_bake, nearest_barycentric, quantize};
 use super::shader::SurfaceShader;
 use crate::geom::Mesh;
 use glam::{DVec2, Vec2};
@@ -795,28 +795,7 @@ pub fn bake_page(
                     *out = [quantize(col.x), quantize(col.y), quantize(col.z), 255];
                 }
             });
-            dilate_rect(&mut px, wu, hu);
-            let mut sum = [0u64; 3];
-            let mut count = 0u64;
-            for p in &px {
-                if p[3] != 0 {
-                    for k in 0..3 {
-                        sum[k] += p[k] as u64;
-                    }
-                    count += 1;
-                }
-            }
-            let mean = if count > 0 {
-                sum.map(|s| ((s + count / 2) / count) as u8)
-            } else {
-                [128; 3]
-            };
-            let mut img = image::RgbaImage::new(w, h);
-            img.par_chunks_mut(4).zip(px.par_iter()).for_each(|(o, p)| {
-                let c = if p[3] != 0 { [p[0], p[1], p[2]] } else { mean };
-                o.copy_from_slice(&[c[0], c[1], c[2], 255]);
-            });
-            img
+            finish_bake(px, w, h)
         })
         .collect()
 }
