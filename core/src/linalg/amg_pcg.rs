@@ -231,7 +231,7 @@ impl Csr {
     fn matmul(&self, other: &Csr) -> Csr {
         assert_eq!(self.ncols, other.n);
         let m = other.ncols;
-        let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = (0..self.n.div_ceil(BLOCK))
+        let blocks: Vec<RowBlock> = (0..self.n.div_ceil(BLOCK))
             .into_par_iter()
             .map(|b| {
                 let rows = b * BLOCK..((b + 1) * BLOCK).min(self.n);
@@ -265,7 +265,15 @@ impl Csr {
                 (lens, cols, vals)
             })
             .collect();
-        let mut row_ptr = Vec::with_capacity(self.n + 1);
+        Csr::from_row_blocks(self.n, m, blocks)
+    }
+}
+
+impl Csr {
+    /// A matrix from row blocks made in parallel, each (row lengths, columns, values), joined
+    /// in order.
+    fn from_row_blocks(n: usize, ncols: usize, blocks: Vec<RowBlock>) -> Csr {
+        let mut row_ptr = Vec::with_capacity(n + 1);
         row_ptr.push(0);
         let total: usize = blocks.iter().map(|b| b.1.len()).sum();
         let (mut col, mut val) = (Vec::with_capacity(total), Vec::with_capacity(total));
@@ -277,14 +285,17 @@ impl Csr {
             val.extend(v);
         }
         Csr {
-            n: self.n,
-            ncols: m,
+            n,
+            ncols,
             row_ptr,
             col,
             val,
         }
     }
 }
+
+/// Row lengths, columns and values of a run of rows.
+type RowBlock = (Vec<usize>, Vec<u32>, Vec<f64>);
 
 /// Σ a_i b_i, summed in blocks of [`BLOCK`] (in parallel) and then the block sums in order:
 /// the same bits for any number of threads.
@@ -552,7 +563,7 @@ fn smoothed_prolongator(
         })
         .fold(0.0f64, f64::max);
     let omega = 4.0 / (3.0 * rho);
-    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = (0..n.div_ceil(BLOCK))
+    let blocks: Vec<RowBlock> = (0..n.div_ceil(BLOCK))
         .into_par_iter()
         .map(|b| {
             let (mut lens, mut cols, mut vals) = (Vec::new(), Vec::new(), Vec::new());
@@ -584,23 +595,7 @@ fn smoothed_prolongator(
             (lens, cols, vals)
         })
         .collect();
-    let mut row_ptr = Vec::with_capacity(n + 1);
-    row_ptr.push(0);
-    let (mut col, mut val) = (Vec::new(), Vec::new());
-    for (lens, c, v) in blocks {
-        for l in lens {
-            row_ptr.push(row_ptr.last().unwrap() + l);
-        }
-        col.extend(c);
-        val.extend(v);
-    }
-    Csr {
-        n,
-        ncols: nc,
-        row_ptr,
-        col,
-        val,
-    }
+    Csr::from_row_blocks(n, nc, blocks)
 }
 
 /// A forward Gauss–Seidel sweep for A x = b starting from x = 0 (sequential by nature):
