@@ -185,7 +185,7 @@ impl Format for Bundle {
 /// read by random access).
 fn write_bundle(files: &[(String, Vec<u8>)]) -> Vec<u8> {
     let entries: Vec<BundleEntry> = files
-        .iter()
+        .par_iter()
         .map(|(name, bytes)| BundleEntry {
             name: name.clone(),
             len: bytes.len() as u64,

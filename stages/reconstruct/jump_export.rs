@@ -8,7 +8,7 @@ use crate::image::{Image, ImageView};
 use crate::parameterize::jump_parameterization::ParamParts;
 use crate::reconstruct::jump_blend::{BlendShader, MissingEdge, corner_sets, random_base_set};
 use crate::reconstruct::textured_export::{
-    ExportError, ExportParams, ExportSurface, encode_png, export_textured_mesh,
+    ExportError, ExportParams, ExportSurface, export_textured_mesh,
 };
 use glam::Vec2;
 use std::path::PathBuf;
@@ -95,20 +95,21 @@ pub fn export_jump_textured(
         });
     }
     let layout = chart_layout(&mesh.triangles, param, addresses, &single);
-    let mut files = export_textured_mesh(mesh, &single, &layout, size, &surfaces, p, progress)?;
     let ramp = colour_ramp(size.0, size.1);
-    let opts = crate::render::ViewOptions {
-        size: p.preview_size,
-        up: glam::Vec3::from(p.up),
-        ..Default::default()
-    };
-    let shader = BlendShader {
+    let patches = BlendShader {
         sets: &sets,
         texture: ramp.view(),
     };
-    let view = crate::render::render_views(mesh, &shader, &opts);
-    files.push(("patches.png".into(), encode_png(&view, false)));
-    Ok(files)
+    Ok(export_textured_mesh(
+        mesh,
+        &single,
+        &layout,
+        size,
+        &surfaces,
+        &[("patches.png", &patches)],
+        p,
+        progress,
+    )?)
 }
 
 /// How far (texels, plus a fraction of the edge) the walk's addresses along an edge may stray

@@ -21,7 +21,7 @@ use crate::geom::Mesh;
 use crate::image::texel_to_uv;
 use crate::render::chart_atlas::{ChartAtlas, ChartAtlasError, bake_page, build_chart_atlas};
 use crate::render::shader::SurfaceShader;
-use crate::render::views::{ViewOptions, render_views};
+use crate::render::views::{ViewOptions, render_views_of_each};
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 
@@ -133,11 +133,58 @@ impl ExportError {
     }
 }
 
-/// Builds every export file. `single_set` holds one corner-coordinate set per face in texel
+/// Builds every export file, and `preview.png` plus one image per `extra_views` (name, shader)
+/// rendered from the same rasterization. `single_set` holds one corner-coordinate set per face in texel
 /// addresses of an exemplar of size `exemplar` (for the OBJ); `layout` per face corner
 /// positions in exemplar texels where faces that share an edge continuously share its two
 /// points (the chart atlas keeps those faces together), scaled by `texel_density` here.
 pub fn export_textured_mesh<S: SurfaceShader>(
+    mesh: &Mesh,
+    single_set: &[[Vec2; 3]],
+    layout: &[[Vec2; 3]],
+    exemplar: (u32, u32),
+    surfaces: &[ExportSurface<S>],
+    extra_views: &[(&str, &dyn SurfaceShader)],
+    p: &ExportParams,
+    progress: &dyn Fn(f32),
+) -> Result<Vec<(String, Vec<u8>)>, ExportError> {
+    // The views need nothing from the atlas: rendered beside it, their serial parts overlap
+    // the export's.
+    let mut views = Vec::new();
+    let files = rayon::in_place_scope(|scope| {
+        scope.spawn(|_| {
+            let opts = ViewOptions {
+                size: p.preview_size,
+                up: Vec3::from(p.up),
+                ..Default::default()
+            };
+            let shaders: Vec<(&str, &dyn SurfaceShader)> = surfaces
+                .first()
+                .map(|base| ("preview.png", &base.shader as &dyn SurfaceShader))
+                .into_iter()
+                .chain(extra_views.iter().copied())
+                .collect();
+            let images = render_views_of_each(
+                mesh,
+                &shaders.iter().map(|&(_, s)| s).collect::<Vec<_>>(),
+                &opts,
+            );
+            views = shaders
+                .iter()
+                .zip(images)
+                .map(|(&(name, _), img)| (name.to_string(), encode_png(&img, false)))
+                .collect();
+        });
+        export_files(mesh, single_set, layout, exemplar, surfaces, p, progress)
+    });
+    let mut files = files?;
+    files.extend(views);
+    progress(1.0);
+    Ok(files)
+}
+
+/// Every export file but the rendered views.
+fn export_files<S: SurfaceShader>(
     mesh: &Mesh,
     single_set: &[[Vec2; 3]],
     layout: &[[Vec2; 3]],
@@ -167,10 +214,16 @@ pub fn export_textured_mesh<S: SurfaceShader>(
     maps.normal = find("normal").map(|s| file_name(&s.name, &s.extension));
     maps.roughness = find("roughness").map(|s| file_name(&s.name, &s.extension));
     maps.height = find("height").map(|s| file_name(&s.name, &s.extension));
-    files.push((
-        "textured.obj".into(),
-        write_obj(mesh, Some(&uv), Some("textured.mtl"), "texsyn").into_bytes(),
-    ));
+    // The OBJ's text and the atlas are independent: made side by side.
+    let density = p.texel_density;
+    let (obj, atlas) = rayon::join(
+        || write_obj(mesh, Some(&uv), Some("textured.mtl"), "texsyn").into_bytes(),
+        || {
+            let scaled: Vec<[Vec2; 3]> = layout.iter().map(|t| t.map(|q| q * density)).collect();
+            build_chart_atlas(mesh, &scaled, p.atlas_size)
+        },
+    );
+    files.push(("textured.obj".into(), obj));
     files.push((
         "textured.mtl".into(),
         write_mtl("texsyn", &maps).into_bytes(),
@@ -178,14 +231,7 @@ pub fn export_textured_mesh<S: SurfaceShader>(
     for s in surfaces {
         files.push((file_name(&s.name, &s.extension), s.file.to_vec()));
     }
-    progress(0.05);
-    lap("textured.obj");
-
-    let density = p.texel_density;
-    let scaled: Vec<[Vec2; 3]> = layout.iter().map(|t| t.map(|q| q * density)).collect();
-    let atlas =
-        build_chart_atlas(mesh, &scaled, p.atlas_size).map_err(|e| ExportError::of_atlas(e, p))?;
-    drop(scaled);
+    let atlas = atlas.map_err(|e| ExportError::of_atlas(e, p))?;
     let pages = atlas.pages.len();
     tracing::info!(
         "reconstruct: {} charts on {pages} page(s) ({}) at {density} atlas texels per exemplar texel",
@@ -198,7 +244,7 @@ pub fn export_textured_mesh<S: SurfaceShader>(
             .join(", ")
     );
     progress(0.15);
-    lap("chart atlas");
+    lap("textured.obj and chart atlas");
     let frames = TangentFrames::new(mesh, single_set, &atlas.corner_uv);
     let mut materials: Vec<GlbMaterial> = Vec::with_capacity(pages);
     let mut baked_mtl = String::new();
@@ -291,20 +337,8 @@ pub fn export_textured_mesh<S: SurfaceShader>(
         "textured.glb".into(),
         write_glb(&glb_mesh(mesh, &atlas, &frames, materials)),
     ));
-    progress(0.8);
+    progress(0.95);
     lap("textured.glb");
-
-    if let Some(base) = surfaces.first() {
-        let opts = ViewOptions {
-            size: p.preview_size,
-            up: Vec3::from(p.up),
-            ..Default::default()
-        };
-        let preview = render_views(mesh, &base.shader, &opts);
-        files.push(("preview.png".into(), encode_png(&preview, false)));
-    }
-    lap("preview");
-    progress(1.0);
     Ok(files)
 }
 

@@ -9,7 +9,8 @@
 //!
 //! 1. **Charts.** Faces joined across every edge where both layouts give the same two points
 //!    (and the same orientation) form candidate charts (union-find; a chart is named by its
-//!    lowest face).
+//!    lowest face), cut along a grid of [`CANDIDATE_TILE`] texels so that candidates are
+//!    bounded tasks that grow in parallel.
 //! 2. **Injectivity.** Each candidate is grown breadth-first from its lowest face over an
 //!    occupancy grid of texel centres: a face whose centres are already owned by a face it
 //!    shares no vertex with (the layout folded over itself) or that would make the chart wider
@@ -42,6 +43,14 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// Space around each chart's bounding box, in texels: the gutter, plus one texel so that a
 /// bilinear sample of the gutter's last texel never reads another chart.
 const CHART_MARGIN: f64 = ATLAS_GUTTER as f64 + 1.0;
+
+/// Candidate charts are cut along a grid of this many texels in the layout (a face belongs to
+/// the cell of its centroid). Growing a chart is sequential, so without the cut one patch of
+/// the walk covering most of a million-triangle mesh kept one core busy while the other
+/// idled; with it the candidates are many tasks of bounded size, and so is each task's
+/// occupancy grid (its memory no longer grows with the patch, the exemplar or the density).
+/// The cut adds chart borders, which the bake's gutters make invisible.
+const CANDIDATE_TILE: f64 = 512.0;
 
 /// Texture coordinates for baking over one or more pages.
 #[derive(Debug, Clone, PartialEq)]
@@ -170,6 +179,9 @@ struct Grower<'a> {
     max_extent: f64,
     lo: DVec2,
     hi: DVec2,
+    /// Scratch of [`Grower::try_add`], kept between faces (it runs once per face).
+    claims: Vec<(usize, bool)>,
+    continuous: Vec<u32>,
 }
 
 /// The surface point of face `f` nearest (in the layout) to the layout position `c`, how far
@@ -220,6 +232,8 @@ impl<'a> Grower<'a> {
             max_extent,
             lo: DVec2::INFINITY,
             hi: DVec2::NEG_INFINITY,
+            claims: Vec::new(),
+            continuous: Vec::new(),
         }
     }
 
@@ -244,9 +258,11 @@ impl<'a> Grower<'a> {
             t[0].min(t[1]).min(t[2]) - DVec2::splat(CLEARANCE + 0.5),
             t[0].max(t[1]).max(t[2]) + DVec2::splat(CLEARANCE - 0.5),
         );
-        let mut claims: Vec<(usize, bool)> = Vec::new();
+        let mut claims = std::mem::take(&mut self.claims);
+        claims.clear();
         // Owners already found continuous with `f` (one check per owner, not per texel).
-        let mut continuous: Vec<u32> = Vec::new();
+        let mut continuous = std::mem::take(&mut self.continuous);
+        continuous.clear();
         for y in blo.y.ceil() as i64..=bhi.y.floor() as i64 {
             for x in blo.x.ceil() as i64..=bhi.x.floor() as i64 {
                 let (i, j) = (x - self.origin[0], y - self.origin[1]);
@@ -254,6 +270,8 @@ impl<'a> Grower<'a> {
                     if force {
                         continue;
                     }
+                    self.claims = claims;
+                    self.continuous = continuous;
                     return false;
                 }
                 let c = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
@@ -278,6 +296,8 @@ impl<'a> Grower<'a> {
                     if let (Some((p, dp, density)), Some((q, dq, _))) = (mine, theirs)
                         && (p - q).length() * density > dp + dq + CONTINUITY_TOLERANCE
                     {
+                        self.claims = claims;
+                        self.continuous = continuous;
                         return false;
                     }
                     continuous.push(o);
@@ -287,12 +307,14 @@ impl<'a> Grower<'a> {
                 }
             }
         }
-        for (c, inside) in claims {
+        for &(c, inside) in &claims {
             let (o, o_inside) = self.owner[c];
             if o == u32::MAX || (inside && !o_inside) {
                 self.owner[c] = (f, inside);
             }
         }
+        self.claims = claims;
+        self.continuous = continuous;
         self.lo = lo;
         self.hi = hi;
         true
@@ -315,7 +337,7 @@ fn grow_component(
     layout: &[[DVec2; 3]],
     joins: &[[bool; 3]],
     neighbours: &[[(u32, u8); 3]],
-    member: &dyn Fn(u32) -> bool,
+    member: &dyn Fn(u32, u32) -> bool,
     faces: &[u32],
     leaves: &[(u32, u8)],
     max_extent: f64,
@@ -363,7 +385,7 @@ fn grow_component(
         for k in 0..3 {
             let (n, _) = neighbours[f as usize][k];
             if joins[f as usize][k]
-                && member(n)
+                && member(f, n)
                 && !queued[n as usize].swap(true, Ordering::Relaxed)
             {
                 queue.push_back(n);
@@ -527,6 +549,13 @@ pub fn build_chart_atlas(
         })
         .collect();
     let joined = |f: usize| joins[f].iter().any(|&j| j);
+    let tile: Vec<[i64; 2]> = lay
+        .par_iter()
+        .map(|t| {
+            let c = (t[0] + t[1] + t[2]) / (3.0 * CANDIDATE_TILE);
+            [c.x.floor() as i64, c.y.floor() as i64]
+        })
+        .collect();
 
     // Leaves: faces joined to nobody, each given to the neighbouring joined face of lowest
     // index (so to that face's component).
@@ -556,11 +585,12 @@ pub fn build_chart_atlas(
             }
             m
         };
+        let member = |f: u32, g: u32| in_pool[g as usize] && tile[f as usize] == tile[g as usize];
         let mut dsu = Dsu((0..faces as u32).collect());
         for &f in &pool {
             for k in 0..3 {
                 let (g, _) = neighbours[f as usize][k];
-                if joins[f as usize][k] && in_pool[g as usize] {
+                if joins[f as usize][k] && member(f, g) {
                     dsu.union(f, g);
                 }
             }
@@ -579,7 +609,11 @@ pub fn build_chart_atlas(
             }
         }
         let groups: Vec<(u32, Vec<u32>)> = groups.into_iter().collect();
-        let member = |f: u32| in_pool[f as usize];
+        tracing::debug!(
+            "chart atlas: {} candidates, the largest of {} faces",
+            groups.len(),
+            groups.iter().map(|(_, g)| g.len()).max().unwrap_or(0)
+        );
         let queued: Vec<std::sync::atomic::AtomicBool> = (0..faces)
             .map(|_| std::sync::atomic::AtomicBool::new(false))
             .collect();
@@ -631,8 +665,10 @@ pub fn build_chart_atlas(
             });
         }
     }
+    lap("single charts");
     // A chart's name is its lowest face: order them so, for a layout independent of rounds.
     charts.par_sort_unstable_by_key(|c| c.faces.iter().copied().min().unwrap_or(u32::MAX));
+    lap("charts sorted");
     // Only a chart's forced first face can exceed a page; name the widest such face.
     if let Some((face, extent)) = charts
         .iter()
@@ -646,7 +682,9 @@ pub fn build_chart_atlas(
             max_page,
         });
     }
-    Ok(pack_pages(faces, &charts, max_page))
+    let atlas = pack_pages(faces, &charts, max_page);
+    lap("packed");
+    Ok(atlas)
 }
 
 /// Shelf-packs the charts' boxes (plus margins) into pages.

@@ -160,61 +160,69 @@ struct ScreenTri {
     back_facing: bool,
 }
 
-/// Renders one view into linear-light RGB supersamples (`cam.pixels`² of them, row-major).
+/// Renders one view into linear-light RGB supersamples (`cam.pixels`² of them, row-major),
+/// once per shader: the triangles are binned and rasterized once, and each shader shades the
+/// same visible points (a preview and `patches.png` of a million-triangle mesh share the work).
 fn render_linear(
     mesh: &Mesh,
-    shader: &dyn SurfaceShader,
+    shaders: &[&dyn SurfaceShader],
     cam: &Camera,
     lit: bool,
     background: Vec3,
-) -> Vec<Vec3> {
+) -> Vec<Vec<Vec3>> {
     let n = cam.pixels;
     let projected: Vec<(Vec2, f32)> = mesh.positions.par_iter().map(|&p| cam.project(p)).collect();
     let normals = mesh.vertex_normals();
     let light = cam.light();
 
-    // Triangles in front of the near plane, binned into bands of rows (in index order).
+    // Triangles in front of the near plane and overlapping the image rows.
+    let tris: Vec<Option<ScreenTri>> = mesh
+        .triangles
+        .par_iter()
+        .enumerate()
+        .map(|(f, t)| {
+            let c = t.map(|v| projected.get(v as usize).copied());
+            let (Some(a), Some(b), Some(c)) = (c[0], c[1], c[2]) else {
+                return None;
+            };
+            let pts = [a, b, c];
+            if pts
+                .iter()
+                .any(|(xy, w)| w.is_nan() || *w <= cam.near || !xy.is_finite())
+            {
+                return None;
+            }
+            let min_y = a.0.y.min(b.0.y).min(c.0.y);
+            let max_y = a.0.y.max(b.0.y).max(c.0.y);
+            if max_y < 0.0 || min_y > n as f32 {
+                return None;
+            }
+            let p0 = mesh.positions[t[0] as usize];
+            let back_facing = mesh.face_normal_unnormalized(f).dot(cam.eye - p0) < 0.0;
+            Some(ScreenTri {
+                xy: pts.map(|p| p.0),
+                inv_w: pts.map(|p| 1.0 / p.1),
+                back_facing,
+            })
+        })
+        .collect();
+    // Binned into bands of rows, in index order.
     let bands = n.div_ceil(BAND) as usize;
     let mut bins: Vec<Vec<u32>> = vec![Vec::new(); bands];
-    let mut tris: Vec<Option<ScreenTri>> = Vec::with_capacity(mesh.triangles.len());
-    for (f, t) in mesh.triangles.iter().enumerate() {
-        let c = t.map(|v| projected.get(v as usize).copied());
-        let (Some(a), Some(b), Some(c)) = (c[0], c[1], c[2]) else {
-            tris.push(None);
-            continue;
-        };
-        let pts = [a, b, c];
-        if pts
-            .iter()
-            .any(|(xy, w)| w.is_nan() || *w <= cam.near || !xy.is_finite())
-        {
-            tris.push(None);
-            continue;
+    let band_of = |y: f32| ((y.clamp(0.0, n as f32 - 1.0) as u32 / BAND) as usize).min(bands - 1);
+    for (f, tri) in tris.iter().enumerate() {
+        if let Some(tri) = tri {
+            let min_y = tri.xy[0].y.min(tri.xy[1].y).min(tri.xy[2].y);
+            let max_y = tri.xy[0].y.max(tri.xy[1].y).max(tri.xy[2].y);
+            for bin in &mut bins[band_of(min_y)..=band_of(max_y)] {
+                bin.push(f as u32);
+            }
         }
-        let min_y = a.0.y.min(b.0.y).min(c.0.y);
-        let max_y = a.0.y.max(b.0.y).max(c.0.y);
-        if max_y < 0.0 || min_y > n as f32 {
-            tris.push(None);
-            continue;
-        }
-        let band_of =
-            |y: f32| ((y.clamp(0.0, n as f32 - 1.0) as u32 / BAND) as usize).min(bands - 1);
-        for bin in &mut bins[band_of(min_y)..=band_of(max_y)] {
-            bin.push(f as u32);
-        }
-        let p0 = mesh.positions[t[0] as usize];
-        let back_facing = mesh.face_normal_unnormalized(f).dot(cam.eye - p0) < 0.0;
-        tris.push(Some(ScreenTri {
-            xy: pts.map(|p| p.0),
-            inv_w: pts.map(|p| 1.0 / p.1),
-            back_facing,
-        }));
     }
 
-    let mut out = vec![Vec3::ZERO; (n * n) as usize];
-    out.par_chunks_mut((n * BAND) as usize)
-        .enumerate()
-        .for_each(|(band, rows_out)| {
+    let hits: Vec<Vec<Hit>> = (0..bands)
+        .into_par_iter()
+        .map(|band| {
             let y0 = band as u32 * BAND;
             let y1 = (y0 + BAND).min(n);
             let mut hits = vec![
@@ -223,7 +231,7 @@ fn render_linear(
                     face: NO_FACE,
                     lambda: Vec3::ZERO,
                 };
-                rows_out.len()
+                ((y1 - y0) * n) as usize
             ];
             for &f in &bins[band] {
                 let Some(tri) = &tris[f as usize] else {
@@ -242,23 +250,35 @@ fn render_linear(
                     }
                 });
             }
-            for (px, h) in rows_out.iter_mut().zip(&hits) {
-                *px = if h.face == NO_FACE {
-                    background
-                } else {
-                    shade(
-                        mesh,
-                        normals,
-                        shader,
-                        tris[h.face as usize].as_ref(),
-                        h,
-                        lit,
-                        light,
-                    )
-                };
-            }
-        });
-    out
+            hits
+        })
+        .collect();
+    shaders
+        .iter()
+        .map(|&shader| {
+            let mut out = vec![Vec3::ZERO; (n * n) as usize];
+            out.par_chunks_mut((n * BAND) as usize)
+                .zip(&hits)
+                .for_each(|(rows_out, hits)| {
+                    for (px, h) in rows_out.iter_mut().zip(hits) {
+                        *px = if h.face == NO_FACE {
+                            background
+                        } else {
+                            shade(
+                                mesh,
+                                normals,
+                                shader,
+                                tris[h.face as usize].as_ref(),
+                                h,
+                                lit,
+                                light,
+                            )
+                        };
+                    }
+                });
+            out
+        })
+        .collect()
 }
 
 /// Perspective-correct barycentrics from screen-space ones: `lambda_i / w_i`, renormalized.
@@ -320,11 +340,26 @@ pub fn render_views(
     shader: &dyn SurfaceShader,
     opts: &ViewOptions,
 ) -> image::RgbaImage {
+    let mut images = render_views_of_each(mesh, &[shader], opts);
+    images.pop().expect("one image per shader")
+}
+
+/// [`render_views`] for each of `shaders`, from one rasterization of each view: the images
+/// are the same, byte for byte, as separate calls give.
+pub fn render_views_of_each(
+    mesh: &Mesh,
+    shaders: &[&dyn SurfaceShader],
+    opts: &ViewOptions,
+) -> Vec<image::RgbaImage> {
     let s = opts.size.clamp(1, ViewOptions::MAX_SIZE);
     let bg = opts.background;
-    let mut out = image::RgbaImage::from_pixel(3 * s, s, image::Rgba([bg[0], bg[1], bg[2], 255]));
+    let mut outs =
+        vec![
+            image::RgbaImage::from_pixel(3 * s, s, image::Rgba([bg[0], bg[1], bg[2], 255]));
+            shaders.len()
+        ];
     if mesh.triangles.is_empty() {
-        return out;
+        return outs;
     }
     let bg_lin = Vec3::new(
         srgb::to_linear(bg[0] as f32 / 255.0),
@@ -353,30 +388,32 @@ pub fn render_views(
     let row_bytes = (3 * s * 4) as usize;
     for (v, dir) in dirs.into_iter().enumerate() {
         let cam = Camera::fit(&points, lo, hi, dir, up, ss);
-        let lin = render_linear(mesh, shader, &cam, opts.lit, bg_lin);
-        out.par_chunks_mut(row_bytes)
-            .enumerate()
-            .for_each(|(y, row)| {
-                for x in 0..s as usize {
-                    let mut sum = Vec3::ZERO;
-                    for sy in 0..SUPERSAMPLE as usize {
-                        for sx in 0..SUPERSAMPLE as usize {
-                            let i = (y * SUPERSAMPLE as usize + sy) * ss as usize
-                                + x * SUPERSAMPLE as usize
-                                + sx;
-                            sum += lin[i];
+        let lins = render_linear(mesh, shaders, &cam, opts.lit, bg_lin);
+        for (out, lin) in outs.iter_mut().zip(&lins) {
+            out.par_chunks_mut(row_bytes)
+                .enumerate()
+                .for_each(|(y, row)| {
+                    for x in 0..s as usize {
+                        let mut sum = Vec3::ZERO;
+                        for sy in 0..SUPERSAMPLE as usize {
+                            for sx in 0..SUPERSAMPLE as usize {
+                                let i = (y * SUPERSAMPLE as usize + sy) * ss as usize
+                                    + x * SUPERSAMPLE as usize
+                                    + sx;
+                                sum += lin[i];
+                            }
                         }
+                        let c = sum / (SUPERSAMPLE * SUPERSAMPLE) as f32;
+                        let o = (v * s as usize + x) * 4;
+                        row[o] = srgb::to_u8(c.x);
+                        row[o + 1] = srgb::to_u8(c.y);
+                        row[o + 2] = srgb::to_u8(c.z);
+                        row[o + 3] = 255;
                     }
-                    let c = sum / (SUPERSAMPLE * SUPERSAMPLE) as f32;
-                    let o = (v * s as usize + x) * 4;
-                    row[o] = srgb::to_u8(c.x);
-                    row[o + 1] = srgb::to_u8(c.y);
-                    row[o + 2] = srgb::to_u8(c.z);
-                    row[o + 3] = 255;
-                }
-            });
+                });
+        }
     }
-    out
+    outs
 }
 
 #[cfg(test)]
