@@ -1220,13 +1220,29 @@ fn synthesize_impl(
             if f >= kk as f64 { 0.0 } else { f as f32 }
         })
         .collect();
+    // R = S / S̄ · 2^offset becomes g / ḡ · 2^offset (means over the samples where both are
+    // known), so the texture's density over the whole image stays where the field put it.
+    let (sum_s, sum_g) = metric0
+        .iter()
+        .zip(&spacing)
+        .filter(|(m, s)| m.spacing > 0.0 && **s > 0.0)
+        .fold((0.0f64, 0.0f64), |(a, b), (m, s)| {
+            (a + *s as f64, b + m.spacing as f64)
+        });
+    let mean_ratio = if sum_g > 0.0 {
+        (sum_s / sum_g) as f32
+    } else {
+        1.0
+    };
     let scale0: Vec<f32> = field
         .rel_scale
         .iter()
         .enumerate()
         .map(|(k, &r)| {
             let r = match (metric0.get(k), spacing.get(k)) {
-                (Some(m), Some(&s)) if m.spacing > 0.0 && s > 0.0 => r * m.spacing / s,
+                (Some(m), Some(&s)) if m.spacing > 0.0 && s > 0.0 => {
+                    r * m.spacing / s * mean_ratio
+                }
                 _ => r,
             };
             (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32)
