@@ -528,7 +528,7 @@ impl Ctx<'_, '_> {
     /// values: outside the square, or not yet finished in both orders (taps laid out by the
     /// surface metric can reach past the causal half).
     #[inline]
-    fn from_init(&self, i: i64, j: i64, ti: i64, tj: i64, outside: bool) -> bool {
+    fn reads_init(&self, i: i64, j: i64, ti: i64, tj: i64, outside: bool) -> bool {
         let done = (ti == i && tj < j) || (ti < i && tj + self.wave * ti < j + self.wave * i);
         outside || !done
     }
@@ -684,7 +684,7 @@ impl Ctx<'_, '_> {
         // The value at grid point (ti, tj) of the level being synthesized.
         let at = |ti: i64, tj: i64| {
             let (k, r, outside) = lv.grid.locate(ti, tj);
-            let src = if outside_from_init && self.from_init(i, j, ti, tj, outside) {
+            let src = if outside_from_init && self.reads_init(i, j, ti, tj, outside) {
                 &lv.init
             } else {
                 &lv.data
@@ -836,7 +836,7 @@ impl Ctx<'_, '_> {
             if r != 0 {
                 continue;
             }
-            let src = if kind == Template::Causal && self.from_init(i, j, ti, tj, outside) {
+            let src = if kind == Template::Causal && self.reads_init(i, j, ti, tj, outside) {
                 lv.init_src[k]
             } else {
                 lv.src[k]
@@ -1240,9 +1240,7 @@ fn synthesize_impl(
         .enumerate()
         .map(|(k, &r)| {
             let r = match (metric0.get(k), spacing.get(k)) {
-                (Some(m), Some(&s)) if m.spacing > 0.0 && s > 0.0 => {
-                    r * m.spacing / s * mean_ratio
-                }
+                (Some(m), Some(&s)) if m.spacing > 0.0 && s > 0.0 => r * m.spacing / s * mean_ratio,
                 _ => r,
             };
             (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32)
