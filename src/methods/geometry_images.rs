@@ -45,7 +45,8 @@ const RECONSTRUCT_VERSION: u32 = 6;
 const VARIANTS_VERSION: u32 = 2;
 // 3: the coarsest scanline pass is an exhaustive search again (a jump-penalized one lowered
 // the bumps' mean by 0.16 std).
-const SYNTH_VERSION: u32 = 3;
+// 4: templates laid out in the surface metric (`synthesize.anisotropic`, default true).
+const SYNTH_VERSION: u32 = 4;
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]

@@ -41,6 +41,18 @@
 //! holds the representative-frame value, turned by the quarter turn between the member's and
 //! the representative's sides; all members' output texels are bit-identical.
 //!
+//! Surface metric (`anisotropic`, the default; issue 12 §2): the paper's templates are laid out
+//! in grid texels and its scale `R` is one number per sample, so where the geometry image
+//! stretches the surface more one way than the other (long thin parts) the relief came out as
+//! streaks. Each texel instead reads template tap `s` (in sample texels) at grid offset
+//! `round(A⁻¹ s)` and shifts a coherent candidate by `A o` for a neighbour `o` grid steps away,
+//! with `A` the unimodular square root of the grid's metric ([`SurfaceMetric`]); a finer level's
+//! start takes its parent's source shifted by `A` times the child's offset; `R` uses the
+//! metric's isotropic spacing; and the field's direction goes through `A` into sample axes. The
+//! variants stay isotropic. In the scanline pass a tap so placed can fall outside the causal
+//! half: taps not finished in both the scanline and the wave order are read from the level's
+//! starting values, which keeps the wave order exact.
+//!
 //! Heuristics (the paper: "for other problem cases, e.g. texels in the corner of geometry images,
 //! or where two cuts meet, we use a heuristic approach"):
 //! - A tap outside the square across a corner (outside in both `i` and `j`) is first mirrored
@@ -78,9 +90,11 @@ use crate::analyse_exemplar::texel_variants::{
     SampleMap, Template, TexelVariantsRef, coarse_taps, coarse_window, template_taps,
 };
 use crate::check::{ParamError, check_range};
+use crate::field::param_field::local_spacing;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::image::neighbourhood::mirror;
 use crate::random::{counter_hash, counter_unit};
+use crate::synthesize::surface_metric::{SurfaceMetric, surface_metrics};
 use glam::Vec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -125,6 +139,12 @@ pub struct GeometrySynthParams {
     /// one correction pass: nearest-patch ratio 0.650, against 0.815 for `per_texel`; measured
     /// with `examples/gi_quality.rs`).
     pub coarse_weight: f32,
+    /// Whether the templates are laid out in the surface's metric (see [`SurfaceMetric`]):
+    /// each texel's taps and coherent shifts go through the geometry image's Jacobian, so
+    /// relief keeps its shape where the grid stretches the surface more one way than the other
+    /// (long thin parts: legs, necks, trunks). `false` is the paper's template in grid texels,
+    /// which draws the relief out into streaks there. Default: true.
+    pub anisotropic: bool,
 }
 
 /// The candidate search of each texel's match.
@@ -150,6 +170,7 @@ impl Default for GeometrySynthParams {
             coherence: 1.0,
             correction_passes: 1,
             coarse_weight: 1.0,
+            anisotropic: true,
         }
     }
 }
@@ -178,6 +199,25 @@ const STREAM_FALLBACK: u64 = 0x6774_0006;
 #[inline]
 fn pack_src(v: usize, k: usize) -> u64 {
     ((v as u64) << 32) | k as u64
+}
+
+/// Where a texel's value was copied from: [`pack_src`] of the variant and texel, and, with the
+/// surface metric, the sub-texel remainder of the continuous source position (in that
+/// variant's texels, within ±0.5), so that shifts by `A o` that are not whole texels add up
+/// along a run of coherent texels instead of being rounded away at each step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Src {
+    packed: u64,
+    frac: [f32; 2],
+}
+
+impl Src {
+    fn whole(v: usize, k: usize) -> Src {
+        Src {
+            packed: pack_src(v, k),
+            frac: [0.0; 2],
+        }
+    }
 }
 
 /// Most channels a texel has.
@@ -430,8 +470,34 @@ struct Level {
     /// Fractional scale index in `[0, scales − 1]` (0 = most enlarged).
     scale: Vec<f32>,
     /// Per texel, where its value was copied from ([`pack_src`]), and the same for `init`.
-    src: Vec<u64>,
-    init_src: Vec<u64>,
+    src: Vec<Src>,
+    init_src: Vec<Src>,
+    /// Per texel, the map from grid offsets to sample offsets ([`SurfaceMetric`]); empty
+    /// without `anisotropic` (template taps are grid offsets).
+    metric: Vec<SurfaceMetric>,
+}
+
+impl Level {
+    /// The grid offset `(dx, dy)` at which texel `t` reads template tap `tap`.
+    #[inline]
+    fn tap_offset(&self, t: usize, tap: (i32, i32)) -> (i32, i32) {
+        match self.metric.get(t) {
+            Some(m) => m.to_grid(tap),
+            None => tap,
+        }
+    }
+
+    /// The shift, in sample texels, of a neighbour `o` grid steps away from texel `t`.
+    #[inline]
+    fn sample_shift(&self, t: usize, o: (i32, i32)) -> [f64; 2] {
+        match self.metric.get(t) {
+            Some(m) => {
+                let s = m.to_sample(Vec2::new(o.0 as f32, o.1 as f32));
+                [s.x as f64, s.y as f64]
+            }
+            None => [o.0 as f64, o.1 as f64],
+        }
+    }
 }
 
 /// Everything a texel's match needs, shared by the passes.
@@ -451,6 +517,21 @@ struct Ctx<'a, 'v> {
     coherence: f32,
     /// Per (variant, level), `v * levels + l`: the map to the sample's level 0.
     maps: Vec<SampleMap>,
+    /// Anti-diagonal step of the scanline pass's waves (`template / 2 + 1`): a texel `(i', j')`
+    /// is finished before texel `(i, j)` in both the scanline and the wave order when it is
+    /// left of it on its row, or on a row above and on an earlier wave.
+    wave: i64,
+}
+
+impl Ctx<'_, '_> {
+    /// Whether the scanline pass reads tap `(ti, tj)` of texel `(i, j)` from the starting
+    /// values: outside the square, or not yet finished in both orders (taps laid out by the
+    /// surface metric can reach past the causal half).
+    #[inline]
+    fn reads_init(&self, i: i64, j: i64, ti: i64, tj: i64, outside: bool) -> bool {
+        let done = (ti == i && tj < j) || (ti < i && tj + self.wave * ti < j + self.wave * i);
+        outside || !done
+    }
 }
 
 /// Scratch buffers of one matcher.
@@ -459,8 +540,9 @@ struct Scratch {
     raw: Vec<f32>,
     reduced: Vec<f32>,
     search: Vec<f32>,
-    /// Candidate texel index `<< 1`, plus 1 for a k-coherent (not shifted) one.
-    candidates: Vec<u64>,
+    /// Candidate texel index `<< 1`, plus 1 for a k-coherent (not shifted) one, and its
+    /// sub-texel remainder ([`Src::frac`]).
+    candidates: Vec<(u64, [f32; 2])>,
 }
 
 /// The texels of a `w × h` variant level (with a `cw × ch` coarser level, if any) whose whole
@@ -486,6 +568,35 @@ fn valid_range(kind: Template, side: u32, w: u32, h: u32, coarse: Option<(u32, u
         b[3] = b[3].min(2 * (ch as i64 - 1 - rc) + 1);
     }
     b
+}
+
+/// The value at grid offset `g` (fractional, `x` = columns) from `(i, j)`, interpolated
+/// bilinearly between the four grid points around it, each read by `at(i, j)`.
+#[inline]
+fn bilinear(
+    g: Vec2,
+    i: i64,
+    j: i64,
+    at: &impl Fn(i64, i64) -> [f32; MAX_CHANNELS],
+) -> [f32; MAX_CHANNELS] {
+    let (x0, y0) = (g.x.floor(), g.y.floor());
+    let (fx, fy) = (g.x - x0, g.y - y0);
+    let (bi, bj) = (i + y0 as i64, j + x0 as i64);
+    let mut out = [0.0f32; MAX_CHANNELS];
+    for (di, dj, w) in [
+        (0, 0, (1.0 - fx) * (1.0 - fy)),
+        (0, 1, fx * (1.0 - fy)),
+        (1, 0, (1.0 - fx) * fy),
+        (1, 1, fx * fy),
+    ] {
+        if w > 0.0 {
+            let px = at(bi + di, bj + dj);
+            for (o, p) in out.iter_mut().zip(px) {
+                *o += w * p;
+            }
+        }
+    }
+    out
 }
 
 impl Ctx<'_, '_> {
@@ -554,33 +665,52 @@ impl Ctx<'_, '_> {
     ) {
         let c = self.channels;
         raw.clear();
-        let push = |data: &[f32], k: usize, r: u8, raw: &mut Vec<f32>| {
+        let read = |data: &[f32], k: usize, r: u8| {
             let mut px = [0.0f32; MAX_CHANNELS];
             px[..c].copy_from_slice(&data[k * c..(k + 1) * c]);
             if r != 0 {
                 quarter_turn(r, &mut px);
             }
+            px
+        };
+        let push = |px: [f32; MAX_CHANNELS], raw: &mut Vec<f32>| {
             for ch in 0..c {
                 raw.push(px[ch] * self.weights[ch]);
             }
         };
         let lv = &levels[l];
-        for &(dx, dy) in taps {
-            let (k, r, outside) = lv.grid.locate(i + dy as i64, j + dx as i64);
-            let src = if outside && outside_from_init {
+        let t = lv.grid.idx(i, j);
+        let metric = lv.metric.get(t);
+        // The value at grid point (ti, tj) of the level being synthesized.
+        let at = |ti: i64, tj: i64| {
+            let (k, r, outside) = lv.grid.locate(ti, tj);
+            let src = if outside_from_init && self.reads_init(i, j, ti, tj, outside) {
                 &lv.init
             } else {
                 &lv.data
             };
-            push(src, k, r, raw);
+            read(src, k, r)
+        };
+        for &tap in taps {
+            match metric {
+                // With the surface metric a tap falls between grid points: bilinear.
+                Some(m) => push(bilinear(m.to_grid_f(tap), i, j, &at), raw),
+                None => push(at(i + tap.1 as i64, j + tap.0 as i64), raw),
+            }
         }
         if let Some(cl) = levels.get(l + 1) {
             // The coarser level is finished: read it as it is, across cuts too.
             let (ci, cj) = (i >> 1, j >> 1);
             let start = raw.len();
-            for &(dx, dy) in ctaps {
-                let (k, r, _) = cl.grid.locate(ci + dy as i64, cj + dx as i64);
-                push(&cl.data, k, r, raw);
+            let at = |ti: i64, tj: i64| {
+                let (k, r, _) = cl.grid.locate(ti, tj);
+                read(&cl.data, k, r)
+            };
+            for &tap in ctaps {
+                match metric {
+                    Some(m) => push(bilinear(m.to_grid_f(tap), ci, cj, &at), raw),
+                    None => push(at(ci + tap.1 as i64, cj + tap.0 as i64), raw),
+                }
             }
             for v in &mut raw[start..] {
                 *v *= self.coarse_weight;
@@ -603,7 +733,7 @@ impl Ctx<'_, '_> {
         j: i64,
         scratch: &mut Scratch,
         out: &mut [f32],
-    ) -> u64 {
+    ) -> Src {
         let c = self.channels;
         let lv = &levels[l];
         let t = lv.grid.idx(i, j);
@@ -614,7 +744,7 @@ impl Ctx<'_, '_> {
         let from_init = kind == Template::Causal;
         self.gather(levels, l, taps, ctaps, i, j, from_init, &mut scratch.raw);
         let level_img = self.variants.level(v, l);
-        let k = match self.search {
+        let (k, frac) = match self.search {
             Search::PerTexel => {
                 let set = self.variants.set(v, l, kind);
                 debug_assert_eq!(scratch.raw.len(), set.dim_in);
@@ -624,14 +754,17 @@ impl Ctx<'_, '_> {
                     .tree
                     .nearest1_approx(&scratch.reduced, self.eps, &mut scratch.search)
                     .expect("feature sets are never empty");
-                set.centres[id as usize] as usize
+                (set.centres[id as usize] as usize, [0.0; 2])
             }
             Search::KCoherence => {
                 self.coherent_match(levels, l, pass, kind, taps, ctaps, i, j, v, scratch)
             }
         };
         out[..c].copy_from_slice(&level_img.texels[k * c..(k + 1) * c]);
-        pack_src(v, k)
+        Src {
+            packed: pack_src(v, k),
+            frac,
+        }
     }
 
     /// Rounds a point of level `l` of variant `v` to a texel index inside `range`.
@@ -658,7 +791,7 @@ impl Ctx<'_, '_> {
         j: i64,
         v: usize,
         scratch: &mut Scratch,
-    ) -> usize {
+    ) -> (usize, [f32; 2]) {
         let vars = self.variants;
         let nl = vars.levels();
         let lv = &levels[l];
@@ -686,27 +819,38 @@ impl Ctx<'_, '_> {
         let jump_factor = (1.0 + self.coherence / (1u32 << l) as f32).powi(2);
         let cands = &mut scratch.candidates;
         cands.clear();
+        let keep_frac = !lv.metric.is_empty();
         // The texel itself (its prediction from the coarser level, or its value before this
         // pass) and each synthesized neighbour inside the square: their source, shifted back by
         // the neighbour's offset.
         let own = std::iter::once((0i32, 0i32));
-        for (dx, dy) in own.chain(taps.iter().copied()) {
+        let t = lv.grid.idx(i, j);
+        for tap in own.chain(taps.iter().copied()) {
+            let (dx, dy) = lv.tap_offset(t, tap);
             // Across a cut whose sides share their axes (a quarter turn of 0) the shift holds
             // too; across a turning cut it would need the turned variant, so those taps bring
             // none. Outside taps of the scanline pass are read from the starting values (see
             // `gather`), and so are their sources.
-            let (k, r, outside) = lv.grid.locate(i + dy as i64, j + dx as i64);
+            let (ti, tj) = (i + dy as i64, j + dx as i64);
+            let (k, r, outside) = lv.grid.locate(ti, tj);
             if r != 0 {
                 continue;
             }
-            let src = if outside && kind == Template::Causal {
+            let src = if kind == Template::Causal && self.reads_init(i, j, ti, tj, outside) {
                 lv.init_src[k]
             } else {
                 lv.src[k]
             };
-            let (sv, sk) = ((src >> 32) as usize, (src & 0xFFFF_FFFF) as u32);
+            let (sv, sk) = (
+                (src.packed >> 32) as usize,
+                (src.packed & 0xFFFF_FFFF) as u32,
+            );
             let sw = vars.level(sv, l).width;
-            let q = [(sk % sw) as f64 - dx as f64, (sk / sw) as f64 - dy as f64];
+            let shift = lv.sample_shift(t, (dx, dy));
+            let q = [
+                (sk % sw) as f64 + src.frac[0] as f64 - shift[0],
+                (sk / sw) as f64 + src.frac[1] as f64 - shift[1],
+            ];
             let q = if sv == v {
                 q
             } else {
@@ -714,7 +858,15 @@ impl Ctx<'_, '_> {
                 map_v.from_sample(self.maps[sv * nlv + l].to_sample(q))
             };
             if let Some(id) = Self::texel_in(&range, img.width, q) {
-                cands.push((id as u64) << 1);
+                // The remainder is kept with the surface metric only: without it every shift
+                // is whole texels within a variant, and the paper's rounding across variants
+                // stays as it was.
+                let frac = if keep_frac {
+                    [q[0] - (q[0] + 0.5).floor(), q[1] - (q[1] + 0.5).floor()].map(|f| f as f32)
+                } else {
+                    [0.0; 2]
+                };
+                cands.push(((id as u64) << 1, frac));
             }
             // Its k-coherent set, through the sample level matching this variant's level.
             let x0 = map_v.to_sample(q);
@@ -732,14 +884,18 @@ impl Ctx<'_, '_> {
                     (e / ks.width) as f64 * kscale,
                 ];
                 if let Some(id) = Self::texel_in(&range, img.width, map_v.from_sample(ex)) {
-                    cands.push(((id as u64) << 1) | 1);
+                    cands.push((((id as u64) << 1) | 1, [0.0; 2]));
                 }
             }
         }
         // By texel, a shifted candidate before a k-coherent one of the same texel, which then
         // goes.
-        cands.sort_unstable();
-        cands.dedup_by(|b, a| *a >> 1 == *b >> 1);
+        cands.sort_unstable_by(|a, b| {
+            a.0.cmp(&b.0)
+                .then(a.1[0].total_cmp(&b.1[0]))
+                .then(a.1[1].total_cmp(&b.1[1]))
+        });
+        cands.dedup_by(|b, a| a.0 >> 1 == b.0 >> 1);
         if cands.is_empty() && !(l + 1 == nl && kind == Template::Causal) {
             // Nothing coherent lies inside the variant: a random texel whose template does.
             let h = counter_hash(
@@ -751,7 +907,7 @@ impl Ctx<'_, '_> {
             let ny = (range[3] - range[2] + 1) as u64;
             let x = range[0] + (h % nx) as i64;
             let y = range[2] + ((h >> 32) % ny) as i64;
-            return (y * img.width as i64 + x) as usize;
+            return ((y * img.width as i64 + x) as usize, [0.0; 2]);
         }
         let c = self.channels;
         let query = &scratch.raw;
@@ -799,10 +955,10 @@ impl Ctx<'_, '_> {
                     }
                 }
             }
-            return best.1 as usize;
+            return (best.1 as usize, [0.0; 2]);
         }
-        let mut best = (f32::INFINITY, (cands[0] >> 1) as u32);
-        for &cand in cands.iter() {
+        let mut best = (f32::INFINITY, (cands[0].0 >> 1) as u32, cands[0].1);
+        for &(cand, frac) in cands.iter() {
             // Jumps to a k-coherent texel must be (1 + coherence) times better than a shifted
             // candidate (Hertzmann et al. 2001's κ), as squared distances.
             let scale = if cand & 1 == 1 { jump_factor } else { 1.0 };
@@ -810,10 +966,10 @@ impl Ctx<'_, '_> {
             let (x, y) = ((cand % img.width) as i64, (cand / img.width) as i64);
             let d = dist(x, y, best.0 / scale) * scale;
             if d < best.0 {
-                best = (d, cand);
+                best = (d, cand, frac);
             }
         }
-        best.1 as usize
+        (best.1 as usize, best.2)
     }
 }
 
@@ -840,19 +996,36 @@ fn unify_mates(lv: &mut Level, c: usize, seed: u64, level: usize, pass: u32) {
 /// The sources of a finer level's starting values: texel `(i, j)` takes its parent
 /// `(i / 2, j / 2)`'s source texel `q` (in the coarser level of the parent's variant) as
 /// `2 q + (j mod 2, i mod 2)` in that variant's finer level (`size` gives its width and
-/// height), clamped inside.
-fn upsample_sources(coarse: &Level, nf: usize, size: impl Fn(usize) -> (u32, u32)) -> Vec<u64> {
+/// height), clamped inside; with the surface metric, the child's offset `(j mod 2, i mod 2)`
+/// goes through `fine`'s map to sample offsets, rounded.
+fn upsample_sources(coarse: &Level, fine: &Level, size: impl Fn(usize) -> (u32, u32)) -> Vec<Src> {
     let nc = coarse.grid.n;
-    let mut out = vec![0u64; nf * nf];
+    let nf = fine.grid.n;
+    let mut out = vec![Src::default(); nf * nf];
     for i in 0..nf {
         for j in 0..nf {
             let src = coarse.src[(i / 2) * nc + j / 2];
-            let (v, k) = ((src >> 32) as usize, (src & 0xFFFF_FFFF) as u32);
+            let (v, k) = (
+                (src.packed >> 32) as usize,
+                (src.packed & 0xFFFF_FFFF) as u32,
+            );
             let (w, h) = size(v);
             let cw = w.div_ceil(2);
-            let x = (2 * (k % cw) + (j % 2) as u32).min(w - 1);
-            let y = (2 * (k / cw) + (i % 2) as u32).min(h - 1);
-            out[i * nf + j] = pack_src(v, (y * w + x) as usize);
+            let o = fine.sample_shift(i * nf + j, ((j % 2) as i32, (i % 2) as i32));
+            // The continuous position 2 (q + frac) + o, rounded to a texel inside; the
+            // remainder is kept (zero without the surface metric).
+            let at = |base: u32, frac: f32, d: f64, len: u32| {
+                let x = 2.0 * frac as f64 + d;
+                let r = (x + 0.5).floor();
+                let t = ((2 * base) as i64 + r as i64).clamp(0, len as i64 - 1) as u32;
+                (t, (x - r) as f32)
+            };
+            let (x, fx) = at(k % cw, src.frac[0], o[0], w);
+            let (y, fy) = at(k / cw, src.frac[1], o[1], h);
+            out[i * nf + j] = Src {
+                packed: pack_src(v, (y * w + x) as usize),
+                frac: [fx, fy],
+            };
         }
     }
     out
@@ -1018,22 +1191,60 @@ fn synthesize_impl(
     let ss = vp.scales as usize;
     let mid = vp.middle_scale();
 
-    // Per-sample controls at level 0.
+    // Per-sample controls at level 0. With the surface metric, the field's direction (grid
+    // axes) is turned into the sample axes by A, and R takes the metric's isotropic spacing in
+    // place of the mean neighbour distance (which the longer grid direction dominates).
+    let metric0 = if p.anisotropic {
+        surface_metrics(gi)
+    } else {
+        Vec::new()
+    };
+    let spacing = if p.anisotropic {
+        local_spacing(gi)
+    } else {
+        Vec::new()
+    };
     let tau = std::f64::consts::TAU;
     let orient0: Vec<f32> = field
         .dir
         .iter()
-        .map(|&d| {
+        .enumerate()
+        .map(|(k, &d)| {
+            let d = match metric0.get(k) {
+                Some(m) if d != Vec2::ZERO => m.to_sample(d),
+                _ => d,
+            };
             let (cos, sin) = dir_rotation(d);
             let theta = (sin as f64).atan2_pure(cos as f64);
             let f = (theta / (tau / kk as f64)).rem_euclid(kk as f64);
             if f >= kk as f64 { 0.0 } else { f as f32 }
         })
         .collect();
+    // R = S / S̄ · 2^offset becomes g / ḡ · 2^offset (means over the samples where both are
+    // known), so the texture's density over the whole image stays where the field put it.
+    let (sum_s, sum_g) = metric0
+        .iter()
+        .zip(&spacing)
+        .filter(|(m, s)| m.spacing > 0.0 && **s > 0.0)
+        .fold((0.0f64, 0.0f64), |(a, b), (m, s)| {
+            (a + *s as f64, b + m.spacing as f64)
+        });
+    let mean_ratio = if sum_g > 0.0 {
+        (sum_s / sum_g) as f32
+    } else {
+        1.0
+    };
     let scale0: Vec<f32> = field
         .rel_scale
         .iter()
-        .map(|&r| (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32))
+        .enumerate()
+        .map(|(k, &r)| {
+            let r = match (metric0.get(k), spacing.get(k)) {
+                (Some(m), Some(&s)) if m.spacing > 0.0 && s > 0.0 => r * m.spacing / s * mean_ratio,
+                _ => r,
+            };
+            (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32)
+        })
         .collect();
 
     // Level grids: mates from the level-0 samples on each level's lattice.
@@ -1061,6 +1272,12 @@ fn synthesize_impl(
                 scale[i * n + j] = scale0[fine(i, j)];
             }
         }
+        // The metric is scale-free: a level's texel takes its level-0 sample's.
+        let metric = if metric0.is_empty() {
+            Vec::new()
+        } else {
+            (0..n * n).map(|k| metric0[fine(k / n, k % n)]).collect()
+        };
         levels.push(Level {
             grid: LevelGrid::build(n, rep, p.boundary_strip),
             data: Vec::new(),
@@ -1069,6 +1286,7 @@ fn synthesize_impl(
             scale,
             src: Vec::new(),
             init_src: Vec::new(),
+            metric,
         });
     }
     if p.search == Search::PerTexel && !variants.meta.per_texel {
@@ -1094,6 +1312,7 @@ fn synthesize_impl(
         search: p.search,
         coherence: p.coherence,
         maps,
+        wave: (vp.template / 2) as i64 + 1,
     };
     let causal_taps = template_taps(Template::Causal, vp.template);
     let causal_ctaps = coarse_taps(vp.template);
@@ -1119,7 +1338,7 @@ fn synthesize_impl(
         let init = if l + 1 == nl {
             let lv = &levels[l];
             let mut init = vec![0.0f32; lv.grid.n * lv.grid.n * c];
-            let mut src = vec![0u64; lv.grid.n * lv.grid.n];
+            let mut src = vec![Src::default(); lv.grid.n * lv.grid.n];
             init.par_chunks_mut(c)
                 .zip(src.par_iter_mut())
                 .enumerate()
@@ -1130,11 +1349,11 @@ fn synthesize_impl(
                     let key = choice_index(l, INIT_PASS, t);
                     let k = (counter_hash(p.seed, STREAM_INIT, key) % count) as usize;
                     out.copy_from_slice(&img.texels[k * c..(k + 1) * c]);
-                    *src = pack_src(v, k);
+                    *src = Src::whole(v, k);
                 });
             (init, src)
         } else {
-            let src = upsample_sources(&levels[l + 1], levels[l].grid.n, |v| {
+            let src = upsample_sources(&levels[l + 1], &levels[l], |v| {
                 let img = variants.level(v, l);
                 (img.width, img.height)
             });
@@ -1152,7 +1371,7 @@ fn synthesize_impl(
             n
         };
         let last_wave = (n - 1) + f * (n - 1);
-        let mut results: Vec<([f32; MAX_CHANNELS], u64)> = Vec::new();
+        let mut results: Vec<([f32; MAX_CHANNELS], Src)> = Vec::new();
         for w in 0..=last_wave {
             let i_lo = if w > n - 1 {
                 (w - (n - 1) + f - 1) / f
@@ -1206,7 +1425,7 @@ fn synthesize_impl(
         };
         for _ in 0..corrections {
             let nn = levels[l].grid.n * levels[l].grid.n;
-            let res: Vec<([f32; MAX_CHANNELS], u64)> = (0..nn)
+            let res: Vec<([f32; MAX_CHANNELS], Src)> = (0..nn)
                 .into_par_iter()
                 .map_init(Scratch::default, |scratch, t| {
                     let (i, j) = levels[l].grid.coords(t as u32);
@@ -1413,9 +1632,16 @@ mod tests {
         for i in 0..n {
             mate_rep[(i * n + n - 1) as usize] = i * n;
         }
+        // Stretched 3:1 down the rows, sheared and bent: the surface metric spreads the
+        // causal taps past the causal half, where both orders must read the starting values.
         let gi = GeometryImage {
             n,
-            positions: vec![Vec3::ZERO; nn],
+            positions: (0..nn)
+                .map(|k| {
+                    let (i, j) = ((k / n as usize) as f32, (k % n as usize) as f32);
+                    Vec3::new(j + 0.5 * i, 3.0 * i + 0.02 * j * j, 0.0)
+                })
+                .collect(),
             normals: vec![Vec3::Z; nn],
             mate_rep,
         };
@@ -1438,15 +1664,24 @@ mod tests {
             )
             .unwrap();
             let vr = owned.as_ref();
-            for search in [Search::KCoherence, Search::PerTexel] {
+            for (search, anisotropic) in [
+                (Search::KCoherence, true),
+                (Search::KCoherence, false),
+                (Search::PerTexel, true),
+            ] {
                 let p = GeometrySynthParams {
                     search,
+                    anisotropic,
                     ..p.clone()
                 };
                 let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
                 let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
                 let bits = |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&a), bits(&b), "template {template} {search:?}");
+                assert_eq!(
+                    bits(&a),
+                    bits(&b),
+                    "template {template} {search:?} anisotropic {anisotropic}"
+                );
             }
         }
     }
@@ -1482,8 +1717,9 @@ mod tests {
                         init: lev.texels.to_vec(),
                         orient: vec![0.0; m * m],
                         scale: vec![0.0; m * m],
-                        src: vec![0; m * m],
-                        init_src: vec![0; m * m],
+                        src: vec![Src::default(); m * m],
+                        init_src: vec![Src::default(); m * m],
+                        metric: Vec::new(),
                     }
                 })
                 .collect();
@@ -1499,6 +1735,7 @@ mod tests {
                 block: 5,
                 search: Search::PerTexel,
                 coherence: 0.0,
+                wave: (template / 2) as i64 + 1,
                 maps: vec![vr.sample_map(0, 0), vr.sample_map(0, 1)],
             };
             for kind in [Template::Causal, Template::Full] {
