@@ -1003,6 +1003,49 @@ mod tests {
     }
 
     #[test]
+    fn candidate_charts_are_cut_on_the_tile_grid_and_keep_their_faces_whole() {
+        // A flat 41×41-vertex grid laid at 40 texels per cell: one continuous layout of 1600
+        // texels, which the tile grid must cut into bounded charts (4 × 4 tiles, as the
+        // seams are off the cell lines), each face kept whole in exactly one chart.
+        let mesh = crate::geom::primitives::grid(41, 1.0);
+        let layout: Vec<[Vec2; 3]> = mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| mesh.positions[v as usize].truncate() * 40.0 + Vec2::splat(3.0)))
+            .collect();
+        let atlas = build_chart_atlas(&mesh, &layout, 8192).unwrap();
+        assert!(atlas.charts >= 16, "{} charts", atlas.charts);
+        // No chart spans more than a tile plus one face.
+        let mut lo = vec![Vec2::splat(f32::INFINITY); atlas.charts];
+        let mut hi = vec![Vec2::splat(f32::NEG_INFINITY); atlas.charts];
+        for (f, t) in layout.iter().enumerate() {
+            let c = atlas.face_chart[f] as usize;
+            for p in t {
+                lo[c] = lo[c].min(*p);
+                hi[c] = hi[c].max(*p);
+            }
+        }
+        for c in 0..atlas.charts {
+            let e = (hi[c] - lo[c]).max_element();
+            assert!(
+                e <= CANDIDATE_TILE as f32 + 40.0,
+                "chart {c} spans {e} texels"
+            );
+        }
+        // Inside a chart the layout is kept up to a translation: corners keep their spacing.
+        let page = atlas.pages[0];
+        for (f, t) in layout.iter().enumerate() {
+            let uv = atlas.corner_uv[f];
+            let d = (uv[1] - uv[0]) * Vec2::new(page[0] as f32, page[1] as f32);
+            assert!(
+                (d - (t[1] - t[0])).length() < 1e-2,
+                "face {f}: {d} vs {}",
+                t[1] - t[0]
+            );
+        }
+    }
+
+    #[test]
     fn bakes_do_not_depend_on_the_thread_count() {
         let (mesh, _) = uv_sphere(12, 24);
         let mesh = Mesh::new(mesh.positions, mesh.triangles);

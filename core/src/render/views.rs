@@ -623,6 +623,25 @@ pub(crate) mod tests {
         assert!(a.as_raw() == b.as_raw() && a.as_raw() == c.as_raw());
     }
 
+    #[test]
+    fn views_of_several_shaders_equal_separate_renders() {
+        // One rasterization shaded twice must give each shader its own image, as if rendered
+        // alone (a mix-up of shaders or of hit buffers between bands breaks this).
+        let (mesh, corner_uv) = uv_sphere(24, 48);
+        let tex = quadrant_texture();
+        let textured = CornerUvShader::new(&corner_uv, tex.view());
+        let red = ConstantShader(Vec3::new(0.9, 0.1, 0.1));
+        let opts = ViewOptions {
+            size: 100,
+            ..ViewOptions::default()
+        };
+        let both = render_views_of_each(&mesh, &[&textured, &red], &opts);
+        assert_eq!(both.len(), 2);
+        assert!(both[0].as_raw() == render_views(&mesh, &textured, &opts).as_raw());
+        assert!(both[1].as_raw() == render_views(&mesh, &red, &opts).as_raw());
+        assert!(both[0].as_raw() != both[1].as_raw());
+    }
+
     /// Lit views `size` pixels high of a fine sphere with a uniform `grey` albedo, and the
     /// background colour around it.
     fn grey_sphere_views(size: u32, grey: f32) -> (image::RgbaImage, [u8; 3]) {
