@@ -97,9 +97,19 @@ pub struct Triple {
     pub c: [[u16; 2]; 3],
 }
 
-#[inline]
+/// `x mod n` in `0..n`; one period either side without a division (the common case).
+#[inline(always)]
 pub fn wrap(x: i32, n: u32) -> u16 {
-    x.rem_euclid(n as i32) as u16
+    let n = n as i32;
+    if (0..n).contains(&x) {
+        x as u16
+    } else if (-n..0).contains(&x) {
+        (x + n) as u16
+    } else if (n..2 * n).contains(&x) {
+        (x - n) as u16
+    } else {
+        x.rem_euclid(n) as u16
+    }
 }
 
 impl Triple {
@@ -109,7 +119,7 @@ impl Triple {
 
     /// Eq. (4): `T + d` for a whole-pixel offset `d = (d_x, d_y, d_z)` in the local frame,
     /// wrapped into a `width × height` exemplar.
-    #[inline]
+    #[inline(always)]
     pub fn offset(&self, d: [i32; 3], width: u32, height: u32) -> Triple {
         let mut out = *self;
         for p in 0..3 {

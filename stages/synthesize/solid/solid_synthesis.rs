@@ -94,7 +94,7 @@
 use super::dependent_set::{
     CHUNK_VOXELS, ChunkedNeed, NeedGrid, chunk_local, dependent_box, dependent_set,
 };
-use super::history_window::{HistoryWindow, Schedule};
+use super::history_window::{HistoryWindow, Schedule, Step};
 use crate::analyse_exemplar::candidate_triples::{SolidAnalysisRef, Triple, wrap};
 use crate::check::ParamError;
 use crate::field::quaternion_field::RotationField;
@@ -1406,15 +1406,15 @@ impl<'a> SolidSynthesis<'a> {
                     || self.scratch(li),
                     |sc, (k, &origin)| {
                         let mut done = Vec::new();
-                        let mut c = 0u64;
-                        for (m, &x) in need.chunk(k).iter().enumerate() {
-                            let v = origin + chunk_local(m);
-                            if x >= threshold && step.active(v) {
-                                let (s, n) = self.correct(li, &st, window, v, sc);
-                                done.push((m as u16, s));
-                                c += n as u64;
-                            }
-                        }
+                        let c = self.correct_chunk(
+                            li,
+                            &st,
+                            window,
+                            &step,
+                            (threshold, origin, need.chunk(k)),
+                            sc,
+                            &mut done,
+                        );
                         (done, c)
                     },
                 )
@@ -1469,8 +1469,75 @@ impl<'a> SolidSynthesis<'a> {
         }
     }
 
+    /// The corrections of one chunk in one step: every voxel of the chunk whose needed
+    /// version reaches `threshold` and that is active in `step`, pushed to `done` (slot in the
+    /// chunk, new value) in slot order; returns the comparisons made. On x86-64 CPUs with
+    /// AVX2 the same code runs compiled for AVX2: wider vectors for the same operations in the
+    /// same order (Rust never fuses a multiply and an add), so the values are the same bits.
+    #[allow(clippy::too_many_arguments)]
+    fn correct_chunk(
+        &self,
+        li: usize,
+        st: &States,
+        window: &HistoryWindow,
+        step: &Step,
+        chunk: (u8, IVec3, &[u8]),
+        sc: &mut Scratch,
+        done: &mut Vec<(u16, VoxelState)>,
+    ) -> u64 {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            return unsafe { self.correct_chunk_avx2(li, st, window, step, chunk, sc, done) };
+        }
+        self.correct_chunk_portable::<false>(li, st, window, step, chunk, sc, done)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn correct_chunk_avx2(
+        &self,
+        li: usize,
+        st: &States,
+        window: &HistoryWindow,
+        step: &Step,
+        chunk: (u8, IVec3, &[u8]),
+        sc: &mut Scratch,
+        done: &mut Vec<(u16, VoxelState)>,
+    ) -> u64 {
+        self.correct_chunk_portable::<true>(li, st, window, step, chunk, sc, done)
+    }
+
+    /// [`SolidSynthesis::correct_chunk`], compiled for whatever the caller is compiled for
+    /// (`AVX`: the caller has AVX2, so [`project`] may use its 8-wide registers).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn correct_chunk_portable<const AVX: bool>(
+        &self,
+        li: usize,
+        st: &States,
+        window: &HistoryWindow,
+        step: &Step,
+        (threshold, origin, bytes): (u8, IVec3, &[u8]),
+        sc: &mut Scratch,
+        done: &mut Vec<(u16, VoxelState)>,
+    ) -> u64 {
+        let mut c = 0u64;
+        for (m, &x) in bytes.iter().enumerate() {
+            let v = origin + chunk_local(m);
+            if x >= threshold && step.active(v) {
+                let (s, n) = self.correct::<AVX>(li, st, window, v, sc);
+                done.push((m as u16, s));
+                c += n as u64;
+            }
+        }
+        c
+    }
+
     /// §4.3: the corrected value of voxel `v` of array level `li`, and the comparisons made.
-    fn correct(
+    #[inline(always)]
+    fn correct<const AVX: bool>(
         &self,
         li: usize,
         st: &States,
@@ -1534,21 +1601,68 @@ impl<'a> SolidSynthesis<'a> {
             let c1 = mat.col(p) * s;
             let c2 = mat.col((p + 1) % 3) * s;
             // Gather, row-major: j along image y (c2), i along image x (c1).
-            let mut o = 0;
-            for j in -nh..=nh {
-                let row = vf + c2 * j as f32;
-                for i in -nh..=nh {
-                    let col = sample(row + c1 * i as f32);
-                    sc.vec[o] = col[0];
-                    sc.vec[o + 1] = col[1];
-                    sc.vec[o + 2] = col[2];
-                    o += 3;
+            let out = &mut sc.vec[..dim];
+            match lattice_steps(c1, c2).filter(|_| !trilinear) {
+                // The frame's columns are whole voxel steps along two axes (the trivial
+                // field): every sample position is an integer, exactly, so the nearest voxel
+                // of `v + i c₁ + j c₂` is `v + i a + j b` without rounding, and its clamped
+                // coordinates, slot parts and place in the window (all per axis) are worked
+                // out once per column `i` and row `j`. The same reads as `read`.
+                Some(((ax, sa), (bx, sb))) => {
+                    let cx = 3 - ax - bx;
+                    let side = (2 * nh + 1) as usize;
+                    let part = |axis: usize, x: i32| {
+                        let x = x.clamp(0, dmax[axis]);
+                        let (t, l) = st.need.axis_part(axis, x);
+                        (t, l, x >= clo[axis] && x < chi[axis])
+                    };
+                    let mut cols = [(0, 0, false); MAX_SIDE];
+                    let mut rows = [(0, 0, false); MAX_SIDE];
+                    for (t, i) in (-nh..=nh).enumerate() {
+                        cols[t] = part(ax, v[ax] + sa * i);
+                        rows[t] = part(bx, v[bx] + sb * i);
+                    }
+                    let (tc, lc, inc) = part(cx, v[cx]);
+                    let mut cells = out.chunks_exact_mut(3);
+                    for &(tb, lb, inb) in &rows[..side] {
+                        for &(ta, la, ina) in &cols[..side] {
+                            let slot = st.need.slot_of_parts(ta + tb + tc, la + lb + lc);
+                            let src = if ina && inb && inc {
+                                &st.cur
+                            } else {
+                                &st.start
+                            };
+                            if let Some(cell) = cells.next() {
+                                cell.copy_from_slice(&src[slot].c);
+                            }
+                        }
+                    }
+                }
+                None => {
+                    let mut o = 0;
+                    for j in -nh..=nh {
+                        let row = vf + c2 * j as f32;
+                        for i in -nh..=nh {
+                            let col = sample(row + c1 * i as f32);
+                            out[o..o + 3].copy_from_slice(&col);
+                            o += 3;
+                        }
+                    }
                 }
             }
             let img = a.image_of(p);
             let (_, basis) = a.pca(li, img);
             let mp = &self.mean_proj[li][img];
-            project(basis, &sc.vec[..dim], mp, &mut sc.proj[p][..comps]);
+            let (x, proj) = (&sc.vec[..dim], &mut sc.proj[p][..comps]);
+            #[cfg(target_arch = "x86_64")]
+            if AVX {
+                // SAFETY: `AVX` is set only on the AVX2 path (`correct_chunk_avx2`).
+                unsafe { project_avx2(basis, x, mp, proj) };
+            } else {
+                project(basis, x, mp, proj);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            project(basis, x, mp, proj);
             // Candidates S_P(v), reduced form.
             for d2 in -1..=1 {
                 for d1 in -1..=1 {
@@ -1606,14 +1720,7 @@ impl<'a> SolidSynthesis<'a> {
             }
         }
         let mut best = (f32::INFINITY, triple_of_key(sc.keys[0]));
-        let prefetch = |key: u128| {
-            let cand = triple_of_key(key);
-            for p in 0..3 {
-                if weights[p] != 0.0 {
-                    prefetch_slice(a.feature(li, a.image_of(p), cand.c[p]));
-                }
-            }
-        };
+        let prefetch = |key: u128| prefetch_candidate(a, li, weights, key);
         // The features of the candidates are scattered over the exemplar's stack: ask for
         // them a few candidates ahead (a hint only; the values compared are the same).
         for key in sc.keys.iter().take(PREFETCH_AHEAD) {
@@ -1675,6 +1782,36 @@ fn triple_key(t: &Triple) -> u128 {
 fn triple_of_key(k: u128) -> Triple {
     let x = |i: u32| (k >> (16 * (5 - i))) as u16;
     Triple::new([x(0), x(1)], [x(2), x(3)], [x(4), x(5)])
+}
+
+/// Largest neighbourhood side N (the analysis allows 3..=15).
+const MAX_SIDE: usize = 15;
+
+/// When the neighbourhood axes `c₁, c₂` are whole voxel steps along one axis each (the
+/// columns of a frame whose entries are 0 and ±1, times a whole scale): `(axis, step)` of
+/// each. Then every coordinate of `v + i c₁ + j c₂` is a small integer, exact in `f32`, and
+/// its nearest voxel is `v + i a + j b` exactly, with no rounding to do.
+#[inline(always)]
+fn lattice_steps(c1: Vec3, c2: Vec3) -> Option<((usize, i32), (usize, i32))> {
+    let single = |c: Vec3| {
+        let i = c.as_ivec3();
+        let whole = i.as_vec3() == c && i.abs().cmple(IVec3::splat(1024)).all();
+        let axes = (0..3).filter(|&a| i[a] != 0).count();
+        (whole && axes == 1).then(|| (0..3).find(|&a| i[a] != 0).map(|a| (a, i[a])))?
+    };
+    let (a, b) = (single(c1)?, single(c2)?);
+    (a.0 != b.0).then_some((a, b))
+}
+
+/// Asks for the features of candidate `key` (a hint only).
+#[inline(always)]
+fn prefetch_candidate(a: &SolidAnalysisRef, li: usize, weights: [f32; 3], key: u128) {
+    let cand = triple_of_key(key);
+    for p in 0..3 {
+        if weights[p] != 0.0 {
+            prefetch_slice(a.feature(li, a.image_of(p), cand.c[p]));
+        }
+    }
 }
 
 /// Candidates whose features are requested ahead of their comparison.
@@ -1739,6 +1876,56 @@ fn project(basis: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
     }
 }
 
+/// [`project`] in AVX registers: lane `i` of row `k`'s register is `project`'s `acc[r][i]`,
+/// added to in the same order (a product, then a sum, never fused), so every output is the
+/// same bits as [`project`]'s.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn project_avx2(basis: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
+    use std::arch::x86_64::{
+        _mm256_add_ps, _mm256_loadu_ps, _mm256_mul_ps, _mm256_setzero_ps, _mm256_storeu_ps,
+    };
+    const L: usize = 8;
+    let dim = x.len();
+    let comps = out.len();
+    assert!(basis.len() >= comps * dim && mean.len() >= comps);
+    let whole = dim / L * L;
+    let mut k = 0;
+    while k + 4 <= comps {
+        let rows: [&[f32]; 4] = std::array::from_fn(|r| &basis[(k + r) * dim..(k + r + 1) * dim]);
+        let mut acc = [_mm256_setzero_ps(); 4];
+        let mut c = 0;
+        while c < whole {
+            let xs: &[f32; L] = x[c..c + L].try_into().expect("8 lanes");
+            // SAFETY: unaligned loads of 8 floats from arrays of 8.
+            let xv = unsafe { _mm256_loadu_ps(xs.as_ptr()) };
+            for r in 0..4 {
+                let row: &[f32; L] = rows[r][c..c + L].try_into().expect("8 lanes");
+                // SAFETY: as above.
+                let rv = unsafe { _mm256_loadu_ps(row.as_ptr()) };
+                acc[r] = _mm256_add_ps(acc[r], _mm256_mul_ps(rv, xv));
+            }
+            c += L;
+        }
+        for r in 0..4 {
+            let mut lanes = [0.0f32; L];
+            // SAFETY: an unaligned store of 8 floats to an array of 8.
+            unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), acc[r]) };
+            let mut tail = 0.0f32;
+            for i in whole..dim {
+                tail += rows[r][i] * x[i];
+            }
+            out[k + r] = reduce_lanes(lanes) + tail - mean[k + r];
+        }
+        k += 4;
+    }
+    while k < comps {
+        out[k] = dot(&basis[k * dim..(k + 1) * dim], x) - mean[k];
+        k += 1;
+    }
+}
+
 /// [`lane_sum`]'s final reduction of eight lanes.
 #[inline]
 fn reduce_lanes(mut acc: [f32; 8]) -> f32 {
@@ -1762,12 +1949,55 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 }
 
 /// Squared Euclidean distance with four partial sums (see [`lane_sum`]).
-#[inline]
+#[inline(always)]
 fn squared_distance(a: &[f32], b: &[f32]) -> f32 {
+    #[cfg(target_arch = "x86_64")]
+    if a.len() == b.len() {
+        return squared_distance_sse(a, b);
+    }
+    squared_distance_portable(a, b)
+}
+
+#[inline(always)]
+fn squared_distance_portable(a: &[f32], b: &[f32]) -> f32 {
     lane_sum::<4>(a, b, |x, y| {
         let t = x - y;
         t * t
     })
+}
+
+/// [`squared_distance_portable`] for equal lengths, its four partial sums in one SSE
+/// register (x86-64's baseline): the same operations in the same order, so the same bits.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+#[allow(unused_unsafe)]
+fn squared_distance_sse(a: &[f32], b: &[f32]) -> f32 {
+    use std::arch::x86_64::{
+        _mm_add_ps, _mm_loadu_ps, _mm_mul_ps, _mm_setzero_ps, _mm_storeu_ps, _mm_sub_ps,
+    };
+    let n = a.len().min(b.len());
+    let whole = n / 4 * 4;
+    // SAFETY: SSE is part of x86-64; every load and store is of 4 floats from an array of 4.
+    let l = unsafe {
+        let mut acc = _mm_setzero_ps();
+        let mut c = 0;
+        while c < whole {
+            let x: &[f32; 4] = a[c..c + 4].try_into().expect("4 lanes");
+            let y: &[f32; 4] = b[c..c + 4].try_into().expect("4 lanes");
+            let d = _mm_sub_ps(_mm_loadu_ps(x.as_ptr()), _mm_loadu_ps(y.as_ptr()));
+            acc = _mm_add_ps(acc, _mm_mul_ps(d, d));
+            c += 4;
+        }
+        let mut l = [0.0f32; 4];
+        _mm_storeu_ps(l.as_mut_ptr(), acc);
+        l
+    };
+    let mut tail = 0.0f32;
+    for i in whole..n {
+        let t = a[i] - b[i];
+        tail += t * t;
+    }
+    ((l[0] + l[2]) + (l[1] + l[3])) + tail
 }
 
 /// The sum of `term(a[i], b[i])` over `L` partial sums (so it vectorizes), added in a fixed
@@ -1804,4 +2034,131 @@ fn lane_sum<const L: usize>(a: &[f32], b: &[f32], term: impl Fn(f32, f32) -> f32
 fn voxel_key(level: u32, v: IVec3) -> u64 {
     let f = |x: i32| (x as i64 as u64) & 0xF_FFFF;
     ((level as u64) << 60) ^ (f(v.x) << 40) ^ (f(v.y) << 20) ^ f(v.z)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic floats in [-2, 2) with some exact zeros, negative zeros and repeats.
+    fn floats(seed: u64, n: usize) -> Vec<f32> {
+        (0..n as u64)
+            .map(|i| match counter_hash(seed, 1, i) % 16 {
+                0 => 0.0,
+                1 => -0.0,
+                2 => 1.5,
+                _ => 4.0 * counter_unit(seed, 2, i) - 2.0,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn avx2_projection_is_bitwise_the_portable_one() {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // N = 7 and 9 neighbourhoods (147, 243 values), and lengths with other tails.
+            for (seed, dim, comps) in [
+                (1, 243, 20),
+                (2, 147, 20),
+                (3, 243, 7),
+                (4, 8, 3),
+                (5, 5, 4),
+            ] {
+                let basis = floats(seed, dim * comps);
+                let x = floats(seed + 100, dim);
+                let mean = floats(seed + 200, comps);
+                let (mut a, mut b) = (vec![0.0f32; comps], vec![0.0f32; comps]);
+                project(&basis, &x, &mean, &mut a);
+                // SAFETY: the CPU has AVX2 (checked above).
+                unsafe { project_avx2(&basis, &x, &mean, &mut b) };
+                let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a), bits(&b), "dim {dim}, comps {comps}");
+                // And both are the rows' dot products (so the test compares real values).
+                for k in 0..comps {
+                    let d: f64 = (0..dim)
+                        .map(|i| basis[k * dim + i] as f64 * x[i] as f64)
+                        .sum::<f64>()
+                        - mean[k] as f64;
+                    assert!((a[k] as f64 - d).abs() < 1e-3, "row {k}: {} vs {d}", a[k]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn sse_distance_is_bitwise_the_portable_one() {
+        for (seed, n) in [(1, 20), (2, 3), (3, 0), (4, 17), (5, 64)] {
+            let (a, b) = (floats(seed, n), floats(seed + 50, n));
+            let d = squared_distance(&a, &b);
+            assert_eq!(
+                d.to_bits(),
+                squared_distance_portable(&a, &b).to_bits(),
+                "n = {n}"
+            );
+            let exact: f64 = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| (*x as f64 - *y as f64).powi(2))
+                .sum();
+            assert!((d as f64 - exact).abs() <= 1e-4 * (1.0 + exact), "n = {n}");
+        }
+    }
+
+    #[test]
+    fn lattice_steps_are_the_rounded_positions() {
+        let frames = [
+            Mat3::IDENTITY,
+            Mat3::from_cols(-Vec3::Y, Vec3::X, Vec3::Z),
+            Mat3::from_cols(Vec3::Y, -Vec3::Z, -Vec3::X),
+        ];
+        let mut found = 0;
+        for mat in frames {
+            for s in [1.0f32, 2.0] {
+                for p in 0..3 {
+                    let (c1, c2) = (mat.col(p) * s, mat.col((p + 1) % 3) * s);
+                    let Some(((ax, sa), (bx, sb))) = lattice_steps(c1, c2) else {
+                        continue;
+                    };
+                    found += 1;
+                    assert_ne!(ax, bx);
+                    for v in [
+                        IVec3::new(0, 0, 0),
+                        IVec3::new(1023, 627, 333),
+                        IVec3::new(5, 9, 2),
+                    ] {
+                        let vf = v.as_vec3();
+                        for j in -7..=7 {
+                            let row = vf + c2 * j as f32;
+                            for i in -7..=7 {
+                                let mut q = v;
+                                q[ax] += sa * i;
+                                q[bx] += sb * j;
+                                assert_eq!(round_v(row + c1 * i as f32), q);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // Every plane of these signed permutations, at both scales, is a lattice.
+        assert_eq!(found, 18, "{found} lattice planes");
+        // A frame off the lattice takes the general path.
+        let m = Mat3::from_cols(Vec3::new(0.8, 0.6, 0.0), Vec3::new(-0.6, 0.8, 0.0), Vec3::Z);
+        assert!(lattice_steps(m.col(0), m.col(1)).is_none());
+        assert!(lattice_steps(Vec3::X * 1.5, Vec3::Y).is_none());
+        assert!(lattice_steps(Vec3::X, Vec3::X).is_none());
+    }
+
+    #[test]
+    fn wrap_without_division_is_rem_euclid() {
+        for n in [1u32, 7, 100, 32768] {
+            let n_i = n as i32;
+            for x in (-3 * n_i..3 * n_i)
+                .step_by((n as usize / 50).max(1))
+                .chain([-1, 0, n_i - 1, n_i, -n_i, 2 * n_i - 1, 2 * n_i, -n_i - 1])
+            {
+                assert_eq!(wrap(x, n) as i32, x.rem_euclid(n_i), "x = {x}, n = {n}");
+            }
+        }
+    }
 }
