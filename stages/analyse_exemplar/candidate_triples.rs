@@ -33,6 +33,14 @@
 //! the paper's 7 and 9), RGB, reduced per level and image by PCA to `components` (about 20,
 //! §4.3) dimensions: these are the vectors correction compares.
 //!
+//! With `feature_mask` set (§4: "for exemplar image textures with high regularity (e.g.
+//! bricks), a further feature component is introduced"), everything that matches — the
+//! neighbourhood vectors and their PCA, crossbar lines and errors, slab seeds, and the
+//! synthesized voxels' neighbourhoods — reads the exemplars in appearance space (colour plus a
+//! feature channel, PCA-reduced to 3 dimensions; `feature_mask.rs`), stacked like the colours
+//! and stored as the `appearance` array; the `stack` array keeps the colours, which are what
+//! is output.
+//!
 //! # Candidate triples
 //!
 //! For every pixel `p` of every plane `P`, at every level, the `candidates` best triples with

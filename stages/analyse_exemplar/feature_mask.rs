@@ -220,7 +220,12 @@ mod tests {
         let f = feature_channel(img.view(), &FeatureMaskParams::default()).unwrap();
         let at = |x: usize, y: usize| f[y * 32 + x];
         // On a mortar row (also the first row: it wraps to the last) and far from one.
-        assert!(at(5, 8) > 0.99 && at(5, 0) > 0.99, "{} {}", at(5, 8), at(5, 0));
+        assert!(
+            at(5, 8) > 0.99 && at(5, 0) > 0.99,
+            "{} {}",
+            at(5, 8),
+            at(5, 0)
+        );
         assert!(at(5, 4) < at(5, 2) && at(5, 2) < at(5, 1));
         // Row 31 is one texel from row 0's mortar across the wrap.
         assert!((at(5, 31) - at(5, 1)).abs() < 1e-6);
@@ -238,7 +243,9 @@ mod tests {
         };
         let a = appearance(img.view(), &p).unwrap();
         let (brick, mortar) = (a.image.pixels[4 * 32 + 4], a.image.pixels[8 * 32 + 4]);
-        let d: f32 = (0..3).map(|k| (brick[k] - mortar[k]) * (brick[k] - mortar[k])).sum();
+        let d: f32 = (0..3)
+            .map(|k| (brick[k] - mortar[k]) * (brick[k] - mortar[k]))
+            .sum();
         assert!(d > 0.5, "appearance distance {d}");
         assert!(a.kept_variance > 0.9, "{}", a.kept_variance);
     }

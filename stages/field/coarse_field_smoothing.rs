@@ -24,7 +24,8 @@ const MAX_PASSES: usize = 200;
 /// field, or `sigma` below half a node spacing, comes back unchanged.
 pub fn smooth_field(field: &RotationField, sigma: f32) -> RotationField {
     let spacing = field.grid.spacing as f64;
-    let passes = ((2.0 * (sigma as f64).powi(2) / (spacing * spacing)).ceil() as usize).min(MAX_PASSES);
+    let passes =
+        ((2.0 * (sigma as f64).powi(2) / (spacing * spacing)).ceil() as usize).min(MAX_PASSES);
     let mut out = field.clone();
     if passes == 0 || sigma < 0.5 * field.grid.spacing {
         return out;
@@ -117,7 +118,12 @@ mod tests {
     fn smoothing_removes_jumps_but_keeps_the_trend() {
         let f = noisy(0.3);
         let g = smooth_field(&f, 2.0);
-        assert!(roughness(&g) < 0.3 * roughness(&f), "{} vs {}", roughness(&g), roughness(&f));
+        assert!(
+            roughness(&g) < 0.3 * roughness(&f),
+            "{} vs {}",
+            roughness(&g),
+            roughness(&f)
+        );
         // Unit quaternions, and the ramp (0.05 rad per node) survives in the middle.
         assert!(g.rotations.iter().all(|q| (q.length() - 1.0).abs() < 1e-5));
         let mid = |f: &RotationField, i: u32| {

@@ -85,3 +85,17 @@ pub fn rings_field(volume: &Volume, cells: u32) -> RotationField {
     }
     f
 }
+
+/// `field` with every node tilted by its own pseudo-random rotation of up to `amplitude`
+/// radians about x and about y (counter-based, so reproducible): a field with jumps from node
+/// to node, as a hastily sketched or noisy one has.
+pub fn jittered(field: &RotationField, amplitude: f32, seed: u64) -> RotationField {
+    let mut f = field.clone();
+    for (n, q) in f.rotations.iter_mut().enumerate() {
+        let u = |s: u64| texsyn::random::counter_unit(seed, s, n as u64) * 2.0 - 1.0;
+        let tilt =
+            Quat::from_rotation_x(amplitude * u(1)) * Quat::from_rotation_y(amplitude * u(2));
+        *q = (*q * tilt).normalize();
+    }
+    f
+}

@@ -72,8 +72,16 @@
 //!   `coherent_candidates`, default on). Without it, every correction replaces all three
 //!   coordinates by those of a listed triple, and the planes other than the one the candidate
 //!   came from lose their coherence: on wood2, stripes broke up into short pieces.
-//! - On coarse levels the paper integrates the field along the neighbourhood's directions; here
-//!   every level samples with the centre voxel's frame (the paper's fine-level choice).
+//! - On coarse levels the paper integrates the field along the neighbourhood's directions
+//!   (§4.3); here that is the switch `field_integration` (default off: every level samples with
+//!   the centre voxel's frame, the paper's fine-level choice; `field_integration.rs`), and the
+//!   coarse-level smoothing of the field (§6) the switch `field_smoothing`
+//!   (`stages/field/coarse_field_smoothing.rs`). "Coarse levels" are the coarser half
+//!   ([`coarse_level`]). With integration a coarse level's stencil reach grows to
+//!   `2 N_h s_max` (see `widen_for_integration`).
+//! - With a feature mask (`analyse_exemplar.feature_mask`) voxels carry their triple's
+//!   appearance-space colour for matching ([`SolidAnalysisRef::match_colour`]); what is
+//!   output stays the colour.
 //! - Working values live in 8³ chunks allocated only where the dependent set is; the
 //!   dependency bytes are worked out densely over the bounding box of a batch's dependent set
 //!   (one byte per voxel, two more while dilating) and then kept in the same chunks.
