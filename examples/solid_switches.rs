@@ -7,7 +7,7 @@
 //! - `solid-coarse-field.png`: wood2 layered across x (yz not matched) in a "tree rings"
 //!   field (x pointing away from the cube's z axis, a singularity on it) with every node
 //!   tilted by up to 0.35 rad at random; the middle z section (top row) and level 2 of 4 under
-//!   it (bottom row, contrast stretched): neither | `field_smoothing = 2` | `field_integration` | both.
+//!   it (bottom row, grey, contrast stretched): neither | `field_smoothing = 2` | `field_integration` | both.
 //!
 //! It prints the measurements the README quotes. `cargo run --release --example
 //! solid_switches -- [OUT_DIR]`; `SIZE` [64].
@@ -50,17 +50,14 @@ fn save_row(path: &std::path::Path, tiles: &[Vec<[f32; 3]>], n: u32, zoom: u32) 
     img.save(path).unwrap();
 }
 
-/// Colours stretched per channel to the full range (a coarse level's blurred colours are
+/// Luminance stretched to the full range, grey (a coarse level's blurred colours are
 /// otherwise too flat to see).
 fn stretch(px: &[[f32; 3]]) -> Vec<[f32; 3]> {
-    let lo = px.iter().fold([f32::MAX; 3], |a, c| {
-        std::array::from_fn(|k| a[k].min(c[k]))
-    });
-    let hi = px.iter().fold([f32::MIN; 3], |a, c| {
-        std::array::from_fn(|k| a[k].max(c[k]))
-    });
-    px.iter()
-        .map(|c| std::array::from_fn(|k| (c[k] - lo[k]) / (hi[k] - lo[k]).max(1e-6)))
+    let lum: Vec<f32> = px.iter().map(|c| (c[0] + c[1] + c[2]) / 3.0).collect();
+    let lo = lum.iter().copied().fold(f32::MAX, f32::min);
+    let hi = lum.iter().copied().fold(f32::MIN, f32::max);
+    lum.iter()
+        .map(|l| [(l - lo) / (hi - lo).max(1e-6); 3])
         .collect()
 }
 
