@@ -297,11 +297,11 @@ impl CandidateParams {
             (1..=64).contains(&self.slab_thickness),
             "expected 1..=64",
         )?;
-        if let Some((name, expected)) = self.feature_mask.as_ref().and_then(|f| f.invalid()) {
-            let value = format!("{:?}", self.feature_mask);
+        if let Some((name, value, expected)) = self.feature_mask.as_ref().and_then(|f| f.invalid())
+        {
             return Err(AnalysisError::Param {
                 name,
-                value,
+                value: format!("{value:?}"),
                 expected,
             });
         }

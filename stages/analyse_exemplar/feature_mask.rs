@@ -81,25 +81,49 @@ impl FeatureMaskParams {
         }
     }
 
-    /// The first setting out of range, as (name, message).
-    pub fn invalid(&self) -> Option<(&'static str, &'static str)> {
+    /// The first setting out of range, as (name, value, message).
+    pub fn invalid(&self) -> Option<(&'static str, f32, &'static str)> {
         let ok = |x: f32, lo: f32, hi: f32| x.is_finite() && (lo..=hi).contains(&x);
-        if !ok(self.weight, 0.0, 100.0) {
-            return Some(("feature_mask.weight", "expected 0..=100"));
-        }
-        if !ok(self.radius, 0.5, 256.0) {
-            return Some(("feature_mask.radius", "expected 0.5..=256"));
-        }
-        if !ok(self.scale, 0.5, 16.0) {
-            return Some(("feature_mask.scale", "expected 0.5..=16"));
-        }
-        if !ok(self.threshold, 0.0, 1.0) {
-            return Some(("feature_mask.threshold", "expected 0..=1"));
-        }
-        if !ok(self.min_length, 0.0, 65536.0) {
-            return Some(("feature_mask.min_length", "expected 0..=65536"));
-        }
-        None
+        [
+            (
+                "feature_mask.weight",
+                self.weight,
+                0.0,
+                100.0,
+                "expected 0..=100",
+            ),
+            (
+                "feature_mask.radius",
+                self.radius,
+                0.5,
+                256.0,
+                "expected 0.5..=256",
+            ),
+            (
+                "feature_mask.scale",
+                self.scale,
+                0.5,
+                16.0,
+                "expected 0.5..=16",
+            ),
+            (
+                "feature_mask.threshold",
+                self.threshold,
+                0.0,
+                1.0,
+                "expected 0..=1",
+            ),
+            (
+                "feature_mask.min_length",
+                self.min_length,
+                0.0,
+                65536.0,
+                "expected 0..=65536",
+            ),
+        ]
+        .into_iter()
+        .find(|(_, x, lo, hi, _)| !ok(*x, *lo, *hi))
+        .map(|(name, x, _, _, expected)| (name, x, expected))
     }
 }
 
