@@ -33,6 +33,14 @@
 //! the paper's 7 and 9), RGB, reduced per level and image by PCA to `components` (about 20,
 //! §4.3) dimensions: these are the vectors correction compares.
 //!
+//! With `feature_mask` set (§4: "for exemplar image textures with high regularity (e.g.
+//! bricks), a further feature component is introduced"), everything that matches — the
+//! neighbourhood vectors and their PCA, crossbar lines and errors, slab seeds, and the
+//! synthesized voxels' neighbourhoods — reads the exemplars in appearance space (colour plus a
+//! feature channel, PCA-reduced to 3 dimensions; `feature_mask.rs`), stacked like the colours
+//! and stored as the `appearance` array; the `stack` array keeps the colours, which are what
+//! is output.
+//!
 //! # Candidate triples
 //!
 //! For every pixel `p` of every plane `P`, at every level, the `candidates` best triples with
@@ -77,6 +85,7 @@
 //! gives the named byte slices to store, and [`SolidAnalysisRef::from_arrays`] views stored
 //! arrays in place (zero copy), checking every length against the metadata.
 
+use super::feature_mask::{FeatureMaskParams, appearance};
 use crate::image::knn::KdTree;
 use crate::image::pca::{Pca, PcaParams};
 use crate::image::{Image, ImageView};
@@ -159,6 +168,12 @@ pub struct CandidateParams {
     pub plane_weights: [f32; 3],
     /// Thickness D of a candidate slab, in coarsest-level voxels, 1..=64. Default: 4.
     pub slab_thickness: u32,
+    /// Feature masks for regular exemplars (§4, §6, Fig. 16): given, matching runs on the
+    /// exemplars in appearance space, colour plus a feature channel (`feature_mask.rs`).
+    /// Default: none (off). Left out of the serialized parameters when off, so keys of
+    /// analyses without it do not change.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub feature_mask: Option<FeatureMaskParams>,
 }
 
 impl Default for CandidateParams {
@@ -174,6 +189,7 @@ impl Default for CandidateParams {
             search_eps: 1.0,
             plane_weights: [1.0; 3],
             slab_thickness: 4,
+            feature_mask: None,
         }
     }
 }
@@ -207,6 +223,8 @@ pub enum AnalysisError {
     },
     #[error("solid analysis arrays: {0}")]
     Corrupt(String),
+    #[error("analyse_exemplar.feature_mask: {0}")]
+    Features(String),
 }
 
 fn param<T: std::fmt::Debug>(
@@ -289,6 +307,14 @@ impl CandidateParams {
             (1..=64).contains(&self.slab_thickness),
             "expected 1..=64",
         )?;
+        if let Some((name, value, expected)) = self.feature_mask.as_ref().and_then(|f| f.invalid())
+        {
+            return Err(AnalysisError::Param {
+                name,
+                value: format!("{value:?}"),
+                expected,
+            });
+        }
         Ok(())
     }
 
@@ -305,6 +331,9 @@ impl CandidateParams {
 /// The small metadata of an analysis; with the arrays it is the whole artifact.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AnalysisMeta {
+    /// Stored without `feature_mask` (see [`stored_params`]); whether the analysis has one is
+    /// whether it has an `appearance` array.
+    #[serde(with = "stored_params")]
     pub params: CandidateParams,
     pub width: u32,
     pub height: u32,
@@ -316,6 +345,62 @@ pub struct AnalysisMeta {
     pub dims: Vec<u32>,
     /// PCA components kept per level (the same for every image).
     pub components: Vec<u32>,
+}
+
+/// The analysis' parameters as its artifact stores them: the fields from before feature masks,
+/// in their order, so analyses without a mask keep their bytes (bincode is not
+/// self-describing: a new field, even an absent `Option`, would change them). Read back,
+/// `feature_mask` is `None`.
+mod stored_params {
+    use super::CandidateParams;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Serialize, Deserialize)]
+    struct Stored {
+        levels: u32,
+        neighbourhood_coarsest: u32,
+        neighbourhood: u32,
+        candidates: u32,
+        search: u32,
+        components: u32,
+        crossbar_components: u32,
+        search_eps: f32,
+        plane_weights: [f32; 3],
+        slab_thickness: u32,
+    }
+
+    pub fn serialize<S: Serializer>(p: &CandidateParams, s: S) -> Result<S::Ok, S::Error> {
+        Stored {
+            levels: p.levels,
+            neighbourhood_coarsest: p.neighbourhood_coarsest,
+            neighbourhood: p.neighbourhood,
+            candidates: p.candidates,
+            search: p.search,
+            components: p.components,
+            crossbar_components: p.crossbar_components,
+            search_eps: p.search_eps,
+            plane_weights: p.plane_weights,
+            slab_thickness: p.slab_thickness,
+        }
+        .serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<CandidateParams, D::Error> {
+        let t = Stored::deserialize(d)?;
+        Ok(CandidateParams {
+            levels: t.levels,
+            neighbourhood_coarsest: t.neighbourhood_coarsest,
+            neighbourhood: t.neighbourhood,
+            candidates: t.candidates,
+            search: t.search,
+            components: t.components,
+            crossbar_components: t.crossbar_components,
+            search_eps: t.search_eps,
+            plane_weights: t.plane_weights,
+            slab_thickness: t.slab_thickness,
+            feature_mask: None,
+        })
+    }
 }
 
 /// Array offsets derived from the metadata.
@@ -414,6 +499,9 @@ pub struct SolidAnalysis {
     pub candidate_errors: Vec<f32>,
     /// Slab seeds of the coarsest level, `[pixel of I_xy]`.
     pub slabs: Vec<Triple>,
+    /// With a feature mask: the exemplars in appearance space (`feature_mask.rs`), stacked
+    /// like `stack`; what matching compares. Empty without one (matching compares `stack`).
+    pub appearance: Vec<[f32; 3]>,
 }
 
 /// Names of the arrays in the order [`SolidAnalysis::arrays`] gives them.
@@ -430,7 +518,7 @@ pub const ARRAY_NAMES: [&str; 7] = [
 impl SolidAnalysis {
     /// The named arrays as bytes, to store next to `meta`.
     pub fn arrays(&self) -> Vec<(String, &[u8])> {
-        vec![
+        let mut out: Vec<(String, &[u8])> = vec![
             ("stack".into(), bytemuck::cast_slice(&self.stack)),
             ("pca_mean".into(), bytemuck::cast_slice(&self.pca_mean)),
             ("pca_basis".into(), bytemuck::cast_slice(&self.pca_basis)),
@@ -441,7 +529,12 @@ impl SolidAnalysis {
                 bytemuck::cast_slice(&self.candidate_errors),
             ),
             ("slabs".into(), bytemuck::cast_slice(&self.slabs)),
-        ]
+        ];
+        // Only with a feature mask, so analyses without one store what they always did.
+        if !self.appearance.is_empty() {
+            out.push(("appearance".into(), bytemuck::cast_slice(&self.appearance)));
+        }
+        out
     }
 
     /// A borrowed view (what synthesis reads).
@@ -460,6 +553,7 @@ impl SolidAnalysis {
             candidates: &self.candidates,
             candidate_errors: &self.candidate_errors,
             slabs: &self.slabs,
+            appearance: &self.appearance,
         }
     }
 }
@@ -476,6 +570,8 @@ pub struct SolidAnalysisRef<'a> {
     pub candidates: &'a [Triple],
     pub candidate_errors: &'a [f32],
     pub slabs: &'a [Triple],
+    /// See [`SolidAnalysis::appearance`].
+    pub appearance: &'a [[f32; 3]],
 }
 
 fn view<'a, T: Pod>(
@@ -518,6 +614,12 @@ impl<'a> SolidAnalysisRef<'a> {
             candidates: view("candidates", arrays, planes_k)?,
             candidate_errors: view("candidate_errors", arrays, planes_k)?,
             slabs: view("slabs", arrays, lay.pixels)?,
+            // Present exactly when the analysis had a feature mask.
+            appearance: if arrays.iter().any(|(n, _)| n == "appearance") {
+                view("appearance", arrays, lay.levels * lay.images * lay.pixels)?
+            } else {
+                &[]
+            },
             layout: lay,
             meta,
         };
@@ -533,6 +635,7 @@ impl<'a> SolidAnalysisRef<'a> {
             || !r.pca_mean.iter().all(finite)
             || !r.features.iter().all(finite)
             || !r.stack.iter().flatten().all(finite)
+            || !r.appearance.iter().flatten().all(finite)
         {
             return Err(AnalysisError::Corrupt(
                 "a stored value is not finite".into(),
@@ -611,6 +714,41 @@ impl<'a> SolidAnalysisRef<'a> {
         acc.map(|x| x / total)
     }
 
+    /// What matching compares of a triple at level `li`: [`Self::colour`], or with a feature
+    /// mask the same plane-weighted mean of the triple's three appearance texels.
+    #[inline]
+    pub fn match_colour(&self, li: usize, t: &Triple) -> [f32; 3] {
+        if self.appearance.is_empty() {
+            return self.colour(li, t);
+        }
+        let w = self.meta.params.plane_weights;
+        let mut acc = [0.0f32; 3];
+        let mut total = 0.0f32;
+        for p in 0..3 {
+            if w[p] > 0.0 {
+                let c = self.appearance[(li * self.layout.images + self.image_of(p))
+                    * self.layout.pixels
+                    + self.pixel_index(t.c[p])];
+                for ch in 0..3 {
+                    acc[ch] += w[p] * c[ch];
+                }
+                total += w[p];
+            }
+        }
+        acc.map(|x| x / total)
+    }
+
+    /// The level of the stack that matching reads (appearance with a feature mask, else
+    /// colour) of image `img` at array level `li`.
+    pub fn match_level(&self, li: usize, img: usize) -> &'a [[f32; 3]] {
+        if self.appearance.is_empty() {
+            return self.stack_level(li, img);
+        }
+        let p = self.layout.pixels;
+        let start = (li * self.layout.images + img) * p;
+        &self.appearance[start..start + p]
+    }
+
     /// PCA mean and basis (`components × dim`, row-major) of image `img` at level `li`.
     pub fn pca(&self, li: usize, img: usize) -> (&'a [f32], &'a [f32]) {
         let i = li * self.layout.images + img;
@@ -653,7 +791,7 @@ impl<'a> SolidAnalysisRef<'a> {
 
     /// Crossbar error of a triple at level `li` (see the module docs), from the stack.
     pub fn crossbar_error(&self, li: usize, t: &Triple) -> f32 {
-        let st: [&[[f32; 3]]; 3] = std::array::from_fn(|p| self.stack_level(li, self.image_of(p)));
+        let st: [&[[f32; 3]]; 3] = std::array::from_fn(|p| self.match_level(li, self.image_of(p)));
         crossbar_error_in(
             &st,
             self.meta.width,
@@ -887,11 +1025,28 @@ pub fn analyse(
         .iter()
         .map(|img| gaussian_stack(*img, levels))
         .collect();
-    // Array level li uses the stack level of spacing 2^(L−1−li).
-    let level_img = |li: usize, img: usize| -> &[[f32; 3]] { &stacks[img][levels - 1 - li] };
+    // With a feature mask, matching reads the images in appearance space: their own stacks
+    // (the projection is linear, so this is the appearance of the colour stack).
+    let appearance_stacks: Option<Vec<Vec<Vec<[f32; 3]>>>> = match &params.feature_mask {
+        None => None,
+        Some(f) => Some(
+            images
+                .iter()
+                .map(|img| {
+                    let a = appearance(*img, f).map_err(AnalysisError::Features)?;
+                    Ok(gaussian_stack(a.image.view(), levels))
+                })
+                .collect::<Result<_, AnalysisError>>()?,
+        ),
+    };
+    let matched = appearance_stacks.as_ref().unwrap_or(&stacks);
+    // Array level li uses the stack level of spacing 2^(L−1−li); matching reads `matched`.
+    let colour_img = |li: usize, img: usize| -> &[[f32; 3]] { &stacks[img][levels - 1 - li] };
+    let level_img = |li: usize, img: usize| -> &[[f32; 3]] { &matched[img][levels - 1 - li] };
 
     let k = params.candidates as usize;
     let mut stack = Vec::with_capacity(levels * ni * pixels);
+    let mut appearance_arr = Vec::new();
     let (mut pca_mean, mut pca_basis, mut features) = (vec![], vec![], vec![]);
     let mut candidates = Vec::with_capacity(levels * 3 * pixels * k);
     let mut candidate_errors = Vec::with_capacity(levels * 3 * pixels * k);
@@ -906,7 +1061,10 @@ pub fn analyse(
         dims.push(dim as u32);
         comps.push(c as u32);
         for img in 0..ni {
-            stack.extend_from_slice(level_img(li, img));
+            stack.extend_from_slice(colour_img(li, img));
+            if appearance_stacks.is_some() {
+                appearance_arr.extend_from_slice(level_img(li, img));
+            }
             let vecs = neighbourhood_vectors(level_img(li, img), w, hgt, n, h);
             let pca = Pca::fit(
                 &vecs,
@@ -1080,6 +1238,7 @@ pub fn analyse(
         candidates,
         candidate_errors,
         slabs,
+        appearance: appearance_arr,
     })
 }
 

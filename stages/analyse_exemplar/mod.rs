@@ -1,5 +1,6 @@
 //! Stage: analyse_exemplar.
 pub mod candidate_triples;
+pub mod feature_mask;
 pub mod gaussian_stack;
 pub mod jump_map;
 pub mod texel_variants;

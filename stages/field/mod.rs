@@ -1,4 +1,5 @@
 //! Stage: field.
+pub mod coarse_field_smoothing;
 pub mod curve_grouping;
 pub mod feature_field;
 pub mod orientation_field;

@@ -3,5 +3,6 @@
 //! §5 it rests on, the history windows of grid and dual-grid correction ([`history_window`])
 //! and the dependent set of a request worked out backwards through them ([`dependent_set`]).
 pub mod dependent_set;
+pub mod field_integration;
 pub mod history_window;
 pub mod solid_synthesis;

@@ -72,8 +72,16 @@
 //!   `coherent_candidates`, default on). Without it, every correction replaces all three
 //!   coordinates by those of a listed triple, and the planes other than the one the candidate
 //!   came from lose their coherence: on wood2, stripes broke up into short pieces.
-//! - On coarse levels the paper integrates the field along the neighbourhood's directions; here
-//!   every level samples with the centre voxel's frame (the paper's fine-level choice).
+//! - On coarse levels the paper integrates the field along the neighbourhood's directions
+//!   (§4.3); here that is the switch `field_integration` (default off: every level samples with
+//!   the centre voxel's frame, the paper's fine-level choice; `field_integration.rs`), and the
+//!   coarse-level smoothing of the field (§6) the switch `field_smoothing`
+//!   (`stages/field/coarse_field_smoothing.rs`). "Coarse levels" are the coarser half
+//!   ([`coarse_level`]). With integration a coarse level's stencil reach grows to
+//!   `2 N_h s_max` (see `widen_for_integration`).
+//! - With a feature mask (`analyse_exemplar.feature_mask`) voxels carry their triple's
+//!   appearance-space colour for matching ([`SolidAnalysisRef::match_colour`]); what is
+//!   output stays the colour.
 //! - Working values live in 8³ chunks allocated only where the dependent set is; the
 //!   dependency bytes are worked out densely over the bounding box of a batch's dependent set
 //!   (one byte per voxel, two more while dilating) and then kept in the same chunks.
@@ -94,9 +102,11 @@
 use super::dependent_set::{
     CHUNK_VOXELS, ChunkedNeed, NeedGrid, chunk_local, dependent_box, dependent_set,
 };
+use super::field_integration::integrated_neighbourhood;
 use super::history_window::{HistoryWindow, Schedule, Step};
 use crate::analyse_exemplar::candidate_triples::{SolidAnalysisRef, Triple, wrap};
 use crate::check::ParamError;
+use crate::field::coarse_field_smoothing::smooth_field;
 use crate::field::quaternion_field::RotationField;
 use crate::parameterize::volume_embedding::Volume;
 use crate::random::{counter_hash, counter_unit};
@@ -135,6 +145,11 @@ impl Pyramid {
             d[1].div_ceil(s) as i32,
             d[2].div_ceil(s) as i32,
         )
+    }
+
+    /// Object-space position of the (fractional) voxel coordinates `x` of `level`.
+    pub fn position_f(&self, level: u32, x: Vec3) -> Vec3 {
+        Vec3::from(self.volume.origin) + (x * self.step(level) as f32 + 0.5) * self.volume.voxel
     }
 
     /// Object-space position of voxel `v` of `level`.
@@ -222,6 +237,29 @@ pub struct SolidParams {
     /// Per level, coarsest first; as many as the pyramid has levels. Default:
     /// [`SolidParams::paper`] with 4 levels.
     pub levels: Vec<LevelParams>,
+    /// §6 "in coarser levels, the field is further smoothed": on the [coarse
+    /// levels](coarse_level), the field smoothed by a Gaussian of σ = `field_smoothing` voxels
+    /// of the level (`stages/field/coarse_field_smoothing.rs`), 0..=16. Default: 0 (off).
+    /// Serialized only when on, so keys without it do not change.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub field_smoothing: f32,
+    /// §4.3 "for coarse levels, a numerical integration along the directions is used": on the
+    /// [coarse levels](coarse_level), neighbourhoods are sampled along the field's integral
+    /// lines instead of the centre voxel's frame (`field_integration.rs`). Default: false.
+    /// Serialized only when on.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub field_integration: bool,
+}
+
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
+}
+
+/// The paper's "coarse levels" (§4.3, §6), where trilinear sampling, field smoothing and
+/// integration along the field apply: the coarser half of the pyramid, `2·li < L` for array
+/// level `li` (levels 1–2 of 4).
+pub fn coarse_level(li: usize, levels: usize) -> bool {
+    2 * li < levels
 }
 
 impl Default for SolidParams {
@@ -244,7 +282,7 @@ impl SolidParams {
                     Scheme::DualGrid
                 },
                 subpasses: true,
-                trilinear: 2 * li < levels,
+                trilinear: coarse_level(li as usize, levels as usize),
                 jitter: 0.0,
             })
             .collect();
@@ -254,6 +292,8 @@ impl SolidParams {
             subpart: 32,
             coherent_candidates: true,
             levels,
+            field_smoothing: 0.0,
+            field_integration: false,
         }
     }
 
@@ -280,6 +320,12 @@ impl SolidParams {
             self.subpart,
             (1..=4096).contains(&self.subpart),
             "expected 1..=4096",
+        )?;
+        check(
+            "synthesize.field_smoothing",
+            self.field_smoothing,
+            self.field_smoothing.is_finite() && (0.0..=16.0).contains(&self.field_smoothing),
+            "expected 0..=16 (voxels of the level; 0 = off)",
         )?;
         for l in &self.levels {
             check(
@@ -725,6 +771,8 @@ struct Scratch {
     proj: [Vec<f32>; 3],
     cands: Vec<Triple>,
     keys: Vec<u128>,
+    /// Sample positions of an integrated neighbourhood (`field_integration`).
+    positions: Vec<Vec3>,
     /// Open-addressing set of keys seen in this correction (entries stamped with `stamp`).
     seen: Vec<(u128, u32)>,
     stamp: u32,
@@ -879,10 +927,39 @@ fn stencil_reach(
         .collect()
 }
 
+/// With `field_integration`, a level's samples lie along integral lines up to `bound` voxels
+/// from the centre per axis (`2 N_h s_max`: `|i| + |j|` steps of at most `s_max` each), not
+/// `N_h √2 s_max`: its reach grows to cover them (trilinear sampling reads one more voxel).
+fn widen_for_integration(
+    reach: &mut [i32],
+    integrate: &[Option<f32>],
+    params: &SolidParams,
+    pyramid: &Pyramid,
+) {
+    let side = pyramid.volume.dims.iter().copied().max().unwrap_or(1) as f32;
+    let delta = 1e-3 + side * f32::EPSILON * 8.0;
+    for (li, r) in reach.iter_mut().enumerate() {
+        if let Some(bound) = integrate[li] {
+            let e = bound + delta;
+            let need = if params.levels[li].trilinear {
+                e.floor() as i32 + 1
+            } else {
+                (e + 0.5).floor() as i32
+            };
+            *r = (*r).max(need);
+        }
+    }
+}
+
 /// A configured synthesis: analysis, field, volume and parameters, validated.
 pub struct SolidSynthesis<'a> {
     analysis: SolidAnalysisRef<'a>,
     field: &'a RotationField,
+    /// Per level, the field smoothed for it (`field_smoothing`), if it is.
+    smoothed: Vec<Option<RotationField>>,
+    /// Per level, the per-axis bound of an integrated sample's offset, if the level samples
+    /// along the field (`field_integration`).
+    integrate: Vec<Option<f32>>,
     pyramid: Pyramid,
     params: SolidParams,
     schedules: Vec<Schedule>,
@@ -948,7 +1025,29 @@ impl<'a> SolidSynthesis<'a> {
                 Scheme::DualGrid => Schedule::dual_grid(l.passes, l.subpasses, m),
             })
             .collect();
-        let reach = stencil_reach(&analysis, field, &pyramid, &params);
+        let constant = field.rotations.iter().all(|q| *q == field.rotations[0])
+            && field.scales.iter().all(|s| *s == field.scales[0]);
+        let nl = pyramid.levels as usize;
+        let smoothed = (0..nl)
+            .map(|li| {
+                let on = params.field_smoothing > 0.0 && coarse_level(li, nl) && !constant;
+                on.then(|| {
+                    let side = pyramid.step(li as u32 + 1) as f32 * volume.voxel;
+                    smooth_field(field, params.field_smoothing * side)
+                })
+            })
+            .collect();
+        // Along a constant field the integral lines are the frame's straight lines: the
+        // centre's frame samples them exactly.
+        let s_max = field.scales.iter().fold(0.0f32, |a, &b| a.max(b));
+        let integrate: Vec<Option<f32>> = (0..nl)
+            .map(|li| {
+                let on = params.field_integration && coarse_level(li, nl) && !constant;
+                on.then(|| 2.0 * (analysis.n(li) / 2) as f32 * s_max)
+            })
+            .collect();
+        let mut reach = stencil_reach(&analysis, field, &pyramid, &params);
+        widen_for_integration(&mut reach, &integrate, &params, &pyramid);
         let images = analysis.meta.images as usize;
         let mean_proj = (0..pyramid.levels as usize)
             .map(|li| {
@@ -966,6 +1065,8 @@ impl<'a> SolidSynthesis<'a> {
         Ok(SolidSynthesis {
             analysis,
             field,
+            smoothed,
+            integrate,
             pyramid,
             params,
             schedules,
@@ -973,6 +1074,12 @@ impl<'a> SolidSynthesis<'a> {
             mean_proj,
             limits: BatchLimits::default(),
         })
+    }
+
+    /// The field array level `li` reads: smoothed on the coarse levels with
+    /// `field_smoothing`, else the field itself.
+    pub fn field_of(&self, li: usize) -> &RotationField {
+        self.smoothed[li].as_ref().unwrap_or(self.field)
     }
 
     /// The finest level's grid.
@@ -1324,8 +1431,8 @@ impl<'a> SolidSynthesis<'a> {
         let part = v.div_euclid(IVec3::splat(k));
         let centre = (part * k).as_vec3() + 0.5 * k as f32;
         let pos = self.pyramid.position(1, v);
-        let q = self.field.rotation_at(pos);
-        let s = self.field.scale_at(pos);
+        let q = self.field_of(0).rotation_at(pos);
+        let s = self.field_of(0).scale_at(pos);
         let u = centre + q.inverse() * (v.as_vec3() - centre) / s;
         self.slab_triple(part, round_v(u))
     }
@@ -1336,8 +1443,8 @@ impl<'a> SolidSynthesis<'a> {
         let vp = v.div_euclid(IVec3::splat(2));
         let tp = parents.get(vp);
         let pos = self.pyramid.position(level - 1, vp);
-        let q = self.field.rotation_at(pos);
-        let s = self.field.scale_at(pos);
+        let q = self.field_of(li - 1).rotation_at(pos);
+        let s = self.field_of(li - 1).scale_at(pos);
         let h = self.analysis.spacing(li) as f32;
         let mut d = q.inverse() * ((v - vp * 2).as_vec3() * (h / s));
         let jitter = self.params.levels[li].jitter;
@@ -1382,7 +1489,7 @@ impl<'a> SolidSynthesis<'a> {
                     };
                     *slot = VoxelState {
                         t,
-                        c: self.analysis.colour(li, &t),
+                        c: self.analysis.match_colour(li, &t),
                     };
                 }
             });
@@ -1464,6 +1571,7 @@ impl<'a> SolidSynthesis<'a> {
             proj: [vec![0.0; c], vec![0.0; c], vec![0.0; c]],
             cands: Vec::with_capacity(27 * (self.analysis.k() + 1)),
             keys: Vec::with_capacity(27 * (self.analysis.k() + 1)),
+            positions: Vec::new(),
             seen: vec![(0, 0); (54 * (self.analysis.k() + 1)).next_power_of_two()],
             stamp: 0,
         }
@@ -1535,6 +1643,14 @@ impl<'a> SolidSynthesis<'a> {
         c
     }
 
+    /// The scaled frame (columns `s·q` axes, in voxels of the level) of array level `li` at
+    /// `x`, in voxel coordinates of the level.
+    fn frame_at(&self, li: usize, x: Vec3) -> Mat3 {
+        let pos = self.pyramid.position_f(li as u32 + 1, x);
+        let f = self.field_of(li);
+        Mat3::from_quat(f.rotation_at(pos)) * f.scale_at(pos)
+    }
+
     /// §4.3: the corrected value of voxel `v` of array level `li`, and the comparisons made.
     #[inline(always)]
     fn correct<const AVX: bool>(
@@ -1551,8 +1667,8 @@ impl<'a> SolidSynthesis<'a> {
         let weights = a.weights();
         let dmax = self.pyramid.level_dims(level) - 1;
         let pos = self.pyramid.position(level, v);
-        let q = self.field.rotation_at(pos);
-        let s = self.field.scale_at(pos);
+        let q = self.field_of(li).rotation_at(pos);
+        let s = self.field_of(li).scale_at(pos);
         let mat = Mat3::from_quat(q);
         let h = a.spacing(li) as f32;
         let (clo, chi) = window.latest_box(v);
@@ -1601,51 +1717,60 @@ impl<'a> SolidSynthesis<'a> {
             let c1 = mat.col(p) * s;
             let c2 = mat.col((p + 1) % 3) * s;
             // Gather, row-major: j along image y (c2), i along image x (c1).
-            let out = &mut sc.vec[..dim];
-            match lattice_steps(c1, c2).filter(|_| !trilinear) {
-                // The frame's columns are whole voxel steps along two axes (the trivial
-                // field): every sample position is an integer, exactly, so the nearest voxel
-                // of `v + i c₁ + j c₂` is `v + i a + j b` without rounding, and its clamped
-                // coordinates, slot parts and place in the window (all per axis) are worked
-                // out once per column `i` and row `j`. The same reads as `read`.
-                Some(((ax, sa), (bx, sb))) => {
-                    let cx = 3 - ax - bx;
-                    let side = (2 * nh + 1) as usize;
-                    let part = |axis: usize, x: i32| {
-                        let x = x.clamp(0, dmax[axis]);
-                        let (t, l) = st.need.axis_part(axis, x);
-                        (t, l, x >= clo[axis] && x < chi[axis])
-                    };
-                    let mut cols = [(0, 0, false); MAX_SIDE];
-                    let mut rows = [(0, 0, false); MAX_SIDE];
-                    for (t, i) in (-nh..=nh).enumerate() {
-                        cols[t] = part(ax, v[ax] + sa * i);
-                        rows[t] = part(bx, v[bx] + sb * i);
-                    }
-                    let (tc, lc, inc) = part(cx, v[cx]);
-                    let mut cells = out.chunks_exact_mut(3);
-                    for &(tb, lb, inb) in &rows[..side] {
-                        for &(ta, la, ina) in &cols[..side] {
-                            let slot = st.need.slot_of_parts(ta + tb + tc, la + lb + lc);
-                            let src = if ina && inb && inc {
-                                &st.cur
-                            } else {
-                                &st.start
-                            };
-                            if let Some(cell) = cells.next() {
-                                cell.copy_from_slice(&src[slot].c);
+            if let Some(bound) = self.integrate[li] {
+                // Coarse levels with `field_integration`: along the field's integral lines.
+                let frame = |x: Vec3| self.frame_at(li, x);
+                integrated_neighbourhood(frame, vf, p, nh, bound, &mut sc.positions);
+                for (o, x) in sc.positions.iter().enumerate() {
+                    sc.vec[3 * o..3 * o + 3].copy_from_slice(&sample(*x));
+                }
+            } else {
+                let out = &mut sc.vec[..dim];
+                match lattice_steps(c1, c2).filter(|_| !trilinear) {
+                    // The frame's columns are whole voxel steps along two axes (the trivial
+                    // field): every sample position is an integer, exactly, so the nearest voxel
+                    // of `v + i c₁ + j c₂` is `v + i a + j b` without rounding, and its clamped
+                    // coordinates, slot parts and place in the window (all per axis) are worked
+                    // out once per column `i` and row `j`. The same reads as `read`.
+                    Some(((ax, sa), (bx, sb))) => {
+                        let cx = 3 - ax - bx;
+                        let side = (2 * nh + 1) as usize;
+                        let part = |axis: usize, x: i32| {
+                            let x = x.clamp(0, dmax[axis]);
+                            let (t, l) = st.need.axis_part(axis, x);
+                            (t, l, x >= clo[axis] && x < chi[axis])
+                        };
+                        let mut cols = [(0, 0, false); MAX_SIDE];
+                        let mut rows = [(0, 0, false); MAX_SIDE];
+                        for (t, i) in (-nh..=nh).enumerate() {
+                            cols[t] = part(ax, v[ax] + sa * i);
+                            rows[t] = part(bx, v[bx] + sb * i);
+                        }
+                        let (tc, lc, inc) = part(cx, v[cx]);
+                        let mut cells = out.chunks_exact_mut(3);
+                        for &(tb, lb, inb) in &rows[..side] {
+                            for &(ta, la, ina) in &cols[..side] {
+                                let slot = st.need.slot_of_parts(ta + tb + tc, la + lb + lc);
+                                let src = if ina && inb && inc {
+                                    &st.cur
+                                } else {
+                                    &st.start
+                                };
+                                if let Some(cell) = cells.next() {
+                                    cell.copy_from_slice(&src[slot].c);
+                                }
                             }
                         }
                     }
-                }
-                None => {
-                    let mut o = 0;
-                    for j in -nh..=nh {
-                        let row = vf + c2 * j as f32;
-                        for i in -nh..=nh {
-                            let col = sample(row + c1 * i as f32);
-                            out[o..o + 3].copy_from_slice(&col);
-                            o += 3;
+                    None => {
+                        let mut o = 0;
+                        for j in -nh..=nh {
+                            let row = vf + c2 * j as f32;
+                            for i in -nh..=nh {
+                                let col = sample(row + c1 * i as f32);
+                                out[o..o + 3].copy_from_slice(&col);
+                                o += 3;
+                            }
                         }
                     }
                 }
@@ -1751,7 +1876,7 @@ impl<'a> SolidSynthesis<'a> {
         (
             VoxelState {
                 t,
-                c: a.colour(li, &t),
+                c: a.match_colour(li, &t),
             },
             comparisons,
         )
