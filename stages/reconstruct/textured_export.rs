@@ -138,6 +138,7 @@ impl ExportError {
 /// addresses of an exemplar of size `exemplar` (for the OBJ); `layout` per face corner
 /// positions in exemplar texels where faces that share an edge continuously share its two
 /// points (the chart atlas keeps those faces together), scaled by `texel_density` here.
+#[allow(clippy::too_many_arguments)] // the export's inputs, each used once, passed as they are
 pub fn export_textured_mesh<S: SurfaceShader>(
     mesh: &Mesh,
     single_set: &[[Vec2; 3]],
