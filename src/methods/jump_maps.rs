@@ -35,10 +35,10 @@ use std::path::PathBuf;
 
 /// Node code versions: bump when a node's output for the same inputs changes.
 const JUMP_MAP_VERSION: u32 = 1;
-const FIELD_VERSION: u32 = 1;
+const FIELD_VERSION: u32 = 2;
 const PARAMETERIZE_VERSION: u32 = 1;
 const WALK_VERSION: u32 = 2;
-const RECONSTRUCT_VERSION: u32 = 3;
+const RECONSTRUCT_VERSION: u32 = 4;
 
 /// A `jump_maps` config.
 #[derive(Debug, Clone, Deserialize, Serialize)]

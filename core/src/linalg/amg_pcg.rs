@@ -20,13 +20,14 @@
 //!    solved by the exact (simplicial) Cholesky factorization of [`super::SpdSolver`].
 //!
 //! The preconditioner is one V-cycle with one forward Gauss–Seidel sweep before the coarse
-//! correction and one backward sweep after it, so it is symmetric and the outer iteration
-//! can be conjugate gradients (Hestenes & Stiefel 1952).
+//! correction and one backward sweep after it (ℓ1 hybrid sweeps over blocks of rows, see
+//! [`SWEEP_BLOCK`]), so it is symmetric and the outer iteration can be conjugate gradients
+//! (Hestenes & Stiefel 1952).
 //!
 //! Determinism: plain scalar f64 code (Rust does not contract a·b + c into fused
 //! multiply-adds), so results do not depend on the CPU. Work split over threads writes
 //! disjoint outputs, each computed in a fixed order (matrix rows, Gauss–Seidel sweeps
-//! sequential); dot products sum fixed-size blocks and then the block sums in order. So the
+//! sequential within fixed blocks of rows); dot products sum fixed-size blocks and then the block sums in order. So the
 //! bits do not depend on the thread count either.
 
 use super::{SolveError, SpdSolver};
@@ -391,6 +392,7 @@ fn aggregate(a: &Csr, strong: &dyn Fn(usize, usize, f64) -> bool) -> (Vec<u32>, 
 /// to it from the next coarser level (with its transpose, the restriction).
 struct Level {
     a: Csr,
+    /// 1 / (a_ii + Σ |a_ij| over j outside row i's sweep block): the ℓ1 smoother's divisor.
     inv_diag: Vec<f64>,
     /// Position of each row's diagonal entry in `a`'s arrays (columns are sorted, so the
     /// entries before it are the strictly lower triangle).
@@ -432,7 +434,20 @@ impl Hierarchy {
             let p = smoothed_prolongator(&a, &diag, &agg, nc, &strong);
             let r = p.transpose();
             let coarse = r.matmul(&a.matmul(&p));
-            let inv_diag = diag.iter().map(|d| 1.0 / d).collect();
+            // ℓ1 hybrid smoothing: each row's diagonal grows by its off-block entries' sizes.
+            let inv_diag = (0..a.n)
+                .map(|i| {
+                    let (c, v) = a.row(i);
+                    let blk = i / SWEEP_BLOCK;
+                    let off: f64 = c
+                        .iter()
+                        .zip(v)
+                        .filter(|&(&j, _)| j as usize / SWEEP_BLOCK != blk)
+                        .map(|(_, v)| v.abs())
+                        .sum();
+                    1.0 / (diag[i] + off)
+                })
+                .collect();
             let diag_pos = (0..a.n)
                 .map(|i| {
                     let (c, _) = a.row(i);
@@ -602,9 +617,13 @@ fn smoothed_prolongator(
 /// million-vertex mesh its sweeps were half of the solve on one core while the other idled;
 /// so the sweeps are *hybrid* (block Jacobi between blocks of this many consecutive rows,
 /// Gauss–Seidel within each, as in hypre's hybrid smoothers): blocks run in parallel and each
-/// reads the other blocks' values from before the sweep. The blocks are fixed by the row
-/// count alone, so the bits do not depend on the thread count; a level of at most one block
-/// is plain Gauss–Seidel.
+/// reads the other blocks' values from before the sweep. Plain hybrid Gauss–Seidel need not
+/// converge for every SPD matrix (cotan weights can be negative, coarse Galerkin levels are not
+/// diagonally dominant), so it is the *ℓ1* variant (Baker, Falgout, Kolev & Yang, "Multigrid
+/// smoothers for ultraparallel computing", SIAM J. Sci. Comput. 33, 2011): each row divides
+/// by its diagonal plus the sizes of its off-block entries, which makes the smoother
+/// convergent for any SPD matrix. The blocks are fixed by the row count alone, so the bits
+/// do not depend on the thread count; a level of at most one block is plain Gauss–Seidel.
 const SWEEP_BLOCK: usize = 8192;
 
 /// A forward hybrid Gauss–Seidel sweep for A x = b starting from x = 0: within a block the
@@ -641,11 +660,10 @@ fn gauss_seidel_backward(lev: &Level, b: &[f64], x: &mut [f64]) {
             let lo = blk * SWEEP_BLOCK;
             let hi = lo + xs.len();
             for (r, i) in (lo..hi).enumerate().rev() {
+                // x_i += r_i / d_i with the row's residual r_i (its own entry included): with
+                // the ℓ1 divisor d_i ≠ a_ii this is not the same as solving row i for x_i.
                 let mut s = b[i];
                 for k in a.row_ptr[i]..a.row_ptr[i + 1] {
-                    if k == lev.diag_pos[i] {
-                        continue;
-                    }
                     let j = a.col[k] as usize;
                     let xj = if (lo..hi).contains(&j) {
                         xs[j - lo]
@@ -654,7 +672,7 @@ fn gauss_seidel_backward(lev: &Level, b: &[f64], x: &mut [f64]) {
                     };
                     s -= a.val[k] * xj;
                 }
-                xs[r] = s * lev.inv_diag[i];
+                xs[r] += s * lev.inv_diag[i];
             }
         });
 }

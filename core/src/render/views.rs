@@ -220,9 +220,19 @@ fn render_linear(
         }
     }
 
-    let hits: Vec<Vec<Hit>> = (0..bands)
+    // Each band is rasterized once and shaded by every shader before the next, so only a
+    // band's hits are held (as when one shader was rendered at a time).
+    let mut outs: Vec<Vec<Vec3>> = vec![vec![Vec3::ZERO; (n * n) as usize]; shaders.len()];
+    let mut band_slices: Vec<Vec<&mut [Vec3]>> = (0..bands).map(|_| Vec::new()).collect();
+    for out in &mut outs {
+        for (b, chunk) in out.chunks_mut((n * BAND) as usize).enumerate() {
+            band_slices[b].push(chunk);
+        }
+    }
+    band_slices
         .into_par_iter()
-        .map(|band| {
+        .enumerate()
+        .for_each(|(band, mut rows_outs)| {
             let y0 = band as u32 * BAND;
             let y1 = (y0 + BAND).min(n);
             let mut hits = vec![
@@ -250,35 +260,25 @@ fn render_linear(
                     }
                 });
             }
-            hits
-        })
-        .collect();
-    shaders
-        .iter()
-        .map(|&shader| {
-            let mut out = vec![Vec3::ZERO; (n * n) as usize];
-            out.par_chunks_mut((n * BAND) as usize)
-                .zip(&hits)
-                .for_each(|(rows_out, hits)| {
-                    for (px, h) in rows_out.iter_mut().zip(hits) {
-                        *px = if h.face == NO_FACE {
-                            background
-                        } else {
-                            shade(
-                                mesh,
-                                normals,
-                                shader,
-                                tris[h.face as usize].as_ref(),
-                                h,
-                                lit,
-                                light,
-                            )
-                        };
-                    }
-                });
-            out
-        })
-        .collect()
+            for (&shader, rows_out) in shaders.iter().zip(rows_outs.iter_mut()) {
+                for (px, h) in rows_out.iter_mut().zip(&hits) {
+                    *px = if h.face == NO_FACE {
+                        background
+                    } else {
+                        shade(
+                            mesh,
+                            normals,
+                            shader,
+                            tris[h.face as usize].as_ref(),
+                            h,
+                            lit,
+                            light,
+                        )
+                    };
+                }
+            }
+        });
+    outs
 }
 
 /// Perspective-correct barycentrics from screen-space ones: `lambda_i / w_i`, renormalized.
