@@ -528,7 +528,8 @@ impl Hierarchy {
         lev.p.mul_add(&xc, x);
         ws.rhs[l] = bc;
         ws.sol[l] = xc;
-        gauss_seidel_backward(lev, b, x);
+        // The residual's buffer is free again: it holds x from before the sweep.
+        gauss_seidel_backward(lev, b, x, &mut ws.residual[l]);
     }
 }
 
@@ -651,9 +652,10 @@ fn gauss_seidel_from_zero(lev: &Level, b: &[f64], x: &mut [f64]) {
 /// A backward hybrid Gauss–Seidel sweep for A x = b (the adjoint of the forward one, which
 /// keeps the V-cycle symmetric): within a block, rows in reverse order read the block's
 /// newest values; outside it, the values from before the sweep.
-fn gauss_seidel_backward(lev: &Level, b: &[f64], x: &mut [f64]) {
+fn gauss_seidel_backward(lev: &Level, b: &[f64], x: &mut [f64], before: &mut [f64]) {
     let a = &lev.a;
-    let before = x.to_vec();
+    before.copy_from_slice(x);
+    let before = &*before;
     x.par_chunks_mut(SWEEP_BLOCK)
         .enumerate()
         .for_each(|(blk, xs)| {

@@ -871,6 +871,17 @@ mod tests {
             + (px(x0, y0 + 1.0) * (1.0 - fx) + px(x0 + 1.0, y0 + 1.0) * fx) * fy
     }
 
+    /// Every page of `atlas` baked with `shader`.
+    fn bake_every_page(
+        atlas: &ChartAtlas,
+        mesh: &Mesh,
+        shader: &dyn SurfaceShader,
+    ) -> Vec<image::RgbaImage> {
+        (0..atlas.pages.len())
+            .map(|p| bake_page(atlas, p, mesh, &[shader]).remove(0))
+            .collect()
+    }
+
     /// A layout where neighbouring faces agree (the sphere's own (u, v) unrolled, in texels)
     /// except along one meridian, plus per-face shapes there.
     fn sphere_layout(mesh: &Mesh, texels: f32) -> Vec<[Vec2; 3]> {
@@ -913,9 +924,7 @@ mod tests {
             atlas.charts
         );
         let shader = PositionColour(&mesh);
-        let pages: Vec<image::RgbaImage> = (0..atlas.pages.len())
-            .map(|p| bake_page(&atlas, p, &mesh, &[&shader]).remove(0))
-            .collect();
+        let pages = bake_every_page(&atlas, &mesh, &shader);
         let mut worst: f32 = 0.0;
         for f in 0..mesh.triangles.len() {
             for bary in [
@@ -973,9 +982,7 @@ mod tests {
         // No two faces of one chart claim the same texel centre with different colours: each
         // face bakes to its own position colour wherever it lies.
         let shader = PositionColour(&mesh);
-        let pages: Vec<image::RgbaImage> = (0..atlas.pages.len())
-            .map(|p| bake_page(&atlas, p, &mesh, &[&shader]).remove(0))
-            .collect();
+        let pages = bake_every_page(&atlas, &mesh, &shader);
         let mut worst: f32 = 0.0;
         for f in 0..mesh.triangles.len() {
             let uv = atlas.corner_uv[f];
