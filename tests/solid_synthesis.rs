@@ -570,6 +570,51 @@ fn the_exact_stencil_gives_the_same_voxels_from_a_thinner_set() {
     }
 }
 
+/// On the trivial field a correction reads only the squares of its weighted exemplar planes,
+/// so the dependent set dilates by those (the flat stencil) and not by the whole cube: a
+/// thinner set, and every brick of every level the same as the cube's. Both a plane of weight
+/// 0 (wood2 in xy and zx) and all three planes.
+#[test]
+fn the_flat_stencil_gives_the_same_voxels_from_a_thinner_set() {
+    let (vol, field) = trivial_cube(40);
+    let req = VoxelRequest::plane(&vol, Vec3::splat(20.0), Vec3::new(0.1, 0.2, 1.0));
+    let (_, all_planes) = small();
+    let (_, two_planes) = wood_layers();
+    for (name, a) in [("three planes", all_planes), ("two planes", two_planes)] {
+        let flat = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
+        let cube = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params())
+            .unwrap()
+            .cube_stencil();
+        assert_ne!(
+            flat.stencil(2),
+            cube.stencil(2),
+            "{name}: the stencil is flat"
+        );
+        let (df, dc) = (flat.dependent_set(&req), cube.dependent_set(&req));
+        for (f, c) in df.iter().zip(&dc) {
+            assert!(f.voxels <= c.voxels, "{name} level {}", f.level);
+        }
+        let (f, c) = (
+            df.iter().map(|l| l.voxels).sum::<u64>(),
+            dc.iter().map(|l| l.voxels).sum::<u64>(),
+        );
+        assert!(f < c, "{name}: {f} vs {c}");
+        let (sf, sc) = (MemoryBrickStore::new(), MemoryBrickStore::new());
+        flat.synthesize(&req, &sf).unwrap();
+        cube.synthesize(&req, &sc).unwrap();
+        let mut compared = 0;
+        for (level, b, brick) in all_bricks(&flat, &sf) {
+            let other = sc.get(level, b).expect("the cube's set makes every brick");
+            assert!(
+                *other == brick,
+                "{name}: brick {b:?} of level {level} differs"
+            );
+            compared += 1;
+        }
+        assert!(compared > 10, "{name}: {compared}");
+    }
+}
+
 /// A 48² crop of wood2 as a solid layered across x: xy shows the stripes, zx the transposed
 /// stripes, yz (weight 0) is not matched.
 fn wood_layers() -> &'static (Image, SolidAnalysis) {

@@ -87,15 +87,66 @@ impl NeedGrid {
     }
 }
 
+/// What one correction reads around its voxel, which the dependent set dilates by.
+///
+/// In general the cube of radius `reach`. Where the reads are known to lie in axis planes
+/// through the voxel (the trivial field: each exemplar's `N × N` neighbourhood and its
+/// candidates' `3 × 3` positions are whole voxel steps along two axes, Dong et al. 2008's
+/// crossbars), only the union of those planes' squares: the cube's other voxels are never
+/// read, and every ring of the set that the cube would add there is one the synthesis does
+/// not need (issue 12 §3: the same voxels from a thinner set).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Stencil {
+    pub reach: i32,
+    /// `Some(planes)`: only the planes `p` with `planes[p]`, spanned by axes `p` and
+    /// `(p + 1) % 3` (the solid's exemplar planes `xy`, `yz`, `zx`), each a square of
+    /// radius `reach`. `None`: the whole cube.
+    pub planes: Option<[bool; 3]>,
+}
+
+impl Stencil {
+    pub fn cube(reach: i32) -> Stencil {
+        Stencil {
+            reach,
+            planes: None,
+        }
+    }
+
+    /// The per-axis radii of each square whose union the stencil is (one cube, or one per
+    /// plane, flat along the axis that plane does not span).
+    fn squares(&self) -> Vec<[i32; 3]> {
+        let r = self.reach;
+        match self.planes {
+            None => vec![[r; 3]],
+            Some(planes) => (0..3)
+                .filter(|&p| planes[p])
+                .map(|p| {
+                    let mut radii = [r; 3];
+                    radii[(p + 2) % 3] = 0;
+                    radii
+                })
+                .collect(),
+        }
+    }
+}
+
+impl From<i32> for Stencil {
+    fn from(reach: i32) -> Stencil {
+        Stencil::cube(reach)
+    }
+}
+
 /// Works out the needed versions at one level; see the module docs. `domain` is the level's
 /// extent `[0, domain)`, `targets` boxes `[lo, hi)` of voxels whose final version is wanted
-/// (clipped to the domain here), `reach` the stencil radius.
+/// (clipped to the domain here), `stencil` what a correction reads (a radius: the cube).
 pub fn dependent_set(
     schedule: &Schedule,
     domain: IVec3,
     targets: &[(IVec3, IVec3)],
-    reach: i32,
+    stencil: impl Into<Stencil>,
 ) -> NeedGrid {
+    let stencil = stencil.into();
+    let reach = stencil.reach;
     let targets: Vec<(IVec3, IVec3)> = targets
         .iter()
         .map(|&(lo, hi)| (lo.max(IVec3::ZERO), hi.min(domain)))
@@ -174,7 +225,7 @@ pub fn dependent_set(
                 }
             });
         let barriers = &stages[step.stage].window.barriers;
-        dilate_both(&mut mask, &mut tmp, rlo, rn, reach, barriers);
+        dilate_stencil(&mut mask, &mut tmp, rlo, rn, &stencil, barriers);
         let dilated = &mask;
         let latest: [u8; 8] = std::array::from_fn(|c| 1 + step.latest_for_class(c as u8) as u8);
         let start = 1 + step.stage_start as u8;
@@ -418,31 +469,72 @@ pub fn chunk_local(m: usize) -> IVec3 {
     IVec3::new(m % CHUNK, (m / CHUNK) % CHUNK, m / (CHUNK * CHUNK))
 }
 
-/// Dilation of a 0/1 mask over the box `[lo, lo + n)` by the cube of radius `r`; with
-/// barriers, only within the cell (of every lattice) of each source voxel.
-pub fn dilate(mask: &[u8], lo: IVec3, n: IVec3, r: i32, barriers: &[Cells]) -> Vec<u8> {
+/// Dilation of a 0/1 mask over the box `[lo, lo + n)` by `stencil`; with barriers, only
+/// within the cell (of every lattice) of each source voxel.
+pub fn dilate(
+    mask: &[u8],
+    lo: IVec3,
+    n: IVec3,
+    stencil: impl Into<Stencil>,
+    barriers: &[Cells],
+) -> Vec<u8> {
     let mut buf: Vec<u8> = mask.iter().map(|&m| 3 * (m != 0) as u8).collect();
-    dilate_both(&mut buf, &mut Vec::new(), lo, n, r, barriers);
+    dilate_stencil(&mut buf, &mut Vec::new(), lo, n, &stencil.into(), barriers);
     let bit = if barriers.is_empty() { 1 } else { 2 };
     buf.iter().map(|&d| (d & bit != 0) as u8).collect()
 }
 
+/// [`dilate_both`] by a [`Stencil`]: the cube in place, or the union of its planes' squares
+/// (each square dilates a copy; a square and a cell are both boxes, so the cut to the cell
+/// is separable per square and the union of the cut squares is the cut union).
+pub fn dilate_stencil(
+    buf: &mut Vec<u8>,
+    tmp: &mut Vec<u8>,
+    lo: IVec3,
+    n: IVec3,
+    stencil: &Stencil,
+    barriers: &[Cells],
+) {
+    let squares = stencil.squares();
+    if let [radii] = squares[..] {
+        dilate_both(buf, tmp, lo, n, radii, barriers);
+        return;
+    }
+    let source = std::mem::take(buf);
+    let mut union = vec![0u8; source.len()];
+    for radii in squares {
+        let mut square = source.clone();
+        dilate_both(&mut square, tmp, lo, n, radii, barriers);
+        union
+            .par_iter_mut()
+            .zip(square.par_iter())
+            .for_each(|(u, s)| *u |= s);
+    }
+    *buf = union;
+}
+
 /// Two dilations of one box at once, in place in `buf` (`tmp` is scratch, resized): bit 0
-/// by the cube of radius `r`, bit 1 by the same cube cut to the cell of every lattice in
-/// `barriers` (the cell's window lies inside the cube's, so one pass over a window serves
-/// both). Each axis in turn ORs the window's rows or slabs; no buffer but the two is
-/// allocated, so a step of [`dependent_set`] costs two bytes per voxel of its region.
+/// by the box of per-axis radii `r`, bit 1 by the same box cut to the cell of every lattice
+/// in `barriers` (the cell's window lies inside the box's, so one pass over a window serves
+/// both). Each axis in turn ORs the window's rows or slabs (an axis of radius 0 is left as
+/// it is); no buffer but the two is allocated, so a step of [`dependent_set`] costs two
+/// bytes per voxel of its region.
 pub fn dilate_both(
     buf: &mut Vec<u8>,
     tmp: &mut Vec<u8>,
     lo: IVec3,
     n: IVec3,
-    r: i32,
+    radii: [i32; 3],
     barriers: &[Cells],
 ) {
     let dims = [n.x as usize, n.y as usize, n.z as usize];
     tmp.resize(buf.len(), 0);
     for axis in 0..3 {
+        let r = radii[axis];
+        if r == 0 {
+            // The source voxel's own position, which is in its own cell: both bits stay.
+            continue;
+        }
         let origin = lo[axis];
         let len = dims[axis] as i32;
         // Windows [a, b] (inclusive, local) per position along the axis: the cube's, then
@@ -579,6 +671,65 @@ mod tests {
                 dilate(&mask, lo, n, r, &cells),
                 brute_dilate(&mask, lo, n, r, &cells)
             );
+        }
+    }
+
+    #[test]
+    fn flat_dilation_matches_brute_force() {
+        let lo = IVec3::new(-3, 2, 5);
+        let n = IVec3::new(13, 9, 11);
+        let len = (n.x * n.y * n.z) as usize;
+        let mut mask = vec![0u8; len];
+        for i in (0..len).step_by(89) {
+            mask[i] = 1;
+        }
+        let g = NeedGrid {
+            lo,
+            n,
+            need: mask.clone(),
+        };
+        let cells = [Cells { size: 4, offset: 1 }];
+        for planes in [
+            [true, false, true],
+            [true, true, true],
+            [false, true, false],
+        ] {
+            for barriers in [&[][..], &cells[..]] {
+                let r = 2;
+                let got = dilate(
+                    &mask,
+                    lo,
+                    n,
+                    Stencil {
+                        reach: r,
+                        planes: Some(planes),
+                    },
+                    barriers,
+                );
+                let mut flat = 0;
+                for i in 0..len {
+                    let w = g.position(i);
+                    // Some source within a square of a read plane (and the same cells).
+                    let mut hit = false;
+                    for p in (0..3).filter(|&p| planes[p]) {
+                        for a in -r..=r {
+                            for b in -r..=r {
+                                let mut o = IVec3::ZERO;
+                                o[p] = a;
+                                o[(p + 1) % 3] = b;
+                                let v = w + o;
+                                hit |= g.get(v) != 0
+                                    && barriers.iter().all(|c| c.cell_of(v) == c.cell_of(w));
+                            }
+                        }
+                    }
+                    assert_eq!(got[i] != 0, hit, "planes {planes:?} at {w}");
+                    flat += hit as usize;
+                }
+                let cube = dilate(&mask, lo, n, r, barriers);
+                let cube = cube.iter().filter(|&&x| x != 0).count();
+                assert!(flat < cube, "planes {planes:?}: {flat} vs {cube}");
+            }
         }
     }
 

@@ -97,10 +97,11 @@
 //! about 1 GB (BENCHMARKS.md).
 //! - The dependency stencil is the cube of radius `r = ⌊N_h √2 s_max + ½⌋` (`⌊N_h √2 s_max⌋ + 1`
 //!   with trilinear sampling), or the exact extent for a constant field (see
-//!   [`stencil_reach`]); the paper's `D = ⌈N√2⌉`.
+//!   [`stencil_reach`]); the paper's `D = ⌈N√2⌉`. For the trivial field it is only the
+//!   squares of the weighted exemplar planes ([`Stencil`]), which is all a correction reads.
 
 use super::dependent_set::{
-    CHUNK_VOXELS, ChunkedNeed, NeedGrid, chunk_local, dependent_box, dependent_set,
+    CHUNK_VOXELS, ChunkedNeed, NeedGrid, Stencil, chunk_local, dependent_box, dependent_set,
 };
 use super::field_integration::integrated_neighbourhood;
 use super::history_window::{HistoryWindow, Schedule, Step};
@@ -726,10 +727,13 @@ pub struct LevelDependency {
     pub level: u32,
     /// Bricks, sorted.
     pub bricks: Vec<[i32; 3]>,
-    /// Voxels synthesized (including those only upsampled).
+    /// Voxels in the dependent set (including those only upsampled), each counted once.
     pub voxels: u64,
-    /// Voxel corrections.
+    /// Voxel corrections the set needs, each voxel's counted once.
     pub corrections: u64,
+    /// Voxels synthesized: `voxels` plus the overlap of the level's batches, which is
+    /// synthesized once per batch (equal when the level is one batch).
+    pub batch_voxels: u64,
     /// Upper bound of the level's impact distance, in its voxels.
     pub impact_distance: i32,
 }
@@ -814,8 +818,41 @@ impl LevelPlan {
     fn voxels(&self) -> u64 {
         self.batches.iter().map(|b| b.need.voxels()).sum()
     }
-    fn corrections(&self) -> u64 {
-        self.batches.iter().map(|b| b.need.corrections()).sum()
+
+    /// Distinct voxels and corrections of the union of the batches' sets: a voxel in several
+    /// batches counts once, at the most versions any batch needs of it (the same versions:
+    /// each batch's set is closed under the same dependencies).
+    fn distinct(&self) -> (u64, u64) {
+        if let [b] = &self.batches[..] {
+            return (b.need.voxels(), b.need.corrections());
+        }
+        // 8³ blocks on the level's own lattice, so every batch's voxel lands in one place.
+        let mut union: std::collections::HashMap<IVec3, Box<[u8; CHUNK_VOXELS]>> =
+            std::collections::HashMap::new();
+        for b in &self.batches {
+            for (k, origin) in b.need.origins().iter().enumerate() {
+                for (m, &x) in b.need.chunk(k).iter().enumerate() {
+                    if x == 0 {
+                        continue;
+                    }
+                    let v = *origin + chunk_local(m);
+                    let block = union
+                        .entry(v >> 3)
+                        .or_insert_with(|| Box::new([0; CHUNK_VOXELS]));
+                    let w = v & 7;
+                    let slot = &mut block[((w.z * 8 + w.y) * 8 + w.x) as usize];
+                    *slot = (*slot).max(x);
+                }
+            }
+        }
+        let (mut voxels, mut corrections) = (0, 0);
+        for block in union.values() {
+            for &x in block.iter() {
+                voxels += (x > 0) as u64;
+                corrections += x.saturating_sub(1) as u64;
+            }
+        }
+        (voxels, corrections)
     }
 }
 
@@ -879,12 +916,17 @@ impl Default for BatchLimits {
 ///   `+1` corners have weight 0 and are never read, and the reach is `N_h s`.
 ///
 /// A margin `δ` covers `f32` rounding of positions (it grows with the volume's side).
+///
+/// On the lattice (the trivial field) the reads are also flat: each weighted exemplar plane
+/// `p` is sampled at `v + s (i e_p + j e_{p+1})`, its candidates at `v ± e_p ± e_{p+1}`, so
+/// the stencil is the union of those planes' squares, not the cube (returned as the planes
+/// read; `None` off the lattice).
 fn stencil_reach(
     analysis: &SolidAnalysisRef,
     field: &RotationField,
     pyramid: &Pyramid,
     params: &SolidParams,
-) -> Vec<i32> {
+) -> (Vec<i32>, Option<[bool; 3]>) {
     let q0 = field.rotations[0];
     let s0 = field.scales[0];
     let constant =
@@ -906,7 +948,8 @@ fn stencil_reach(
     };
     let side = pyramid.volume.dims.iter().copied().max().unwrap_or(1) as f32;
     let delta = 1e-3 + side * f32::EPSILON * 8.0;
-    params
+    let planes = lattice.then(|| analysis.weights().map(|w| w != 0.0));
+    let reach = params
         .levels
         .iter()
         .enumerate()
@@ -924,7 +967,8 @@ fn stencil_reach(
             };
             r.max(1)
         })
-        .collect()
+        .collect();
+    (reach, planes)
 }
 
 /// With `field_integration`, a level's samples lie along integral lines up to `bound` voxels
@@ -964,6 +1008,9 @@ pub struct SolidSynthesis<'a> {
     params: SolidParams,
     schedules: Vec<Schedule>,
     reach: Vec<i32>,
+    /// The exemplar planes a correction reads, when they are axis planes (the trivial field):
+    /// the stencil is then their squares, not the cube.
+    planes: Option<[bool; 3]>,
     /// `basis · mean` per (level, image), to project without centring.
     mean_proj: Vec<Vec<Vec<f32>>>,
     limits: BatchLimits,
@@ -1046,7 +1093,11 @@ impl<'a> SolidSynthesis<'a> {
                 on.then(|| 2.0 * (analysis.n(li) / 2) as f32 * s_max)
             })
             .collect();
-        let mut reach = stencil_reach(&analysis, field, &pyramid, &params);
+        let (mut reach, mut planes) = stencil_reach(&analysis, field, &pyramid, &params);
+        if integrate.iter().any(Option::is_some) {
+            // Integral lines leave the planes (never on the lattice, which is constant).
+            planes = None;
+        }
         widen_for_integration(&mut reach, &integrate, &params, &pyramid);
         let images = analysis.meta.images as usize;
         let mean_proj = (0..pyramid.levels as usize)
@@ -1071,6 +1122,7 @@ impl<'a> SolidSynthesis<'a> {
             params,
             schedules,
             reach,
+            planes,
             mean_proj,
             limits: BatchLimits::default(),
         })
@@ -1111,7 +1163,24 @@ impl<'a> SolidSynthesis<'a> {
     /// and the benchmark's before/after counts).
     pub fn widen_reach(mut self, extra: i32) -> Self {
         self.reach.iter_mut().for_each(|r| *r += extra.max(0));
+        self.planes = None;
         self
+    }
+
+    /// The same synthesis dilating by the whole cube of the reach even where the reads lie in
+    /// planes: the same voxel results from a larger dependent set (the stencil before it was
+    /// made flat; for tests and the benchmark's before/after counts).
+    pub fn cube_stencil(mut self) -> Self {
+        self.planes = None;
+        self
+    }
+
+    /// What a correction of array level `li` reads, as the dependent set dilates by it.
+    pub fn stencil(&self, li: usize) -> Stencil {
+        Stencil {
+            reach: self.reach[li],
+            planes: self.planes,
+        }
     }
 
     /// The same synthesis in batches of other sizes (the voxels do not change).
@@ -1241,7 +1310,7 @@ impl<'a> SolidSynthesis<'a> {
         if bricks.len() > 1 && (n.x * n.y * n.z) as u64 > self.limits.box_voxels {
             return split(bricks);
         }
-        let dense = dependent_set(schedule, domain, &targets, self.reach[li]);
+        let dense = dependent_set(schedule, domain, &targets, self.stencil(li));
         let need = ChunkedNeed::from_grid(&dense);
         if bricks.len() > 1 && need.chunk_voxels() > self.limits.chunk_voxels {
             return split(bricks);
@@ -1273,12 +1342,16 @@ impl<'a> SolidSynthesis<'a> {
         self.plan(request, None)
             .into_iter()
             .enumerate()
-            .map(|(li, p)| LevelDependency {
-                level: li as u32 + 1,
-                voxels: p.voxels(),
-                corrections: p.corrections(),
-                bricks: p.needed,
-                impact_distance: self.schedules[li].impact_distance(self.reach[li]),
+            .map(|(li, p)| {
+                let (voxels, corrections) = p.distinct();
+                LevelDependency {
+                    level: li as u32 + 1,
+                    voxels,
+                    corrections,
+                    batch_voxels: p.voxels(),
+                    bricks: p.needed,
+                    impact_distance: self.schedules[li].impact_distance(self.reach[li]),
+                }
             })
             .collect()
     }
