@@ -71,7 +71,10 @@ fn main() {
         .cube_stencil();
     println!("reach {:?}", synth.reach());
     for (name, s) in [("flat stencil", &synth), ("cube stencil", &cube)] {
-        for d in s.dependent_set(&request) {
+        let t = std::time::Instant::now();
+        let set = s.dependent_set(&request);
+        println!("{name}: planned in {:.2} s", t.elapsed().as_secs_f64());
+        for d in set {
             let dims = pyr.level_dims(d.level);
             let all = dims.x as f64 * dims.y as f64 * dims.z as f64;
             println!(

@@ -500,6 +500,29 @@ pub fn dilate_stencil(
         dilate_both(buf, tmp, lo, n, radii, barriers);
         return;
     }
+    let r = stencil.reach;
+    let along = |axis: usize| {
+        let mut radii = [0; 3];
+        radii[axis] = r;
+        radii
+    };
+    if let [p, q] = squares[..] {
+        // Two planes share one axis `c`: (d_c d_a S) ∪ (d_c d_b S) = d_c (d_a S ∪ d_b S),
+        // three one-axis passes as for the cube instead of four.
+        let own = |sq: [i32; 3], other: [i32; 3]| (0..3).find(|&x| sq[x] != 0 && other[x] == 0);
+        let (Some(a), Some(b)) = (own(p, q), own(q, p)) else {
+            unreachable!("two distinct planes each have an axis of their own")
+        };
+        let c = 3 - a - b;
+        let mut other = buf.clone();
+        dilate_both(buf, tmp, lo, n, along(a), barriers);
+        dilate_both(&mut other, tmp, lo, n, along(b), barriers);
+        buf.par_iter_mut()
+            .zip(other.par_iter())
+            .for_each(|(u, s)| *u |= s);
+        dilate_both(buf, tmp, lo, n, along(c), barriers);
+        return;
+    }
     let source = std::mem::take(buf);
     let mut union = vec![0u8; source.len()];
     for radii in squares {
