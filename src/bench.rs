@@ -588,8 +588,7 @@ fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
     };
     let (dual_sets, plain_sets) = (sets(Scheme::DualGrid, false)?, sets(Scheme::Plain, false)?);
     let (dual_before, plain_before) = (sets(Scheme::DualGrid, true)?, sets(Scheme::Plain, true)?);
-    let fine =
-        |d: &[LevelDependency]| d.iter().rev().take(2).map(|l| l.voxels).sum::<u64>() as f64;
+    let fine = |d: &[LevelDependency]| d.iter().rev().take(2).map(|l| l.voxels).sum::<u64>() as f64;
     let ratio = fine(&plain_sets) / fine(&dual_sets).max(1.0);
     let ratio_before = fine(&plain_before) / fine(&dual_before).max(1.0);
     // The standard scheme's dependent set can be no larger than the level: say how much of

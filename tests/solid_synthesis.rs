@@ -517,7 +517,8 @@ fn dual_grid_depends_on_fewer_voxels_than_plain_correction() {
 
 /// The stencil the dependent set dilates by is as tight as the reads (⌊e + ½⌋ for nearest
 /// sampling, the exact lattice for the trivial field): the set shrinks, and every voxel, at
-/// every level, is what the one-voxel-wider stencil of before gives.
+/// every level, is what the one-voxel-wider stencil of before gives, for a constant field and
+/// for one that turns and scales over the volume.
 #[test]
 fn the_exact_stencil_gives_the_same_voxels_from_a_thinner_set() {
     let (_, a) = small();
@@ -527,8 +528,32 @@ fn the_exact_stencil_gives_the_same_voxels_from_a_thinner_set() {
         &vol,
         Quat::from_rotation_y(0.5) * Quat::from_rotation_x(0.2),
     );
-    let req = VoxelRequest::plane(&vol, Vec3::splat(20.0), Vec3::new(0.1, 0.2, 1.0));
-    for (name, field) in [("trivial", &trivial), ("rotated", &rotated)] {
+    // A field that turns and scales from node to node: the reach bounds every read through
+    // the largest scale and the √2 of a turned frame, not one frame's exact extent (a larger
+    // volume, so that the sets do not fill it).
+    let big = cube(72);
+    let mut varying = common::solid::trivial_field(&big);
+    let nodes = varying.rotations.len() as f32;
+    for (i, (q, s)) in varying
+        .rotations
+        .iter_mut()
+        .zip(varying.scales.iter_mut())
+        .enumerate()
+    {
+        let t = i as f32 / nodes;
+        *q = Quat::from_rotation_y(1.2 * t) * Quat::from_rotation_x(0.7 * (1.0 - t));
+        *s = 0.7 + 0.3 * t;
+    }
+    let plane = |vol: &texsyn::stages::parameterize::volume_embedding::Volume| {
+        let c = vol.dims[0] as f32 / 2.0;
+        VoxelRequest::plane(vol, Vec3::splat(c), Vec3::new(0.1, 0.2, 1.0))
+    };
+    for (name, vol, field) in [
+        ("trivial", vol, &trivial),
+        ("rotated", vol, &rotated),
+        ("varying", big, &varying),
+    ] {
+        let req = plane(&vol);
         let exact = SolidSynthesis::new(a.as_ref(), field, vol, small_solid_params()).unwrap();
         let wide = SolidSynthesis::new(a.as_ref(), field, vol, small_solid_params())
             .unwrap()
