@@ -16,12 +16,15 @@
 //! of the input's geometry image, which numbers its vertices the same way), i.e. relative to
 //! the input surface.
 
+use super::relief_frame::score_along_maps;
 use super::{Item, Run, ScoreFailure};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::image::Image;
 use crate::methods::geometry_images::GeometryImagesConfig;
-use crate::stages::analyse_exemplar::texel_variants::TexelVariants;
+use crate::stages::analyse_exemplar::texel_variants::{TexelVariants, TexelVariantsRef};
+use crate::stages::field::param_field::ParamField;
+use crate::stages::synthesize::geometry_texture::{sample_frame_maps, texel_controls};
 use crate::stages::reconstruct::displacement::grid_mesh;
 use std::collections::HashMap;
 use std::path::Path;
@@ -30,7 +33,7 @@ use texsyn_core::math::PureMath;
 /// The texel channel holding the height (`dn`).
 const HEIGHT: usize = 2;
 
-pub(crate) fn geometry_images(run: &Run) -> Result<Item, ScoreFailure> {
+pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
     let c: GeometryImagesConfig = run
         .config
         .parse()
@@ -70,6 +73,7 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Item, ScoreFailure> {
     );
     run.score_into(&mut item, out_img.view(), None, reference_img.view())?;
     let offset = c.field.density_offset;
+    let frame = surface_item(run, &c, &variants, &out_img, &reference_img, offset)?;
     item.extra
         .insert("density_offset".into(), serde_json::json!(offset));
     if offset != 0.0 {
@@ -96,6 +100,51 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Item, ScoreFailure> {
     item.extra.insert(
         "mesh".into(),
         serde_json::to_value(&checks).expect("plain numbers"),
+    );
+    Ok(vec![item, frame])
+}
+
+/// The relief read in the sample's frame along the surface ([`super::relief_frame`]): each
+/// patch through the map synthesis laid the texture out with at its centre (metric, scale
+/// and orientation), against the sample at its own size, unrotated.
+fn surface_item(
+    run: &Run,
+    c: &GeometryImagesConfig,
+    variants: &TexelVariantsRef<'_>,
+    out_img: &Image,
+    reference_img: &Image,
+    offset: f32,
+) -> Result<Item, ScoreFailure> {
+    let gi = run.view::<GeometryImage>("parameterize")?;
+    let field = run.view::<ParamField>("field")?;
+    if field.dir.len() != gi.positions.len() || gi.positions.len() != out_img.pixels.len() {
+        return Err(ScoreFailure::new(
+            "the field, geometry image and synthesized relief disagree on the sample count",
+        ));
+    }
+    let controls = texel_controls(&gi, &field, variants.params(), c.synthesize.anisotropic);
+    let maps = sample_frame_maps(&controls, variants);
+    let mut item = Item::new(
+        "the synthesized relief read along the surface, in the sample's frame",
+        "the sample's relief at its own size, unrotated",
+    );
+    match score_along_maps(out_img.view(), &maps, reference_img.view(), &run.params) {
+        Ok(f) => {
+            item.score = Some(f.score);
+            item.extra.insert(
+                "skipped_patches".into(),
+                serde_json::json!(f.skipped as f64 / (f.skipped + f.readable) as f64),
+            );
+        }
+        Err(e) => item.notes.push(format!("not scored: {e}")),
+    }
+    item.extra
+        .insert("density_offset".into(), serde_json::json!(offset));
+    item.notes.push(
+        "each patch is read through the map the synthesis used at its centre (surface metric, \
+         the field's scale and orientation), bilinearly; patches that leave the square are \
+         skipped (skipped_patches: their fraction of the texels)"
+            .into(),
     );
     Ok(item)
 }

@@ -87,7 +87,7 @@
 //!   Orientations are still drawn per texel: per cell, stripes broke into straight pieces at the
 //!   cell borders.
 use crate::analyse_exemplar::texel_variants::{
-    SampleMap, Template, TexelVariantsRef, coarse_taps, coarse_window, template_taps,
+    SampleMap, Template, TexelVariantParams, TexelVariantsRef, coarse_taps, coarse_window, template_taps,
 };
 use crate::check::{ParamError, check_range};
 use crate::field::param_field::local_spacing;
@@ -1156,50 +1156,37 @@ fn dir_rotation(dir: Vec2) -> (f32, f32) {
     }
 }
 
-/// Synthesizes a texel image over `gi` (see the module docs). The result has `gi.n × gi.n`
-/// texels with the variants' channels; `(dx, dy, dn)` are in the local frames of
-/// [`crate::geom::geometry_image::local_frames`]. `progress` gets the fraction done, 0 to 1,
-/// from the calling thread.
-pub fn synthesize_geometry_texture(
-    gi: &GeometryImage,
-    field: &ParamField,
-    variants: &TexelVariantsRef<'_>,
-    p: &GeometrySynthParams,
-    progress: &dyn Fn(f32),
-) -> Result<TexelImage, GeometryTextureError> {
-    synthesize_impl(gi, field, variants, p, progress, true)
+/// The level-0 controls of each sample (`i * n + j`), as synthesis reads them.
+pub struct TexelControls {
+    /// The surface metric ([`SurfaceMetric`]); empty without `anisotropic`.
+    pub metric: Vec<SurfaceMetric>,
+    /// Fractional orientation index in `[0, orientations)`: the variant angle is
+    /// `orient · 360° / orientations`.
+    pub orient: Vec<f32>,
+    /// Fractional scale index in `[0, scales − 1]` (0 = most enlarged).
+    pub scale: Vec<f32>,
 }
 
-/// [`synthesize_geometry_texture`]; `wavefront` false runs the scanline pass texel by texel
-/// (the reference the wavefront order must reproduce).
-fn synthesize_impl(
+/// The per-sample orientation, scale and metric that [`synthesize_geometry_texture`] matches
+/// each texel with (§4.3; with the surface metric, see the module docs).
+pub fn texel_controls(
     gi: &GeometryImage,
     field: &ParamField,
-    variants: &TexelVariantsRef<'_>,
-    p: &GeometrySynthParams,
-    progress: &dyn Fn(f32),
-    wavefront: bool,
-) -> Result<TexelImage, GeometryTextureError> {
-    p.validate()?;
-    let vp = variants.params().clone();
-    let nl = vp.levels as usize;
-    check_inputs(gi, field, nl)?;
-    progress(0.0);
-    let n0 = gi.n as usize;
-    let c = variants.channels();
+    vp: &TexelVariantParams,
+    anisotropic: bool,
+) -> TexelControls {
     let kk = vp.orientations as usize;
     let ss = vp.scales as usize;
     let mid = vp.middle_scale();
-
     // Per-sample controls at level 0. With the surface metric, the field's direction (grid
     // axes) is turned into the sample axes by A, and R takes the metric's isotropic spacing in
     // place of the mean neighbour distance (which the longer grid direction dominates).
-    let metric0 = if p.anisotropic {
+    let metric0 = if anisotropic {
         surface_metrics(gi)
     } else {
         Vec::new()
     };
-    let spacing = if p.anisotropic {
+    let spacing = if anisotropic {
         local_spacing(gi)
     } else {
         Vec::new()
@@ -1246,6 +1233,103 @@ fn synthesize_impl(
             (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32)
         })
         .collect();
+
+    TexelControls {
+        metric: metric0,
+        orient: orient0,
+        scale: scale0,
+    }
+}
+
+/// Per level-0 sample, the linear map `M` (row-major, acting on `(x = column, y = row)`) from
+/// grid offsets to offsets in the sample's own texels (level 0, unrotated) that synthesis lays
+/// the texture out with there: `M = f · R(−θ) · A`, with `A` the surface metric (the identity
+/// without it), `θ` the field's angle as a continuous orientation index and `f` the variants'
+/// texel size in sample texels at the continuous scale index (geometric between the two scales
+/// the synthesis mixes). A synthesized neighbour `o` grid steps away copies, in coherent runs,
+/// the sample point `M o` away from the texel's; this is what the surface-space score reads
+/// the relief along.
+pub fn sample_frame_maps(controls: &TexelControls, variants: &TexelVariantsRef<'_>) -> Vec<[f32; 4]> {
+    let vp = variants.params();
+    let kk = vp.orientations as f64;
+    let ss = vp.scales as usize;
+    // Texel size of scale s's variants in sample texels (orientation 0: a pure scaling).
+    let log_size: Vec<f64> = (0..ss)
+        .map(|s| variants.sample_map(variants.variant(s, 0), 0).a[0][0].log2_pure())
+        .collect();
+    controls
+        .orient
+        .iter()
+        .zip(&controls.scale)
+        .enumerate()
+        .map(|(k, (&o, &s))| {
+            let s = s as f64;
+            let s0 = (s.floor() as usize).min(ss - 1);
+            let t = s - s0 as f64;
+            let ls = if s0 + 1 < ss {
+                (1.0 - t) * log_size[s0] + t * log_size[s0 + 1]
+            } else {
+                log_size[s0]
+            };
+            let f = ls.exp2_pure();
+            let theta = std::f64::consts::TAU * o as f64 / kk;
+            let (sin, cos) = (theta.sin_pure(), theta.cos_pure());
+            // f R(−θ) = f [[cos, sin], [−sin, cos]], as the variants' sample maps.
+            let r = [f * cos, f * sin, -f * sin, f * cos];
+            let a = controls
+                .metric
+                .get(k)
+                .map_or([1.0f64, 0.0, 0.0, 1.0], |m| m.a.map(|v| v as f64));
+            [
+                r[0] * a[0] + r[1] * a[2],
+                r[0] * a[1] + r[1] * a[3],
+                r[2] * a[0] + r[3] * a[2],
+                r[2] * a[1] + r[3] * a[3],
+            ]
+            .map(|v| v as f32)
+        })
+        .collect()
+}
+
+/// Synthesizes a texel image over `gi` (see the module docs). The result has `gi.n × gi.n`
+/// texels with the variants' channels; `(dx, dy, dn)` are in the local frames of
+/// [`crate::geom::geometry_image::local_frames`]. `progress` gets the fraction done, 0 to 1,
+/// from the calling thread.
+pub fn synthesize_geometry_texture(
+    gi: &GeometryImage,
+    field: &ParamField,
+    variants: &TexelVariantsRef<'_>,
+    p: &GeometrySynthParams,
+    progress: &dyn Fn(f32),
+) -> Result<TexelImage, GeometryTextureError> {
+    synthesize_impl(gi, field, variants, p, progress, true)
+}
+
+/// [`synthesize_geometry_texture`]; `wavefront` false runs the scanline pass texel by texel
+/// (the reference the wavefront order must reproduce).
+fn synthesize_impl(
+    gi: &GeometryImage,
+    field: &ParamField,
+    variants: &TexelVariantsRef<'_>,
+    p: &GeometrySynthParams,
+    progress: &dyn Fn(f32),
+    wavefront: bool,
+) -> Result<TexelImage, GeometryTextureError> {
+    p.validate()?;
+    let vp = variants.params().clone();
+    let nl = vp.levels as usize;
+    check_inputs(gi, field, nl)?;
+    progress(0.0);
+    let n0 = gi.n as usize;
+    let c = variants.channels();
+    let kk = vp.orientations as usize;
+    let ss = vp.scales as usize;
+
+    let TexelControls {
+        metric: metric0,
+        orient: orient0,
+        scale: scale0,
+    } = texel_controls(gi, field, &vp, p.anisotropic);
 
     // Level grids: mates from the level-0 samples on each level's lattice.
     let mut levels: Vec<Level> = Vec::with_capacity(nl);
