@@ -73,7 +73,7 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
     );
     run.score_into(&mut item, out_img.view(), None, reference_img.view())?;
     let offset = c.field.density_offset;
-    let frame = surface_item(run, &c, &variants, &out_img, &reference_img, offset)?;
+    let frame = surface_item(run, &c, &variants, &out_img, &grey, offset)?;
     item.extra
         .insert("density_offset".into(), serde_json::json!(offset));
     if offset != 0.0 {
@@ -106,13 +106,16 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
 
 /// The relief read in the sample's frame along the surface ([`super::relief_frame`]): each
 /// patch through the map synthesis laid the texture out with at its centre (metric, scale
-/// and orientation), against the sample at its own size, unrotated.
+/// and orientation), against the sample unrotated, at the scale of the variants the synthesis
+/// used most (the median scale index over the samples, rounded: at density offset 0 the
+/// sample's own size; denser textures copy from downsampled variants, whose detail the grid
+/// can hold, so they are compared with those).
 fn surface_item(
     run: &Run,
     c: &GeometryImagesConfig,
     variants: &TexelVariantsRef<'_>,
     out_img: &Image,
-    reference_img: &Image,
+    grey: &dyn Fn(u32, u32, &[f32]) -> Image,
     offset: f32,
 ) -> Result<Item, ScoreFailure> {
     let gi = run.view::<GeometryImage>("parameterize")?;
@@ -122,12 +125,35 @@ fn surface_item(
             "the field, geometry image and synthesized relief disagree on the sample count",
         ));
     }
-    let controls = texel_controls(&gi, &field, variants.params(), c.synthesize.anisotropic);
-    let maps = sample_frame_maps(&controls, variants);
+    let controls = texel_controls(&gi, &field, variants.params(), &c.synthesize);
+    let mut by_scale = controls.scale.clone();
+    by_scale.sort_unstable_by(f32::total_cmp);
+    let median = by_scale.get(by_scale.len() / 2).copied().unwrap_or(0.0);
+    let s_ref = ((median + 0.5).floor() as usize).min(variants.params().scales as usize - 1);
+    let v_ref = variants.variant(s_ref, 0);
+    // The maps go to the sample's texels; the reference's are `size` of them.
+    let size = variants.sample_map(v_ref, 0).a[0][0] as f32;
+    let maps: Vec<[f32; 4]> = sample_frame_maps(&controls, variants)
+        .into_iter()
+        .map(|m| m.map(|v| v / size))
+        .collect();
+    let level = variants.level(v_ref, 0);
+    let heights: Vec<f32> = level
+        .texels
+        .chunks_exact(variants.channels())
+        .map(|t| t[HEIGHT])
+        .collect();
+    let reference_img = grey(level.width, level.height, &heights);
     let mut item = Item::new(
         "the synthesized relief read along the surface, in the sample's frame",
-        "the sample's relief at its own size, unrotated",
+        format!(
+            "the sample's relief unrotated, at the synthesis's median scale: variant scale {s_ref} \
+             ({}×{} texels, {size} sample texels each)",
+            level.width, level.height
+        ),
     );
+    item.extra
+        .insert("reference_scale".into(), serde_json::json!(s_ref));
     match score_along_maps(out_img.view(), &maps, reference_img.view(), &run.params) {
         Ok(f) => {
             item.score = Some(f.score);

@@ -145,6 +145,32 @@ pub struct GeometrySynthParams {
     /// (long thin parts: legs, necks, trunks). `false` is the paper's template in grid texels,
     /// which draws the relief out into streaks there. Default: true.
     pub anisotropic: bool,
+    /// With the surface metric, how a template tap that falls between grid points is read:
+    /// `"bilinear"` (default) or `"nearest"` (the grid point nearest to it, as the coherent
+    /// shifts round).
+    pub taps: Taps,
+    /// How a texel's scale is picked between the two variants' scales next to its
+    /// `log2 R + middle`: `"random"` (default; the paper's, `T_s` with probability by
+    /// closeness, shared over jittered cells) or `"nearest"` (the closer one everywhere).
+    pub scale_choice: ScaleChoice,
+}
+
+/// How template taps between grid points are read (see [`GeometrySynthParams::taps`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Taps {
+    #[default]
+    Bilinear,
+    Nearest,
+}
+
+/// How each texel's scale is picked (see [`GeometrySynthParams::scale_choice`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ScaleChoice {
+    #[default]
+    Random,
+    Nearest,
 }
 
 /// The candidate search of each texel's match.
@@ -171,6 +197,8 @@ impl Default for GeometrySynthParams {
             correction_passes: 1,
             coarse_weight: 1.0,
             anisotropic: true,
+            taps: Taps::Bilinear,
+            scale_choice: ScaleChoice::Random,
         }
     }
 }
@@ -515,6 +543,8 @@ struct Ctx<'a, 'v> {
     search: Search,
     /// `coherence` of the parameters.
     coherence: f32,
+    /// `taps = "nearest"`.
+    nearest_taps: bool,
     /// Per (variant, level), `v * levels + l`: the map to the sample's level 0.
     maps: Vec<SampleMap>,
     /// Anti-diagonal step of the scanline pass's waves (`template / 2 + 1`): a texel `(i', j')`
@@ -693,7 +723,12 @@ impl Ctx<'_, '_> {
         };
         for &tap in taps {
             match metric {
-                // With the surface metric a tap falls between grid points: bilinear.
+                // With the surface metric a tap falls between grid points: bilinear, or the
+                // nearest grid point.
+                Some(m) if self.nearest_taps => {
+                    let (dx, dy) = m.to_grid(tap);
+                    push(at(i + dy as i64, j + dx as i64), raw)
+                }
                 Some(m) => push(bilinear(m.to_grid_f(tap), i, j, &at), raw),
                 None => push(at(i + tap.1 as i64, j + tap.0 as i64), raw),
             }
@@ -708,6 +743,10 @@ impl Ctx<'_, '_> {
             };
             for &tap in ctaps {
                 match metric {
+                    Some(m) if self.nearest_taps => {
+                        let (dx, dy) = m.to_grid(tap);
+                        push(at(ci + dy as i64, cj + dx as i64), raw)
+                    }
                     Some(m) => push(bilinear(m.to_grid_f(tap), ci, cj, &at), raw),
                     None => push(at(ci + tap.1 as i64, cj + tap.0 as i64), raw),
                 }
@@ -1173,8 +1212,9 @@ pub fn texel_controls(
     gi: &GeometryImage,
     field: &ParamField,
     vp: &TexelVariantParams,
-    anisotropic: bool,
+    p: &GeometrySynthParams,
 ) -> TexelControls {
+    let anisotropic = p.anisotropic;
     let kk = vp.orientations as usize;
     let ss = vp.scales as usize;
     let mid = vp.middle_scale();
@@ -1230,7 +1270,12 @@ pub fn texel_controls(
                 (Some(m), Some(&s)) if m.spacing > 0.0 && s > 0.0 => r * m.spacing / s * mean_ratio,
                 _ => r,
             };
-            (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32)
+            let s = (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32);
+            match p.scale_choice {
+                ScaleChoice::Random => s,
+                // A whole index: the choice then takes that scale with probability 1.
+                ScaleChoice::Nearest => (s + 0.5).floor(),
+            }
         })
         .collect();
 
@@ -1329,7 +1374,7 @@ fn synthesize_impl(
         metric: metric0,
         orient: orient0,
         scale: scale0,
-    } = texel_controls(gi, field, &vp, p.anisotropic);
+    } = texel_controls(gi, field, &vp, p);
 
     // Level grids: mates from the level-0 samples on each level's lattice.
     let mut levels: Vec<Level> = Vec::with_capacity(nl);
@@ -1395,6 +1440,7 @@ fn synthesize_impl(
         block: vp.template as usize,
         search: p.search,
         coherence: p.coherence,
+        nearest_taps: p.taps == Taps::Nearest,
         maps,
         wave: (vp.template / 2) as i64 + 1,
     };
