@@ -154,6 +154,14 @@ fn surface_item(
     );
     item.extra
         .insert("reference_scale".into(), serde_json::json!(s_ref));
+    if let Some(dir) = std::env::var_os("TEXSYN_SCORE_DUMP") {
+        let win = super::relief_frame::windows_along_maps(out_img.view(), &maps, 64, 6);
+        let png = crate::stages::reconstruct::textured_export::encode_png(&win.to_rgba8(), false);
+        let path = Path::new(&dir).join("score_relief_along_the_surface.png");
+        if let Err(e) = std::fs::write(&path, png) {
+            tracing::warn!("TEXSYN_SCORE_DUMP: writing {}: {e}", path.display());
+        }
+    }
     match score_along_maps(out_img.view(), &maps, reference_img.view(), &run.params) {
         Ok(f) => {
             item.score = Some(f.score);

@@ -24,7 +24,7 @@
 //!
 //! With `M_c` the identity everywhere every number equals the grid score's.
 
-use crate::image::ImageView;
+use crate::image::{Image, ImageView};
 use crate::image::patch_score::{
     GradientEnergy, PatchScore, ResampledPatches, ScoreError, ScoreParams, patch_score_resampled,
     query_subset,
@@ -68,6 +68,44 @@ fn bilinear(image: ImageView<'_>, x: f64, y: f64) -> [f32; 3] {
             let px = image.pixels[(yi * w + xi) as usize];
             for c in 0..3 {
                 out[c] += wt * px[c];
+            }
+        }
+    }
+    out
+}
+
+/// Windows of `side × side` sample texels around `count` centres spread over the grid, each
+/// read through its centre's map (taps outside the square black), side by side with a
+/// 2-texel gap: what the surface row scores, large enough to look at (`TEXSYN_SCORE_DUMP`).
+pub fn windows_along_maps(
+    grid: ImageView<'_>,
+    maps: &[[f32; 4]],
+    side: u32,
+    count: u32,
+) -> Image {
+    let (w, h) = (grid.width as usize, grid.height as usize);
+    let stride = side + 2;
+    let mut out = Image::new(stride * count, side);
+    let r = side as f64 / 2.0;
+    for k in 0..count {
+        // Centres on the diagonal band, clear of the square's sides.
+        let t = (k as f64 + 1.0) / (count as f64 + 1.0);
+        let (cx, cy) = (
+            (t * (w - 1) as f64).round() as usize,
+            ((0.5 + 0.3 * (t - 0.5)) * (h - 1) as f64).round() as usize,
+        );
+        let Some(m) = maps.get(cy * w + cx).and_then(inverse) else {
+            continue;
+        };
+        for v in 0..side {
+            for u in 0..side {
+                let (a, b) = (u as f64 - r, v as f64 - r);
+                let (x, y) = (cx as f64 + m[0] * a + m[1] * b, cy as f64 + m[2] * a + m[3] * b);
+                if x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64 {
+                    let g = bilinear(grid, x, y);
+                    out.pixels[(v * stride * count + k * stride + u) as usize] =
+                        [g[0], g[1], g[2], 1.0];
+                }
             }
         }
     }
@@ -291,6 +329,19 @@ mod tests {
         let transposed: Vec<[f32; 4]> = maps.iter().map(|m| [m[0], m[2], m[1], m[3]]).collect();
         let t = score_along_maps(grid.view(), &transposed, ex.view(), &p).unwrap();
         assert!(t.score.ratio > 1.5 * s.ratio, "transposed {}", t.score.ratio);
+    }
+
+    #[test]
+    fn windows_read_the_planted_warp_back_into_the_sample() {
+        let ex = sample(128, 7);
+        let (grid, maps) = warped(&ex, 129);
+        let win = windows_along_maps(grid.view(), &maps, 16, 3);
+        assert_eq!((win.width, win.height), (54, 16));
+        // The middle window's centre is the grid's texel (64, 64), which shows φ(64, 64).
+        let (u, v) = phi(64.0, 64.0);
+        let want = bilinear(ex.view(), u, v)[0];
+        let got = win.pixels[(8 * 54 + 18 + 8) as usize][0];
+        assert!((got - want).abs() < 0.02, "{got} against {want}");
     }
 
     #[test]
