@@ -94,7 +94,7 @@ use crate::field::param_field::local_spacing;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::image::neighbourhood::mirror;
 use crate::random::{counter_hash, counter_unit};
-use crate::synthesize::surface_metric::{SurfaceMetric, surface_metrics};
+use crate::synthesize::surface_metric::{MAX_STRETCH, SurfaceMetric, surface_metrics_clamped};
 use glam::Vec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -153,6 +153,16 @@ pub struct GeometrySynthParams {
     /// `log2 R + middle`: `"random"` (default; the paper's, `T_s` with probability by
     /// closeness, shared over jittered cells) or `"nearest"` (the closer one everywhere).
     pub scale_choice: ScaleChoice,
+    /// With the surface metric, whether a texel takes the value at its source's sub-texel
+    /// position (bilinear between the four variant texels around it) rather than the nearest
+    /// texel's. Coherent runs then follow the fractional shifts `A o` in value too, instead of
+    /// repeating a texel where a grid step is less than one sample texel. Default: false.
+    pub subtexel: bool,
+    /// With the surface metric, the largest stretch `λ` undone, 1..=4 (see [`SurfaceMetric`]):
+    /// where one grid direction covers more than `λ` times the surface of the other, the rest
+    /// is left to the grid. A grid step along the stretched direction covers `λ` times the
+    /// isotropic spacing, and relief finer than that is lost there. Default: 4.
+    pub max_stretch: f32,
 }
 
 /// How template taps between grid points are read (see [`GeometrySynthParams::taps`]).
@@ -199,6 +209,8 @@ impl Default for GeometrySynthParams {
             anisotropic: true,
             taps: Taps::Bilinear,
             scale_choice: ScaleChoice::Random,
+            subtexel: false,
+            max_stretch: MAX_STRETCH as f32,
         }
     }
 }
@@ -212,7 +224,8 @@ impl GeometrySynthParams {
         check_range("search_eps", self.search_eps, 0.0, 10.0).map_err(within)?;
         check_range("coherence", self.coherence, 0.0, 10.0).map_err(within)?;
         check_range("correction_passes", self.correction_passes, 0, 8).map_err(within)?;
-        check_range("coarse_weight", self.coarse_weight, 0.0, 4.0).map_err(within)
+        check_range("coarse_weight", self.coarse_weight, 0.0, 4.0).map_err(within)?;
+        check_range("max_stretch", self.max_stretch, 1.0, MAX_STRETCH as f32).map_err(within)
     }
 }
 
@@ -545,6 +558,8 @@ struct Ctx<'a, 'v> {
     coherence: f32,
     /// `taps = "nearest"`.
     nearest_taps: bool,
+    /// `subtexel` (with the surface metric).
+    subtexel: bool,
     /// Per (variant, level), `v * levels + l`: the map to the sample's level 0.
     maps: Vec<SampleMap>,
     /// Anti-diagonal step of the scanline pass's waves (`template / 2 + 1`): a texel `(i', j')`
@@ -800,6 +815,29 @@ impl Ctx<'_, '_> {
             }
         };
         out[..c].copy_from_slice(&level_img.texels[k * c..(k + 1) * c]);
+        if self.subtexel && frac != [0.0; 2] {
+            // The value at the continuous source position, bilinear between the four texels
+            // around it (clamped inside the level).
+            let (w, h) = (level_img.width as i64, level_img.height as i64);
+            let (x, y) = ((k as i64 % w) as f32 + frac[0], (k as i64 / w) as f32 + frac[1]);
+            let (x0, y0) = (x.floor(), y.floor());
+            let (fx, fy) = (x - x0, y - y0);
+            let mut acc = [0.0f32; MAX_CHANNELS];
+            for (dx, dy, wt) in [
+                (0, 0, (1.0 - fx) * (1.0 - fy)),
+                (1, 0, fx * (1.0 - fy)),
+                (0, 1, (1.0 - fx) * fy),
+                (1, 1, fx * fy),
+            ] {
+                let xi = (x0 as i64 + dx).clamp(0, w - 1);
+                let yi = (y0 as i64 + dy).clamp(0, h - 1);
+                let q = (yi * w + xi) as usize * c;
+                for ch in 0..c {
+                    acc[ch] += wt * level_img.texels[q + ch];
+                }
+            }
+            out[..c].copy_from_slice(&acc[..c]);
+        }
         Src {
             packed: pack_src(v, k),
             frac,
@@ -1222,7 +1260,7 @@ pub fn texel_controls(
     // axes) is turned into the sample axes by A, and R takes the metric's isotropic spacing in
     // place of the mean neighbour distance (which the longer grid direction dominates).
     let metric0 = if anisotropic {
-        surface_metrics(gi)
+        surface_metrics_clamped(gi, p.max_stretch as f64)
     } else {
         Vec::new()
     };
@@ -1441,6 +1479,7 @@ fn synthesize_impl(
         search: p.search,
         coherence: p.coherence,
         nearest_taps: p.taps == Taps::Nearest,
+        subtexel: p.subtexel && p.anisotropic,
         maps,
         wave: (vp.template / 2) as i64 + 1,
     };
