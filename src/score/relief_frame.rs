@@ -24,11 +24,11 @@
 //!
 //! With `M_c` the identity everywhere every number equals the grid score's.
 
-use crate::image::{Image, ImageView};
 use crate::image::patch_score::{
     GradientEnergy, PatchScore, ResampledPatches, ScoreError, ScoreParams, patch_score_resampled,
     query_subset,
 };
+use crate::image::{Image, ImageView};
 
 /// The surface-space measures and how many patches could be read.
 #[derive(Clone, Debug)]
@@ -77,12 +77,7 @@ fn bilinear(image: ImageView<'_>, x: f64, y: f64) -> [f32; 3] {
 /// Windows of `side × side` sample texels around `count` centres spread over the grid, each
 /// read through its centre's map (taps outside the square black), side by side with a
 /// 2-texel gap: what the surface row scores, large enough to look at (`TEXSYN_SCORE_DUMP`).
-pub fn windows_along_maps(
-    grid: ImageView<'_>,
-    maps: &[[f32; 4]],
-    side: u32,
-    count: u32,
-) -> Image {
+pub fn windows_along_maps(grid: ImageView<'_>, maps: &[[f32; 4]], side: u32, count: u32) -> Image {
     let (w, h) = (grid.width as usize, grid.height as usize);
     let stride = side + 2;
     let mut out = Image::new(stride * count, side);
@@ -100,7 +95,10 @@ pub fn windows_along_maps(
         for v in 0..side {
             for u in 0..side {
                 let (a, b) = (u as f64 - r, v as f64 - r);
-                let (x, y) = (cx as f64 + m[0] * a + m[1] * b, cy as f64 + m[2] * a + m[3] * b);
+                let (x, y) = (
+                    cx as f64 + m[0] * a + m[1] * b,
+                    cy as f64 + m[2] * a + m[3] * b,
+                );
                 if x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64 {
                     let g = bilinear(grid, x, y);
                     out.pixels[(v * stride * count + k * stride + u) as usize] =
@@ -131,7 +129,8 @@ pub fn score_along_maps(
     }
     let r = (p.patch / 2) as f64;
     let inv: Vec<Option<[f64; 4]>> = maps.iter().map(inverse).collect();
-    let inside = |x: f64, y: f64| x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64;
+    let inside =
+        |x: f64, y: f64| x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64;
     let at = |k: usize, m: &[f64; 4], u: f64, v: f64| {
         let (x, y) = ((k % w) as f64, (k / w) as f64);
         (x + m[0] * u + m[1] * v, y + m[2] * u + m[3] * v)
@@ -232,8 +231,11 @@ mod tests {
             let (fx, fy) = (x / cell as f64 - cx, y / cell as f64 - cy);
             let s = |t: f64| t * t * (3.0 - 2.0 * t);
             let at = |i: f64, j: f64| {
-                counter_unit(seed, stream, ((i as i64 + 1000) * 4096 + j as i64 + 1000) as u64)
-                    as f64
+                counter_unit(
+                    seed,
+                    stream,
+                    ((i as i64 + 1000) * 4096 + j as i64 + 1000) as u64,
+                ) as f64
             };
             let (sx, sy) = (s(fx), s(fy));
             let top = at(cx, cy) * (1.0 - sx) + at(cx + 1.0, cy) * sx;
@@ -287,7 +289,10 @@ mod tests {
         let frame = score_along_maps(grid.view(), &maps, ex.view(), &p).unwrap();
         let grid_score = patch_score(grid.view(), ex.view(), &p).unwrap();
         let s = &frame.score;
-        eprintln!("surface {s:?} readable {} skipped {}", frame.readable, frame.skipped);
+        eprintln!(
+            "surface {s:?} readable {} skipped {}",
+            frame.readable, frame.skipped
+        );
         eprintln!("grid {grid_score:?}");
         // The best a resampled copy can do: the same centres' patches read straight from the
         // sample at φ(c) + (u, v). Not 0, because φ(c) falls between the sample's texels and
@@ -318,17 +323,33 @@ mod tests {
             s.ratio,
             ideal.ratio
         );
-        assert!(s.largest_offset > 0.5, "largest offset {}", s.largest_offset);
-        assert!((s.gradient_ratio - 1.0).abs() < 0.25, "{}", s.gradient_ratio);
+        assert!(
+            s.largest_offset > 0.5,
+            "largest offset {}",
+            s.largest_offset
+        );
+        assert!(
+            (s.gradient_ratio - 1.0).abs() < 0.25,
+            "{}",
+            s.gradient_ratio
+        );
         // In the grid the same relief is stretched 1.5 to 3 times: far from any sample patch.
-        assert!(grid_score.ratio > 1.5 * s.ratio, "grid {}", grid_score.ratio);
+        assert!(
+            grid_score.ratio > 1.5 * s.ratio,
+            "grid {}",
+            grid_score.ratio
+        );
         assert!(grid_score.gradient_ratio < 0.5 * s.gradient_ratio);
         // Patches near the far corner, where the map reads beyond the grid, are skipped.
         assert!(frame.skipped > 0 && frame.readable > 3000);
         // The map's inverse is what is read along: the transposed map is no copy.
         let transposed: Vec<[f32; 4]> = maps.iter().map(|m| [m[0], m[2], m[1], m[3]]).collect();
         let t = score_along_maps(grid.view(), &transposed, ex.view(), &p).unwrap();
-        assert!(t.score.ratio > 1.5 * s.ratio, "transposed {}", t.score.ratio);
+        assert!(
+            t.score.ratio > 1.5 * s.ratio,
+            "transposed {}",
+            t.score.ratio
+        );
     }
 
     #[test]

@@ -87,7 +87,8 @@
 //!   Orientations are still drawn per texel: per cell, stripes broke into straight pieces at the
 //!   cell borders.
 use crate::analyse_exemplar::texel_variants::{
-    SampleMap, Template, TexelVariantParams, TexelVariantsRef, coarse_taps, coarse_window, template_taps,
+    SampleMap, Template, TexelVariantParams, TexelVariantsRef, coarse_taps, coarse_window,
+    template_taps,
 };
 use crate::check::{ParamError, check_range};
 use crate::field::param_field::local_spacing;
@@ -819,7 +820,10 @@ impl Ctx<'_, '_> {
             // The value at the continuous source position, bilinear between the four texels
             // around it (clamped inside the level).
             let (w, h) = (level_img.width as i64, level_img.height as i64);
-            let (x, y) = ((k as i64 % w) as f32 + frac[0], (k as i64 / w) as f32 + frac[1]);
+            let (x, y) = (
+                (k as i64 % w) as f32 + frac[0],
+                (k as i64 / w) as f32 + frac[1],
+            );
             let (x0, y0) = (x.floor(), y.floor());
             let (fx, fy) = (x - x0, y - y0);
             let mut acc = [0.0f32; MAX_CHANNELS];
@@ -1332,7 +1336,10 @@ pub fn texel_controls(
 /// the synthesis mixes). A synthesized neighbour `o` grid steps away copies, in coherent runs,
 /// the sample point `M o` away from the texel's; this is what the surface-space score reads
 /// the relief along.
-pub fn sample_frame_maps(controls: &TexelControls, variants: &TexelVariantsRef<'_>) -> Vec<[f32; 4]> {
+pub fn sample_frame_maps(
+    controls: &TexelControls,
+    variants: &TexelVariantsRef<'_>,
+) -> Vec<[f32; 4]> {
     let vp = variants.params();
     let kk = vp.orientations as f64;
     let ss = vp.scales as usize;
