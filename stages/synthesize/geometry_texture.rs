@@ -1840,15 +1840,28 @@ mod tests {
             )
             .unwrap();
             let vr = owned.as_ref();
-            for (search, anisotropic) in [
-                (Search::KCoherence, true),
-                (Search::KCoherence, false),
-                (Search::PerTexel, true),
+            for (search, anisotropic, options) in [
+                (Search::KCoherence, true, false),
+                (Search::KCoherence, true, true),
+                (Search::KCoherence, false, false),
+                (Search::PerTexel, true, false),
             ] {
                 let p = GeometrySynthParams {
                     search,
                     anisotropic,
                     ..p.clone()
+                };
+                // The experiments' options keep the order exact too.
+                let p = if options {
+                    GeometrySynthParams {
+                        taps: Taps::Nearest,
+                        scale_choice: ScaleChoice::Nearest,
+                        subtexel: true,
+                        max_stretch: 2.0,
+                        ..p
+                    }
+                } else {
+                    p
                 };
                 let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
                 let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
@@ -1856,10 +1869,52 @@ mod tests {
                 assert_eq!(
                     bits(&a),
                     bits(&b),
-                    "template {template} {search:?} anisotropic {anisotropic}"
+                    "template {template} {search:?} anisotropic {anisotropic} {options}"
                 );
             }
         }
+    }
+
+    #[test]
+    fn sample_frame_maps_are_the_variants_maps_times_the_metric() {
+        use crate::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
+        let mut sample = TexelImage::new(40, 40, 3);
+        for (k, v) in sample.data.iter_mut().enumerate() {
+            *v = counter_unit(3, 0, k as u64);
+        }
+        let vp = TexelVariantParams {
+            orientations: 4,
+            ..Default::default()
+        };
+        let owned = build_texel_variants(&sample, &vp, &|_| {}).unwrap();
+        let vr = owned.as_ref();
+        let stretched = SurfaceMetric::from_metric(9.0, 0.0, 1.0);
+        let controls = TexelControls {
+            metric: vec![SurfaceMetric::IDENTITY, SurfaceMetric::IDENTITY, stretched],
+            orient: vec![0.0, 1.0, 0.0],
+            scale: vec![1.0, 2.0, 1.5],
+        };
+        let maps = sample_frame_maps(&controls, &vr);
+        let close =
+            |a: [f32; 4], b: [f64; 4]| a.iter().zip(b).all(|(&x, y)| (x as f64 - y).abs() < 1e-5);
+        // The middle scale unrotated: the sample's own texels.
+        assert!(close(maps[0], [1.0, 0.0, 0.0, 1.0]), "{:?}", maps[0]);
+        // Orientation 1 of 4 at the coarser scale: the variant's own sample map.
+        let a = vr.sample_map(vr.variant(2, 1), 0).a;
+        assert!(
+            close(maps[1], [a[0][0], a[0][1], a[1][0], a[1][1]]),
+            "{:?} against {a:?}",
+            maps[1]
+        );
+        assert!(close(maps[1], [0.0, 2.0, -2.0, 0.0]), "{:?}", maps[1]);
+        // Halfway between two scales a factor √2, times the metric's A: a grid step along x
+        // covers 3 times the surface of one along y, so A = diag(√3, 1/√3).
+        let (r2, r3) = (std::f64::consts::SQRT_2, 3f64.sqrt());
+        assert!(
+            close(maps[2], [r2 * r3, 0.0, 0.0, r2 / r3]),
+            "{:?}",
+            maps[2]
+        );
     }
 
     #[test]
@@ -1911,6 +1966,8 @@ mod tests {
                 block: 5,
                 search: Search::PerTexel,
                 coherence: 0.0,
+                nearest_taps: false,
+                subtexel: false,
                 wave: (template / 2) as i64 + 1,
                 maps: vec![vr.sample_map(0, 0), vr.sample_map(0, 1)],
             };
