@@ -235,6 +235,23 @@ fn geometry_images_score_the_relief_and_check_the_mesh() {
         mesh["flipped_faces"].as_u64().unwrap() < triangles,
         "{mesh}"
     );
+    // The second row reads the relief along the surface, in the sample's frame, against the
+    // sample at the synthesis's median scale (3 scales at offset 0: the middle one, 1).
+    let frame = &v["items"][1];
+    assert!(
+        frame["output"]
+            .as_str()
+            .unwrap()
+            .contains("along the surface"),
+        "{frame}"
+    );
+    let s = &frame["score"];
+    assert!(s["ratio"].as_f64().unwrap() > 0.0, "{frame}");
+    assert!(s["queries"].as_u64().unwrap() > 100, "{frame}");
+    assert_eq!(frame["extra"]["reference_scale"], 1, "{frame}");
+    let skipped = frame["extra"]["skipped_patches"].as_f64().unwrap();
+    assert!(skipped > 0.0 && skipped < 0.5, "{frame}");
+    assert_eq!(v["items"].as_array().unwrap().len(), 2);
 }
 
 /// A solid surface request has no planar image: `score` synthesizes a section of the same

@@ -16,13 +16,16 @@
 //! of the input's geometry image, which numbers its vertices the same way), i.e. relative to
 //! the input surface.
 
+use super::relief_frame::score_along_maps;
 use super::{Item, Run, ScoreFailure};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::image::Image;
 use crate::methods::geometry_images::GeometryImagesConfig;
-use crate::stages::analyse_exemplar::texel_variants::TexelVariants;
+use crate::stages::analyse_exemplar::texel_variants::{TexelVariants, TexelVariantsRef};
+use crate::stages::field::param_field::ParamField;
 use crate::stages::reconstruct::displacement::grid_mesh;
+use crate::stages::synthesize::geometry_texture::{sample_frame_maps, texel_controls};
 use std::collections::HashMap;
 use std::path::Path;
 use texsyn_core::math::PureMath;
@@ -30,7 +33,7 @@ use texsyn_core::math::PureMath;
 /// The texel channel holding the height (`dn`).
 const HEIGHT: usize = 2;
 
-pub(crate) fn geometry_images(run: &Run) -> Result<Item, ScoreFailure> {
+pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
     let c: GeometryImagesConfig = run
         .config
         .parse()
@@ -70,6 +73,7 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Item, ScoreFailure> {
     );
     run.score_into(&mut item, out_img.view(), None, reference_img.view())?;
     let offset = c.field.density_offset;
+    let frame = surface_item(run, &c, &variants, &out_img, &grey, offset)?;
     item.extra
         .insert("density_offset".into(), serde_json::json!(offset));
     if offset != 0.0 {
@@ -96,6 +100,85 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Item, ScoreFailure> {
     item.extra.insert(
         "mesh".into(),
         serde_json::to_value(&checks).expect("plain numbers"),
+    );
+    Ok(vec![item, frame])
+}
+
+/// The relief read in the sample's frame along the surface ([`super::relief_frame`]): each
+/// patch through the map synthesis laid the texture out with at its centre (metric, scale
+/// and orientation), against the sample unrotated, at the scale of the variants the synthesis
+/// used most (the median scale index over the samples, rounded: at density offset 0 the
+/// sample's own size; denser textures copy from downsampled variants, whose detail the grid
+/// can hold, so they are compared with those).
+fn surface_item(
+    run: &Run,
+    c: &GeometryImagesConfig,
+    variants: &TexelVariantsRef<'_>,
+    out_img: &Image,
+    grey: &dyn Fn(u32, u32, &[f32]) -> Image,
+    offset: f32,
+) -> Result<Item, ScoreFailure> {
+    let gi = run.view::<GeometryImage>("parameterize")?;
+    let field = run.view::<ParamField>("field")?;
+    if field.dir.len() != gi.positions.len() || gi.positions.len() != out_img.pixels.len() {
+        return Err(ScoreFailure::new(
+            "the field, geometry image and synthesized relief disagree on the sample count",
+        ));
+    }
+    let controls = texel_controls(&gi, &field, variants.params(), &c.synthesize);
+    let mut by_scale = controls.scale.clone();
+    by_scale.sort_unstable_by(f32::total_cmp);
+    let median = by_scale.get(by_scale.len() / 2).copied().unwrap_or(0.0);
+    let s_ref = ((median + 0.5).floor() as usize).min(variants.params().scales as usize - 1);
+    let v_ref = variants.variant(s_ref, 0);
+    // The maps go to the sample's texels; the reference's are `size` of them.
+    let size = variants.sample_map(v_ref, 0).a[0][0] as f32;
+    let maps: Vec<[f32; 4]> = sample_frame_maps(&controls, variants)
+        .into_iter()
+        .map(|m| m.map(|v| v / size))
+        .collect();
+    let level = variants.level(v_ref, 0);
+    let heights: Vec<f32> = level
+        .texels
+        .chunks_exact(variants.channels())
+        .map(|t| t[HEIGHT])
+        .collect();
+    let reference_img = grey(level.width, level.height, &heights);
+    let mut item = Item::new(
+        "the synthesized relief read along the surface, in the sample's frame",
+        format!(
+            "the sample's relief unrotated, at the synthesis's median scale: variant scale {s_ref} \
+             ({}×{} texels, {size} sample texels each)",
+            level.width, level.height
+        ),
+    );
+    item.extra
+        .insert("reference_scale".into(), serde_json::json!(s_ref));
+    if let Some(dir) = std::env::var_os("TEXSYN_SCORE_DUMP") {
+        let win = super::relief_frame::windows_along_maps(out_img.view(), &maps, 64, 6);
+        let png = crate::stages::reconstruct::textured_export::encode_png(&win.to_rgba8(), false);
+        let path = Path::new(&dir).join("score_relief_along_the_surface.png");
+        if let Err(e) = std::fs::write(&path, png) {
+            tracing::warn!("TEXSYN_SCORE_DUMP: writing {}: {e}", path.display());
+        }
+    }
+    match score_along_maps(out_img.view(), &maps, reference_img.view(), &run.params) {
+        Ok(f) => {
+            item.score = Some(f.score);
+            item.extra.insert(
+                "skipped_patches".into(),
+                serde_json::json!(f.skipped as f64 / (f.skipped + f.readable) as f64),
+            );
+        }
+        Err(e) => item.notes.push(format!("not scored: {e}")),
+    }
+    item.extra
+        .insert("density_offset".into(), serde_json::json!(offset));
+    item.notes.push(
+        "each patch is read through the map the synthesis used at its centre (surface metric, \
+         the field's scale and orientation), bilinearly; patches that leave the square are \
+         skipped (skipped_patches: their fraction of the texels)"
+            .into(),
     );
     Ok(item)
 }

@@ -17,6 +17,7 @@
 
 pub mod charts;
 pub mod geometry;
+pub mod relief_frame;
 pub mod solid;
 pub mod surface;
 
@@ -166,7 +167,7 @@ pub fn score_run(
     let items = match plan.method.as_str() {
         "synth2d" => vec![synth2d(&run)?],
         "jump_maps" => charts::jump_maps(&run)?,
-        "geometry_images" => vec![geometry::geometry_images(&run)?],
+        "geometry_images" => geometry::geometry_images(&run)?,
         "solid" => solid::solid(&run, &mut not_scored)?,
         "graph_matching" => vec![surface::graph_matching(&run)?],
         "feature_aligned" => surface::feature_aligned(&run)?,

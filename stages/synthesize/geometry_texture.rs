@@ -87,14 +87,15 @@
 //!   Orientations are still drawn per texel: per cell, stripes broke into straight pieces at the
 //!   cell borders.
 use crate::analyse_exemplar::texel_variants::{
-    SampleMap, Template, TexelVariantsRef, coarse_taps, coarse_window, template_taps,
+    SampleMap, Template, TexelVariantParams, TexelVariantsRef, coarse_taps, coarse_window,
+    template_taps,
 };
 use crate::check::{ParamError, check_range};
 use crate::field::param_field::local_spacing;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::image::neighbourhood::mirror;
 use crate::random::{counter_hash, counter_unit};
-use crate::synthesize::surface_metric::{SurfaceMetric, surface_metrics};
+use crate::synthesize::surface_metric::{MAX_STRETCH, SurfaceMetric, surface_metrics_clamped};
 use glam::Vec2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -145,6 +146,42 @@ pub struct GeometrySynthParams {
     /// (long thin parts: legs, necks, trunks). `false` is the paper's template in grid texels,
     /// which draws the relief out into streaks there. Default: true.
     pub anisotropic: bool,
+    /// With the surface metric, how a template tap that falls between grid points is read:
+    /// `"bilinear"` (default) or `"nearest"` (the grid point nearest to it, as the coherent
+    /// shifts round).
+    pub taps: Taps,
+    /// How a texel's scale is picked between the two variants' scales next to its
+    /// `log2 R + middle`: `"random"` (default; the paper's, `T_s` with probability by
+    /// closeness, shared over jittered cells) or `"nearest"` (the closer one everywhere).
+    pub scale_choice: ScaleChoice,
+    /// With the surface metric, whether a texel takes the value at its source's sub-texel
+    /// position (bilinear between the four variant texels around it) rather than the nearest
+    /// texel's. Coherent runs then follow the fractional shifts `A o` in value too, instead of
+    /// repeating a texel where a grid step is less than one sample texel. Default: false.
+    pub subtexel: bool,
+    /// With the surface metric, the largest stretch `λ` undone, 1..=4 (see [`SurfaceMetric`]):
+    /// where one grid direction covers more than `λ` times the surface of the other, the rest
+    /// is left to the grid. A grid step along the stretched direction covers `λ` times the
+    /// isotropic spacing, and relief finer than that is lost there. Default: 4.
+    pub max_stretch: f32,
+}
+
+/// How template taps between grid points are read (see [`GeometrySynthParams::taps`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Taps {
+    #[default]
+    Bilinear,
+    Nearest,
+}
+
+/// How each texel's scale is picked (see [`GeometrySynthParams::scale_choice`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ScaleChoice {
+    #[default]
+    Random,
+    Nearest,
 }
 
 /// The candidate search of each texel's match.
@@ -171,6 +208,10 @@ impl Default for GeometrySynthParams {
             correction_passes: 1,
             coarse_weight: 1.0,
             anisotropic: true,
+            taps: Taps::Bilinear,
+            scale_choice: ScaleChoice::Random,
+            subtexel: false,
+            max_stretch: MAX_STRETCH as f32,
         }
     }
 }
@@ -184,7 +225,8 @@ impl GeometrySynthParams {
         check_range("search_eps", self.search_eps, 0.0, 10.0).map_err(within)?;
         check_range("coherence", self.coherence, 0.0, 10.0).map_err(within)?;
         check_range("correction_passes", self.correction_passes, 0, 8).map_err(within)?;
-        check_range("coarse_weight", self.coarse_weight, 0.0, 4.0).map_err(within)
+        check_range("coarse_weight", self.coarse_weight, 0.0, 4.0).map_err(within)?;
+        check_range("max_stretch", self.max_stretch, 1.0, MAX_STRETCH as f32).map_err(within)
     }
 }
 
@@ -515,6 +557,10 @@ struct Ctx<'a, 'v> {
     search: Search,
     /// `coherence` of the parameters.
     coherence: f32,
+    /// `taps = "nearest"`.
+    nearest_taps: bool,
+    /// `subtexel` (with the surface metric).
+    subtexel: bool,
     /// Per (variant, level), `v * levels + l`: the map to the sample's level 0.
     maps: Vec<SampleMap>,
     /// Anti-diagonal step of the scanline pass's waves (`template / 2 + 1`): a texel `(i', j')`
@@ -693,7 +739,12 @@ impl Ctx<'_, '_> {
         };
         for &tap in taps {
             match metric {
-                // With the surface metric a tap falls between grid points: bilinear.
+                // With the surface metric a tap falls between grid points: bilinear, or the
+                // nearest grid point.
+                Some(m) if self.nearest_taps => {
+                    let (dx, dy) = m.to_grid(tap);
+                    push(at(i + dy as i64, j + dx as i64), raw)
+                }
                 Some(m) => push(bilinear(m.to_grid_f(tap), i, j, &at), raw),
                 None => push(at(i + tap.1 as i64, j + tap.0 as i64), raw),
             }
@@ -708,6 +759,10 @@ impl Ctx<'_, '_> {
             };
             for &tap in ctaps {
                 match metric {
+                    Some(m) if self.nearest_taps => {
+                        let (dx, dy) = m.to_grid(tap);
+                        push(at(ci + dy as i64, cj + dx as i64), raw)
+                    }
                     Some(m) => push(bilinear(m.to_grid_f(tap), ci, cj, &at), raw),
                     None => push(at(ci + tap.1 as i64, cj + tap.0 as i64), raw),
                 }
@@ -761,6 +816,32 @@ impl Ctx<'_, '_> {
             }
         };
         out[..c].copy_from_slice(&level_img.texels[k * c..(k + 1) * c]);
+        if self.subtexel && frac != [0.0; 2] {
+            // The value at the continuous source position, bilinear between the four texels
+            // around it (clamped inside the level).
+            let (w, h) = (level_img.width as i64, level_img.height as i64);
+            let (x, y) = (
+                (k as i64 % w) as f32 + frac[0],
+                (k as i64 / w) as f32 + frac[1],
+            );
+            let (x0, y0) = (x.floor(), y.floor());
+            let (fx, fy) = (x - x0, y - y0);
+            let mut acc = [0.0f32; MAX_CHANNELS];
+            for (dx, dy, wt) in [
+                (0, 0, (1.0 - fx) * (1.0 - fy)),
+                (1, 0, fx * (1.0 - fy)),
+                (0, 1, (1.0 - fx) * fy),
+                (1, 1, fx * fy),
+            ] {
+                let xi = (x0 as i64 + dx).clamp(0, w - 1);
+                let yi = (y0 as i64 + dy).clamp(0, h - 1);
+                let q = (yi * w + xi) as usize * c;
+                for ch in 0..c {
+                    acc[ch] += wt * level_img.texels[q + ch];
+                }
+            }
+            out[..c].copy_from_slice(&acc[..c]);
+        }
         Src {
             packed: pack_src(v, k),
             frac,
@@ -1156,50 +1237,38 @@ fn dir_rotation(dir: Vec2) -> (f32, f32) {
     }
 }
 
-/// Synthesizes a texel image over `gi` (see the module docs). The result has `gi.n × gi.n`
-/// texels with the variants' channels; `(dx, dy, dn)` are in the local frames of
-/// [`crate::geom::geometry_image::local_frames`]. `progress` gets the fraction done, 0 to 1,
-/// from the calling thread.
-pub fn synthesize_geometry_texture(
-    gi: &GeometryImage,
-    field: &ParamField,
-    variants: &TexelVariantsRef<'_>,
-    p: &GeometrySynthParams,
-    progress: &dyn Fn(f32),
-) -> Result<TexelImage, GeometryTextureError> {
-    synthesize_impl(gi, field, variants, p, progress, true)
+/// The level-0 controls of each sample (`i * n + j`), as synthesis reads them.
+pub struct TexelControls {
+    /// The surface metric ([`SurfaceMetric`]); empty without `anisotropic`.
+    pub metric: Vec<SurfaceMetric>,
+    /// Fractional orientation index in `[0, orientations)`: the variant angle is
+    /// `orient · 360° / orientations`.
+    pub orient: Vec<f32>,
+    /// Fractional scale index in `[0, scales − 1]` (0 = most enlarged).
+    pub scale: Vec<f32>,
 }
 
-/// [`synthesize_geometry_texture`]; `wavefront` false runs the scanline pass texel by texel
-/// (the reference the wavefront order must reproduce).
-fn synthesize_impl(
+/// The per-sample orientation, scale and metric that [`synthesize_geometry_texture`] matches
+/// each texel with (§4.3; with the surface metric, see the module docs).
+pub fn texel_controls(
     gi: &GeometryImage,
     field: &ParamField,
-    variants: &TexelVariantsRef<'_>,
+    vp: &TexelVariantParams,
     p: &GeometrySynthParams,
-    progress: &dyn Fn(f32),
-    wavefront: bool,
-) -> Result<TexelImage, GeometryTextureError> {
-    p.validate()?;
-    let vp = variants.params().clone();
-    let nl = vp.levels as usize;
-    check_inputs(gi, field, nl)?;
-    progress(0.0);
-    let n0 = gi.n as usize;
-    let c = variants.channels();
+) -> TexelControls {
+    let anisotropic = p.anisotropic;
     let kk = vp.orientations as usize;
     let ss = vp.scales as usize;
     let mid = vp.middle_scale();
-
     // Per-sample controls at level 0. With the surface metric, the field's direction (grid
     // axes) is turned into the sample axes by A, and R takes the metric's isotropic spacing in
     // place of the mean neighbour distance (which the longer grid direction dominates).
-    let metric0 = if p.anisotropic {
-        surface_metrics(gi)
+    let metric0 = if anisotropic {
+        surface_metrics_clamped(gi, p.max_stretch as f64)
     } else {
         Vec::new()
     };
-    let spacing = if p.anisotropic {
+    let spacing = if anisotropic {
         local_spacing(gi)
     } else {
         Vec::new()
@@ -1243,9 +1312,114 @@ fn synthesize_impl(
                 (Some(m), Some(&s)) if m.spacing > 0.0 && s > 0.0 => r * m.spacing / s * mean_ratio,
                 _ => r,
             };
-            (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32)
+            let s = (r.log2_pure() + mid as f32).clamp(0.0, (ss - 1) as f32);
+            match p.scale_choice {
+                ScaleChoice::Random => s,
+                // A whole index: the choice then takes that scale with probability 1.
+                ScaleChoice::Nearest => (s + 0.5).floor(),
+            }
         })
         .collect();
+
+    TexelControls {
+        metric: metric0,
+        orient: orient0,
+        scale: scale0,
+    }
+}
+
+/// Per level-0 sample, the linear map `M` (row-major, acting on `(x = column, y = row)`) from
+/// grid offsets to offsets in the sample's own texels (level 0, unrotated) that synthesis lays
+/// the texture out with there: `M = f · R(−θ) · A`, with `A` the surface metric (the identity
+/// without it), `θ` the field's angle as a continuous orientation index and `f` the variants'
+/// texel size in sample texels at the continuous scale index (geometric between the two scales
+/// the synthesis mixes). A synthesized neighbour `o` grid steps away copies, in coherent runs,
+/// the sample point `M o` away from the texel's; this is what the surface-space score reads
+/// the relief along.
+pub fn sample_frame_maps(
+    controls: &TexelControls,
+    variants: &TexelVariantsRef<'_>,
+) -> Vec<[f32; 4]> {
+    let vp = variants.params();
+    let kk = vp.orientations as f64;
+    let ss = vp.scales as usize;
+    // Texel size of scale s's variants in sample texels (orientation 0: a pure scaling).
+    let log_size: Vec<f64> = (0..ss)
+        .map(|s| variants.sample_map(variants.variant(s, 0), 0).a[0][0].log2_pure())
+        .collect();
+    controls
+        .orient
+        .iter()
+        .zip(&controls.scale)
+        .enumerate()
+        .map(|(k, (&o, &s))| {
+            let s = s as f64;
+            let s0 = (s.floor() as usize).min(ss - 1);
+            let t = s - s0 as f64;
+            let ls = if s0 + 1 < ss {
+                (1.0 - t) * log_size[s0] + t * log_size[s0 + 1]
+            } else {
+                log_size[s0]
+            };
+            let f = ls.exp2_pure();
+            let theta = std::f64::consts::TAU * o as f64 / kk;
+            let (sin, cos) = (theta.sin_pure(), theta.cos_pure());
+            // f R(−θ) = f [[cos, sin], [−sin, cos]], as the variants' sample maps.
+            let r = [f * cos, f * sin, -f * sin, f * cos];
+            let a = controls
+                .metric
+                .get(k)
+                .map_or([1.0f64, 0.0, 0.0, 1.0], |m| m.a.map(|v| v as f64));
+            [
+                r[0] * a[0] + r[1] * a[2],
+                r[0] * a[1] + r[1] * a[3],
+                r[2] * a[0] + r[3] * a[2],
+                r[2] * a[1] + r[3] * a[3],
+            ]
+            .map(|v| v as f32)
+        })
+        .collect()
+}
+
+/// Synthesizes a texel image over `gi` (see the module docs). The result has `gi.n × gi.n`
+/// texels with the variants' channels; `(dx, dy, dn)` are in the local frames of
+/// [`crate::geom::geometry_image::local_frames`]. `progress` gets the fraction done, 0 to 1,
+/// from the calling thread.
+pub fn synthesize_geometry_texture(
+    gi: &GeometryImage,
+    field: &ParamField,
+    variants: &TexelVariantsRef<'_>,
+    p: &GeometrySynthParams,
+    progress: &dyn Fn(f32),
+) -> Result<TexelImage, GeometryTextureError> {
+    synthesize_impl(gi, field, variants, p, progress, true)
+}
+
+/// [`synthesize_geometry_texture`]; `wavefront` false runs the scanline pass texel by texel
+/// (the reference the wavefront order must reproduce).
+fn synthesize_impl(
+    gi: &GeometryImage,
+    field: &ParamField,
+    variants: &TexelVariantsRef<'_>,
+    p: &GeometrySynthParams,
+    progress: &dyn Fn(f32),
+    wavefront: bool,
+) -> Result<TexelImage, GeometryTextureError> {
+    p.validate()?;
+    let vp = variants.params().clone();
+    let nl = vp.levels as usize;
+    check_inputs(gi, field, nl)?;
+    progress(0.0);
+    let n0 = gi.n as usize;
+    let c = variants.channels();
+    let kk = vp.orientations as usize;
+    let ss = vp.scales as usize;
+
+    let TexelControls {
+        metric: metric0,
+        orient: orient0,
+        scale: scale0,
+    } = texel_controls(gi, field, &vp, p);
 
     // Level grids: mates from the level-0 samples on each level's lattice.
     let mut levels: Vec<Level> = Vec::with_capacity(nl);
@@ -1311,6 +1485,8 @@ fn synthesize_impl(
         block: vp.template as usize,
         search: p.search,
         coherence: p.coherence,
+        nearest_taps: p.taps == Taps::Nearest,
+        subtexel: p.subtexel && p.anisotropic,
         maps,
         wave: (vp.template / 2) as i64 + 1,
     };
@@ -1664,15 +1840,28 @@ mod tests {
             )
             .unwrap();
             let vr = owned.as_ref();
-            for (search, anisotropic) in [
-                (Search::KCoherence, true),
-                (Search::KCoherence, false),
-                (Search::PerTexel, true),
+            for (search, anisotropic, options) in [
+                (Search::KCoherence, true, false),
+                (Search::KCoherence, true, true),
+                (Search::KCoherence, false, false),
+                (Search::PerTexel, true, false),
             ] {
                 let p = GeometrySynthParams {
                     search,
                     anisotropic,
                     ..p.clone()
+                };
+                // The experiments' options keep the order exact too.
+                let p = if options {
+                    GeometrySynthParams {
+                        taps: Taps::Nearest,
+                        scale_choice: ScaleChoice::Nearest,
+                        subtexel: true,
+                        max_stretch: 2.0,
+                        ..p
+                    }
+                } else {
+                    p
                 };
                 let a = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, true).unwrap();
                 let b = synthesize_impl(&gi, &field, &vr, &p, &|_| {}, false).unwrap();
@@ -1680,10 +1869,52 @@ mod tests {
                 assert_eq!(
                     bits(&a),
                     bits(&b),
-                    "template {template} {search:?} anisotropic {anisotropic}"
+                    "template {template} {search:?} anisotropic {anisotropic} {options}"
                 );
             }
         }
+    }
+
+    #[test]
+    fn sample_frame_maps_are_the_variants_maps_times_the_metric() {
+        use crate::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
+        let mut sample = TexelImage::new(40, 40, 3);
+        for (k, v) in sample.data.iter_mut().enumerate() {
+            *v = counter_unit(3, 0, k as u64);
+        }
+        let vp = TexelVariantParams {
+            orientations: 4,
+            ..Default::default()
+        };
+        let owned = build_texel_variants(&sample, &vp, &|_| {}).unwrap();
+        let vr = owned.as_ref();
+        let stretched = SurfaceMetric::from_metric(9.0, 0.0, 1.0);
+        let controls = TexelControls {
+            metric: vec![SurfaceMetric::IDENTITY, SurfaceMetric::IDENTITY, stretched],
+            orient: vec![0.0, 1.0, 0.0],
+            scale: vec![1.0, 2.0, 1.5],
+        };
+        let maps = sample_frame_maps(&controls, &vr);
+        let close =
+            |a: [f32; 4], b: [f64; 4]| a.iter().zip(b).all(|(&x, y)| (x as f64 - y).abs() < 1e-5);
+        // The middle scale unrotated: the sample's own texels.
+        assert!(close(maps[0], [1.0, 0.0, 0.0, 1.0]), "{:?}", maps[0]);
+        // Orientation 1 of 4 at the coarser scale: the variant's own sample map.
+        let a = vr.sample_map(vr.variant(2, 1), 0).a;
+        assert!(
+            close(maps[1], [a[0][0], a[0][1], a[1][0], a[1][1]]),
+            "{:?} against {a:?}",
+            maps[1]
+        );
+        assert!(close(maps[1], [0.0, 2.0, -2.0, 0.0]), "{:?}", maps[1]);
+        // Halfway between two scales a factor √2, times the metric's A: a grid step along x
+        // covers 3 times the surface of one along y, so A = diag(√3, 1/√3).
+        let (r2, r3) = (std::f64::consts::SQRT_2, 3f64.sqrt());
+        assert!(
+            close(maps[2], [r2 * r3, 0.0, 0.0, r2 / r3]),
+            "{:?}",
+            maps[2]
+        );
     }
 
     #[test]
@@ -1735,6 +1966,8 @@ mod tests {
                 block: 5,
                 search: Search::PerTexel,
                 coherence: 0.0,
+                nearest_taps: false,
+                subtexel: false,
                 wave: (template / 2) as i64 + 1,
                 maps: vec![vr.sample_map(0, 0), vr.sample_map(0, 1)],
             };

@@ -50,6 +50,12 @@ impl SurfaceMetric {
 
     /// The metric of the symmetric 2×2 matrix `[[g11, g12], [g12, g22]]` (`G = JᵀJ`).
     pub fn from_metric(g11: f64, g12: f64, g22: f64) -> SurfaceMetric {
+        Self::from_metric_clamped(g11, g12, g22, MAX_STRETCH)
+    }
+
+    /// [`Self::from_metric`] with `λ` clamped to `max_stretch` (≥ 1) instead of
+    /// [`MAX_STRETCH`].
+    pub fn from_metric_clamped(g11: f64, g12: f64, g22: f64, max_stretch: f64) -> SurfaceMetric {
         let det = g11 * g22 - g12 * g12;
         if !(det.is_finite() && det > 0.0 && g11 > 0.0 && g22 > 0.0) {
             return SurfaceMetric::IDENTITY;
@@ -69,7 +75,7 @@ impl SurfaceMetric {
         } else {
             (0.0, 1.0)
         };
-        let lambda = mu.sqrt().min(MAX_STRETCH);
+        let lambda = mu.sqrt().min(max_stretch.max(1.0));
         // A = λ e eᵀ + λ⁻¹ (I − e eᵀ); A⁻¹ swaps λ and λ⁻¹.
         let m = |l: f64| {
             let (p, q) = (l, 1.0 / l);
@@ -119,6 +125,12 @@ impl SurfaceMetric {
 /// The metric of every sample of `gi` (`i * n + j`), from the grid derivatives of its
 /// positions.
 pub fn surface_metrics(gi: &GeometryImage) -> Vec<SurfaceMetric> {
+    surface_metrics_clamped(gi, MAX_STRETCH)
+}
+
+/// [`surface_metrics`] with the stretch clamped to `max_stretch` (see
+/// [`SurfaceMetric::from_metric_clamped`]).
+pub fn surface_metrics_clamped(gi: &GeometryImage, max_stretch: f64) -> Vec<SurfaceMetric> {
     let n = gi.n as usize;
     if n < 2 {
         return vec![SurfaceMetric::IDENTITY; n * n];
@@ -138,7 +150,7 @@ pub fn surface_metrics(gi: &GeometryImage) -> Vec<SurfaceMetric> {
                 _ if i == n - 1 => deriv(p(n - 2, j), p(n - 1, j), 1.0),
                 _ => deriv(p(i - 1, j), p(i + 1, j), 2.0),
             };
-            SurfaceMetric::from_metric(xu.dot(xu), xu.dot(xv), xv.dot(xv))
+            SurfaceMetric::from_metric_clamped(xu.dot(xu), xu.dot(xv), xv.dot(xv), max_stretch)
         })
         .collect()
 }

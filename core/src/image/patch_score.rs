@@ -161,7 +161,7 @@ pub fn patch_score_masked(
     exemplar: ImageView<'_>,
     p: &ScoreParams,
 ) -> Result<PatchScore, ScoreError> {
-    validate(output, exemplar, p)?;
+    validate(Some(output), exemplar, p)?;
     let patch = p.patch as usize;
     let out = Plane::new(output);
     let ex = Plane::new(exemplar);
@@ -201,15 +201,7 @@ pub fn patch_score_masked(
         })
         .collect();
     let found = cands.search(&out, &queries);
-    let mean_rms = rms_mean(&found, patch);
-
-    let mut covered = vec![false; cands.nx * cands.ny];
-    for &(idx, _) in &found {
-        covered[idx] = true;
-    }
-    let coverage = covered.iter().filter(|&&c| c).count() as f64 / covered.len() as f64;
-
-    let mut offsets: Vec<(i64, i64)> = queries
+    let offsets: Vec<(i64, i64)> = queries
         .iter()
         .zip(&found)
         .map(|(q, &(idx, _))| {
@@ -217,13 +209,136 @@ pub fn patch_score_masked(
             (ex_x as i64 - q.x as i64, ex_y as i64 - q.y as i64)
         })
         .collect();
+    Ok(finish(
+        &found,
+        offsets,
+        &cands,
+        &ex,
+        p,
+        out.gradient_energy(mask),
+        subsampled,
+    ))
+}
+
+/// Output patches that were read from the output elsewhere (e.g. resampled along a map), to
+/// be scored by [`patch_score_resampled`].
+#[derive(Clone, Debug, Default)]
+pub struct ResampledPatches {
+    /// Side of each patch.
+    pub patch: u32,
+    /// The patches' RGB, `patch × patch` pixels each (row-major), one patch after another.
+    pub rgb: Vec<[f32; 3]>,
+    /// Per patch, where its top-left pixel sits in the output's frame, for `largest_offset`
+    /// (the offset is the nearest exemplar position minus this).
+    pub at: Vec<(i64, i64)>,
+}
+
+/// The seeded subset of `pool` output patches that [`patch_score_masked`] scores (all of them
+/// when `pool ≤ max_queries`), ascending, and whether it is a subset: a caller resampling its
+/// own patches picks the same ones.
+pub fn query_subset(pool: usize, p: &ScoreParams) -> (Vec<usize>, bool) {
+    subsample(pool, p.max_queries, p.seed, STREAM_QUERIES)
+}
+
+/// The measures of patches read by the caller: `patches` (the query subset already taken,
+/// `subsampled` saying whether it is one) against `exemplar`, with the output's
+/// `gradient_energy` (a [`GradientEnergy`] the caller accumulated the same way) over the
+/// exemplar's. Equal to [`patch_score_masked`] when the patches, positions and energy are an
+/// image's own.
+pub fn patch_score_resampled(
+    patches: &ResampledPatches,
+    subsampled: bool,
+    gradient_energy: f64,
+    exemplar: ImageView<'_>,
+    p: &ScoreParams,
+) -> Result<PatchScore, ScoreError> {
+    let patch = p.patch as usize;
+    let n = patches.at.len();
+    if patches.patch != p.patch || patches.rgb.len() != n * patch * patch {
+        return Err(ScoreError::PixelCount {
+            which: "resampled patches",
+            width: patches.patch,
+            height: n as u32,
+            pixels: patches.rgb.len(),
+        });
+    }
+    if n == 0 {
+        return Err(ScoreError::NoPatchInMask { patch: p.patch });
+    }
+    // The output was checked through the patches above.
+    validate(None, exemplar, p)?;
+    let ex = Plane::new(exemplar);
+    // The patches side by side in one strip, patch k at (k · patch, 0).
+    let clamp = |c: f32| if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
+    let w = n * patch;
+    let mut rgb = vec![0.0f32; 3 * w * patch];
+    for k in 0..n {
+        for y in 0..patch {
+            for x in 0..patch {
+                let px = patches.rgb[(k * patch + y) * patch + x];
+                let o = 3 * (y * w + k * patch + x);
+                for c in 0..3 {
+                    rgb[o + c] = clamp(px[c]);
+                }
+            }
+        }
+    }
+    let out = Plane { w, h: patch, rgb };
+    let cands = Candidates::new(&ex, patch);
+    let queries: Vec<Query> = (0..n)
+        .map(|k| Query {
+            x: k * patch,
+            y: 0,
+            crop: None,
+        })
+        .collect();
+    let found = cands.search(&out, &queries);
+    let offsets = patches
+        .at
+        .iter()
+        .zip(&found)
+        .map(|(&(ax, ay), &(idx, _))| {
+            let (ex_x, ex_y) = (idx % cands.nx, idx / cands.nx);
+            (ex_x as i64 - ax, ex_y as i64 - ay)
+        })
+        .collect();
+    Ok(finish(
+        &found,
+        offsets,
+        &cands,
+        &ex,
+        p,
+        gradient_energy,
+        subsampled,
+    ))
+}
+
+/// The measures from the queries' nearest candidates `found` and their `offsets`.
+fn finish(
+    found: &[(usize, f32)],
+    mut offsets: Vec<(i64, i64)>,
+    cands: &Candidates,
+    ex: &Plane,
+    p: &ScoreParams,
+    out_gradient: f64,
+    subsampled: bool,
+) -> PatchScore {
+    let patch = p.patch as usize;
+    let mean_rms = rms_mean(found, patch);
+
+    let mut covered = vec![false; cands.nx * cands.ny];
+    for &(idx, _) in found {
+        covered[idx] = true;
+    }
+    let coverage = covered.iter().filter(|&&c| c).count() as f64 / covered.len() as f64;
+
     offsets.sort_unstable();
     let largest = offsets
         .chunk_by(|a, b| a == b)
         .map(|run| run.len())
         .max()
         .unwrap_or(0);
-    let largest_offset = largest as f64 / queries.len() as f64;
+    let largest_offset = largest as f64 / found.len() as f64;
 
     // Self baseline: crops of the exemplar against the exemplar patches beside them.
     let side = ex.w.min(ex.h) / 2;
@@ -254,22 +369,22 @@ pub fn patch_score_masked(
             }
         })
         .collect();
-    let baseline_rms = rms_mean(&cands.search(&ex, &baseline_queries), patch);
+    let baseline_rms = rms_mean(&cands.search(ex, &baseline_queries), patch);
 
-    Ok(PatchScore {
+    PatchScore {
         ratio: quotient(mean_rms, baseline_rms),
         mean_rms,
         baseline_rms,
         coverage,
         largest_offset,
-        gradient_ratio: quotient(out.gradient_energy(mask), ex.gradient_energy(None)),
-        queries: queries.len(),
+        gradient_ratio: quotient(out_gradient, ex.gradient_energy(None)),
+        queries: found.len(),
         subsampled,
-    })
+    }
 }
 
 fn validate(
-    output: ImageView<'_>,
+    output: Option<ImageView<'_>>,
     exemplar: ImageView<'_>,
     p: &ScoreParams,
 ) -> Result<(), ScoreError> {
@@ -279,7 +394,8 @@ fn validate(
     if p.max_queries == 0 {
         return Err(ScoreError::ZeroQueries);
     }
-    for (which, v) in [("output", output), ("exemplar", exemplar)] {
+    for (which, v) in [("output", output), ("exemplar", Some(exemplar))] {
+        let Some(v) = v else { continue };
         if v.pixels.len() != v.width as usize * v.height as usize {
             return Err(ScoreError::PixelCount {
                 which,
@@ -399,34 +515,64 @@ impl Plane {
         let (w, h) = (self.w, self.h);
         let inside = |x: usize, y: usize| mask.is_none_or(|m| m[y * w + x]);
         let px = |x: usize, y: usize| &self.rgb[3 * (y * w + x)..3 * (y * w + x) + 3];
-        let sq = |a: &[f32], b: &[f32]| -> f64 {
-            a.iter()
-                .zip(b)
-                .map(|(a, b)| {
-                    let d = (a - b) as f64;
-                    d * d
-                })
-                .sum()
-        };
-        let (mut gx, mut nx) = (0.0, 0usize);
-        let (mut gy, mut ny) = (0.0, 0usize);
+        let mut g = GradientEnergy::default();
         for y in 0..h {
             for x in 0..w {
                 if !inside(x, y) {
                     continue;
                 }
                 if x + 1 < w && inside(x + 1, y) {
-                    gx += sq(px(x + 1, y), px(x, y));
-                    nx += 1;
+                    g.add_x(px(x + 1, y), px(x, y));
                 }
                 if y + 1 < h && inside(x, y + 1) {
-                    gy += sq(px(x, y + 1), px(x, y));
-                    ny += 1;
+                    g.add_y(px(x, y + 1), px(x, y));
                 }
             }
         }
+        g.value()
+    }
+}
+
+/// The gradient energy of [`PatchScore::gradient_ratio`], accumulated pair by pair: the mean
+/// squared RGB difference over horizontal neighbour pairs plus the same over vertical pairs
+/// (values clamped to [0, 1], NaN as 0, as the scored patches are). A caller that reads its
+/// output's neighbours elsewhere (along a map) sums them here in the same order to get the
+/// same bits.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GradientEnergy {
+    gx: f64,
+    nx: usize,
+    gy: f64,
+    ny: usize,
+}
+
+impl GradientEnergy {
+    fn sq(a: &[f32], b: &[f32]) -> f64 {
+        let clamp = |c: f32| if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
+        a.iter()
+            .zip(b)
+            .map(|(&a, &b)| {
+                let d = (clamp(a) - clamp(b)) as f64;
+                d * d
+            })
+            .sum()
+    }
+
+    /// A horizontal pair (`a` the right-hand pixel's RGB).
+    pub fn add_x(&mut self, a: &[f32], b: &[f32]) {
+        self.gx += Self::sq(a, b);
+        self.nx += 1;
+    }
+
+    /// A vertical pair (`a` the lower pixel's RGB).
+    pub fn add_y(&mut self, a: &[f32], b: &[f32]) {
+        self.gy += Self::sq(a, b);
+        self.ny += 1;
+    }
+
+    pub fn value(&self) -> f64 {
         let mean = |s: f64, n: usize| if n > 0 { s / n as f64 } else { 0.0 };
-        mean(gx, nx) + mean(gy, ny)
+        mean(self.gx, self.nx) + mean(self.gy, self.ny)
     }
 }
 

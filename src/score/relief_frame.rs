@@ -1,0 +1,409 @@
+//! Reading a geometry image's synthesized relief in the sample's frame, along the surface
+//! (issue 12 §2), for the surface-space score of [`super::geometry`].
+//!
+//! The grid-space score compares the relief image's `p × p` grid patches with the sample's.
+//! But synthesis lays the texture out per texel: with the surface metric a tap `s` of the
+//! template (sample texels) is read `A⁻¹ s` grid steps away, the scale `R` varies per texel
+//! (two scales mixed by probability) and the field turns the sample. In the grid the relief is
+//! squeezed and turned on purpose, so grid patches say little about how it looks on the
+//! surface.
+//!
+//! Here each scored patch centre `c` (a level-0 grid texel) has a linear map `M_c` from grid
+//! offsets to offsets in the sample's own texels (for synthesis:
+//! [`crate::stages::synthesize::geometry_texture::sample_frame_maps`]). The patch's tap
+//! `(u, v)`, `u` and `v` in `−p/2..=p/2`, is read at grid position `c + M_c⁻¹ (u, v)`,
+//! interpolated bilinearly, so the patch comes out in the sample's frame at the sample's scale
+//! and is matched against the sample's own patches by [`patch_score_resampled`]. Patches with
+//! a tap outside the square (across a cut) are skipped and counted. The gradient energy reads
+//! each texel's neighbour one sample texel away, `c + M_c⁻¹ e_x` and `c + M_c⁻¹ e_y`. For
+//! `largest_offset`, each patch is placed at its centre's position in the sample's frame,
+//! `M` integrated along the grid (trapezoids along row 0, then down each column): a verbatim
+//! copy laid out by a map that is the Jacobian of a flattening has one offset. Synthesis's `M`
+//! need not be such a Jacobian (the metric's square root has curl), so there a verbatim copy
+//! drifts across neighbouring offsets and `largest_offset` reads lower than in the grid.
+//!
+//! With `M_c` the identity everywhere every number equals the grid score's.
+
+use crate::image::patch_score::{
+    GradientEnergy, PatchScore, ResampledPatches, ScoreError, ScoreParams, patch_score_resampled,
+    query_subset,
+};
+use crate::image::{Image, ImageView};
+
+/// The surface-space measures and how many patches could be read.
+#[derive(Clone, Debug)]
+pub struct FrameScore {
+    pub score: PatchScore,
+    /// Patch centres (level-0 texels) whose patch stays inside the square: the pool the
+    /// queries are drawn from.
+    pub readable: usize,
+    /// Patch centres skipped: a tap leaves the square (crosses a cut) or the map is singular.
+    pub skipped: usize,
+}
+
+/// `M⁻¹` of a row-major 2×2 map, `None` when singular or not finite.
+fn inverse(m: &[f32; 4]) -> Option<[f64; 4]> {
+    let m = m.map(|v| v as f64);
+    let det = m[0] * m[3] - m[1] * m[2];
+    (det.is_finite() && det.abs() > 1e-12 && m.iter().all(|v| v.is_finite()))
+        .then(|| [m[3] / det, -m[1] / det, -m[2] / det, m[0] / det])
+}
+
+/// The grid `image`'s RGB at fractional `(x, y)` (columns, rows), bilinear between the four
+/// texels around it (a weight of 0 reads nothing, so whole positions read one texel exactly).
+fn bilinear(image: ImageView<'_>, x: f64, y: f64) -> [f32; 3] {
+    let (w, h) = (image.width as i64, image.height as i64);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let mut out = [0.0f32; 3];
+    for (dx, dy, wt) in [
+        (0, 0, (1.0 - fx) * (1.0 - fy)),
+        (1, 0, fx * (1.0 - fy)),
+        (0, 1, (1.0 - fx) * fy),
+        (1, 1, fx * fy),
+    ] {
+        if wt > 0.0 {
+            let (xi, yi) = ((x0 + dx).clamp(0, w - 1), (y0 + dy).clamp(0, h - 1));
+            let px = image.pixels[(yi * w + xi) as usize];
+            for c in 0..3 {
+                out[c] += wt * px[c];
+            }
+        }
+    }
+    out
+}
+
+/// Windows of `side × side` sample texels around `count` centres spread over the grid, each
+/// read through its centre's map (taps outside the square black), side by side with a
+/// 2-texel gap: what the surface row scores, large enough to look at (`TEXSYN_SCORE_DUMP`).
+pub fn windows_along_maps(grid: ImageView<'_>, maps: &[[f32; 4]], side: u32, count: u32) -> Image {
+    let (w, h) = (grid.width as usize, grid.height as usize);
+    let stride = side + 2;
+    let mut out = Image::new(stride * count, side);
+    let r = side as f64 / 2.0;
+    for k in 0..count {
+        // Centres on the diagonal band, clear of the square's sides.
+        let t = (k as f64 + 1.0) / (count as f64 + 1.0);
+        let (cx, cy) = (
+            (t * (w - 1) as f64).round() as usize,
+            ((0.5 + 0.3 * (t - 0.5)) * (h - 1) as f64).round() as usize,
+        );
+        let Some(m) = maps.get(cy * w + cx).and_then(inverse) else {
+            continue;
+        };
+        for v in 0..side {
+            for u in 0..side {
+                let (a, b) = (u as f64 - r, v as f64 - r);
+                let (x, y) = (
+                    cx as f64 + m[0] * a + m[1] * b,
+                    cy as f64 + m[2] * a + m[3] * b,
+                );
+                if x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64 {
+                    let g = bilinear(grid, x, y);
+                    out.pixels[(v * stride * count + k * stride + u) as usize] =
+                        [g[0], g[1], g[2], 1.0];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Scores the grid image `grid` read along `maps` (one per texel, row-major; see the module
+/// docs) against `exemplar` with `p`'s patches, query count and seed.
+pub fn score_along_maps(
+    grid: ImageView<'_>,
+    maps: &[[f32; 4]],
+    exemplar: ImageView<'_>,
+    p: &ScoreParams,
+) -> Result<FrameScore, ScoreError> {
+    let (w, h) = (grid.width as usize, grid.height as usize);
+    if maps.len() != w * h || grid.pixels.len() != w * h {
+        return Err(ScoreError::PixelCount {
+            which: "maps of the output",
+            width: grid.width,
+            height: grid.height,
+            pixels: maps.len(),
+        });
+    }
+    let r = (p.patch / 2) as f64;
+    let inv: Vec<Option<[f64; 4]>> = maps.iter().map(inverse).collect();
+    let inside =
+        |x: f64, y: f64| x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64;
+    let at = |k: usize, m: &[f64; 4], u: f64, v: f64| {
+        let (x, y) = ((k % w) as f64, (k / w) as f64);
+        (x + m[0] * u + m[1] * v, y + m[2] * u + m[3] * v)
+    };
+    // The pool: centres whose patch's four corners (and so, the map being linear, all its
+    // taps) lie in the square.
+    let pool: Vec<usize> = (0..w * h)
+        .filter(|&k| {
+            inv[k].is_some_and(|m| {
+                [(-r, -r), (r, -r), (-r, r), (r, r)].iter().all(|&(u, v)| {
+                    let (x, y) = at(k, &m, u, v);
+                    inside(x, y)
+                })
+            })
+        })
+        .collect();
+    if pool.is_empty() {
+        return Err(ScoreError::NoPatchInMask { patch: p.patch });
+    }
+    let (picked, subsampled) = query_subset(pool.len(), p);
+
+    // Each centre's position in the sample's frame: M integrated along row 0, then down.
+    let mut pos = vec![(0.0f64, 0.0f64); w * h];
+    let m64 = |k: usize| maps[k].map(|v| v as f64);
+    for y in 0..h {
+        for x in 0..w {
+            let k = y * w + x;
+            pos[k] = if x == 0 && y == 0 {
+                (0.0, 0.0)
+            } else if y == 0 {
+                let (a, b) = (m64(k - 1), m64(k));
+                let p0 = pos[k - 1];
+                (p0.0 + 0.5 * (a[0] + b[0]), p0.1 + 0.5 * (a[2] + b[2]))
+            } else {
+                let (a, b) = (m64(k - w), m64(k));
+                let p0 = pos[k - w];
+                (p0.0 + 0.5 * (a[1] + b[1]), p0.1 + 0.5 * (a[3] + b[3]))
+            };
+        }
+    }
+
+    let side = p.patch as usize;
+    let mut patches = ResampledPatches {
+        patch: p.patch,
+        rgb: Vec::with_capacity(picked.len() * side * side),
+        at: Vec::with_capacity(picked.len()),
+    };
+    for &i in &picked {
+        let k = pool[i];
+        let m = inv[k].expect("pooled centres have an inverse");
+        for v in 0..side {
+            for u in 0..side {
+                let (x, y) = at(k, &m, u as f64 - r, v as f64 - r);
+                patches.rgb.push(bilinear(grid, x, y));
+            }
+        }
+        let round = |t: f64| (t + 0.5).floor() as i64;
+        patches
+            .at
+            .push((round(pos[k].0) - r as i64, round(pos[k].1) - r as i64));
+    }
+
+    // Gradient energy: each texel against its neighbour one sample texel along x and y.
+    let mut g = GradientEnergy::default();
+    for k in 0..w * h {
+        let Some(m) = inv[k] else { continue };
+        let here = bilinear(grid, (k % w) as f64, (k / w) as f64);
+        let (x, y) = at(k, &m, 1.0, 0.0);
+        if inside(x, y) {
+            g.add_x(&bilinear(grid, x, y), &here);
+        }
+        let (x, y) = at(k, &m, 0.0, 1.0);
+        if inside(x, y) {
+            g.add_y(&bilinear(grid, x, y), &here);
+        }
+    }
+
+    let score = patch_score_resampled(&patches, subsampled, g.value(), exemplar, p)?;
+    Ok(FrameScore {
+        score,
+        readable: pool.len(),
+        skipped: w * h - pool.len(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use crate::image::patch_score::patch_score;
+    use crate::random::counter_unit;
+
+    /// A smooth random grey texture: value noise on 7- and 3-texel lattices, bilinear
+    /// with a smoothstep (features of a few texels, so that resampling it is nearly exact).
+    fn sample(side: u32, seed: u64) -> Image {
+        let noise = |cell: u32, stream: u64, x: f64, y: f64| {
+            let (cx, cy) = ((x / cell as f64).floor(), (y / cell as f64).floor());
+            let (fx, fy) = (x / cell as f64 - cx, y / cell as f64 - cy);
+            let s = |t: f64| t * t * (3.0 - 2.0 * t);
+            let at = |i: f64, j: f64| {
+                counter_unit(
+                    seed,
+                    stream,
+                    ((i as i64 + 1000) * 4096 + j as i64 + 1000) as u64,
+                ) as f64
+            };
+            let (sx, sy) = (s(fx), s(fy));
+            let top = at(cx, cy) * (1.0 - sx) + at(cx + 1.0, cy) * sx;
+            let bottom = at(cx, cy + 1.0) * (1.0 - sx) + at(cx + 1.0, cy + 1.0) * sx;
+            top * (1.0 - sy) + bottom * sy
+        };
+        Image::from_fn(side, side, |x, y| {
+            let (x, y) = (x as f64, y as f64);
+            let g = (0.5 * noise(7, 1, x, y) + 0.5 * noise(3, 2, x, y)) as f32;
+            [g, g, g, 1.0]
+        })
+    }
+
+    /// The planted warp: grid point `(x, y)` shows sample point `φ(x, y)`, a non-uniform,
+    /// sheared, anisotropic map (grid steps cover 0.33 to 0.68 sample texels along x, 0.3
+    /// along y), and its Jacobian per grid point.
+    fn phi(x: f64, y: f64) -> (f64, f64) {
+        (8.0 + 0.33 * x + 0.0014 * x * x, 8.0 + 0.3 * y + 0.12 * x)
+    }
+
+    fn jacobian(x: f64, _y: f64) -> [f32; 4] {
+        [(0.33 + 0.0028 * x) as f32, 0.0, 0.12, 0.3]
+    }
+
+    /// The sample warped into an `n × n` grid by [`phi`] (bilinear), and the grid's maps.
+    fn warped(ex: &Image, n: u32) -> (Image, Vec<[f32; 4]>) {
+        let grid = Image::from_fn(n, n, |x, y| {
+            let (u, v) = phi(x as f64, y as f64);
+            let g = bilinear(ex.view(), u, v);
+            [g[0], g[1], g[2], 1.0]
+        });
+        let maps = (0..n * n)
+            .map(|k| jacobian((k % n) as f64, (k / n) as f64))
+            .collect();
+        (grid, maps)
+    }
+
+    fn params() -> ScoreParams {
+        ScoreParams {
+            patch: 7,
+            max_queries: 3000,
+            seed: 0,
+        }
+    }
+
+    #[test]
+    fn a_planted_warp_read_along_its_map_is_a_copy_of_the_sample() {
+        let ex = sample(128, 7);
+        let (grid, maps) = warped(&ex, 129);
+        let p = params();
+        let frame = score_along_maps(grid.view(), &maps, ex.view(), &p).unwrap();
+        let grid_score = patch_score(grid.view(), ex.view(), &p).unwrap();
+        let s = &frame.score;
+        eprintln!(
+            "surface {s:?} readable {} skipped {}",
+            frame.readable, frame.skipped
+        );
+        eprintln!("grid {grid_score:?}");
+        // The best a resampled copy can do: the same centres' patches read straight from the
+        // sample at φ(c) + (u, v). Not 0, because φ(c) falls between the sample's texels and
+        // the nearest sample patch sits at a whole texel.
+        let (picked, _) = query_subset(129 * 129, &p);
+        let mut ideal = ResampledPatches {
+            patch: 7,
+            ..Default::default()
+        };
+        for &k in &picked {
+            let (u0, v0) = phi((k % 129) as f64, (k / 129) as f64);
+            for v in -3..=3 {
+                for u in -3..=3 {
+                    ideal
+                        .rgb
+                        .push(bilinear(ex.view(), u0 + u as f64, v0 + v as f64));
+                }
+            }
+            ideal.at.push((0, 0));
+        }
+        let ideal = patch_score_resampled(&ideal, true, 1.0, ex.view(), &p).unwrap();
+        eprintln!("ideal {ideal:?}");
+        // Read along the map, every patch is that copy up to the grid's interpolation, and
+        // they sit at the one offset the integrated map predicts.
+        assert!(
+            s.ratio < ideal.ratio + 0.05,
+            "surface ratio {} against {}",
+            s.ratio,
+            ideal.ratio
+        );
+        assert!(
+            s.largest_offset > 0.5,
+            "largest offset {}",
+            s.largest_offset
+        );
+        assert!(
+            (s.gradient_ratio - 1.0).abs() < 0.25,
+            "{}",
+            s.gradient_ratio
+        );
+        // In the grid the same relief is stretched 1.5 to 3 times: far from any sample patch.
+        assert!(
+            grid_score.ratio > 1.5 * s.ratio,
+            "grid {}",
+            grid_score.ratio
+        );
+        assert!(grid_score.gradient_ratio < 0.5 * s.gradient_ratio);
+        // Patches near the far corner, where the map reads beyond the grid, are skipped.
+        assert!(frame.skipped > 0 && frame.readable > 3000);
+        // The map's inverse is what is read along: the transposed map is no copy.
+        let transposed: Vec<[f32; 4]> = maps.iter().map(|m| [m[0], m[2], m[1], m[3]]).collect();
+        let t = score_along_maps(grid.view(), &transposed, ex.view(), &p).unwrap();
+        assert!(
+            t.score.ratio > 1.5 * s.ratio,
+            "transposed {}",
+            t.score.ratio
+        );
+    }
+
+    #[test]
+    fn windows_read_the_planted_warp_back_into_the_sample() {
+        let ex = sample(128, 7);
+        let (grid, maps) = warped(&ex, 129);
+        let win = windows_along_maps(grid.view(), &maps, 16, 3);
+        assert_eq!((win.width, win.height), (54, 16));
+        // The middle window's centre is the grid's texel (64, 64), which shows φ(64, 64).
+        let (u, v) = phi(64.0, 64.0);
+        let want = bilinear(ex.view(), u, v)[0];
+        let got = win.pixels[(8 * 54 + 18 + 8) as usize][0];
+        assert!((got - want).abs() < 0.02, "{got} against {want}");
+    }
+
+    #[test]
+    fn a_shuffled_grid_is_far_from_the_sample_in_surface_space_too() {
+        let ex = sample(128, 7);
+        let (grid, maps) = warped(&ex, 129);
+        let mut shuffled = grid.clone();
+        // Fisher–Yates with the crate's counter hash.
+        let n = shuffled.pixels.len();
+        for i in (1..n).rev() {
+            let j = (crate::random::counter_hash(3, 9, i as u64) % (i as u64 + 1)) as usize;
+            shuffled.pixels.swap(i, j);
+        }
+        let s = score_along_maps(shuffled.view(), &maps, ex.view(), &params())
+            .unwrap()
+            .score;
+        // Bilinear taps between shuffled texels average some of the noise away, but the
+        // patches stay far from any sample patch and much rougher.
+        assert!(s.ratio > 1.3, "shuffled surface ratio {}", s.ratio);
+        assert!(s.gradient_ratio > 2.0, "{}", s.gradient_ratio);
+        assert!(s.largest_offset < 0.05, "{}", s.largest_offset);
+    }
+
+    #[test]
+    fn identity_maps_give_the_grid_score() {
+        let ex = sample(96, 3);
+        let out = sample(80, 11);
+        let maps = vec![[1.0f32, 0.0, 0.0, 1.0]; 80 * 80];
+        for max_queries in [1000, 100_000] {
+            let p = ScoreParams {
+                max_queries,
+                ..params()
+            };
+            let a = score_along_maps(out.view(), &maps, ex.view(), &p).unwrap();
+            let b = patch_score(out.view(), ex.view(), &p).unwrap();
+            assert_eq!(a.readable, 74 * 74);
+            assert_eq!(
+                format!("{:?}", a.score),
+                format!("{b:?}"),
+                "max_queries {max_queries}"
+            );
+        }
+    }
+}
