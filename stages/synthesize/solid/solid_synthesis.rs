@@ -1788,7 +1788,12 @@ impl<'a> SolidSynthesis<'a> {
             }
             #[cfg(not(target_arch = "x86_64"))]
             project(basis, x, mp, proj);
-            // Candidates S_P(v), reduced form.
+            // Candidates S_P(v), reduced form. Where the neighbours are coherent most of
+            // the nine shifted pixels are the same pixel, whose k candidates are then all
+            // already listed: a repeated pixel adds none (none could be a first visit in the
+            // deduplication below), so its list is skipped before any copying or hashing.
+            let mut pixels = [[0u16; 2]; 9];
+            let mut distinct = 0;
             for d2 in -1..=1 {
                 for d1 in -1..=1 {
                     let wv = round_v(vf + c1 * d1 as f32 + c2 * d2 as f32).clamp(IVec3::ZERO, dmax);
@@ -1799,10 +1804,14 @@ impl<'a> SolidSynthesis<'a> {
                         wrap(round_i(tw.c[p][0] as f32 - e1), w),
                         wrap(round_i(tw.c[p][1] as f32 - e2), hh),
                     ];
-                    // One push each: a copy of a few triples is cheaper inline than
-                    // through a memcpy call.
-                    for t in a.candidates(li, p, px) {
-                        sc.cands.push(*t);
+                    if !pixels[..distinct].contains(&px) {
+                        pixels[distinct] = px;
+                        distinct += 1;
+                        // One push each: a copy of a few triples is cheaper inline than
+                        // through a memcpy call.
+                        for t in a.candidates(li, p, px) {
+                            sc.cands.push(*t);
+                        }
                     }
                     if self.params.coherent_candidates {
                         // The neighbour's whole triple, shifted back (eq. 4).
