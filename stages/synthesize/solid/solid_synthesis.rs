@@ -1746,21 +1746,8 @@ impl<'a> SolidSynthesis<'a> {
                             cols[t] = part(ax, v[ax] + sa * i);
                             rows[t] = part(bx, v[bx] + sb * i);
                         }
-                        let (tc, lc, inc) = part(cx, v[cx]);
-                        let mut cells = out.chunks_exact_mut(3);
-                        for &(tb, lb, inb) in &rows[..side] {
-                            for &(ta, la, ina) in &cols[..side] {
-                                let slot = st.need.slot_of_parts(ta + tb + tc, la + lb + lc);
-                                let src = if ina && inb && inc {
-                                    &st.cur
-                                } else {
-                                    &st.start
-                                };
-                                if let Some(cell) = cells.next() {
-                                    cell.copy_from_slice(&src[slot].c);
-                                }
-                            }
-                        }
+                        let centre = part(cx, v[cx]);
+                        gather_lattice(st, &rows[..side], &cols[..side], centre, out);
                     }
                     None => {
                         let mut o = 0;
@@ -1889,6 +1876,33 @@ impl<'a> SolidSynthesis<'a> {
             },
             comparisons,
         )
+    }
+}
+
+/// The colours of a lattice neighbourhood (see `lattice_steps`) into `out`, row-major: the
+/// voxel of row part `rows[j]`, column part `cols[i]` and `centre` (each `(table part, local
+/// part, inside the latest window)` of one axis) at `out[3(j·side + i)..]`, from `cur` inside
+/// the window and from `start` outside, as `read` does. Its own function, not inlined: inside
+/// the big correction loop the output cursor lived on the stack, and every cell waited on
+/// its store and reload; here the cursor, the tables and both sources stay in registers.
+#[inline(never)]
+fn gather_lattice(
+    st: &States,
+    rows: &[(usize, usize, bool)],
+    cols: &[(usize, usize, bool)],
+    (tc, lc, inc): (usize, usize, bool),
+    out: &mut [f32],
+) {
+    let (cur, start) = (&st.cur[..], &st.start[..]);
+    let mut o = 0;
+    for &(tb, lb, inb) in rows {
+        let (t, l, inside) = (tb + tc, lb + lc, inb && inc);
+        for &(ta, la, ina) in cols {
+            let slot = st.need.slot_of_parts(ta + t, la + l);
+            let src = if ina && inside { cur } else { start };
+            out[o..o + 3].copy_from_slice(&src[slot].c);
+            o += 3;
+        }
     }
 }
 
