@@ -803,7 +803,13 @@ impl PlaneDistances {
     /// The distance of `plane`'s pixel `px` in correction `stamp`, from `compute` the first
     /// time it is asked for.
     #[inline(always)]
-    fn get(&mut self, stamp: u32, plane: usize, px: [u16; 2], compute: impl FnOnce() -> f32) -> f32 {
+    fn get(
+        &mut self,
+        stamp: u32,
+        plane: usize,
+        px: [u16; 2],
+        compute: impl FnOnce() -> f32,
+    ) -> f32 {
         let key = ((plane as u64) << 32) | ((px[1] as u64) << 16) | px[0] as u64;
         let mask = self.entries.len() - 1;
         let mut i = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask;
