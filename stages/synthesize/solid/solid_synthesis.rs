@@ -779,7 +779,62 @@ struct Scratch {
     positions: Vec<Vec3>,
     /// Open-addressing set of keys seen in this correction (entries stamped with `stamp`).
     seen: Vec<(u128, u32)>,
+    /// Plane distances of this correction (entries stamped with `stamp`).
+    memo: PlaneDistances,
     stamp: u32,
+}
+
+/// The distance from a voxel's projected neighbourhood in plane `P` to the feature of one
+/// exemplar pixel of that plane, remembered per correction. A candidate's distance is the
+/// weighted sum of one such distance per plane, and the candidates share them: the k
+/// candidates of one pixel of `P` all have that pixel as their `P` coordinate (and mostly the
+/// neighbour's shifted triple too), so each (plane, pixel) is compared once and its
+/// feature read once. The sums add the same values in the same order: the same bits.
+struct PlaneDistances {
+    /// Open addressing: (plane, pixel) key, stamp, distance.
+    entries: Vec<(u64, u32, f32)>,
+}
+
+impl PlaneDistances {
+    /// A table for at most `capacity` distances per correction: always a free entry, and
+    /// small enough (8 KiB for k = 4) to stay in the first-level cache beside the rest.
+    fn new(capacity: usize) -> PlaneDistances {
+        PlaneDistances {
+            entries: vec![(0, 0, 0.0); (capacity + 1).next_power_of_two()],
+        }
+    }
+
+    /// The distance of `plane`'s pixel `px` in correction `stamp`, from `compute` the first
+    /// time it is asked for.
+    #[inline(always)]
+    fn get(
+        &mut self,
+        stamp: u32,
+        plane: usize,
+        px: [u16; 2],
+        compute: impl FnOnce() -> f32,
+    ) -> f32 {
+        let key = ((plane as u64) << 32) | ((px[1] as u64) << 16) | px[0] as u64;
+        let mask = self.entries.len() - 1;
+        let mut i = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask;
+        loop {
+            let e = &mut self.entries[i];
+            if e.1 != stamp {
+                let d = compute();
+                *e = (key, stamp, d);
+                return d;
+            }
+            if e.0 == key {
+                return e.2;
+            }
+            i = (i + 1) & mask;
+        }
+    }
+
+    /// Forgets every stamp (when the stamps wrap around).
+    fn clear(&mut self) {
+        self.entries.iter_mut().for_each(|e| e.1 = 0);
+    }
 }
 
 /// The parents' bricks of a level.
@@ -1646,6 +1701,8 @@ impl<'a> SolidSynthesis<'a> {
             keys: Vec::with_capacity(27 * (self.analysis.k() + 1)),
             positions: Vec::new(),
             seen: vec![(0, 0); (54 * (self.analysis.k() + 1)).next_power_of_two()],
+            // At most one distance per plane of each of the 27 (k + 1) candidates.
+            memo: PlaneDistances::new(3 * 27 * (self.analysis.k() + 1)),
             stamp: 0,
         }
     }
@@ -1819,21 +1876,8 @@ impl<'a> SolidSynthesis<'a> {
                             cols[t] = part(ax, v[ax] + sa * i);
                             rows[t] = part(bx, v[bx] + sb * i);
                         }
-                        let (tc, lc, inc) = part(cx, v[cx]);
-                        let mut cells = out.chunks_exact_mut(3);
-                        for &(tb, lb, inb) in &rows[..side] {
-                            for &(ta, la, ina) in &cols[..side] {
-                                let slot = st.need.slot_of_parts(ta + tb + tc, la + lb + lc);
-                                let src = if ina && inb && inc {
-                                    &st.cur
-                                } else {
-                                    &st.start
-                                };
-                                if let Some(cell) = cells.next() {
-                                    cell.copy_from_slice(&src[slot].c);
-                                }
-                            }
-                        }
+                        let centre = part(cx, v[cx]);
+                        gather_lattice(st, &rows[..side], &cols[..side], centre, out);
                     }
                     None => {
                         let mut o = 0;
@@ -1861,7 +1905,12 @@ impl<'a> SolidSynthesis<'a> {
             }
             #[cfg(not(target_arch = "x86_64"))]
             project(basis, x, mp, proj);
-            // Candidates S_P(v), reduced form.
+            // Candidates S_P(v), reduced form. Where the neighbours are coherent most of
+            // the nine shifted pixels are the same pixel, whose k candidates are then all
+            // already listed: a repeated pixel adds none (none could be a first visit in the
+            // deduplication below), so its list is skipped before any copying or hashing.
+            let mut pixels = [[0u16; 2]; 9];
+            let mut distinct = 0;
             for d2 in -1..=1 {
                 for d1 in -1..=1 {
                     let wv = round_v(vf + c1 * d1 as f32 + c2 * d2 as f32).clamp(IVec3::ZERO, dmax);
@@ -1872,10 +1921,14 @@ impl<'a> SolidSynthesis<'a> {
                         wrap(round_i(tw.c[p][0] as f32 - e1), w),
                         wrap(round_i(tw.c[p][1] as f32 - e2), hh),
                     ];
-                    // One push each: a copy of a few triples is cheaper inline than
-                    // through a memcpy call.
-                    for t in a.candidates(li, p, px) {
-                        sc.cands.push(*t);
+                    if !pixels[..distinct].contains(&px) {
+                        pixels[distinct] = px;
+                        distinct += 1;
+                        // One push each: a copy of a few triples is cheaper inline than
+                        // through a memcpy call.
+                        for t in a.candidates(li, p, px) {
+                            sc.cands.push(*t);
+                        }
                     }
                     if self.params.coherent_candidates {
                         // The neighbour's whole triple, shifted back (eq. 4).
@@ -1896,6 +1949,7 @@ impl<'a> SolidSynthesis<'a> {
         sc.stamp = sc.stamp.wrapping_add(1);
         if sc.stamp == 0 {
             sc.seen.iter_mut().for_each(|e| e.1 = 0);
+            sc.memo.clear();
             sc.stamp = 1;
         }
         let mask = sc.seen.len() - 1;
@@ -1934,8 +1988,11 @@ impl<'a> SolidSynthesis<'a> {
                 if weights[p] == 0.0 {
                     continue;
                 }
-                let f = a.feature(li, a.image_of(p), cand.c[p]);
-                e += weights[p] * squared_distance(&sc.proj[p], f);
+                let proj = &sc.proj[p];
+                let d = sc.memo.get(sc.stamp, p, cand.c[p], || {
+                    squared_distance(proj, a.feature(li, a.image_of(p), cand.c[p]))
+                });
+                e += weights[p] * d;
                 if e >= best.0 {
                     break;
                 }
@@ -1953,6 +2010,33 @@ impl<'a> SolidSynthesis<'a> {
             },
             comparisons,
         )
+    }
+}
+
+/// The colours of a lattice neighbourhood (see `lattice_steps`) into `out`, row-major: the
+/// voxel of row part `rows[j]`, column part `cols[i]` and `centre` (each `(table part, local
+/// part, inside the latest window)` of one axis) at `out[3(j·side + i)..]`, from `cur` inside
+/// the window and from `start` outside, as `read` does. Its own function, not inlined: inside
+/// the big correction loop the output cursor lived on the stack, and every cell waited on
+/// its store and reload; here the cursor, the tables and both sources stay in registers.
+#[inline(never)]
+fn gather_lattice(
+    st: &States,
+    rows: &[(usize, usize, bool)],
+    cols: &[(usize, usize, bool)],
+    (tc, lc, inc): (usize, usize, bool),
+    out: &mut [f32],
+) {
+    let (cur, start) = (&st.cur[..], &st.start[..]);
+    let mut o = 0;
+    for &(tb, lb, inb) in rows {
+        let (t, l, inside) = (tb + tc, lb + lc, inb && inc);
+        for &(ta, la, ina) in cols {
+            let slot = st.need.slot_of_parts(ta + t, la + l);
+            let src = if ina && inside { cur } else { start };
+            out[o..o + 3].copy_from_slice(&src[slot].c);
+            o += 3;
+        }
     }
 }
 
@@ -2093,15 +2177,17 @@ fn project_avx2(basis: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
     while k + 4 <= comps {
         let rows: [&[f32]; 4] = std::array::from_fn(|r| &basis[(k + r) * dim..(k + r + 1) * dim]);
         let mut acc = [_mm256_setzero_ps(); 4];
+        // Raw loads: checked slices cost the loop five compares and branches per eight
+        // columns, more than its four multiplies and adds.
+        let row_at = rows.map(|r| r.as_ptr());
         let mut c = 0;
         while c < whole {
-            let xs: &[f32; L] = x[c..c + L].try_into().expect("8 lanes");
-            // SAFETY: unaligned loads of 8 floats from arrays of 8.
-            let xv = unsafe { _mm256_loadu_ps(xs.as_ptr()) };
+            // SAFETY: unaligned loads of 8 floats at `c`, where `c + 8 <= whole <= dim`, the
+            // length of `x` and of every row.
+            let xv = unsafe { _mm256_loadu_ps(x.as_ptr().add(c)) };
             for r in 0..4 {
-                let row: &[f32; L] = rows[r][c..c + L].try_into().expect("8 lanes");
                 // SAFETY: as above.
-                let rv = unsafe { _mm256_loadu_ps(row.as_ptr()) };
+                let rv = unsafe { _mm256_loadu_ps(row_at[r].add(c)) };
                 acc[r] = _mm256_add_ps(acc[r], _mm256_mul_ps(rv, xv));
             }
             c += L;
