@@ -657,8 +657,9 @@ fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
     );
     t += "Voxels include those only upsampled, as in the paper's tables. A request is rounded up to \
 whole bricks (12³ dual-grid cells) so that bricks can be cached and reused; the dependent set grows \
-from those bricks. At 512 voxels the standard scheme's dependent set fills almost the whole volume \
-on the two finest levels, which caps the ratio this volume can show. The paper's Table 1 (a horse \
+from those bricks. At 512 voxels the standard scheme's dependent set fills most of level 3 and \
+half of level 4, which caps the ratio this volume can show (BENCHMARKS.md, \"Where the dependent \
+set is thick\"). The paper's Table 1 (a horse \
 at 800–1024 voxels): levels 3 and 4 need 1.51 M and 2.48 M voxels with dual-grid correction against \
 12.0 M and 12.9 M without.\n\n";
     t += "| level | voxels (dual) | corrections (dual) | comparisons (dual) | time (dual) | voxels (std) | corrections (std) | comparisons (std) | time (std) |\n";

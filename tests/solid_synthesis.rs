@@ -362,6 +362,20 @@ fn batches_bound_the_working_set_and_leave_every_brick_unchanged() {
     let r = boxed.synthesize(&req, &store).unwrap();
     assert!(r.levels[finest].batches > 1);
     assert_eq!(all_bricks(&boxed, &store), all_bricks(&s, &whole));
+    // The dependent set counts each voxel once however the level is batched; the work
+    // (`batch_voxels`) counts the overlap again.
+    let (one, split) = (s.dependent_set(&req), batched.dependent_set(&req));
+    for (o, b) in one.iter().zip(&split) {
+        assert_eq!(
+            (b.voxels, b.corrections),
+            (o.voxels, o.corrections),
+            "level {}",
+            o.level
+        );
+        assert_eq!(o.batch_voxels, o.voxels, "level {}: one batch", o.level);
+        assert!(b.batch_voxels >= b.voxels, "level {}", b.level);
+    }
+    assert!(split[finest].batch_voxels > split[finest].voxels);
 }
 
 /// Bricks by (level, coordinates).
@@ -602,12 +616,19 @@ fn the_exact_stencil_gives_the_same_voxels_from_a_thinner_set() {
 #[test]
 fn the_flat_stencil_gives_the_same_voxels_from_a_thinner_set() {
     let (vol, field) = trivial_cube(40);
+    // Whole voxel steps of 2 are on the lattice too: reads every second voxel of the planes.
+    let mut doubled = field.clone();
+    doubled.scales.iter_mut().for_each(|s| *s = 2.0);
     let req = VoxelRequest::plane(&vol, Vec3::splat(20.0), Vec3::new(0.1, 0.2, 1.0));
     let (_, all_planes) = small();
     let (_, two_planes) = wood_layers();
-    for (name, a) in [("three planes", all_planes), ("two planes", two_planes)] {
-        let flat = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params()).unwrap();
-        let cube = SolidSynthesis::new(a.as_ref(), &field, vol, small_solid_params())
+    for (name, a, field) in [
+        ("three planes", all_planes, &field),
+        ("two planes", two_planes, &field),
+        ("two planes, scale 2", two_planes, &doubled),
+    ] {
+        let flat = SolidSynthesis::new(a.as_ref(), field, vol, small_solid_params()).unwrap();
+        let cube = SolidSynthesis::new(a.as_ref(), field, vol, small_solid_params())
             .unwrap()
             .cube_stencil();
         assert_ne!(

@@ -10,11 +10,16 @@
 //! (and only `1` = just the upsampled value).
 //!
 //! Working from the last step back to the first, the active voxels of a step whose new
-//! version is needed are dilated by the cube of radius `r` (the paper's `D × D × D` history
-//! window, `D = 2r + 1`): restricted to the same barrier cell they ask for the neighbours'
-//! latest versions, otherwise for the stage-start versions. Cubes and axis-aligned cells make
-//! both dilations separable, so each step costs three prefix-sum sweeps over the bounding box
-//! of that step's active voxels.
+//! version is needed are dilated by the stencil of what a correction reads: restricted to the
+//! same barrier cell they ask for the neighbours' latest versions, otherwise for the
+//! stage-start versions. The stencil is the cube of radius `r` (the paper's `D × D × D`
+//! history window, `D = 2r + 1`), or, where every read lies in the axis planes of the
+//! weighted exemplars (the trivial field: Dong et al.'s crossbars), only those planes'
+//! `D × D` squares ([`Stencil`]; a departure from the paper's window, which is a bound: the
+//! cube's other voxels are never read, and dilating by them only thickens the set). Boxes and
+//! axis-aligned cells make both dilations separable, so each step costs three one-axis
+//! prefix-sum sweeps over the bounding box of that step's active voxels (four for three
+//! planes).
 //!
 //! The result is exact for the stencil: synthesizing exactly these versions gives every
 //! wanted voxel the value a synthesis of the whole domain would give, whatever else was
@@ -485,8 +490,9 @@ pub fn dilate(
 }
 
 /// [`dilate_both`] by a [`Stencil`]: the cube in place, or the union of its planes' squares
-/// (each square dilates a copy; a square and a cell are both boxes, so the cut to the cell
-/// is separable per square and the union of the cut squares is the cut union).
+/// (a square and a cell are both boxes, so the cut to the cell is separable per square and
+/// the union of the cut squares is the cut union), factored so that planes sharing an axis
+/// share its pass.
 pub fn dilate_stencil(
     buf: &mut Vec<u8>,
     tmp: &mut Vec<u8>,
@@ -523,17 +529,21 @@ pub fn dilate_stencil(
         dilate_both(buf, tmp, lo, n, along(c), barriers);
         return;
     }
-    let source = std::mem::take(buf);
-    let mut union = vec![0u8; source.len()];
-    for radii in squares {
-        let mut square = source.clone();
-        dilate_both(&mut square, tmp, lo, n, radii, barriers);
-        union
-            .par_iter_mut()
-            .zip(square.par_iter())
-            .for_each(|(u, s)| *u |= s);
-    }
-    *buf = union;
+    // All three planes xy, yz, zx: with A = d_y S and B = d_z S, xy ∪ zx = d_x (A ∪ B) and
+    // yz = d_z A, four one-axis passes.
+    let or = |into: &mut [u8], from: &[u8]| {
+        into.par_iter_mut()
+            .zip(from.par_iter())
+            .for_each(|(u, s)| *u |= s)
+    };
+    let mut b = buf.clone();
+    dilate_both(buf, tmp, lo, n, along(1), barriers);
+    dilate_both(&mut b, tmp, lo, n, along(2), barriers);
+    let mut yz = buf.clone();
+    dilate_both(&mut yz, tmp, lo, n, along(2), barriers);
+    or(buf, &b);
+    dilate_both(buf, tmp, lo, n, along(0), barriers);
+    or(buf, &yz);
 }
 
 /// Two dilations of one box at once, in place in `buf` (`tmp` is scratch, resized): bit 0
