@@ -70,8 +70,13 @@ pub fn export_jump_textured(
     {
         return Err(JumpExportError::VertexCount);
     }
+    let clock = std::time::Instant::now();
     let sets = corner_sets(&mesh.triangles, param, addresses)?;
     let single = random_base_set(&sets);
+    tracing::debug!(
+        "reconstruct: corner sets at {:.3} s",
+        clock.elapsed().as_secs_f64()
+    );
     let size = (exemplar.image.width, exemplar.image.height);
     let mut surfaces = Vec::new();
     for m in std::iter::once(exemplar).chain(maps) {
@@ -95,6 +100,10 @@ pub fn export_jump_textured(
         });
     }
     let layout = chart_layout(&mesh.triangles, param, addresses, &single);
+    tracing::debug!(
+        "reconstruct: chart layout at {:.3} s",
+        clock.elapsed().as_secs_f64()
+    );
     let ramp = colour_ramp(size.0, size.1);
     let patches = BlendShader {
         sets: &sets,
