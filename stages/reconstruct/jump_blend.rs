@@ -34,28 +34,40 @@ pub fn corner_sets(
     param: &ParamParts,
     addresses: &[Vec2],
 ) -> Result<CornerSets, MissingEdge> {
-    triangles
-        .iter()
-        .enumerate()
-        .map(|(f, t)| {
-            let mut sets = [[Vec2::ZERO; 3]; 3];
-            for b in 0..3 {
-                let base = addresses[t[b] as usize];
-                for c in 0..3 {
-                    sets[b][c] = if c == b {
-                        base
-                    } else {
-                        base + param.offset(t[b], t[c]).ok_or(MissingEdge {
-                            face: f,
-                            from: t[b],
-                            to: t[c],
-                        })?
-                    };
-                }
+    use rayon::prelude::*;
+    let face_sets = |f: usize, t: &[u32; 3]| -> Result<[[Vec2; 3]; 3], MissingEdge> {
+        let mut sets = [[Vec2::ZERO; 3]; 3];
+        for b in 0..3 {
+            let base = addresses[t[b] as usize];
+            for c in 0..3 {
+                sets[b][c] = if c == b {
+                    base
+                } else {
+                    base + param.offset(t[b], t[c]).ok_or(MissingEdge {
+                        face: f,
+                        from: t[b],
+                        to: t[c],
+                    })?
+                };
             }
-            Ok(sets)
-        })
-        .collect()
+        }
+        Ok(sets)
+    };
+    // In parallel (a million faces); a failure is found again in order, so the error names
+    // the first missing edge whatever the thread count.
+    let sets: Option<CornerSets> = triangles
+        .par_iter()
+        .enumerate()
+        .map(|(f, t)| face_sets(f, t).ok())
+        .collect();
+    match sets {
+        Some(sets) => Ok(sets),
+        None => triangles
+            .iter()
+            .enumerate()
+            .map(|(f, t)| face_sets(f, t))
+            .collect(),
+    }
 }
 
 /// One set per face with a random base corner (§4.3), for formats that hold one set. The

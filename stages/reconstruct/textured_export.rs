@@ -249,56 +249,81 @@ fn export_files<S: SurfaceShader>(
     let frames = TangentFrames::new(mesh, single_set, &atlas.corner_uv);
     let mut materials: Vec<GlbMaterial> = Vec::with_capacity(pages);
     let mut baked_mtl = String::new();
-    for page in 0..pages {
-        let rebased = find("normal").map(|s| NormalRebase {
-            inner: &s.shader,
-            frames: &frames,
+    let names: Vec<String> = (0..pages)
+        .map(|page| format!("texsyn_page{page}"))
+        .collect();
+    // `baked.obj` needs only the atlas's coordinates: its text is made beside the bake (whose
+    // PNG encoding is sequential), not after it.
+    let mut baked_obj = Vec::new();
+    rayon::in_place_scope(|scope| {
+        scope.spawn(|_| {
+            // OBJ texture coordinates have v up.
+            let obj_uv: Vec<[Vec2; 3]> = atlas
+                .corner_uv
+                .iter()
+                .map(|t| t.map(|q| Vec2::new(q.x, 1.0 - q.y)))
+                .collect();
+            baked_obj = write_obj_materials(
+                mesh,
+                Some(&obj_uv),
+                Some("baked.mtl"),
+                &names,
+                Some(&atlas.face_page),
+            )
+            .into_bytes();
         });
-        let shaders: Vec<&dyn SurfaceShader> = surfaces
-            .iter()
-            .map(|s| match (&rebased, s.name.as_str()) {
-                (Some(r), "normal") => r as &dyn SurfaceShader,
-                _ => &s.shader as &dyn SurfaceShader,
-            })
-            .collect();
-        let baked = bake_page(&atlas, page, mesh, &shaders);
-        let mut material = GlbMaterial {
-            name: format!("texsyn_page{page}"),
-            double_sided: true,
-            ..Default::default()
-        };
-        let mut page_maps = MtlMaps::default();
-        for (k, (s, img)) in surfaces.iter().zip(baked).enumerate() {
-            let png = encode_png(&img, false);
-            let name = baked_name(&s.name, page, pages);
-            match s.name.as_str() {
-                _ if k == 0 => {
-                    material.base_color_png = Some(png.clone());
-                    page_maps.diffuse = Some(name.clone());
-                }
-                "normal" => {
-                    material.normal_png = Some(png.clone());
-                    page_maps.normal = Some(name.clone());
-                }
-                "roughness" => {
-                    // glTF reads roughness from green and metalness from blue.
-                    let mut mr = img;
-                    for px in mr.pixels_mut() {
-                        px.0 = [0, px.0[0], 0, 255];
+        for page in 0..pages {
+            let rebased = find("normal").map(|s| NormalRebase {
+                inner: &s.shader,
+                frames: &frames,
+            });
+            let shaders: Vec<&dyn SurfaceShader> = surfaces
+                .iter()
+                .map(|s| match (&rebased, s.name.as_str()) {
+                    (Some(r), "normal") => r as &dyn SurfaceShader,
+                    _ => &s.shader as &dyn SurfaceShader,
+                })
+                .collect();
+            let baked = bake_page(&atlas, page, mesh, &shaders);
+            let mut material = GlbMaterial {
+                name: names[page].clone(),
+                double_sided: true,
+                ..Default::default()
+            };
+            let mut page_maps = MtlMaps::default();
+            for (k, (s, img)) in surfaces.iter().zip(baked).enumerate() {
+                let png = encode_png(&img, false);
+                let name = baked_name(&s.name, page, pages);
+                match s.name.as_str() {
+                    _ if k == 0 => {
+                        material.base_color_png = Some(png.clone());
+                        page_maps.diffuse = Some(name.clone());
                     }
-                    material.metallic_roughness_png = Some(encode_png(&mr, false));
-                    page_maps.roughness = Some(name.clone());
+                    "normal" => {
+                        material.normal_png = Some(png.clone());
+                        page_maps.normal = Some(name.clone());
+                    }
+                    "roughness" => {
+                        // glTF reads roughness from green and metalness from blue.
+                        let mut mr = img;
+                        for px in mr.pixels_mut() {
+                            px.0 = [0, px.0[0], 0, 255];
+                        }
+                        material.metallic_roughness_png = Some(encode_png(&mr, false));
+                        page_maps.roughness = Some(name.clone());
+                    }
+                    "height" => page_maps.height = Some(name.clone()),
+                    _ => {}
                 }
-                "height" => page_maps.height = Some(name.clone()),
-                _ => {}
+                files.push((name, png));
             }
-            files.push((name, png));
+            baked_mtl.push_str(&write_mtl(&material.name, &page_maps));
+            materials.push(material);
+            progress(0.15 + 0.55 * (page + 1) as f32 / pages as f32);
+            lap("page baked and encoded");
         }
-        baked_mtl.push_str(&write_mtl(&material.name, &page_maps));
-        materials.push(material);
-        progress(0.15 + 0.55 * (page + 1) as f32 / pages as f32);
-        lap("page baked and encoded");
-    }
+    });
+    lap("baked.obj");
     // A .glb holds at most 4 GiB (32-bit lengths): refuse rather than write a broken file.
     let textures: usize = materials
         .iter()
@@ -314,26 +339,8 @@ fn export_files<S: SurfaceShader>(
             (textures + arrays) as f64 / (1u64 << 30) as f64
         )));
     }
-    let names: Vec<String> = materials.iter().map(|m| m.name.clone()).collect();
-    // OBJ texture coordinates have v up.
-    let obj_uv: Vec<[Vec2; 3]> = atlas
-        .corner_uv
-        .iter()
-        .map(|t| t.map(|q| Vec2::new(q.x, 1.0 - q.y)))
-        .collect();
-    files.push((
-        "baked.obj".into(),
-        write_obj_materials(
-            mesh,
-            Some(&obj_uv),
-            Some("baked.mtl"),
-            &names,
-            Some(&atlas.face_page),
-        )
-        .into_bytes(),
-    ));
+    files.push(("baked.obj".into(), baked_obj));
     files.push(("baked.mtl".into(), baked_mtl.into_bytes()));
-    lap("baked.obj");
     files.push((
         "textured.glb".into(),
         write_glb(&glb_mesh(mesh, &atlas, &frames, materials)),
@@ -366,30 +373,30 @@ fn gradient_frame(p: [Vec3; 3], t: [Vec2; 3]) -> Option<(Vec3, Vec3)> {
 
 impl TangentFrames {
     fn new(mesh: &Mesh, set: &[[Vec2; 3]], atlas_uv: &[[Vec2; 3]]) -> Self {
-        let mut exemplar = Vec::with_capacity(mesh.triangles.len());
-        let mut at = Vec::with_capacity(mesh.triangles.len());
-        for (f, t) in mesh.triangles.iter().enumerate() {
-            let p = t.map(|v| mesh.positions[v as usize]);
-            let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-            let ortho = |a: Vec3, b: Vec3| -> (Vec3, Vec3) {
-                let a = (a - a.dot(n) * n).normalize_or_zero();
-                let b = (b - b.dot(n) * n - (b.dot(a)) * a).normalize_or_zero();
-                (a, b)
-            };
-            // Texel y points down the image; normal maps' +Y points up it.
-            let (ex, ey) = gradient_frame(p, set[f])
-                .map(|(x, y)| ortho(x, -y))
-                .unwrap_or((Vec3::ZERO, Vec3::ZERO));
-            exemplar.push((ex, ey, n));
-            let (ax, ay) = gradient_frame(p, atlas_uv[f])
-                .map(|(x, y)| ortho(x, -y))
-                .unwrap_or((Vec3::ZERO, Vec3::ZERO));
-            at.push((ax, ay));
-        }
-        TangentFrames {
-            exemplar,
-            atlas: at,
-        }
+        use rayon::prelude::*;
+        let (exemplar, atlas) = mesh
+            .triangles
+            .par_iter()
+            .enumerate()
+            .map(|(f, t)| {
+                let p = t.map(|v| mesh.positions[v as usize]);
+                let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+                let ortho = |a: Vec3, b: Vec3| -> (Vec3, Vec3) {
+                    let a = (a - a.dot(n) * n).normalize_or_zero();
+                    let b = (b - b.dot(n) * n - (b.dot(a)) * a).normalize_or_zero();
+                    (a, b)
+                };
+                // Texel y points down the image; normal maps' +Y points up it.
+                let (ex, ey) = gradient_frame(p, set[f])
+                    .map(|(x, y)| ortho(x, -y))
+                    .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+                let atlas = gradient_frame(p, atlas_uv[f])
+                    .map(|(x, y)| ortho(x, -y))
+                    .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+                ((ex, ey, n), atlas)
+            })
+            .unzip();
+        TangentFrames { exemplar, atlas }
     }
 }
 
