@@ -220,12 +220,52 @@ fn compress_file(bytes: &[u8]) -> Vec<u8> {
 
 fn bundle_file(a: &Artifact, entry: &BundleEntry) -> Result<Vec<u8>, ArtifactError> {
     let packed = a.raw_array(&entry.name)?;
-    let bytes = zstd::bulk::decompress(packed, entry.len as usize)
+    let bytes = decompress_file(packed, entry.len as usize)
         .map_err(|e| ArtifactError::Meta(format!("{}: {e}", entry.name)))?;
     if ContentHash::of(&bytes) != entry.hash {
         return Err(ArtifactError::HashMismatch);
     }
     Ok(bytes)
+}
+
+/// The inverse of [`compress_file`]: a big file's frames (one per [`BUNDLE_PIECE`], each
+/// decoding to exactly that many bytes but the last) are decompressed in parallel into their
+/// places. Anything else (one frame, or frames of other sizes) is decoded as one stream.
+fn decompress_file(packed: &[u8], len: usize) -> std::io::Result<Vec<u8>> {
+    let frames = (len > BUNDLE_PIECE).then(|| split_frames(packed)).flatten();
+    let Some(frames) = frames.filter(|f| f.len() == len.div_ceil(BUNDLE_PIECE)) else {
+        return zstd::bulk::decompress(packed, len);
+    };
+    let mut out = vec![0u8; len];
+    out.par_chunks_mut(BUNDLE_PIECE)
+        .zip(frames)
+        .try_for_each(|(piece, frame)| {
+            let n = zstd::bulk::decompress_to_buffer(frame, piece)?;
+            if n == piece.len() {
+                Ok(())
+            } else {
+                Err(std::io::Error::other(format!(
+                    "a frame decoded to {n} bytes, not {}",
+                    piece.len()
+                )))
+            }
+        })?;
+    Ok(out)
+}
+
+/// The zstd frames of `packed`, or None if it does not parse as whole frames.
+fn split_frames(mut packed: &[u8]) -> Option<Vec<&[u8]>> {
+    let mut frames = Vec::new();
+    while !packed.is_empty() {
+        let n = zstd::zstd_safe::find_frame_compressed_size(packed).ok()?;
+        if n == 0 || n > packed.len() {
+            return None;
+        }
+        let (frame, rest) = packed.split_at(n);
+        frames.push(frame);
+        packed = rest;
+    }
+    Some(frames)
 }
 
 #[cfg(test)]
@@ -254,6 +294,16 @@ mod tests {
             .unwrap();
         assert_eq!(one.install(|| write_bundle(&files)), write_bundle(&files));
         assert_ne!(compress_file(&big), zstd::bulk::compress(&big, 3).unwrap());
+        // The pieces are found and decoded in parallel; a single frame of a big file (or a
+        // damaged one) still decodes, or fails, as one stream.
+        assert_eq!(split_frames(&compress_file(&big)).map(|f| f.len()), Some(3));
+        let single = zstd::bulk::compress(&big, 1).unwrap();
+        assert_eq!(decompress_file(&single, big.len()).unwrap(), big);
+        let mut damaged = compress_file(&big);
+        let mid = damaged.len() / 2;
+        damaged[mid] ^= 0xff;
+        assert_ne!(decompress_file(&damaged, big.len()).ok(), Some(big.clone()));
+        assert!(decompress_file(&compress_file(&big), big.len() - 1).is_err());
     }
 
     #[test]

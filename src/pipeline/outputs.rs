@@ -460,9 +460,8 @@ pub fn owner_is_dead(pid: u32, path: &Path) -> bool {
 }
 
 fn write_synced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    use std::io::Write;
-    let mut f = fs::File::create(path)?;
-    f.write_all(bytes)?;
+    let f = fs::File::create(path)?;
+    crate::cache::write_parallel(&f, bytes)?;
     f.sync_all()
 }
 
