@@ -45,7 +45,6 @@ pub(crate) fn write_parallel(f: &File, bytes: &[u8]) -> std::io::Result<()> {
     f.write_all(bytes)
 }
 
-
 /// The format version is in the directory name, so a future layout change starts a fresh
 /// store beside the old one instead of misreading it.
 const OBJECTS_DIR: &str = "objects-v1";
