@@ -255,7 +255,10 @@ fn export_files<S: SurfaceShader>(
     // `baked.obj` needs only the atlas's coordinates: its text is made beside the bake (whose
     // PNG encoding is sequential), not after it.
     let mut baked_obj = Vec::new();
+    let mut glb = GlbMesh::default();
     rayon::in_place_scope(|scope| {
+        // So are the .glb's vertex arrays; its materials are attached after the bake.
+        scope.spawn(|_| glb = glb_mesh(mesh, &atlas, &frames, find("normal").is_some()));
         scope.spawn(|_| {
             // OBJ texture coordinates have v up.
             let obj_uv: Vec<[Vec2; 3]> = atlas
@@ -343,7 +346,10 @@ fn export_files<S: SurfaceShader>(
     files.push(("baked.mtl".into(), baked_mtl.into_bytes()));
     files.push((
         "textured.glb".into(),
-        write_glb(&glb_mesh(mesh, &atlas, &frames, materials)),
+        {
+            attach_materials(&mut glb, materials);
+            write_glb(&glb)
+        },
     ));
     progress(0.95);
     lap("textured.glb");
@@ -429,7 +435,7 @@ fn glb_mesh(
     mesh: &Mesh,
     atlas: &ChartAtlas,
     frames: &TangentFrames,
-    materials: Vec<GlbMaterial>,
+    want_tangents: bool,
 ) -> GlbMesh {
     let normals = mesh.vertex_normals();
     let faces = mesh.triangles.len();
@@ -490,7 +496,6 @@ fn glb_mesh(
         handedness.push(if wsum < 0.0 { -1.0 } else { 1.0 });
     }
     // Tangents only matter to a normal map (the validator flags unused ones).
-    let want_tangents = materials.iter().any(|m| m.normal_png.is_some());
     let tangents = if want_tangents {
         tangent_sum
             .iter()
@@ -507,14 +512,12 @@ fn glb_mesh(
     } else {
         Vec::new()
     };
-    let mut per_page: Vec<Vec<u32>> = vec![Vec::new(); materials.len().max(1)];
+    let mut per_page: Vec<Vec<u32>> = vec![Vec::new(); atlas.pages.len().max(1)];
     for f in 0..faces {
         let page = atlas.face_page[f] as usize;
         per_page[page].extend_from_slice(&corner_vertex[3 * f..3 * f + 3]);
     }
-    let mut materials = materials.into_iter();
     let mut pages = per_page.into_iter();
-    let material = materials.next().unwrap_or_default();
     let indices = pages.next().unwrap_or_default();
     GlbMesh {
         name: "texsyn".into(),
@@ -525,11 +528,22 @@ fn glb_mesh(
         colors: None,
         extra: Vec::new(),
         indices,
-        material,
+        material: GlbMaterial::default(),
         more_primitives: pages
-            .zip(materials)
-            .map(|(indices, material)| GlbPrimitive { indices, material })
+            .map(|indices| GlbPrimitive {
+                indices,
+                material: GlbMaterial::default(),
+            })
             .collect(),
+    }
+}
+
+/// Gives the .glb's primitives (one per page, in page order) their baked materials.
+fn attach_materials(glb: &mut GlbMesh, materials: Vec<GlbMaterial>) {
+    let mut materials = materials.into_iter();
+    glb.material = materials.next().unwrap_or_default();
+    for (primitive, material) in glb.more_primitives.iter_mut().zip(materials) {
+        primitive.material = material;
     }
 }
 
