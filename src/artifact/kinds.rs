@@ -237,20 +237,19 @@ fn decompress_file(packed: &[u8], len: usize) -> std::io::Result<Vec<u8>> {
         return zstd::bulk::decompress(packed, len);
     };
     let mut out = vec![0u8; len];
-    out.par_chunks_mut(BUNDLE_PIECE)
+    let whole = out
+        .par_chunks_mut(BUNDLE_PIECE)
         .zip(frames)
-        .try_for_each(|(piece, frame)| {
-            let n = zstd::bulk::decompress_to_buffer(frame, piece)?;
-            if n == piece.len() {
-                Ok(())
-            } else {
-                Err(std::io::Error::other(format!(
-                    "a frame decoded to {n} bytes, not {}",
-                    piece.len()
-                )))
-            }
-        })?;
-    Ok(out)
+        .all(|(piece, frame)| {
+            zstd::bulk::decompress_to_buffer(frame, piece).is_ok_and(|n| n == piece.len())
+        });
+    if whole {
+        Ok(out)
+    } else {
+        // Damaged, or split otherwise: decoded again as one stream, whose error (if any) does
+        // not depend on which frame a thread met first.
+        zstd::bulk::decompress(packed, len)
+    }
 }
 
 /// The zstd frames of `packed`, or None if it does not parse as whole frames.
@@ -299,11 +298,44 @@ mod tests {
         assert_eq!(split_frames(&compress_file(&big)).map(|f| f.len()), Some(3));
         let single = zstd::bulk::compress(&big, 1).unwrap();
         assert_eq!(decompress_file(&single, big.len()).unwrap(), big);
-        let mut damaged = compress_file(&big);
-        let mid = damaged.len() / 2;
-        damaged[mid] ^= 0xff;
-        assert_ne!(decompress_file(&damaged, big.len()).ok(), Some(big.clone()));
         assert!(decompress_file(&compress_file(&big), big.len() - 1).is_err());
+        // Frames of another size than the pieces still decode (as one stream).
+        let halves: Vec<u8> = big
+            .chunks(BUNDLE_PIECE / 2)
+            .flat_map(|c| zstd::bulk::compress(c, 1).unwrap())
+            .collect();
+        assert_eq!(decompress_file(&halves, big.len()).unwrap(), big);
+        // A bundle whose big file is damaged in any frame, or cut short, is an error, with
+        // the same message for any thread count.
+        let stored = write_bundle(&files);
+        let a = Artifact::from_bytes(stored.clone()).unwrap();
+        let view = Bundle::decode(&a).unwrap();
+        let packed_at = {
+            let packed = a.raw_array("big.bin").unwrap();
+            packed.as_ptr() as usize - a.file_bytes().as_ptr() as usize
+        };
+        let frames = split_frames(a.raw_array("big.bin").unwrap()).unwrap();
+        let mut at = packed_at;
+        for frame in &frames {
+            let mut damaged = stored.clone();
+            // A byte in the middle of the frame's compressed data.
+            damaged[at + frame.len() / 2] ^= 0x5a;
+            let d = Artifact::from_bytes(damaged).unwrap();
+            let err = |threads: usize| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap()
+                    .install(|| bundle_file(&d, &view.entries[1]).map_err(|e| e.to_string()))
+            };
+            let (one, three) = (err(1), err(3));
+            assert!(one.is_err(), "a damaged frame decoded to the right bytes");
+            assert_eq!(one, three);
+            at += frame.len();
+        }
+        let packed = a.raw_array("big.bin").unwrap();
+        let cut = &packed[..packed.len() - frames.last().unwrap().len() / 2];
+        assert!(decompress_file(cut, big.len()).is_err());
     }
 
     #[test]

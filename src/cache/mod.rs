@@ -29,17 +29,22 @@ use std::time::{Duration, SystemTime};
 const WRITE_PIECE: usize = 16 << 20;
 
 /// Writes `bytes` to the empty file `f`, big ones in [`WRITE_PIECE`]s in parallel (Unix;
-/// elsewhere in one piece). The file's bytes are the same either way.
+/// elsewhere in one piece). The file's bytes are the same either way. Only for a temporary
+/// file that is renamed into place after `sync_all`: the file gets its full length first, so
+/// a failed or interrupted write leaves holes of zeros, not a short file. The error is the
+/// first failed piece's, whatever the thread count.
 pub(crate) fn write_parallel(f: &File, bytes: &[u8]) -> std::io::Result<()> {
     #[cfg(unix)]
     if bytes.len() > WRITE_PIECE {
         use rayon::prelude::*;
         use std::os::unix::fs::FileExt;
         f.set_len(bytes.len() as u64)?;
-        return bytes
+        let results: Vec<std::io::Result<()>> = bytes
             .par_chunks(WRITE_PIECE)
             .enumerate()
-            .try_for_each(|(i, piece)| f.write_all_at(piece, (i * WRITE_PIECE) as u64));
+            .map(|(i, piece)| f.write_all_at(piece, (i * WRITE_PIECE) as u64))
+            .collect();
+        return results.into_iter().collect();
     }
     let mut f = f;
     f.write_all(bytes)

@@ -256,9 +256,11 @@ fn export_files<S: SurfaceShader>(
     // PNG encoding is sequential), not after it.
     let mut baked_obj = Vec::new();
     let mut glb = GlbMesh::default();
+    // Tangents only for a normal map, which is never the first surface (the base colour).
+    let normal_map = surfaces.iter().skip(1).any(|s| s.name == "normal");
     rayon::in_place_scope(|scope| {
         // So are the .glb's vertex arrays; its materials are attached after the bake.
-        scope.spawn(|_| glb = glb_mesh(mesh, &atlas, &frames, find("normal").is_some()));
+        scope.spawn(|_| glb = glb_mesh(mesh, &atlas, &frames, normal_map));
         scope.spawn(|_| {
             // OBJ texture coordinates have v up.
             let obj_uv: Vec<[Vec2; 3]> = atlas
@@ -344,13 +346,10 @@ fn export_files<S: SurfaceShader>(
     }
     files.push(("baked.obj".into(), baked_obj));
     files.push(("baked.mtl".into(), baked_mtl.into_bytes()));
-    files.push((
-        "textured.glb".into(),
-        {
-            attach_materials(&mut glb, materials);
-            write_glb(&glb)
-        },
-    ));
+    files.push(("textured.glb".into(), {
+        attach_materials(&mut glb, materials);
+        write_glb(&glb)
+    }));
     progress(0.95);
     lap("textured.glb");
     Ok(files)
