@@ -804,11 +804,13 @@ struct Scratch {
     vec: Vec<f32>,
     proj: [Vec<f32>; 3],
     cands: Vec<Triple>,
-    keys: Vec<u128>,
+    /// The distinct candidates, in the order of first visits.
+    unique: Vec<Triple>,
     /// Sample positions of an integrated neighbourhood (`field_integration`).
     positions: Vec<Vec3>,
-    /// Open-addressing set of keys seen in this correction (entries stamped with `stamp`).
-    seen: Vec<(u128, u32)>,
+    /// Open-addressing set of the triples seen in this correction (entries stamped with
+    /// `stamp`): 16 bytes an entry, the triple itself is the key.
+    seen: Vec<(Triple, u32)>,
     /// Plane distances of this correction (entries stamped with `stamp`).
     memo: PlaneDistances,
     stamp: u32,
@@ -1728,9 +1730,9 @@ impl<'a> SolidSynthesis<'a> {
             vec: vec![0.0; self.analysis.dim(li)],
             proj: [vec![0.0; c], vec![0.0; c], vec![0.0; c]],
             cands: Vec::with_capacity(27 * (self.analysis.k() + 1)),
-            keys: Vec::with_capacity(27 * (self.analysis.k() + 1)),
+            unique: Vec::with_capacity(27 * (self.analysis.k() + 1)),
             positions: Vec::new(),
-            seen: vec![(0, 0); (54 * (self.analysis.k() + 1)).next_power_of_two()],
+            seen: vec![(Triple::default(), 0); (54 * (self.analysis.k() + 1)).next_power_of_two()],
             // At most one distance per plane of each of the 27 (k + 1) candidates.
             memo: PlaneDistances::new(3 * 27 * (self.analysis.k() + 1)),
             stamp: 0,
@@ -1983,8 +1985,9 @@ impl<'a> SolidSynthesis<'a> {
                 sc.cands.iter_mut().for_each(|c| c.c[p] = [0, 0]);
             }
         }
-        // Deduplicate by a packed key (a small hash set), keeping the order of first visits.
-        sc.keys.clear();
+        // Deduplicate (a small hash set of the triples themselves), keeping the order of
+        // first visits.
+        sc.unique.clear();
         sc.stamp = sc.stamp.wrapping_add(1);
         if sc.stamp == 0 {
             sc.seen.iter_mut().for_each(|e| e.1 = 0);
@@ -1993,35 +1996,31 @@ impl<'a> SolidSynthesis<'a> {
         }
         let mask = sc.seen.len() - 1;
         for c in &sc.cands {
-            let key = triple_key(c);
-            let mut i = ((key as u64 ^ (key >> 64) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-                >> 40) as usize
-                & mask;
+            let mut i = triple_hash(c) & mask;
             loop {
                 let e = &mut sc.seen[i];
                 if e.1 != sc.stamp {
-                    *e = (key, sc.stamp);
-                    sc.keys.push(key);
+                    *e = (*c, sc.stamp);
+                    sc.unique.push(*c);
                     break;
                 }
-                if e.0 == key {
+                if e.0 == *c {
                     break;
                 }
                 i = (i + 1) & mask;
             }
         }
-        let mut best = (f32::INFINITY, triple_of_key(sc.keys[0]));
-        let prefetch = |key: u128| prefetch_candidate(a, li, weights, key);
+        let mut best = (f32::INFINITY, sc.unique[0]);
+        let prefetch = |t: &Triple| prefetch_candidate(a, li, weights, t);
         // The features of the candidates are scattered over the exemplar's stack: ask for
         // them a few candidates ahead (a hint only; the values compared are the same).
-        for key in sc.keys.iter().take(PREFETCH_AHEAD) {
-            prefetch(*key);
+        for t in sc.unique.iter().take(PREFETCH_AHEAD) {
+            prefetch(t);
         }
-        for (ki, key) in sc.keys.iter().enumerate() {
-            if let Some(next) = sc.keys.get(ki + PREFETCH_AHEAD) {
-                prefetch(*next);
+        for (ki, cand) in sc.unique.iter().enumerate() {
+            if let Some(next) = sc.unique.get(ki + PREFETCH_AHEAD) {
+                prefetch(next);
             }
-            let cand = &triple_of_key(*key);
             let mut e = 0.0f32;
             for p in 0..3 {
                 if weights[p] == 0.0 {
@@ -2040,7 +2039,7 @@ impl<'a> SolidSynthesis<'a> {
                 best = (e, *cand);
             }
         }
-        let comparisons = sc.keys.len() as u32;
+        let comparisons = sc.unique.len() as u32;
         let t = best.1;
         (
             VoxelState {
@@ -2092,17 +2091,13 @@ fn round_v(v: Vec3) -> IVec3 {
     IVec3::new(round_i(v.x), round_i(v.y), round_i(v.z))
 }
 
-#[inline]
-fn triple_key(t: &Triple) -> u128 {
-    t.c.iter()
-        .flatten()
-        .fold(0u128, |k, &x| (k << 16) | x as u128)
-}
-
-#[inline]
-fn triple_of_key(k: u128) -> Triple {
-    let x = |i: u32| (k >> (16 * (5 - i))) as u16;
-    Triple::new([x(0), x(1)], [x(2), x(3)], [x(4), x(5)])
+/// A hash of a triple's 12 bytes (for the deduplication's table; its bits only choose where
+/// probing starts, never what is kept).
+#[inline(always)]
+fn triple_hash(t: &Triple) -> usize {
+    let w: [u32; 3] = bytemuck::cast(*t);
+    let lo = w[0] as u64 | (w[1] as u64) << 32;
+    ((lo ^ (w[2] as u64).rotate_left(29)).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize
 }
 
 /// Largest neighbourhood side N (the analysis allows 3..=15).
@@ -2124,10 +2119,9 @@ fn lattice_steps(c1: Vec3, c2: Vec3) -> Option<((usize, i32), (usize, i32))> {
     (a.0 != b.0).then_some((a, b))
 }
 
-/// Asks for the features of candidate `key` (a hint only).
+/// Asks for the features of candidate `cand` (a hint only).
 #[inline(always)]
-fn prefetch_candidate(a: &SolidAnalysisRef, li: usize, weights: [f32; 3], key: u128) {
-    let cand = triple_of_key(key);
+fn prefetch_candidate(a: &SolidAnalysisRef, li: usize, weights: [f32; 3], cand: &Triple) {
     for p in 0..3 {
         if weights[p] != 0.0 {
             prefetch_slice(a.feature(li, a.image_of(p), cand.c[p]));
