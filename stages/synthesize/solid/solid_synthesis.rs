@@ -750,46 +750,16 @@ struct VoxelState {
 /// [`ChunkedNeed`]; `start` is the snapshot at the start of a stage with barriers.
 struct States<'n> {
     need: &'n ChunkedNeed,
-    cur: Values,
-    start: Values,
-}
-
-/// Voxel values in two parallel arrays (structure of arrays): the neighbourhood gather reads
-/// only colours, and with them apart from the triples its loads touch 12 bytes per voxel,
-/// not 24, so twice as many neighbours share a cache line.
-#[derive(Default)]
-struct Values {
-    t: Vec<Triple>,
-    c: Vec<[f32; 3]>,
-}
-
-impl Values {
-    fn zeroed(n: usize) -> Values {
-        Values {
-            t: vec![Triple::default(); n],
-            c: vec![[0.0; 3]; n],
-        }
-    }
-
-    /// Copies `other` into `self`, reusing `self`'s allocations.
-    fn copy_from(&mut self, other: &Values) {
-        self.t.clone_from(&other.t);
-        self.c.clone_from(&other.c);
-    }
-
-    #[inline]
-    fn set(&mut self, slot: usize, s: VoxelState) {
-        self.t[slot] = s.t;
-        self.c[slot] = s.c;
-    }
+    cur: Vec<VoxelState>,
+    start: Vec<VoxelState>,
 }
 
 impl<'n> States<'n> {
     fn new(need: &'n ChunkedNeed) -> States<'n> {
         States {
             need,
-            cur: Values::zeroed(need.chunk_voxels() as usize),
-            start: Values::default(),
+            cur: vec![VoxelState::default(); need.chunk_voxels() as usize],
+            start: Vec::new(),
         }
     }
 
@@ -960,7 +930,7 @@ struct Batch {
 ///
 /// What this bounds: planning a batch allocates its dependent set densely over its box
 /// (`box_voxels` bytes, and about eight more per voxel for a moment while dilating);
-/// synthesizing it holds two sets of [`Values`] (a triple and a colour, 24 bytes) per working voxel
+/// synthesizing it holds two [`VoxelState`]s of 24 bytes per working voxel
 /// (`2 · 24 · chunk_voxels`), the corrections of one step (an eighth of them with
 /// subpasses), the batch's parent bricks and the bricks it makes. Between batches only the
 /// plans (about a byte per working voxel) and the bricks of the level being made and the
@@ -1633,13 +1603,11 @@ impl<'a> SolidSynthesis<'a> {
         let level = li as u32 + 1;
         let mut st = States::new(need);
         st.cur
-            .t
             .par_chunks_mut(CHUNK_VOXELS)
-            .zip(st.cur.c.par_chunks_mut(CHUNK_VOXELS))
             .zip(need.origins().par_iter())
             .enumerate()
-            .for_each(|(k, ((dt, dc), &origin))| {
-                for (m, &x) in need.chunk(k).iter().enumerate() {
+            .for_each(|(k, (dst, &origin))| {
+                for (m, (slot, &x)) in dst.iter_mut().zip(need.chunk(k)).enumerate() {
                     if x == 0 {
                         continue;
                     }
@@ -1649,8 +1617,10 @@ impl<'a> SolidSynthesis<'a> {
                     } else {
                         self.upsample(li, v, parents)
                     };
-                    dt[m] = t;
-                    dc[m] = self.analysis.match_colour(li, &t);
+                    *slot = VoxelState {
+                        t,
+                        c: self.analysis.match_colour(li, &t),
+                    };
                 }
             });
         let schedule = &self.schedules[li];
@@ -1661,7 +1631,7 @@ impl<'a> SolidSynthesis<'a> {
             if step.stage != stage {
                 stage = step.stage;
                 if !window.barriers.is_empty() {
-                    st.start.copy_from(&st.cur);
+                    st.start.clone_from(&st.cur);
                 }
             }
             let threshold = 1 + step.version_after() as u8;
@@ -1688,12 +1658,12 @@ impl<'a> SolidSynthesis<'a> {
                 .collect();
             for (k, (done, c)) in results.into_iter().enumerate() {
                 for (m, s) in done {
-                    st.cur.set(k * CHUNK_VOXELS + m as usize, s);
+                    st.cur[k * CHUNK_VOXELS + m as usize] = s;
                 }
                 comparisons += c;
             }
         }
-        st.start = Values::default();
+        st.start = Vec::new();
         let m = self.m();
         let dims = self.pyramid.level_dims(level);
         let bricks = out
@@ -1706,7 +1676,7 @@ impl<'a> SolidSynthesis<'a> {
                         for x in 0..m {
                             let v = lo + IVec3::new(x, y, z);
                             triples.push(if v.cmpge(IVec3::ZERO).all() && v.cmplt(dims).all() {
-                                st.cur.t[st.slot(v)]
+                                st.cur[st.slot(v)].t
                             } else {
                                 Triple::default()
                             });
@@ -1834,25 +1804,19 @@ impl<'a> SolidSynthesis<'a> {
         let mat = Mat3::from_quat(q);
         let h = a.spacing(li) as f32;
         let (clo, chi) = window.latest_box(v);
-        // Where voxel `p` (clamped to the level) is read: its slot, from `cur` inside the
-        // latest window and from `start` outside.
-        let read = |p: IVec3| -> (&Values, usize) {
+        let read = |p: IVec3| -> &VoxelState {
             let p = p.clamp(IVec3::ZERO, dmax);
             let slot = st.slot(p);
             if p.cmpge(clo).all() && p.cmplt(chi).all() {
-                (&st.cur, slot)
+                &st.cur[slot]
             } else {
-                (&st.start, slot)
+                &st.start[slot]
             }
-        };
-        let colour = |p: IVec3| -> [f32; 3] {
-            let (src, slot) = read(p);
-            src.c[slot]
         };
         let trilinear = self.params.levels[li].trilinear;
         let sample = |p: Vec3| -> [f32; 3] {
             if !trilinear {
-                return colour(round_v(p));
+                return read(round_v(p)).c;
             }
             let f = p.floor();
             let t = p - f;
@@ -1866,7 +1830,7 @@ impl<'a> SolidSynthesis<'a> {
                 if wt == 0.0 {
                     continue;
                 }
-                let c = colour(b + o);
+                let c = read(b + o).c;
                 for ch in 0..3 {
                     acc[ch] += wt * c[ch];
                 }
@@ -1952,10 +1916,7 @@ impl<'a> SolidSynthesis<'a> {
             let mut distinct = 0;
             for d2 in -1..=1 {
                 for d1 in -1..=1 {
-                    let triple = |wv: IVec3| {
-                        let (src, slot) = read(wv);
-                        src.t[slot]
-                    };
+                    let triple = |wv: IVec3| read(wv).t;
                     // The neighbour `w`'s triple, the pixel it names in `p` shifted back by
                     // `w`'s exemplar offset `e`, and `−e` rounded (eq. 4).
                     let (tw, px, back) = if let Some(f) = &whole {
@@ -2082,14 +2043,14 @@ fn gather_lattice(
     (tc, lc, inc): (usize, usize, bool),
     out: &mut [f32],
 ) {
-    let (cur, start) = (&st.cur.c[..], &st.start.c[..]);
+    let (cur, start) = (&st.cur[..], &st.start[..]);
     let mut o = 0;
     for &(tb, lb, inb) in rows {
         let (t, l, inside) = (tb + tc, lb + lc, inb && inc);
         for &(ta, la, ina) in cols {
             let slot = st.need.slot_of_parts(ta + t, la + l);
             let src = if ina && inside { cur } else { start };
-            out[o..o + 3].copy_from_slice(&src[slot]);
+            out[o..o + 3].copy_from_slice(&src[slot].c);
             o += 3;
         }
     }
