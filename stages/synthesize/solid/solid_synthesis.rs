@@ -774,11 +774,13 @@ struct Scratch {
     vec: Vec<f32>,
     proj: [Vec<f32>; 3],
     cands: Vec<Triple>,
-    keys: Vec<u128>,
+    /// The distinct candidates, in the order of first visits.
+    unique: Vec<Triple>,
     /// Sample positions of an integrated neighbourhood (`field_integration`).
     positions: Vec<Vec3>,
-    /// Open-addressing set of keys seen in this correction (entries stamped with `stamp`).
-    seen: Vec<(u128, u32)>,
+    /// Open-addressing set of the triples seen in this correction (entries stamped with
+    /// `stamp`): 16 bytes an entry, the triple itself is the key.
+    seen: Vec<(Triple, u32)>,
     /// Plane distances of this correction (entries stamped with `stamp`).
     memo: PlaneDistances,
     stamp: u32,
@@ -1698,9 +1700,9 @@ impl<'a> SolidSynthesis<'a> {
             vec: vec![0.0; self.analysis.dim(li)],
             proj: [vec![0.0; c], vec![0.0; c], vec![0.0; c]],
             cands: Vec::with_capacity(27 * (self.analysis.k() + 1)),
-            keys: Vec::with_capacity(27 * (self.analysis.k() + 1)),
+            unique: Vec::with_capacity(27 * (self.analysis.k() + 1)),
             positions: Vec::new(),
-            seen: vec![(0, 0); (54 * (self.analysis.k() + 1)).next_power_of_two()],
+            seen: vec![(Triple::default(), 0); (54 * (self.analysis.k() + 1)).next_power_of_two()],
             // At most one distance per plane of each of the 27 (k + 1) candidates.
             memo: PlaneDistances::new(3 * 27 * (self.analysis.k() + 1)),
             stamp: 0,
@@ -1837,6 +1839,7 @@ impl<'a> SolidSynthesis<'a> {
         };
         let nh = (a.n(li) / 2) as i32;
         let vf = v.as_vec3();
+        let whole = WholeFrame::of(&mat, s, h / s);
         let comps = a.components(li);
         let dim = a.dim(li);
         sc.cands.clear();
@@ -1913,14 +1916,30 @@ impl<'a> SolidSynthesis<'a> {
             let mut distinct = 0;
             for d2 in -1..=1 {
                 for d1 in -1..=1 {
-                    let wv = round_v(vf + c1 * d1 as f32 + c2 * d2 as f32).clamp(IVec3::ZERO, dmax);
-                    let tw = read(wv).t;
-                    let e = mat.transpose() * ((wv - v).as_vec3() * (h / s));
-                    let (e1, e2) = (e[p], e[(p + 1) % 3]);
-                    let px = [
-                        wrap(round_i(tw.c[p][0] as f32 - e1), w),
-                        wrap(round_i(tw.c[p][1] as f32 - e2), hh),
-                    ];
+                    let triple = |wv: IVec3| read(wv).t;
+                    // The neighbour `w`'s triple, the pixel it names in `p` shifted back by
+                    // `w`'s exemplar offset `e`, and `−e` rounded (eq. 4).
+                    let (tw, px, back) = if let Some(f) = &whole {
+                        let wv = f.neighbour(v, p, d1, d2).clamp(IVec3::ZERO, dmax);
+                        let tw = triple(wv);
+                        let e = f.shift(wv - v);
+                        let px = [
+                            wrap(tw.c[p][0] as i32 - e[p], w),
+                            wrap(tw.c[p][1] as i32 - e[(p + 1) % 3], hh),
+                        ];
+                        (tw, px, -e)
+                    } else {
+                        let wv =
+                            round_v(vf + c1 * d1 as f32 + c2 * d2 as f32).clamp(IVec3::ZERO, dmax);
+                        let tw = triple(wv);
+                        let e = mat.transpose() * ((wv - v).as_vec3() * (h / s));
+                        let (e1, e2) = (e[p], e[(p + 1) % 3]);
+                        let px = [
+                            wrap(round_i(tw.c[p][0] as f32 - e1), w),
+                            wrap(round_i(tw.c[p][1] as f32 - e2), hh),
+                        ];
+                        (tw, px, -round_v(e))
+                    };
                     if !pixels[..distinct].contains(&px) {
                         pixels[distinct] = px;
                         distinct += 1;
@@ -1932,7 +1951,7 @@ impl<'a> SolidSynthesis<'a> {
                     }
                     if self.params.coherent_candidates {
                         // The neighbour's whole triple, shifted back (eq. 4).
-                        sc.cands.push(tw.offset((-round_v(e)).into(), w, hh));
+                        sc.cands.push(tw.offset(back.into(), w, hh));
                     }
                 }
             }
@@ -1944,8 +1963,9 @@ impl<'a> SolidSynthesis<'a> {
                 sc.cands.iter_mut().for_each(|c| c.c[p] = [0, 0]);
             }
         }
-        // Deduplicate by a packed key (a small hash set), keeping the order of first visits.
-        sc.keys.clear();
+        // Deduplicate (a small hash set of the triples themselves), keeping the order of
+        // first visits.
+        sc.unique.clear();
         sc.stamp = sc.stamp.wrapping_add(1);
         if sc.stamp == 0 {
             sc.seen.iter_mut().for_each(|e| e.1 = 0);
@@ -1954,35 +1974,31 @@ impl<'a> SolidSynthesis<'a> {
         }
         let mask = sc.seen.len() - 1;
         for c in &sc.cands {
-            let key = triple_key(c);
-            let mut i = ((key as u64 ^ (key >> 64) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-                >> 40) as usize
-                & mask;
+            let mut i = triple_hash(c) & mask;
             loop {
                 let e = &mut sc.seen[i];
                 if e.1 != sc.stamp {
-                    *e = (key, sc.stamp);
-                    sc.keys.push(key);
+                    *e = (*c, sc.stamp);
+                    sc.unique.push(*c);
                     break;
                 }
-                if e.0 == key {
+                if e.0 == *c {
                     break;
                 }
                 i = (i + 1) & mask;
             }
         }
-        let mut best = (f32::INFINITY, triple_of_key(sc.keys[0]));
-        let prefetch = |key: u128| prefetch_candidate(a, li, weights, key);
+        let mut best = (f32::INFINITY, sc.unique[0]);
+        let prefetch = |t: &Triple| prefetch_candidate(a, li, weights, t);
         // The features of the candidates are scattered over the exemplar's stack: ask for
         // them a few candidates ahead (a hint only; the values compared are the same).
-        for key in sc.keys.iter().take(PREFETCH_AHEAD) {
-            prefetch(*key);
+        for t in sc.unique.iter().take(PREFETCH_AHEAD) {
+            prefetch(t);
         }
-        for (ki, key) in sc.keys.iter().enumerate() {
-            if let Some(next) = sc.keys.get(ki + PREFETCH_AHEAD) {
-                prefetch(*next);
+        for (ki, cand) in sc.unique.iter().enumerate() {
+            if let Some(next) = sc.unique.get(ki + PREFETCH_AHEAD) {
+                prefetch(next);
             }
-            let cand = &triple_of_key(*key);
             let mut e = 0.0f32;
             for p in 0..3 {
                 if weights[p] == 0.0 {
@@ -2001,7 +2017,7 @@ impl<'a> SolidSynthesis<'a> {
                 best = (e, *cand);
             }
         }
-        let comparisons = sc.keys.len() as u32;
+        let comparisons = sc.unique.len() as u32;
         let t = best.1;
         (
             VoxelState {
@@ -2053,17 +2069,64 @@ fn round_v(v: Vec3) -> IVec3 {
     IVec3::new(round_i(v.x), round_i(v.y), round_i(v.z))
 }
 
-#[inline]
-fn triple_key(t: &Triple) -> u128 {
-    t.c.iter()
-        .flatten()
-        .fold(0u128, |k, &x| (k << 16) | x as u128)
+/// A hash of a triple's 12 bytes (for the deduplication's table; its bits only choose where
+/// probing starts, never what is kept).
+#[inline(always)]
+fn triple_hash(t: &Triple) -> usize {
+    let w: [u32; 3] = bytemuck::cast(*t);
+    let lo = w[0] as u64 | (w[1] as u64) << 32;
+    ((lo ^ (w[2] as u64).rotate_left(29)).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize
 }
 
-#[inline]
-fn triple_of_key(k: u128) -> Triple {
-    let x = |i: u32| (k >> (16 * (5 - i))) as u16;
-    Triple::new([x(0), x(1)], [x(2), x(3)], [x(4), x(5)])
+/// A frame whose rotation is a signed permutation (entries 0 and ±1), at a whole scale `s`,
+/// with a whole number `h/s` of exemplar pixels per voxel step: the trivial field's. Then
+/// the candidates' float arithmetic is exact integer arithmetic, done here in integers: the
+/// neighbour `[v + s q d]` is `v + s q d` (every coordinate a small integer, exact in `f32`,
+/// so the rounding returns it), and its exemplar offset `qᵀ (w − v) h/s` is a sum of
+/// products of 0 or ±1 with small whole numbers, each exact, so its roundings return it
+/// too. The same values as the float path, bit for bit.
+struct WholeFrame {
+    /// The rotation's columns.
+    axes: [IVec3; 3],
+    s: i32,
+    /// Exemplar pixels per voxel step, `h/s`.
+    hs: i32,
+}
+
+impl WholeFrame {
+    /// The whole frame of rotation `mat`, scale `s` and step `hs = h/s` (as the float path
+    /// computes it), if it is one; magnitudes are bounded so that every intermediate value
+    /// of the float path stays an integer below 2²⁴.
+    #[inline]
+    fn of(mat: &Mat3, s: f32, hs: f32) -> Option<WholeFrame> {
+        let unit = mat
+            .to_cols_array()
+            .iter()
+            .all(|&x| x == 0.0 || x == 1.0 || x == -1.0);
+        let small = |x: f32| (1.0..=1024.0).contains(&x) && (x as i32) as f32 == x;
+        (unit && small(s) && small(hs)).then(|| WholeFrame {
+            axes: [0, 1, 2].map(|k| mat.col(k).as_ivec3()),
+            s: s as i32,
+            hs: hs as i32,
+        })
+    }
+
+    /// `v + s (d₁ q_p + d₂ q_{p+1})`: the neighbour at in-plane offset `(d₁, d₂)` of plane
+    /// `p`, before clamping.
+    #[inline(always)]
+    fn neighbour(&self, v: IVec3, p: usize, d1: i32, d2: i32) -> IVec3 {
+        v + self.axes[p] * (self.s * d1) + self.axes[(p + 1) % 3] * (self.s * d2)
+    }
+
+    /// `qᵀ x · h/s`.
+    #[inline(always)]
+    fn shift(&self, x: IVec3) -> IVec3 {
+        IVec3::new(
+            self.axes[0].dot(x),
+            self.axes[1].dot(x),
+            self.axes[2].dot(x),
+        ) * self.hs
+    }
 }
 
 /// Largest neighbourhood side N (the analysis allows 3..=15).
@@ -2085,10 +2148,9 @@ fn lattice_steps(c1: Vec3, c2: Vec3) -> Option<((usize, i32), (usize, i32))> {
     (a.0 != b.0).then_some((a, b))
 }
 
-/// Asks for the features of candidate `key` (a hint only).
+/// Asks for the features of candidate `cand` (a hint only).
 #[inline(always)]
-fn prefetch_candidate(a: &SolidAnalysisRef, li: usize, weights: [f32; 3], key: u128) {
-    let cand = triple_of_key(key);
+fn prefetch_candidate(a: &SolidAnalysisRef, li: usize, weights: [f32; 3], cand: &Triple) {
     for p in 0..3 {
         if weights[p] != 0.0 {
             prefetch_slice(a.feature(li, a.image_of(p), cand.c[p]));
@@ -2386,6 +2448,72 @@ mod tests {
                 .sum();
             assert!((d as f64 - exact).abs() <= 1e-4 * (1.0 + exact), "n = {n}");
         }
+    }
+
+    #[test]
+    fn whole_frames_give_the_float_paths_values() {
+        // The float path of the candidates' shifted pixels, as `correct` computes it.
+        let float = |mat: Mat3, s: f32, h: f32, v: IVec3, p: usize, d: (i32, i32)| {
+            let (c1, c2) = (mat.col(p) * s, mat.col((p + 1) % 3) * s);
+            let wv = round_v(v.as_vec3() + c1 * d.0 as f32 + c2 * d.1 as f32);
+            let e = mat.transpose() * ((wv - v).as_vec3() * (h / s));
+            (wv, e)
+        };
+        let frames = [
+            Mat3::IDENTITY,
+            Mat3::from_cols(-Vec3::Y, Vec3::X, Vec3::Z),
+            Mat3::from_cols(Vec3::Y, -Vec3::Z, -Vec3::X),
+            Mat3::from_cols(-Vec3::X, -Vec3::Y, Vec3::Z),
+        ];
+        let mut checked = 0;
+        for mat in frames {
+            for (s, h) in [
+                (1.0f32, 1.0f32),
+                (1.0, 8.0),
+                (2.0, 4.0),
+                (2.0, 2.0),
+                (4.0, 8.0),
+            ] {
+                let f = WholeFrame::of(&mat, s, h / s).expect("a whole frame");
+                for v in [
+                    IVec3::new(0, 0, 0),
+                    IVec3::new(17, 3, 250),
+                    IVec3::new(5, 900, 41),
+                ] {
+                    for p in 0..3 {
+                        for d2 in -1..=1 {
+                            for d1 in -1..=1 {
+                                let (wv, e) = float(mat, s, h, v, p, (d1, d2));
+                                assert_eq!(f.neighbour(v, p, d1, d2), wv);
+                                // Off the unclamped neighbour too (clamping moves `w`).
+                                for w in [wv, wv + IVec3::new(1, -2, 0)] {
+                                    let e = if w == wv {
+                                        e
+                                    } else {
+                                        mat.transpose() * ((w - v).as_vec3() * (h / s))
+                                    };
+                                    let i = f.shift(w - v);
+                                    assert_eq!(i, round_v(e), "{mat} s {s} h {h}");
+                                    for t in [0u16, 7, 300, 32767] {
+                                        for k in 0..3 {
+                                            assert_eq!(t as i32 - i[k], round_i(t as f32 - e[k]));
+                                        }
+                                    }
+                                    checked += 1;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(checked > 1000);
+        // Not whole: a fractional pixel step, a fractional scale, a rotation off the axes.
+        assert!(WholeFrame::of(&Mat3::IDENTITY, 3.0, 4.0 / 3.0).is_none());
+        assert!(WholeFrame::of(&Mat3::IDENTITY, 1.5, 2.0 / 1.5).is_none());
+        let tilted = Mat3::from_quat(glam::Quat::from_rotation_z(0.1));
+        assert!(WholeFrame::of(&tilted, 1.0, 1.0).is_none());
+        assert!(WholeFrame::of(&(Mat3::IDENTITY * 0.5), 2.0, 1.0).is_none());
     }
 
     #[test]
