@@ -2078,7 +2078,8 @@ fn triple_hash(t: &Triple) -> usize {
     ((lo ^ (w[2] as u64).rotate_left(29)).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize
 }
 
-/// A frame whose rotation is a signed permutation (entries 0 and ±1), at a whole scale `s`,
+/// A frame whose rotation has entries 0 and ±1 only (the trivial field's signed
+/// permutations; the argument below needs no more than that), at a whole scale `s`,
 /// with a whole number `h/s` of exemplar pixels per voxel step: the trivial field's. Then
 /// the candidates' float arithmetic is exact integer arithmetic, done here in integers: the
 /// neighbour `[v + s q d]` is `v + s q d` (every coordinate a small integer, exact in `f32`,
@@ -2096,7 +2097,8 @@ struct WholeFrame {
 impl WholeFrame {
     /// The whole frame of rotation `mat`, scale `s` and step `hs = h/s` (as the float path
     /// computes it), if it is one; magnitudes are bounded so that every intermediate value
-    /// of the float path stays an integer below 2²⁴.
+    /// of the float path stays an integer below 2²³ (≤ 3 · 2048 · 1024 ≈ 6.3 M), where
+    /// `x + 0.5` and its floor are exact too.
     #[inline]
     fn of(mat: &Mat3, s: f32, hs: f32) -> Option<WholeFrame> {
         let unit = mat
