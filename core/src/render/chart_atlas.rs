@@ -623,7 +623,7 @@ pub fn build_chart_atlas(
             // One task per candidate: candidates are ordered by lowest face, so the big ones sit
             // together, and rayon's default split (a few pieces, each run sequentially unless
             // stolen early) left them all to one thread: growing took as long on two threads
-            // as on one (1.9 s on the 1.4M-triangle elephant; 1.1 + 0.9 s of work per thread
+            // as on one (1.9 s on the 1.4M-triangle elephant; 1.2 + 0.9 s of work per thread
             // with one task each).
             .with_max_len(1)
             .map(|(root, fs)| {
