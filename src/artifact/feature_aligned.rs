@@ -8,7 +8,7 @@
 //! the input) are checked by the node that joins them, as an internal error.
 
 use super::format::inconsistent;
-use super::{Artifact, ArtifactError, ArtifactWriter, Format, Kind};
+use super::{AlignedBytes, Artifact, ArtifactError, ArtifactWriter, Format, Kind};
 use crate::geom::Mesh;
 use crate::geom::edge_refine::Refined;
 use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
@@ -52,7 +52,7 @@ fn from_csr(start: &[u32], vertices: &[u32], closed: &[u8]) -> Vec<Polyline> {
 impl Format for ShapeFeatures {
     const KIND: Kind = Kind::ShapeFeatures;
     type View<'a> = ShapeFeatures;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         let (start, vertices, closed) = to_csr(&self.curves.iter().collect::<Vec<_>>());
         let kinds: Vec<u8> = self.kinds.iter().map(|&k| k as u8).collect();
         ArtifactWriter::new(Self::KIND, &self.source)
@@ -99,7 +99,7 @@ struct TextureFeatureMeta {
 impl Format for TextureFeatures {
     const KIND: Kind = Kind::TextureFeatures;
     type View<'a> = TextureFeatures;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         let mut start = vec![0u32];
         let mut points: Vec<[f32; 2]> = Vec::new();
         for l in &self.lines {
@@ -165,7 +165,7 @@ struct FieldMeta {
 impl Format for OrientedField {
     const KIND: Kind = Kind::FeatureField;
     type View<'a> = OrientedField;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         let f = &self.field;
         let (start, vertices, closed) =
             to_csr(&f.curves.iter().map(|(c, _)| c).collect::<Vec<_>>());
@@ -218,7 +218,7 @@ impl Format for OrientedField {
 impl Format for Refined {
     const KIND: Kind = Kind::RefinedMesh;
     type View<'a> = Refined;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &self.input_vertices)
             .array("positions", &self.mesh.positions)
             .array("triangles", &self.mesh.triangles)
@@ -258,7 +258,7 @@ impl Format for Refined {
 impl Format for SurfaceSynthesis {
     const KIND: Kind = Kind::SurfaceColours;
     type View<'a> = SurfaceSynthesis;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &self.stats)
             .array("colours", &self.colours)
             .array("source", &self.source)

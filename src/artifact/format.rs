@@ -7,7 +7,7 @@
 //! builds artifact bytes: methods return owned values from their nodes and receive views,
 //! and the pipeline writes and opens the artifacts.
 
-use super::{Artifact, ArtifactError, Kind};
+use super::{AlignedBytes, Artifact, ArtifactError, Kind};
 
 /// An artifact format. `Self` is the owned value a node computes; [`Format::View`] is what a
 /// node reading it sees (zero-copy where the arrays are used in place).
@@ -18,7 +18,7 @@ pub trait Format: Send + Sync + 'static {
     /// (meshes), an owned copy; otherwise borrowed slices of the artifact.
     type View<'a>;
     /// The complete artifact bytes (header, metadata, arrays).
-    fn write(&self) -> Vec<u8>;
+    fn write(&self) -> AlignedBytes;
     /// Views an artifact already checked to be of [`Format::KIND`]. Checks that lengths agree
     /// with each other and with the metadata, so damage is an error here and never an
     /// out-of-bounds index later.
@@ -65,7 +65,7 @@ macro_rules! format_pair {
         impl $crate::artifact::Format for $owned {
             const KIND: $crate::artifact::Kind = $crate::artifact::Kind::$kind;
             type View<'a> = $view<'a>;
-            fn write(&self) -> Vec<u8> {
+            fn write(&self) -> AlignedBytes {
                 $crate::artifact::ArtifactWriter::new(Self::KIND, &self.$meta)
                     $(.array(stringify!($array), &self.$array))*
                     .finish()

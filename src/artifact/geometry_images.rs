@@ -7,7 +7,7 @@
 //! owned types are the stages' and the core's (an owned/borrowed pair would need a borrowed
 //! twin of each there), and three store metadata that is not one of their fields.
 
-use super::{Artifact, ArtifactError, ArtifactWriter, Format, Kind};
+use super::{AlignedBytes, Artifact, ArtifactError, ArtifactWriter, Format, Kind};
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::stages::analyse_exemplar::texel_variants::{TexelVariants, TexelVariantsRef};
 use crate::stages::field::param_field::ParamField;
@@ -23,7 +23,7 @@ impl Format for GeometryImage {
     const KIND: Kind = Kind::GeometryImage;
     /// Copied: synthesis and reconstruction want owned grids.
     type View<'a> = GeometryImage;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Kind::GeometryImage, &self.n)
             .array("positions", &self.positions)
             .array("normals", &self.normals)
@@ -68,7 +68,7 @@ impl Format for TexelImage {
     const KIND: Kind = Kind::TexelImage;
     /// Copied, like the geometry image.
     type View<'a> = TexelImage;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(
             Kind::TexelImage,
             &TexelMeta {
@@ -102,7 +102,7 @@ impl Format for ParamField {
     const KIND: Kind = Kind::ParamField;
     /// Copied, like the geometry image it belongs to.
     type View<'a> = ParamField;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Kind::ParamField, &(self.dir.len() as u64))
             .array("dir", &self.dir)
             .array("rel_scale", &self.rel_scale)
@@ -127,7 +127,7 @@ impl Format for ParamField {
 impl Format for TexelVariants {
     const KIND: Kind = Kind::TexelVariants;
     type View<'a> = TexelVariantsRef<'a>;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Kind::TexelVariants, &self.meta)
             .arrays_bytes(self.arrays())
             .finish()

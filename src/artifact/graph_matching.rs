@@ -6,7 +6,7 @@
 //! into, so a damaged artifact is an error here, never an out-of-bounds index later.
 
 use super::format::inconsistent;
-use super::{Artifact, ArtifactError, ArtifactWriter, Format, Kind};
+use super::{AlignedBytes, Artifact, ArtifactError, ArtifactWriter, Format, Kind};
 use crate::stages::analyse_exemplar::gaussian_stack::{GaussianStack, StackMeta};
 use crate::stages::field::sweep_field::{FieldKeys, SweepField};
 use crate::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
@@ -35,7 +35,7 @@ struct HierarchyMeta {
 impl Format for Sqrt2Hierarchy {
     const KIND: Kind = Kind::Sqrt2Hierarchy;
     type View<'a> = Sqrt2Hierarchy;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         let meta = HierarchyMeta {
             input_vertices: self.input_vertices,
             level_vertices: self.level_vertices.clone(),
@@ -103,7 +103,7 @@ impl Format for Sqrt2Hierarchy {
 impl Format for FieldKeys {
     const KIND: Kind = Kind::FieldKeys;
     type View<'a> = FieldKeys;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &(self.vertices.len() as u64))
             .array("vertices", &self.vertices)
             .array("directions", &self.directions)
@@ -130,7 +130,7 @@ impl Format for FieldKeys {
 impl Format for SweepField {
     const KIND: Kind = Kind::SweepField;
     type View<'a> = SweepField;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &self.passes)
             .array("orientation", &self.orientation)
             .array("sweep", &self.sweep)
@@ -158,7 +158,7 @@ impl Format for SweepField {
 impl Format for GaussianStack {
     const KIND: Kind = Kind::GaussianStack;
     type View<'a> = GaussianStack;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &self.meta)
             .array("texels", &self.texels)
             .finish()
@@ -181,7 +181,7 @@ impl Format for GaussianStack {
 impl Format for GraphMatching {
     const KIND: Kind = Kind::VertexColours;
     type View<'a> = GraphMatching;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &self.stats)
             .array("colours", &self.colours)
             .array("level_colours", &self.level_colours)

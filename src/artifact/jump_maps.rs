@@ -4,7 +4,7 @@
 //! against each other so a damaged artifact is an error, never an out-of-bounds index later.
 
 use super::format::inconsistent;
-use super::{Artifact, ArtifactError, ArtifactWriter, Format, Kind};
+use super::{AlignedBytes, Artifact, ArtifactError, ArtifactWriter, Format, Kind};
 use crate::stages::analyse_exemplar::jump_map::{Jump, JumpMap, JumpMapRef};
 pub use crate::stages::parameterize::jump_parameterization::{
     JumpParameterization, ParamMeta, ParamParts,
@@ -23,7 +23,7 @@ struct JumpMapMeta {
 impl Format for JumpMap {
     const KIND: Kind = Kind::JumpMap;
     type View<'a> = JumpMapRef<'a>;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         let meta = JumpMapMeta {
             width: self.width,
             height: self.height,
@@ -46,7 +46,7 @@ pub struct OrientationField(pub Vec<Vec3>);
 impl Format for OrientationField {
     const KIND: Kind = Kind::OrientationField;
     type View<'a> = &'a [Vec3];
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &(self.0.len() as u64))
             .array("up", &self.0)
             .finish()

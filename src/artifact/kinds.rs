@@ -1,7 +1,9 @@
 //! The formats every method uses: meshes, images and file bundles (what reconstruct nodes
 //! export).
 
-use super::{Artifact, ArtifactError, ArtifactWriter, ContentHash, Format, Kind, ReadOwned};
+use super::{
+    AlignedBytes, Artifact, ArtifactError, ArtifactWriter, ContentHash, Format, Kind, ReadOwned,
+};
 use crate::geom::Mesh;
 use crate::image::{Image, ImageView};
 use glam::Vec3;
@@ -19,7 +21,7 @@ impl Format for Mesh {
     const KIND: Kind = Kind::Mesh;
     /// An owned copy: algorithms want meshes that cache their adjacency.
     type View<'a> = Mesh;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         write_mesh(self)
     }
     fn decode(a: &Artifact) -> Result<Mesh, ArtifactError> {
@@ -33,7 +35,7 @@ impl ReadOwned for Mesh {
     }
 }
 
-fn write_mesh(mesh: &Mesh) -> Vec<u8> {
+fn write_mesh(mesh: &Mesh) -> AlignedBytes {
     let mut w = ArtifactWriter::new(
         Kind::Mesh,
         &MeshMeta {
@@ -88,7 +90,7 @@ struct ImageMeta {
 impl Format for Image {
     const KIND: Kind = Kind::Image;
     type View<'a> = ImageView<'a>;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         write_image(self)
     }
     fn decode(a: &Artifact) -> Result<ImageView<'_>, ArtifactError> {
@@ -96,7 +98,7 @@ impl Format for Image {
     }
 }
 
-fn write_image(img: &Image) -> Vec<u8> {
+fn write_image(img: &Image) -> AlignedBytes {
     ArtifactWriter::new(
         Kind::Image,
         &ImageMeta {
@@ -160,9 +162,10 @@ pub struct BundleRef<'a> {
     pub entries: Vec<BundleEntry>,
 }
 
-impl BundleRef<'_> {
-    /// One file's bytes, decompressed and checked against its hash.
-    pub fn file(&self, entry: &BundleEntry) -> Result<Vec<u8>, ArtifactError> {
+impl<'a> BundleRef<'a> {
+    /// One file's bytes, decompressed (or in place, if stored uncompressed) and checked against
+    /// its hash.
+    pub fn file(&self, entry: &BundleEntry) -> Result<std::borrow::Cow<'a, [u8]>, ArtifactError> {
         bundle_file(self.artifact, entry)
     }
 }
@@ -170,7 +173,7 @@ impl BundleRef<'_> {
 impl Format for Bundle {
     const KIND: Kind = Kind::FileBundle;
     type View<'a> = BundleRef<'a>;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         write_bundle(&self.files)
     }
     fn decode(a: &Artifact) -> Result<BundleRef<'_>, ArtifactError> {
@@ -181,9 +184,17 @@ impl Format for Bundle {
     }
 }
 
-/// The files a reconstruct node exports, zstd-compressed (DESIGN.md: zstd for what is not
-/// read by random access).
-fn write_bundle(files: &[(String, Vec<u8>)]) -> Vec<u8> {
+/// The files a reconstruct node exports: each one zstd-compressed (DESIGN.md: zstd for what is
+/// not read by random access), except files above [`BUNDLE_PIECE`], which are stored as they
+/// are, under the array name [`RAW`]`NAME`.
+///
+/// Why big files are not compressed: a million-triangle mesh's exports are over 300 MB of OBJ
+/// and glTF, and zstd level 1 runs at about 150 MB/s per core on the machines texsyn is measured
+/// on, so compressing them (and decompressing them again to write the outputs) took longer than
+/// writing them uncompressed: the cache copy is about 1.6× bigger, the run about a second
+/// shorter (BENCHMARKS.md, issue 15). Bundles written before (big files in 16 MiB level-1
+/// frames under their plain name) are still read.
+fn write_bundle(files: &[(String, Vec<u8>)]) -> AlignedBytes {
     let entries: Vec<BundleEntry> = files
         .par_iter()
         .map(|(name, bytes)| BundleEntry {
@@ -193,44 +204,63 @@ fn write_bundle(files: &[(String, Vec<u8>)]) -> Vec<u8> {
         })
         .collect();
     let mut w = ArtifactWriter::new(Kind::FileBundle, &entries);
-    let packed: Vec<Vec<u8>> = files.par_iter().map(|(_, b)| compress_file(b)).collect();
-    for ((name, _), packed) in files.iter().zip(packed) {
-        w = w.array_bytes(name, packed);
+    let packed: Vec<Option<Vec<u8>>> = files
+        .par_iter()
+        .map(|(_, b)| (b.len() <= BUNDLE_PIECE).then(|| compress_file(b)))
+        .collect();
+    for ((name, bytes), packed) in files.iter().zip(packed) {
+        w = match packed {
+            Some(packed) => w.array_bytes(name, packed),
+            None => w.array_slice(&format!("{RAW}{name}"), bytes),
+        };
     }
     w.finish()
 }
 
-/// Files above this size are compressed in pieces of it, in parallel.
+/// Files above this size are stored uncompressed (see [`write_bundle`]); bundles of earlier
+/// versions compressed them in pieces of this size.
 const BUNDLE_PIECE: usize = 16 << 20;
 
-/// One file, zstd level 3: one frame, or for a big file one frame per [`BUNDLE_PIECE`] at
-/// level 1 (a million-triangle mesh's exports are hundreds of megabytes: level 3 took longer
-/// than making them) compressed in parallel and concatenated (zstd decodes concatenated frames
-/// as one stream, so readers do not change). Each frame is made single-threaded: the bytes
-/// depend only on the input and the zstd version (pinned by Cargo.lock), not on the thread
-/// count.
+/// The array name prefix of a file stored uncompressed. Output names are plain file names
+/// (no `/`), so no compressed file's array can carry it.
+const RAW: &str = "raw/";
+
+/// One file, zstd level 3 in one frame.
 fn compress_file(bytes: &[u8]) -> Vec<u8> {
-    if bytes.len() <= BUNDLE_PIECE {
-        return zstd::bulk::compress(bytes, 3).expect("zstd compression of memory");
-    }
-    let frame = |b: &[u8]| zstd::bulk::compress(b, 1).expect("zstd compression of memory");
-    let frames: Vec<Vec<u8>> = bytes.par_chunks(BUNDLE_PIECE).map(frame).collect();
-    frames.concat()
+    zstd::bulk::compress(bytes, 3).expect("zstd compression of memory")
 }
 
-fn bundle_file(a: &Artifact, entry: &BundleEntry) -> Result<Vec<u8>, ArtifactError> {
-    let packed = a.raw_array(&entry.name)?;
-    let bytes = decompress_file(packed, entry.len as usize)
-        .map_err(|e| ArtifactError::Meta(format!("{}: {e}", entry.name)))?;
+fn bundle_file<'a>(
+    a: &'a Artifact,
+    entry: &BundleEntry,
+) -> Result<std::borrow::Cow<'a, [u8]>, ArtifactError> {
+    let bytes = match a.raw_array(&format!("{RAW}{}", entry.name)) {
+        Ok(raw) if raw.len() as u64 == entry.len => std::borrow::Cow::Borrowed(raw),
+        Ok(raw) => {
+            return Err(ArtifactError::Meta(format!(
+                "{}: {} bytes stored, {} listed",
+                entry.name,
+                raw.len(),
+                entry.len
+            )));
+        }
+        Err(_) => {
+            let packed = a.raw_array(&entry.name)?;
+            decompress_file(packed, entry.len as usize)
+                .map_err(|e| ArtifactError::Meta(format!("{}: {e}", entry.name)))?
+                .into()
+        }
+    };
     if ContentHash::of(&bytes) != entry.hash {
         return Err(ArtifactError::HashMismatch);
     }
     Ok(bytes)
 }
 
-/// The inverse of [`compress_file`]: a big file's frames (one per [`BUNDLE_PIECE`], each
-/// decoding to exactly that many bytes but the last) are decompressed in parallel into their
-/// places. Anything else (one frame, or frames of other sizes) is decoded as one stream.
+/// A compressed file of a bundle. Bundles of earlier versions stored a big file as one
+/// level-1 frame per [`BUNDLE_PIECE`] (each decoding to exactly that many bytes but the last):
+/// those frames are decompressed in parallel into their places. Anything else (one frame, or
+/// frames of other sizes) is decoded as one stream.
 fn decompress_file(packed: &[u8], len: usize) -> std::io::Result<Vec<u8>> {
     let frames = (len > BUNDLE_PIECE).then(|| split_frames(packed)).flatten();
     let Some(frames) = frames.filter(|f| f.len() == len.div_ceil(BUNDLE_PIECE)) else {
@@ -271,34 +301,102 @@ fn split_frames(mut packed: &[u8]) -> Option<Vec<&[u8]>> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn big_bundle_files_round_trip_through_pieces() {
-        // Three pieces (the last short) of bytes that are not periodic in the piece size.
-        let big: Vec<u8> = (0..2 * BUNDLE_PIECE + 12345)
+    /// Bytes that are not periodic in the old piece size.
+    fn big_file() -> Vec<u8> {
+        (0..2 * BUNDLE_PIECE + 12345)
             .map(|i| ((i * 2_654_435_761usize) >> 13) as u8 ^ (i / 1000) as u8)
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn big_bundle_files_are_stored_uncompressed_and_read_in_place() {
+        let big = big_file();
         let files = vec![
-            ("small.txt".to_string(), b"hi".to_vec()),
+            ("small.txt".to_string(), b"hi hi hi hi hi hi".to_vec()),
             ("big.bin".to_string(), big.clone()),
         ];
-        let a = Artifact::from_bytes(write_bundle(&files)).unwrap();
+        let stored = write_bundle(&files);
+        let a = Artifact::from_bytes(stored.clone()).unwrap();
         let view = Bundle::decode(&a).unwrap();
         assert_eq!(view.entries.len(), 2);
-        assert_eq!(view.file(&view.entries[1]).unwrap(), big);
-        assert_eq!(view.file(&view.entries[0]).unwrap(), b"hi");
-        // More than one frame was written, and the same bytes with one thread.
+        // The big file is its own bytes, under the raw name, and is read without a copy; the
+        // small one is compressed under its plain name.
+        assert_eq!(a.raw_array("raw/big.bin").unwrap(), &big[..]);
+        assert!(a.raw_array("big.bin").is_err());
+        let read = view.file(&view.entries[1]).unwrap();
+        assert!(matches!(read, std::borrow::Cow::Borrowed(_)));
+        assert_eq!(&read[..], &big[..]);
+        assert!(a.raw_array("raw/small.txt").is_err());
+        assert_ne!(a.raw_array("small.txt").unwrap(), b"hi hi hi hi hi hi");
+        assert_eq!(
+            &view.file(&view.entries[0]).unwrap()[..],
+            b"hi hi hi hi hi hi"
+        );
+        // The same bytes with one thread.
         let one = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
             .build()
             .unwrap();
-        assert_eq!(one.install(|| write_bundle(&files)), write_bundle(&files));
-        assert_ne!(compress_file(&big), zstd::bulk::compress(&big, 3).unwrap());
-        // The pieces are found and decoded in parallel; a single frame of a big file (or a
+        assert_eq!(one.install(|| write_bundle(&files)), stored);
+        // A damaged byte of the stored file, or a length that disagrees with the entry, is an
+        // error.
+        let at = a.raw_array("raw/big.bin").unwrap().as_ptr() as usize
+            - a.file_bytes().as_ptr() as usize;
+        let mut damaged = stored.clone();
+        damaged[at + BUNDLE_PIECE] ^= 0x5a;
+        let d = Artifact::from_bytes(damaged).unwrap();
+        assert!(matches!(
+            bundle_file(&d, &view.entries[1]),
+            Err(ArtifactError::HashMismatch)
+        ));
+        let mut longer = view.entries[1].clone();
+        longer.len += 1;
+        assert!(bundle_file(&a, &longer).is_err());
+    }
+
+    /// Bundles of the version before: a big file as 16 MiB level-1 frames under its plain name.
+    fn old_bundle(files: &[(String, Vec<u8>)]) -> AlignedBytes {
+        let entries: Vec<BundleEntry> = files
+            .iter()
+            .map(|(name, bytes)| BundleEntry {
+                name: name.clone(),
+                len: bytes.len() as u64,
+                hash: ContentHash::of(bytes),
+            })
+            .collect();
+        let mut w = ArtifactWriter::new(Kind::FileBundle, &entries);
+        for (name, b) in files {
+            let packed = if b.len() <= BUNDLE_PIECE {
+                compress_file(b)
+            } else {
+                b.chunks(BUNDLE_PIECE)
+                    .flat_map(|c| zstd::bulk::compress(c, 1).unwrap())
+                    .collect()
+            };
+            w = w.array_bytes(name, packed);
+        }
+        w.finish()
+    }
+
+    #[test]
+    fn bundles_of_the_version_before_are_still_read() {
+        let big = big_file();
+        let files = vec![
+            ("small.txt".to_string(), b"hi".to_vec()),
+            ("big.bin".to_string(), big.clone()),
+        ];
+        let stored = old_bundle(&files);
+        let a = Artifact::from_bytes(stored.clone()).unwrap();
+        let view = Bundle::view(&a).unwrap();
+        assert_eq!(&view.file(&view.entries[1]).unwrap()[..], &big[..]);
+        assert_eq!(&view.file(&view.entries[0]).unwrap()[..], b"hi");
+        // Their frames are found and decoded in parallel; a single frame of a big file (or a
         // damaged one) still decodes, or fails, as one stream.
-        assert_eq!(split_frames(&compress_file(&big)).map(|f| f.len()), Some(3));
+        let packed = a.raw_array("big.bin").unwrap();
+        assert_eq!(split_frames(packed).map(|f| f.len()), Some(3));
         let single = zstd::bulk::compress(&big, 1).unwrap();
         assert_eq!(decompress_file(&single, big.len()).unwrap(), big);
-        assert!(decompress_file(&compress_file(&big), big.len() - 1).is_err());
+        assert!(decompress_file(packed, big.len() - 1).is_err());
         // Frames of another size than the pieces still decode (as one stream).
         let halves: Vec<u8> = big
             .chunks(BUNDLE_PIECE / 2)
@@ -307,14 +405,8 @@ mod tests {
         assert_eq!(decompress_file(&halves, big.len()).unwrap(), big);
         // A bundle whose big file is damaged in any frame, or cut short, is an error, with
         // the same message for any thread count.
-        let stored = write_bundle(&files);
-        let a = Artifact::from_bytes(stored.clone()).unwrap();
-        let view = Bundle::decode(&a).unwrap();
-        let packed_at = {
-            let packed = a.raw_array("big.bin").unwrap();
-            packed.as_ptr() as usize - a.file_bytes().as_ptr() as usize
-        };
-        let frames = split_frames(a.raw_array("big.bin").unwrap()).unwrap();
+        let packed_at = packed.as_ptr() as usize - a.file_bytes().as_ptr() as usize;
+        let frames = split_frames(packed).unwrap();
         let mut at = packed_at;
         for frame in &frames {
             let mut damaged = stored.clone();
@@ -326,14 +418,17 @@ mod tests {
                     .num_threads(threads)
                     .build()
                     .unwrap()
-                    .install(|| bundle_file(&d, &view.entries[1]).map_err(|e| e.to_string()))
+                    .install(|| {
+                        bundle_file(&d, &view.entries[1])
+                            .map(|b| b.len())
+                            .map_err(|e| e.to_string())
+                    })
             };
             let (one, three) = (err(1), err(3));
             assert!(one.is_err(), "a damaged frame decoded to the right bytes");
             assert_eq!(one, three);
             at += frame.len();
         }
-        let packed = a.raw_array("big.bin").unwrap();
         let cut = &packed[..packed.len() - frames.last().unwrap().len() / 2];
         assert!(decompress_file(cut, big.len()).is_err());
     }
@@ -363,7 +458,7 @@ mod tests {
         assert_eq!(entries.len(), 2);
         for (e, (name, bytes)) in entries.iter().zip(&files) {
             assert_eq!(&e.name, name);
-            assert_eq!(&bundle_file(&a, e).unwrap(), bytes);
+            assert_eq!(&bundle_file(&a, e).unwrap()[..], &bytes[..]);
         }
         let mut wrong = entries[0].clone();
         wrong.hash = ContentHash::of(b"other");

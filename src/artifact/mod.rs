@@ -34,6 +34,7 @@ pub mod solid;
 pub use format::{Format, ReadOwned};
 pub use kinds::Bundle;
 use memmap2::Mmap;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 use std::fmt;
 
@@ -292,14 +293,16 @@ fn align_up(n: usize) -> usize {
     n.div_ceil(ALIGN) * ALIGN
 }
 
-/// Builds an artifact's bytes: metadata plus named arrays.
-pub struct ArtifactWriter {
+/// Builds an artifact's bytes: metadata plus named arrays. Arrays are borrowed where the
+/// caller has them (a million-triangle mesh's arrays and exports are hundreds of megabytes:
+/// each copy costs a pass over fresh memory) and copied once, into the file's bytes.
+pub struct ArtifactWriter<'a> {
     kind: Kind,
     meta: Vec<u8>,
-    arrays: Vec<(String, Vec<u8>)>,
+    arrays: Vec<(String, std::borrow::Cow<'a, [u8]>)>,
 }
 
-impl ArtifactWriter {
+impl<'a> ArtifactWriter<'a> {
     pub fn new<M: Serialize>(kind: Kind, meta: &M) -> Self {
         ArtifactWriter {
             kind,
@@ -308,32 +311,38 @@ impl ArtifactWriter {
         }
     }
 
-    pub fn array<T: bytemuck::Pod>(mut self, name: &str, data: &[T]) -> Self {
+    pub fn array<T: bytemuck::Pod>(mut self, name: &str, data: &'a [T]) -> Self {
         // x86-64 and every platform we build for are little-endian, so the in-memory
         // bytes of a Pod slice are its little-endian representation.
         self.arrays
-            .push((name.to_owned(), bytemuck::cast_slice(data).to_vec()));
+            .push((name.to_owned(), bytemuck::cast_slice(data).into()));
         self
     }
 
     pub fn array_bytes(mut self, name: &str, data: Vec<u8>) -> Self {
-        self.arrays.push((name.to_owned(), data));
+        self.arrays.push((name.to_owned(), data.into()));
         self
     }
 
-    /// [`ArtifactWriter::array_bytes`] for each of `arrays`, in order (a value's own list of
+    /// [`ArtifactWriter::array_bytes`] of borrowed bytes.
+    pub fn array_slice(mut self, name: &str, data: &'a [u8]) -> Self {
+        self.arrays.push((name.to_owned(), data.into()));
+        self
+    }
+
+    /// [`ArtifactWriter::array_slice`] for each of `arrays`, in order (a value's own list of
     /// named arrays, as the stages give it).
-    pub fn arrays_bytes<'b, N: AsRef<str>>(
+    pub fn arrays_bytes<N: AsRef<str>>(
         self,
-        arrays: impl IntoIterator<Item = (N, &'b [u8])>,
+        arrays: impl IntoIterator<Item = (N, &'a [u8])>,
     ) -> Self {
-        arrays.into_iter().fold(self, |w, (name, data)| {
-            w.array_bytes(name.as_ref(), data.to_vec())
-        })
+        arrays
+            .into_iter()
+            .fold(self, |w, (name, data)| w.array_slice(name.as_ref(), data))
     }
 
     /// The complete file bytes.
-    pub fn finish(self) -> Vec<u8> {
+    pub fn finish(self) -> AlignedBytes {
         // The envelope's array offsets depend on its own length, so lay out with a first
         // guess, then fix up once (the offsets are fixed-width, so the length is stable).
         let mut descs: Vec<ArrayDesc> = self
@@ -361,13 +370,26 @@ impl ArtifactWriter {
         });
         debug_assert_eq!(env.len(), env_len);
         let payload_len = offset;
-        let mut out = vec![0u8; HEADER_LEN + payload_len];
+        // Zeroed by the allocator (fresh pages are zero), filled in parallel: on the machines
+        // texsyn is measured on, first touching a page costs more than copying into it, so a
+        // 300 MB export bundle's one copy is split over the cores.
+        let mut out = AlignedBytes::zeroed(HEADER_LEN + payload_len);
         {
             let payload = &mut out[HEADER_LEN..];
             payload[..env.len()].copy_from_slice(&env);
+            let mut places: Vec<(&mut [u8], &[u8])> = Vec::new();
+            let mut rest = &mut payload[env.len()..];
+            let mut at = env.len();
             for (d, (_, data)) in descs.iter().zip(&self.arrays) {
-                payload[d.offset as usize..d.offset as usize + data.len()].copy_from_slice(data);
+                let (_, tail) = std::mem::take(&mut rest).split_at_mut(d.offset as usize - at);
+                let (place, tail) = tail.split_at_mut(data.len());
+                rest = tail;
+                at = d.offset as usize + data.len();
+                places.extend(place.chunks_mut(COPY_PIECE).zip(data.chunks(COPY_PIECE)));
             }
+            places
+                .into_par_iter()
+                .for_each(|(place, data)| place.copy_from_slice(data));
         }
         let hash = ContentHash::of(&out[HEADER_LEN..]);
         out[0..8].copy_from_slice(MAGIC);
@@ -401,14 +423,64 @@ impl Backing {
 #[repr(C, align(64))]
 struct Block([u8; 64]);
 
+/// Pieces of an artifact's arrays copied side by side in [`ArtifactWriter::finish`].
+const COPY_PIECE: usize = 4 << 20;
+
 /// Bytes in a 64-byte-aligned buffer, so typed views of in-memory artifacts are as aligned
-/// as those of mapped files (a plain `Vec<u8>` only promises 1).
+/// as those of mapped files (a plain `Vec<u8>` only promises 1). What
+/// [`ArtifactWriter::finish`] makes and [`Artifact::from_bytes`] takes without a copy.
+#[derive(Clone)]
 pub struct AlignedBytes {
     blocks: Vec<Block>,
     len: usize,
 }
 
+impl std::ops::Deref for AlignedBytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        self.as_slice()
+    }
+}
+
+impl std::ops::DerefMut for AlignedBytes {
+    fn deref_mut(&mut self) -> &mut [u8] {
+        &mut bytemuck::cast_slice_mut::<Block, u8>(&mut self.blocks)[..self.len]
+    }
+}
+
+impl PartialEq for AlignedBytes {
+    fn eq(&self, other: &Self) -> bool {
+        self.as_slice() == other.as_slice()
+    }
+}
+
+impl fmt::Debug for AlignedBytes {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "AlignedBytes({} bytes)", self.len)
+    }
+}
+
+impl From<Vec<u8>> for AlignedBytes {
+    fn from(bytes: Vec<u8>) -> Self {
+        AlignedBytes::from_slice(&bytes)
+    }
+}
+
+impl From<&[u8]> for AlignedBytes {
+    fn from(bytes: &[u8]) -> Self {
+        AlignedBytes::from_slice(bytes)
+    }
+}
+
 impl AlignedBytes {
+    /// `len` zero bytes, from the allocator's zeroed memory (no pass over it).
+    pub fn zeroed(len: usize) -> Self {
+        AlignedBytes {
+            blocks: bytemuck::zeroed_vec(len.div_ceil(64)),
+            len,
+        }
+    }
+
     pub fn from_slice(bytes: &[u8]) -> Self {
         let mut blocks = vec![Block([0; 64]); bytes.len().div_ceil(64)];
         bytemuck::cast_slice_mut::<Block, u8>(&mut blocks)[..bytes.len()].copy_from_slice(bytes);
@@ -476,8 +548,8 @@ impl Artifact {
         })
     }
 
-    pub fn from_bytes(bytes: Vec<u8>) -> Result<Artifact, ArtifactError> {
-        Self::open(Backing::Owned(AlignedBytes::from_slice(&bytes)))
+    pub fn from_bytes(bytes: impl Into<AlignedBytes>) -> Result<Artifact, ArtifactError> {
+        Self::open(Backing::Owned(bytes.into()))
     }
 
     pub fn header(&self) -> &Header {
@@ -564,6 +636,7 @@ mod tests {
             .array("a", &[1.0f32, 2.0, 3.0])
             .array("b", &[[1u32, 2, 3], [4, 5, 6]])
             .finish()
+            .to_vec()
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! other, so a damaged artifact is an error, never an out-of-bounds index later.
 
 use super::format::inconsistent;
-use super::{Artifact, ArtifactError, ArtifactWriter, Format, Kind, ReadOwned};
+use super::{AlignedBytes, Artifact, ArtifactError, ArtifactWriter, Format, Kind, ReadOwned};
 use crate::stages::analyse_exemplar::candidate_triples::{SolidAnalysis, SolidAnalysisRef, Triple};
 use crate::stages::field::quaternion_field::{FieldGrid, RotationField};
 use crate::stages::parameterize::volume_embedding::{RequestedVoxels, Section, Volume};
@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 impl Format for SolidAnalysis {
     const KIND: Kind = Kind::SolidAnalysis;
     type View<'a> = SolidAnalysisRef<'a>;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &self.meta)
             .arrays_bytes(self.arrays())
             .finish()
@@ -37,7 +37,7 @@ impl Format for SolidAnalysis {
 impl Format for RotationField {
     const KIND: Kind = Kind::RotationField;
     type View<'a> = RotationField;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &self.grid)
             .array("rotations", &self.rotations)
             .array("scales", &self.scales)
@@ -81,7 +81,7 @@ pub struct RequestedVoxelsRef<'a> {
 impl Format for RequestedVoxels {
     const KIND: Kind = Kind::VoxelRequest;
     type View<'a> = RequestedVoxelsRef<'a>;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         let meta = RequestMeta {
             volume: self.volume,
             section: self
@@ -159,7 +159,7 @@ crate::format_pair! {
 impl Format for Brick {
     const KIND: Kind = Kind::SolidBrick;
     type View<'a> = Brick;
-    fn write(&self) -> Vec<u8> {
+    fn write(&self) -> AlignedBytes {
         ArtifactWriter::new(Self::KIND, &self.meta())
             .array("triples", &self.triples)
             .finish()

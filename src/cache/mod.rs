@@ -445,6 +445,7 @@ mod tests {
         ArtifactWriter::new(Kind::Image, &1u8)
             .array("x", &[v; 100])
             .finish()
+            .to_vec()
     }
 
     #[test]

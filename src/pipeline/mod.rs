@@ -202,7 +202,8 @@ impl<'a> NodeContext<'a> {
     }
 }
 
-pub(crate) type ComputeFn = Box<dyn Fn(&NodeContext) -> Result<Vec<u8>, NodeError> + Send + Sync>;
+pub(crate) type ComputeFn =
+    Box<dyn Fn(&NodeContext) -> Result<crate::artifact::AlignedBytes, NodeError> + Send + Sync>;
 
 /// One node of the DAG.
 pub struct Node {

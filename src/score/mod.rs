@@ -222,6 +222,7 @@ impl<'a> Run<'a> {
             })?;
         bundle
             .file(entry)
+            .map(|b| b.into_owned())
             .map_err(|e| ScoreFailure::new(format!("reading {file} from the cache: {e}")))
     }
 
