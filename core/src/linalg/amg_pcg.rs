@@ -100,11 +100,9 @@ impl Csr {
         }
         let mut next = row_ptr.clone();
         let nnz = row_ptr[n];
-        let mut col = vec![0u32; nnz];
-        let mut val = vec![0.0f64; nnz];
+        let mut pairs = vec![(0u32, 0.0f64); nnz];
         let mut put = |r: usize, c: usize, v: f64| {
-            col[next[r]] = c as u32;
-            val[next[r]] = v;
+            pairs[next[r]] = (c as u32, v);
             next[r] += 1;
         };
         for &(r, c, v) in triplets {
@@ -115,21 +113,19 @@ impl Csr {
                 put(r, c, v);
             }
         }
-        // Sort each row by column (stable: duplicates keep the triplet order) and sum
-        // duplicates, compacting in place.
+        // Sort each row by column (stable: duplicates keep the triplet order; rows in
+        // parallel), then sum duplicates in that order, compacting.
+        crate::geom::laplacian::for_each_run(&mut pairs, &row_ptr, |row| row.sort_by_key(|p| p.0));
         let mut out_ptr = vec![0usize; n + 1];
+        let (mut col, mut val) = (Vec::with_capacity(nnz), Vec::with_capacity(nnz));
         let mut w = 0usize;
-        let mut pairs: Vec<(u32, f64)> = Vec::new();
         for i in 0..n {
-            pairs.clear();
-            pairs.extend((row_ptr[i]..row_ptr[i + 1]).map(|k| (col[k], val[k])));
-            pairs.sort_by_key(|p| p.0);
-            for &(c, v) in &pairs {
+            for &(c, v) in &pairs[row_ptr[i]..row_ptr[i + 1]] {
                 if w > out_ptr[i] && col[w - 1] == c {
                     val[w - 1] += v;
                 } else {
-                    col[w] = c;
-                    val[w] = v;
+                    col.push(c);
+                    val.push(v);
                     w += 1;
                 }
             }
@@ -158,6 +154,7 @@ impl Csr {
     /// The diagonal (0 where a row has no diagonal entry).
     fn diagonal(&self) -> Vec<f64> {
         (0..self.n)
+            .into_par_iter()
             .map(|i| {
                 let (c, v) = self.row(i);
                 c.iter()
@@ -436,6 +433,7 @@ impl Hierarchy {
             let coarse = r.matmul(&a.matmul(&p));
             // ℓ1 hybrid smoothing: each row's diagonal grows by its off-block entries' sizes.
             let inv_diag = (0..a.n)
+                .into_par_iter()
                 .map(|i| {
                     let (c, v) = a.row(i);
                     let blk = i / SWEEP_BLOCK;
@@ -449,6 +447,7 @@ impl Hierarchy {
                 })
                 .collect();
             let diag_pos = (0..a.n)
+                .into_par_iter()
                 .map(|i| {
                     let (c, _) = a.row(i);
                     a.row_ptr[i] + c.iter().position(|&j| j as usize == i).unwrap()
@@ -566,7 +565,9 @@ fn smoothed_prolongator(
             d
         })
         .collect();
+    // The largest row ratio: a maximum, the same whatever order the rows are visited in.
     let rho = (0..n)
+        .into_par_iter()
         .map(|i| {
             let (c, v) = a.row(i);
             let mut s = filtered_diag[i].abs();
@@ -577,7 +578,7 @@ fn smoothed_prolongator(
             }
             s / filtered_diag[i]
         })
-        .fold(0.0f64, f64::max);
+        .reduce(|| 0.0f64, f64::max);
     let omega = 4.0 / (3.0 * rho);
     let blocks: Vec<RowBlock> = (0..n.div_ceil(BLOCK))
         .into_par_iter()
