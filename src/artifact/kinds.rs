@@ -217,6 +217,12 @@ fn write_bundle(files: &[(String, Vec<u8>)]) -> AlignedBytes {
     w.finish()
 }
 
+/// The layout of a bundle's files, mixed into the key of every node that exports one (so a
+/// lock made before a change says "key changed", not "content changed under the same key").
+/// 1: every file zstd-compressed, big ones in 16 MiB level-1 frames. 2: files above
+/// [`BUNDLE_PIECE`] stored uncompressed under [`RAW`]`NAME`.
+pub const BUNDLE_FORMAT: u32 = 2;
+
 /// Files above this size are stored uncompressed (see [`write_bundle`]); bundles of earlier
 /// versions compressed them in pieces of this size.
 const BUNDLE_PIECE: usize = 16 << 20;

@@ -32,7 +32,7 @@ pub mod kinds;
 pub mod solid;
 
 pub use format::{Format, ReadOwned};
-pub use kinds::Bundle;
+pub use kinds::{BUNDLE_FORMAT, Bundle};
 use memmap2::Mmap;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};

@@ -298,6 +298,11 @@ impl Dag {
         h.update(node.algorithm.as_bytes());
         h.update(b"\0");
         h.update(&node.version.to_le_bytes());
+        if node.exports {
+            // How a bundle stores its files is part of what an exporting node makes.
+            h.update(b"bundle format\0");
+            h.update(&crate::artifact::BUNDLE_FORMAT.to_le_bytes());
+        }
         h.update(&(node.params.len() as u64).to_le_bytes());
         h.update(&node.params);
         for (input, hash) in node.inputs.iter().zip(input_hashes) {
