@@ -191,8 +191,9 @@ pub fn dependent_set(
             .enumerate()
             .map(|(row, xs)| {
                 let (mut lo, mut hi) = (IVec3::MAX, IVec3::MIN);
-                if xs.iter().any(|&x| x >= threshold) {
-                    let p0 = grid.position(row * nx);
+                let p0 = grid.position(row * nx);
+                let parity = step.class.is_none_or(|c| class_of(p0.with_x(0)) == c & 6);
+                if parity && xs.iter().any(|&x| x >= threshold) {
                     for (x, &b) in xs.iter().enumerate() {
                         if b >= threshold {
                             let p = p0 + IVec3::new(x as i32, 0, 0);
@@ -224,9 +225,19 @@ pub fn dependent_set(
                 let y = rlo.y + (row % rn.y as usize) as i32;
                 let z = rlo.z + (row / rn.y as usize) as i32;
                 let start = grid.index(IVec3::new(rlo.x, y, z));
-                for (x, o) in out.iter_mut().enumerate() {
+                let src = &grid.need[start..start + out.len()];
+                // A subpass's class fixes the parity of y and z: three rows in four hold
+                // no active voxel.
+                let parity = step.class.is_none_or(|c| {
+                    class_of(IVec3::new(0, y, z)) == c & 6
+                });
+                if !parity || !src.iter().any(|&b| b >= threshold) {
+                    out.fill(0);
+                    return;
+                }
+                for (x, (o, &b)) in out.iter_mut().zip(src).enumerate() {
                     let p = IVec3::new(rlo.x + x as i32, y, z);
-                    *o = 3 * (grid.need[start + x] >= threshold && step.active(p)) as u8;
+                    *o = 3 * (b >= threshold && step.active(p)) as u8;
                 }
             });
         let barriers = &stages[step.stage].window.barriers;
@@ -257,8 +268,12 @@ pub fn dependent_set(
             let y = rlo.y + (r % rn.y as usize) as i32;
             let z = rlo.z + (r / rn.y as usize) as i32;
             let base = r * rn.x as usize;
+            let drow = &dilated[base..base + row.len()];
+            if !any_set(drow) {
+                return;
+            }
             for (x, need) in row.iter_mut().enumerate() {
-                let d = dilated[base + x];
+                let d = drow[x];
                 if d & 1 == 0 {
                     continue;
                 }
@@ -605,16 +620,30 @@ fn dilate_axis(
     bounds: &[[(usize, usize); 2]],
 ) {
     let [nx, ny, _] = d;
-    // ORs the window of rows (or slabs) `j` of `len` bytes at `at(j)` into `o`.
+    if nx == 0 {
+        return;
+    }
+    // Most x rows of a surface's box are empty (and three in four of a subpass step's
+    // sources): the windows skip them, and an empty row dilates to an empty row.
+    let row_any: Vec<bool> = if axis == 0 {
+        Vec::new()
+    } else {
+        src.par_chunks(nx).map(any_set).collect()
+    };
+    // ORs the window of x rows `j` at row index `row(j)` into `o`.
     let or_window =
-        |o: &mut [u8], [(a, b), (ca, cb)]: [(usize, usize); 2], at: &dyn Fn(usize) -> usize| {
+        |o: &mut [u8], [(a, b), (ca, cb)]: [(usize, usize); 2], row: &dyn Fn(usize) -> usize| {
             o.fill(0);
             if a > b {
                 return;
             }
             for j in a..=b {
+                let r = row(j);
+                if !row_any[r] {
+                    continue;
+                }
                 let m = if ca <= j && j <= cb { 3 } else { 1 };
-                let s = &src[at(j)..at(j) + o.len()];
+                let s = &src[r * nx..(r + 1) * nx];
                 for (x, y) in o.iter_mut().zip(s) {
                     *x |= y & m;
                 }
@@ -627,6 +656,10 @@ fn dilate_axis(
                 .for_each_init(
                     || (vec![0u32; nx + 1], vec![0u32; nx + 1]),
                     |(p0, p1), (o, s)| {
+                        if !any_set(s) {
+                            o.fill(0);
+                            return;
+                        }
                         for i in 0..nx {
                             p0[i + 1] = p0[i] + (s[i] & 1) as u32;
                             p1[i + 1] = p1[i] + (s[i] >> 1 & 1) as u32;
@@ -641,20 +674,26 @@ fn dilate_axis(
                 );
         }
         1 => {
-            let slab = nx * ny;
-            out.par_chunks_mut(slab).enumerate().for_each(|(z, o)| {
+            out.par_chunks_mut(nx * ny).enumerate().for_each(|(z, o)| {
                 for (y, row) in o.chunks_mut(nx).enumerate() {
-                    or_window(row, bounds[y], &|j| z * slab + j * nx);
+                    or_window(row, bounds[y], &|j| z * ny + j);
                 }
             });
         }
         _ => {
-            let slab = nx * ny;
-            out.par_chunks_mut(slab)
-                .enumerate()
-                .for_each(|(z, o)| or_window(o, bounds[z], &|j| j * slab));
+            out.par_chunks_mut(nx * ny).enumerate().for_each(|(z, o)| {
+                for (y, row) in o.chunks_mut(nx).enumerate() {
+                    or_window(row, bounds[z], &|j| j * ny + y);
+                }
+            });
         }
     }
+}
+
+/// Whether any byte of `row` is non-zero (an OR over the row, which vectorizes).
+#[inline]
+fn any_set(row: &[u8]) -> bool {
+    row.iter().fold(0u8, |a, &b| a | b) != 0
 }
 
 #[cfg(test)]
