@@ -19,7 +19,8 @@
 //! cube's other voxels are never read, and dilating by them only thickens the set). Boxes and
 //! axis-aligned cells make both dilations separable, so each step costs three one-axis
 //! prefix-sum sweeps over the bounding box of that step's active voxels (four for three
-//! planes).
+//! planes). Every pass skips the x rows with nothing set: most rows of a surface's box, and
+//! three in four of a subpass step's sources (its class fixes the parity of y and z).
 //!
 //! The result is exact for the stencil: synthesizing exactly these versions gives every
 //! wanted voxel the value a synthesis of the whole domain would give, whatever else was
@@ -228,9 +229,9 @@ pub fn dependent_set(
                 let src = &grid.need[start..start + out.len()];
                 // A subpass's class fixes the parity of y and z: three rows in four hold
                 // no active voxel.
-                let parity = step.class.is_none_or(|c| {
-                    class_of(IVec3::new(0, y, z)) == c & 6
-                });
+                let parity = step
+                    .class
+                    .is_none_or(|c| class_of(IVec3::new(0, y, z)) == c & 6);
                 if !parity || !src.iter().any(|&b| b >= threshold) {
                     out.fill(0);
                     return;
