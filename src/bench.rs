@@ -485,7 +485,7 @@ fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
         embed, outside_voxels, section, section_voxels_inside, surface_voxels,
     };
     use crate::stages::synthesize::solid::solid_synthesis::{
-        BatchLimits, BrickStore, LevelDependency, MemoryBrickStore, Pyramid, Scheme, SolidParams,
+        BrickStore, LevelDependency, MemoryBrickStore, Pyramid, Scheme, SolidParams,
         SolidSynthesis, SynthesisReport, VoxelRequest,
     };
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -537,8 +537,7 @@ fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
      -> Result<(SynthesisReport, f64)> {
         let params = SolidParams::paper(4).with_scheme(scheme);
         let synth = SolidSynthesis::new(analysis.as_ref(), &field, emb, params)
-            .map_err(|e| anyhow::anyhow!("{e}"))?
-            .with_batch_limits(BatchLimits::within(crate::memory::budget()));
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
         let t = Instant::now();
         let r = synth
             .synthesize(req, store)

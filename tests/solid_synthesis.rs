@@ -378,38 +378,6 @@ fn batches_bound_the_working_set_and_leave_every_brick_unchanged() {
     assert!(split[finest].batch_voxels > split[finest].voxels);
 }
 
-/// The limits a run's memory budget gives: a batch's working values (48 bytes a voxel) take
-/// at most a third of the budget between the floor and the cap, the box four times the
-/// working voxels, and a bigger budget never gives smaller batches.
-#[test]
-fn batch_limits_follow_the_memory_budget() {
-    let (min, max) = (BatchLimits::MIN, BatchLimits::MAX);
-    assert_eq!(BatchLimits::within(0), min);
-    assert_eq!(BatchLimits::within(64 << 20), min);
-    assert_eq!(BatchLimits::within(u64::MAX), max);
-    // The default run (half the available memory, several GiB) gets the cap: 1.5 GiB of
-    // working values.
-    assert_eq!(BatchLimits::within(8 << 30), max);
-    assert_eq!(48 * max.chunk_voxels, 3 << 29);
-    assert!(max.chunk_voxels > BatchLimits::default().chunk_voxels);
-    let mut last = min;
-    for gib in 1..=16u64 {
-        let budget = gib << 29;
-        let l = BatchLimits::within(budget);
-        assert_eq!(l.box_voxels, 4 * l.chunk_voxels, "{budget}");
-        assert!(l.chunk_voxels >= last.chunk_voxels, "{budget}");
-        assert!(
-            l == min || 48 * l.chunk_voxels <= budget / 3,
-            "{budget}: {l:?}"
-        );
-        assert!(
-            l == max || 48 * l.chunk_voxels > budget / 3 - 48,
-            "{budget}: {l:?}"
-        );
-        last = l;
-    }
-}
-
 /// Bricks by (level, coordinates).
 type Bricks = std::collections::HashMap<(u32, [i32; 3]), std::sync::Arc<Brick>>;
 

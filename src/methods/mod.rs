@@ -244,27 +244,21 @@ pub(crate) fn check_variant_memory(
 /// slim and cubic shapes alike.
 ///
 /// A surface request synthesizes each level in batches whose working set is bounded
-/// (`BatchLimits::within` the budget in `solid_synthesis.rs`: 48 bytes per working voxel, at
-/// most a third of the budget and 32 Mi working voxels, 1.5 GiB) and keeps only the
-/// surface's bricks: the same 16 bytes per voxel while that is smaller, never more than the
-/// batch bound and 400 MB for the resident bricks of two levels, the plans and a step's
-/// corrections (about 250 MB for the cow at 1024), plus half a byte per voxel for the
-/// volume's masks. Measured on the cow (issue 15): 529 MB at 512; at 1024, 2.77 GB before
-/// batching, 736 MiB in four batches (16 Mi working voxels), see BENCHMARKS.md for two.
+/// (`BatchLimits` in `solid_synthesis.rs`: about 1.2 GiB with the resident bricks of two
+/// levels) and keeps only the surface's bricks: the same 16 bytes per voxel while that is
+/// smaller, never more than the batch bound, plus half a byte per voxel for the volume's
+/// masks. Measured on the cow (issue 15): 529 MB at 512, and at 1024 2.77 GB before
+/// batching, see BENCHMARKS.md for after.
 pub(crate) fn check_solid_memory(
     config: &Config,
     resolution: u32,
     request: &crate::stages::parameterize::volume_embedding::Request,
 ) -> Result<(), MethodError> {
     use crate::stages::parameterize::volume_embedding::Request;
-    use crate::stages::synthesize::solid::solid_synthesis::BatchLimits;
-    let batch = 48 * BatchLimits::within(crate::memory::budget()).chunk_voxels + (400 << 20);
-    let estimate: Box<dyn Fn(u64) -> u64> = match request {
-        Request::Section { .. } => Box::new(|r| r * r * r / 2 + (48 << 20)),
-        Request::Box { .. } => Box::new(|r| 16 * r * r * r + (180 << 20)),
-        Request::Surface => {
-            Box::new(move |r| (16 * r * r * r).min(batch) + r * r * r / 2 + (180 << 20))
-        }
+    let estimate: fn(u64) -> u64 = match request {
+        Request::Section { .. } => |r| r * r * r / 2 + (48 << 20),
+        Request::Box { .. } => |r| 16 * r * r * r + (180 << 20),
+        Request::Surface => |r| (16 * r * r * r).min(1_200 << 20) + r * r * r / 2 + (180 << 20),
     };
     check_memory(
         config,

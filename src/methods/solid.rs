@@ -266,9 +266,7 @@ fn add_synthesis(
         (Keyed(analysis), Keyed(field), request),
         |ctx, WithTail(p, region), (analysis, field, req)| {
             let synth = synthesis::SolidSynthesis::new(analysis, &field, req.volume, p.clone());
-            // Batches as big as the memory budget allows (the voxels do not depend on them).
-            let limits = synthesis::BatchLimits::within(crate::memory::budget());
-            let synth = synth.map_err(NodeError::input)?.with_batch_limits(limits);
+            let synth = synth.map_err(NodeError::input)?;
             let voxels = volume::region_voxels(req.voxels, req.regions, *region)
                 .ok_or_else(|| NodeError::internal("a region's synthesis without voxel regions"))?;
             let bricks = ctx.pieces::<(u32, [i32; 3]), Brick>(synth.pyramid())?;

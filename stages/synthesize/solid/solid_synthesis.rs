@@ -88,8 +88,7 @@
 //!
 //! # Memory
 //!
-//! A level's missing bricks are synthesized in batches ([`BatchLimits`]; a run's follow its
-//! memory budget, [`BatchLimits::within`]): what is resident at
+//! A level's missing bricks are synthesized in batches ([`BatchLimits`]): what is resident at
 //! once is one batch's dense box while it is planned, or one batch's working values (48 bytes
 //! per working voxel) while it is synthesized, plus the chunked plans of all batches (about a
 //! byte per working voxel) and the bricks of two levels (12 bytes per brick voxel; a level is
@@ -953,36 +952,6 @@ impl Default for BatchLimits {
         BatchLimits {
             box_voxels: 1 << 26,
             chunk_voxels: 1 << 24,
-        }
-    }
-}
-
-impl BatchLimits {
-    /// The largest limits [`BatchLimits::within`] gives: 128 Mi voxels of box and 32 Mi
-    /// working voxels (1.5 GiB of working values at most; the 1024-voxel cow's surface makes
-    /// its finest level two batches of about 16 M working voxels each, 1.1 GiB peak in all).
-    pub const MAX: BatchLimits = BatchLimits {
-        box_voxels: 1 << 27,
-        chunk_voxels: 1 << 25,
-    };
-
-    /// The smallest: 4 Mi voxels of box and 1 Mi working voxels (50 MiB of working values).
-    pub const MIN: BatchLimits = BatchLimits {
-        box_voxels: 1 << 22,
-        chunk_voxels: 1 << 20,
-    };
-
-    /// Limits for a memory budget of `bytes` (the run's `--max-memory`): a batch's working
-    /// values (48 bytes per working voxel) take at most a third of it, and its box four
-    /// times as many voxels at a byte each (about 3 bytes a voxel for a moment while
-    /// planning), within [`BatchLimits::MIN`]..=[`BatchLimits::MAX`]. Bigger batches
-    /// synthesize less of their overlap twice (at 1024 voxels, the cow's finest level in two
-    /// batches instead of four: 4.5 % fewer of its voxels); the voxels are the same.
-    pub fn within(bytes: u64) -> BatchLimits {
-        let chunk = (bytes / 3 / 48).clamp(Self::MIN.chunk_voxels, Self::MAX.chunk_voxels);
-        BatchLimits {
-            box_voxels: 4 * chunk,
-            chunk_voxels: chunk,
         }
     }
 }
