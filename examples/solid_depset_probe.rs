@@ -4,6 +4,8 @@
 //! voxels inside the mesh on the plane through the volume's centre with that normal). Prints
 //! what `SolidSynthesis::dependent_set` reports (distinct voxels per level) with the flat
 //! stencil and with the cube, and the same from exact targets (no brick rounding).
+//! `BATCH_SCALE=k` multiplies both `BatchLimits` by k; `QUICK=1` prints the flat stencil's
+//! sets only; `PLAN_ONLY=1` times the planning a synthesis does.
 use glam::IVec3;
 use texsyn::stages::analyse_exemplar::candidate_triples::{CandidateParams, analyse_transposed};
 use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
@@ -12,8 +14,20 @@ use texsyn::stages::parameterize::volume_embedding::{
 };
 use texsyn::stages::synthesize::solid::dependent_set::dependent_set;
 use texsyn::stages::synthesize::solid::solid_synthesis::{
-    Pyramid, Scheme, SolidParams, SolidSynthesis, VoxelRequest,
+    BatchLimits, Pyramid, Scheme, SolidParams, SolidSynthesis, VoxelRequest,
 };
+
+/// User + system CPU seconds of this process (all threads).
+fn cpu() -> f64 {
+    let s = std::fs::read_to_string("/proc/self/stat").expect("/proc/self/stat");
+    let f: Vec<&str> = s
+        .rsplit(')')
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
+    (f[11].parse::<f64>().unwrap_or(0.0) + f[12].parse::<f64>().unwrap_or(0.0)) / 100.0
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -65,12 +79,46 @@ fn main() {
     );
     let request = VoxelRequest::from_voxels(&targets);
     let params = SolidParams::paper(4).with_scheme(scheme);
-    let synth = SolidSynthesis::new(analysis.as_ref(), &field, emb, params.clone()).unwrap();
+    // BATCH_SCALE=k multiplies both batch limits by k (how the overlap changes with them).
+    let scale: u64 = std::env::var("BATCH_SCALE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    let limits = BatchLimits::default();
+    let limits = BatchLimits {
+        box_voxels: limits.box_voxels * scale,
+        chunk_voxels: limits.chunk_voxels * scale,
+    };
+    println!("batch limits {limits:?}");
+    let synth = SolidSynthesis::new(analysis.as_ref(), &field, emb, params.clone())
+        .unwrap()
+        .with_batch_limits(limits);
     let cube = SolidSynthesis::new(analysis.as_ref(), &field, emb, params)
         .unwrap()
-        .cube_stencil();
+        .cube_stencil()
+        .with_batch_limits(limits);
     println!("reach {:?}", synth.reach());
-    for (name, s) in [("flat stencil", &synth), ("cube stencil", &cube)] {
+    // PLAN_ONLY=1: time the planning `synthesize` does (against an empty store) and stop.
+    if std::env::var_os("PLAN_ONLY").is_some() {
+        let store = texsyn::stages::synthesize::solid::solid_synthesis::MemoryBrickStore::new();
+        let (t, c0) = (std::time::Instant::now(), cpu());
+        let plan = synth.plan_report(&request, &store);
+        println!(
+            "planned in {:.2} s wall, {:.2} s CPU: bricks per level {:?}",
+            t.elapsed().as_secs_f64(),
+            cpu() - c0,
+            plan.iter().map(|l| l.bricks_computed).collect::<Vec<_>>()
+        );
+        return;
+    }
+    // QUICK=1: the flat stencil's batched sets only (no cube, no exact targets).
+    let quick = std::env::var_os("QUICK").is_some();
+    let runs: &[(&str, &SolidSynthesis)] = if quick {
+        &[("flat stencil", &synth)]
+    } else {
+        &[("flat stencil", &synth), ("cube stencil", &cube)]
+    };
+    for &(name, s) in runs {
         let t = std::time::Instant::now();
         let set = s.dependent_set(&request);
         println!("{name}: planned in {:.2} s", t.elapsed().as_secs_f64());
@@ -87,6 +135,9 @@ fn main() {
                 d.batch_voxels
             );
         }
+    }
+    if quick {
+        return;
     }
     let mut exact: Vec<IVec3> = targets.iter().map(|v| IVec3::from(*v)).collect();
     for level in (1..=4u32).rev() {

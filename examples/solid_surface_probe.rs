@@ -2,13 +2,14 @@
 //! `RESOLUTION` voxels (default 256): CPU seconds of the synthesis alone, per level, and a
 //! checksum of every brick it made (to compare builds and thread counts byte for byte).
 //!
-//! `cargo run --release --example solid_surface_probe` (from the repository root).
+//! `cargo run --release --example solid_surface_probe` (from the repository root);
+//! `BATCH_SCALE=k` runs with both `BatchLimits` k times the default.
 use std::time::Instant;
 use texsyn::stages::analyse_exemplar::candidate_triples::{CandidateParams, analyse_transposed};
 use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
 use texsyn::stages::parameterize::volume_embedding::{embed, surface_voxels};
 use texsyn::stages::synthesize::solid::solid_synthesis::{
-    BrickStore, MemoryBrickStore, SolidParams, SolidSynthesis, VoxelRequest,
+    BatchLimits, BrickStore, MemoryBrickStore, SolidParams, SolidSynthesis, VoxelRequest,
 };
 
 /// User + system CPU seconds of this process (all threads).
@@ -47,8 +48,19 @@ fn main() {
         .iter()
         .map(|v| v.to_array())
         .collect();
-    let synth = SolidSynthesis::new(analysis.as_ref(), &field, emb, SolidParams::paper(4))
+    let mut synth = SolidSynthesis::new(analysis.as_ref(), &field, emb, SolidParams::paper(4))
         .expect("synthesis");
+    // BATCH_SCALE=k: both batch limits k times the default (the voxels do not change).
+    if let Some(k) = std::env::var("BATCH_SCALE")
+        .ok()
+        .and_then(|s| s.parse::<u64>().ok())
+    {
+        let d = BatchLimits::default();
+        synth = synth.with_batch_limits(BatchLimits {
+            box_voxels: d.box_voxels * k,
+            chunk_voxels: d.chunk_voxels * k,
+        });
+    }
     let store = MemoryBrickStore::new();
     let (t, c0) = (Instant::now(), cpu());
     let rep = synth
@@ -69,10 +81,25 @@ fn main() {
     }
     for l in &rep.levels {
         println!(
-            "level {}: {} voxels, {} corrections, {} comparisons, {:.2} s wall",
-            l.level, l.voxels, l.corrections, l.comparisons, l.seconds
+            "level {}: {} voxels, {} corrections, {} comparisons, {:.2} s wall, {} batches (largest {} working voxels)",
+            l.level,
+            l.voxels,
+            l.corrections,
+            l.comparisons,
+            l.seconds,
+            l.batches,
+            l.largest_batch_voxels
         );
     }
+    let hwm = std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .map(|l| l.split_whitespace().nth(1).unwrap_or("0").to_string())
+        })
+        .unwrap_or_default();
+    println!("peak (VmHWM) {hwm} kB, with every level's bricks kept (MemoryBrickStore)");
     println!(
         "resolution {resolution}: {} surface voxels, synthesize {wall:.2} s wall, {used:.2} s CPU, checksum {h:016x}",
         surface.len()

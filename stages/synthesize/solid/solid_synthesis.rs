@@ -1290,10 +1290,25 @@ impl<'a> SolidSynthesis<'a> {
         let bhi = brick_of(m, (need.lo + need.n - 1).div_euclid(IVec3::splat(2)));
         let bn = bhi - blo + 1;
         let mut mark = vec![false; (bn.x * bn.y * bn.z) as usize];
-        for (i, &x) in need.need.iter().enumerate() {
-            if x > 0 {
-                let b = brick_of(m, need.position(i).div_euclid(IVec3::splat(2))) - blo;
-                mark[((b.z * bn.y + b.y) * bn.x + b.x) as usize] = true;
+        // Row by row, skipping empty rows, with each x's brick column worked out once: a
+        // batch's box is tens of millions of voxels, most of them not needed.
+        let nx = need.n.x as usize;
+        let brick_x: Vec<usize> = (0..need.n.x)
+            .map(|x| {
+                let v = IVec3::new(need.lo.x + x, need.lo.y, need.lo.z);
+                (brick_of(m, v.div_euclid(IVec3::splat(2))).x - blo.x) as usize
+            })
+            .collect();
+        for (row, xs) in need.need.chunks(nx).enumerate() {
+            if xs.iter().fold(0u8, |a, &b| a | b) == 0 {
+                continue;
+            }
+            let b = brick_of(m, need.position(row * nx).div_euclid(IVec3::splat(2))) - blo;
+            let base = ((b.z * bn.y + b.y) * bn.x) as usize;
+            for (x, &v) in xs.iter().enumerate() {
+                if v > 0 {
+                    mark[base + brick_x[x]] = true;
+                }
             }
         }
         let mut out = vec![];
