@@ -65,7 +65,7 @@ macro_rules! format_pair {
         impl $crate::artifact::Format for $owned {
             const KIND: $crate::artifact::Kind = $crate::artifact::Kind::$kind;
             type View<'a> = $view<'a>;
-            fn write(&self) -> AlignedBytes {
+            fn write(&self) -> $crate::artifact::AlignedBytes {
                 $crate::artifact::ArtifactWriter::new(Self::KIND, &self.$meta)
                     $(.array(stringify!($array), &self.$array))*
                     .finish()

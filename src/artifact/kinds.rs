@@ -191,24 +191,22 @@ impl Format for Bundle {
 /// Why big files are not compressed: a million-triangle mesh's exports are over 300 MB of OBJ
 /// and glTF, and zstd level 1 runs at about 150 MB/s per core on the machines texsyn is measured
 /// on, so compressing them (and decompressing them again to write the outputs) took longer than
-/// writing them uncompressed: the cache copy is about 1.6× bigger, the run about a second
-/// shorter (BENCHMARKS.md, issue 15). Bundles written before (big files in 16 MiB level-1
+/// writing them uncompressed: on the 1.4M-triangle run the cache holds 413 MB instead of 223 MB,
+/// and the process spends about 1.4 s less CPU (BENCHMARKS.md, "Jump maps end to end"). Bundles written before (big files in 16 MiB level-1
 /// frames under their plain name) are still read.
 fn write_bundle(files: &[(String, Vec<u8>)]) -> AlignedBytes {
-    let entries: Vec<BundleEntry> = files
-        .par_iter()
-        .map(|(name, bytes)| BundleEntry {
-            name: name.clone(),
-            len: bytes.len() as u64,
-            hash: ContentHash::of(bytes),
-        })
-        .collect();
-    let mut w = ArtifactWriter::new(Kind::FileBundle, &entries);
+    let mut w = ArtifactWriter::new(Kind::FileBundle, &bundle_entries(files));
     let packed: Vec<Option<Vec<u8>>> = files
         .par_iter()
         .map(|(_, b)| (b.len() <= BUNDLE_PIECE).then(|| compress_file(b)))
         .collect();
     for ((name, bytes), packed) in files.iter().zip(packed) {
+        // Output names are plain file names (the output writer refuses others): no small
+        // file's array can be named like a raw one.
+        debug_assert!(
+            !name.contains('/'),
+            "bundle file name {name:?} is not a plain name"
+        );
         w = match packed {
             Some(packed) => w.array_bytes(name, packed),
             None => w.array_slice(&format!("{RAW}{name}"), bytes),
@@ -222,6 +220,18 @@ fn write_bundle(files: &[(String, Vec<u8>)]) -> AlignedBytes {
 /// 1: every file zstd-compressed, big ones in 16 MiB level-1 frames. 2: files above
 /// [`BUNDLE_PIECE`] stored uncompressed under [`RAW`]`NAME`.
 pub const BUNDLE_FORMAT: u32 = 2;
+
+/// A bundle's metadata: each file's name, length and hash.
+fn bundle_entries(files: &[(String, Vec<u8>)]) -> Vec<BundleEntry> {
+    files
+        .par_iter()
+        .map(|(name, bytes)| BundleEntry {
+            name: name.clone(),
+            len: bytes.len() as u64,
+            hash: ContentHash::of(bytes),
+        })
+        .collect()
+}
 
 /// Files above this size are stored uncompressed (see [`write_bundle`]); bundles of earlier
 /// versions compressed them in pieces of this size.
@@ -362,15 +372,7 @@ mod tests {
 
     /// Bundles of the version before: a big file as 16 MiB level-1 frames under its plain name.
     fn old_bundle(files: &[(String, Vec<u8>)]) -> AlignedBytes {
-        let entries: Vec<BundleEntry> = files
-            .iter()
-            .map(|(name, bytes)| BundleEntry {
-                name: name.clone(),
-                len: bytes.len() as u64,
-                hash: ContentHash::of(bytes),
-            })
-            .collect();
-        let mut w = ArtifactWriter::new(Kind::FileBundle, &entries);
+        let mut w = ArtifactWriter::new(Kind::FileBundle, &bundle_entries(files));
         for (name, b) in files {
             let packed = if b.len() <= BUNDLE_PIECE {
                 compress_file(b)

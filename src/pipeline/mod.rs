@@ -3,7 +3,8 @@
 //! A method's wiring (`src/methods/`) expands a config into a [`Dag`]. Each [`Node`] is one
 //! algorithm of one stage with its canonical parameter bytes and its inputs: files (hashed by
 //! their bytes) or other nodes (hashed by their artifacts' content). A node's key is
-//! blake3(stage, algorithm, code version, parameters, input content hashes); the node's
+//! blake3(stage, algorithm, code version, parameters, input content hashes; for a node that
+//! exports files also [`crate::artifact::BUNDLE_FORMAT`]); the node's
 //! output is stored in the cache under that key. Because keys are built from input
 //! *content*, an upstream node that reruns and produces identical bytes leaves everything
 //! downstream cached (early cutoff).

@@ -181,7 +181,7 @@ pub fn materialize_all(
     let staging = dir.join(format!("{STAGING}{pid}"));
     let stage = || -> Result<(), OutputError> {
         fs::create_dir(&staging).map_err(io(&staging))?;
-        // In parallel: one file's decompression and writing overlap another's wait for the disk
+        // In parallel: one file's reading (decompression, or hashing in place) and writing overlap another's wait for the disk
         // (a million-triangle export stages 300 MB). The first error in the set's order wins.
         use rayon::prelude::*;
         let staged: Vec<Result<(), OutputError>> = changed

@@ -159,6 +159,11 @@ pub(crate) fn for_each_run<T: Send>(
     f: impl Fn(&mut [T]) + Sync,
 ) {
     const RUNS: usize = 4096;
+    debug_assert_eq!(
+        bounds.first().copied().unwrap_or(0),
+        0,
+        "runs start at item 0"
+    );
     let mut groups: Vec<(usize, &mut [T])> = Vec::new();
     let mut rest = items;
     let mut at = 0;
@@ -250,5 +255,11 @@ mod tests {
             items, expected,
             "the runs were already sorted: the test checks nothing"
         );
+        // No runs at all, and one empty run.
+        for bounds in [vec![], vec![0]] {
+            let mut none: Vec<(u32, u32)> = Vec::new();
+            for_each_run(&mut none, &bounds, |run| run.sort_by_key(|p| p.0));
+            assert!(none.is_empty());
+        }
     }
 }
