@@ -8,10 +8,9 @@ use texsyn::stages::synthesize::solid::solid_synthesis::{
     BrickStore, MemoryBrickStore, SolidParams, SolidSynthesis, VoxelRequest,
 };
 
-fn cpu() -> f64 {
-    let s = std::fs::read_to_string("/proc/self/stat").unwrap();
-    let f: Vec<&str> = s.rsplit(')').next().unwrap().split_whitespace().collect();
-    (f[11].parse::<f64>().unwrap() + f[12].parse::<f64>().unwrap()) / 100.0
+/// User + system CPU seconds of this process (all threads).
+fn cpu_seconds() -> f64 {
+    texsyn::memory::process_cpu_seconds().unwrap_or(0.0)
 }
 
 fn main() {
@@ -72,9 +71,9 @@ fn main() {
         let _ = synth.dependent_set(&req);
         let tp = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let c0 = cpu();
+        let c0 = cpu_seconds();
         let rep = synth.synthesize(&req, &fresh).unwrap();
-        println!("cpu {:.2} s", cpu() - c0);
+        println!("cpu {:.2} s", cpu_seconds() - c0);
         println!(
             "cut {:.2} s (plan alone {:.2} s) {:?}",
             t.elapsed().as_secs_f64(),

@@ -18,15 +18,8 @@ use texsyn::stages::synthesize::solid::solid_synthesis::{
 };
 
 /// User + system CPU seconds of this process (all threads).
-fn cpu() -> f64 {
-    let s = std::fs::read_to_string("/proc/self/stat").expect("/proc/self/stat");
-    let f: Vec<&str> = s
-        .rsplit(')')
-        .next()
-        .unwrap_or("")
-        .split_whitespace()
-        .collect();
-    (f[11].parse::<f64>().unwrap_or(0.0) + f[12].parse::<f64>().unwrap_or(0.0)) / 100.0
+fn cpu_seconds() -> f64 {
+    texsyn::memory::process_cpu_seconds().unwrap_or(0.0)
 }
 
 fn main() {
@@ -101,12 +94,12 @@ fn main() {
     // PLAN_ONLY=1: time the planning `synthesize` does (against an empty store) and stop.
     if std::env::var_os("PLAN_ONLY").is_some() {
         let store = texsyn::stages::synthesize::solid::solid_synthesis::MemoryBrickStore::new();
-        let (t, c0) = (std::time::Instant::now(), cpu());
+        let (t, c0) = (std::time::Instant::now(), cpu_seconds());
         let plan = synth.plan_report(&request, &store);
         println!(
             "planned in {:.2} s wall, {:.2} s CPU: bricks per level {:?}",
             t.elapsed().as_secs_f64(),
-            cpu() - c0,
+            cpu_seconds() - c0,
             plan.iter().map(|l| l.bricks_computed).collect::<Vec<_>>()
         );
         return;

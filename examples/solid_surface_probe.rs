@@ -13,15 +13,8 @@ use texsyn::stages::synthesize::solid::solid_synthesis::{
 };
 
 /// User + system CPU seconds of this process (all threads).
-fn cpu() -> f64 {
-    let s = std::fs::read_to_string("/proc/self/stat").expect("/proc/self/stat");
-    let f: Vec<&str> = s
-        .rsplit(')')
-        .next()
-        .unwrap_or("")
-        .split_whitespace()
-        .collect();
-    (f[11].parse::<f64>().unwrap_or(0.0) + f[12].parse::<f64>().unwrap_or(0.0)) / 100.0
+fn cpu_seconds() -> f64 {
+    texsyn::memory::process_cpu_seconds().unwrap_or(0.0)
 }
 
 fn main() {
@@ -62,11 +55,11 @@ fn main() {
         });
     }
     let store = MemoryBrickStore::new();
-    let (t, c0) = (Instant::now(), cpu());
+    let (t, c0) = (Instant::now(), cpu_seconds());
     let rep = synth
         .synthesize(&VoxelRequest::from_voxels(&surface), &store)
         .expect("synthesize");
-    let (wall, used) = (t.elapsed().as_secs_f64(), cpu() - c0);
+    let (wall, used) = (t.elapsed().as_secs_f64(), cpu_seconds() - c0);
     // FNV-1a over every brick of every level, in sorted order.
     let mut h = 0xcbf2_9ce4_8422_2325u64;
     for level in 1..=4 {

@@ -158,6 +158,19 @@ pub fn peak_since_reset() -> Option<u64> {
     vm_hwm()
 }
 
+/// User + system CPU seconds of this process, all threads (`/proc/self/stat`, Linux; in clock
+/// ticks of 1/100 s, the USER_HZ of every Linux architecture). None elsewhere.
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (in parentheses, which may hold spaces): state is the
+    // first, utime the 12th, stime the 13th.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let mut f = rest.split_whitespace().skip(11);
+    let utime: u64 = f.next()?.parse().ok()?;
+    let stime: u64 = f.next()?.parse().ok()?;
+    Some((utime + stime) as f64 / 100.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

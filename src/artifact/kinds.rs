@@ -192,7 +192,8 @@ impl Format for Bundle {
 /// and glTF, and zstd level 1 runs at about 150 MB/s per core on the machines texsyn is measured
 /// on, so compressing them (and decompressing them again to write the outputs) took longer than
 /// writing them uncompressed: on the 1.4M-triangle run the cache holds 413 MB instead of 223 MB,
-/// and the process spends about 1.4 s less CPU (BENCHMARKS.md, "Jump maps end to end"). Bundles written before (big files in 16 MiB level-1
+/// and the process spends about 1.5 s less CPU (user + system, medians of 3: 19.97 → 18.45 s;
+/// BENCHMARKS.md, "Jump maps end to end"). Bundles written before (big files in 16 MiB level-1
 /// frames under their plain name) are still read.
 fn write_bundle(files: &[(String, Vec<u8>)]) -> AlignedBytes {
     let mut w = ArtifactWriter::new(Kind::FileBundle, &bundle_entries(files));

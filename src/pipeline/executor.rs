@@ -578,7 +578,7 @@ impl Executor<'_> {
         let progress = Progress::new(self.opts.progress, &node.name);
         let input_hashes = self.input_hashes(i);
         let peak;
-        let cpu_before = process_cpu_seconds();
+        let cpu_before = crate::memory::process_cpu_seconds();
         let (result, pieces) = {
             let inputs = node
                 .inputs
@@ -613,7 +613,9 @@ impl Executor<'_> {
                 .then_some(PieceReport { computed, reused });
             (result, pieces)
         };
-        let cpu = cpu_before.zip(process_cpu_seconds()).map(|(a, b)| b - a);
+        let cpu = cpu_before
+            .zip(crate::memory::process_cpu_seconds())
+            .map(|(a, b)| b - a);
         progress.finish();
         if let Err(NodeError::Sharded { share, .. }) = result {
             self.stopped[i] = Stop::Sharded;
@@ -656,19 +658,6 @@ impl Executor<'_> {
         });
         Ok(())
     }
-}
-
-/// User + system CPU seconds of this process, all threads (`/proc/self/stat`, Linux; in clock
-/// ticks of 1/100 s, the USER_HZ of every Linux architecture). None elsewhere.
-fn process_cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the command name (in parentheses, which may hold spaces): state is the
-    // first, utime the 12th, stime the 13th.
-    let rest = &stat[stat.rfind(')')? + 1..];
-    let mut f = rest.split_whitespace().skip(11);
-    let utime: u64 = f.next()?.parse().ok()?;
-    let stime: u64 = f.next()?.parse().ok()?;
-    Some((utime + stime) as f64 / 100.0)
 }
 
 /// What `run` would do, without doing it (like `make -n`).
