@@ -787,42 +787,56 @@ pub fn bake_page(
     let tri = |f: u32| atlas.corner_uv[f as usize].map(|uv| uv.as_dvec2() * size);
     // Ownership keys: face (inside) < 2^63 | distance bits << 32 | face (gutter).
     let keys: Vec<AtomicU64> = (0..wu * hu).map(|_| AtomicU64::new(u64::MAX)).collect();
-    faces.par_iter().for_each(|&f| {
-        let t = tri(f);
-        let lo = t[0].min(t[1]).min(t[2]) - DVec2::splat(g + 0.5);
-        let hi = t[0].max(t[1]).max(t[2]) + DVec2::splat(g - 0.5);
-        let (x0, x1) = (
-            lo.x.ceil().max(0.0) as i64,
-            hi.x.floor().min(size.x - 1.0) as i64,
-        );
-        let (y0, y1) = (
-            lo.y.ceil().max(0.0) as i64,
-            hi.y.floor().min(size.y - 1.0) as i64,
-        );
-        let sign = area2(&t).signum();
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                let c = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-                let inside = sign != 0.0
-                    && (0..3).all(|k| {
-                        let (a, b) = (t[k], t[(k + 1) % 3]);
-                        sign * (b - a).perp_dot(c - a) >= 0.0
-                    });
-                let key = if inside {
-                    f as u64
-                } else {
-                    let b = nearest_barycentric(c, &t).as_dvec3();
-                    let p = t[0] * b.x + t[1] * b.y + t[2] * b.z;
-                    let d = (p - c).abs().max_element();
-                    if d > g {
-                        continue;
-                    }
-                    (1u64 << 63) | (((p - c).length() as f32).to_bits() as u64) << 32 | f as u64
-                };
-                keys[y as usize * wu + x as usize].fetch_min(key, Ordering::Relaxed);
+    // Two passes over each face's box: every inside key is below every gutter key, so once the
+    // first pass has settled which texels some face covers, the second (the nearest-point
+    // search, most of the bake's work on a dense page) skips them: the same keys as one pass.
+    for gutter in [false, true] {
+        faces.par_iter().for_each(|&f| {
+            let t = tri(f);
+            let pad = if gutter { g } else { 0.0 };
+            let lo = t[0].min(t[1]).min(t[2]) - DVec2::splat(pad + 0.5);
+            let hi = t[0].max(t[1]).max(t[2]) + DVec2::splat(pad - 0.5);
+            let (x0, x1) = (
+                lo.x.ceil().max(0.0) as i64,
+                hi.x.floor().min(size.x - 1.0) as i64,
+            );
+            let (y0, y1) = (
+                lo.y.ceil().max(0.0) as i64,
+                hi.y.floor().min(size.y - 1.0) as i64,
+            );
+            let sign = area2(&t).signum();
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    let slot = &keys[y as usize * wu + x as usize];
+                    let c = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                    let inside = sign != 0.0
+                        && (0..3).all(|k| {
+                            let (a, b) = (t[k], t[(k + 1) % 3]);
+                            sign * (b - a).perp_dot(c - a) >= 0.0
+                        });
+                    let key = match (gutter, inside) {
+                        (false, true) => f as u64,
+                        (false, false) | (true, true) => continue,
+                        (true, false) => {
+                            if slot.load(Ordering::Relaxed) < 1 << 63 {
+                                continue;
+                            }
+                            let b = nearest_barycentric(c, &t).as_dvec3();
+                            let p = t[0] * b.x + t[1] * b.y + t[2] * b.z;
+                            let d = (p - c).abs().max_element();
+                            if d > g {
+                                continue;
+                            }
+                            (1u64 << 63)
+                                | (((p - c).length() as f32).to_bits() as u64) << 32
+                                | f as u64
+                        }
+                    };
+                    slot.fetch_min(key, Ordering::Relaxed);
+                }
             }
-        }
-    });
+        });
+    }
     let keys: Vec<u64> = keys.into_iter().map(|k| k.into_inner()).collect();
     shaders
         .iter()
