@@ -13,42 +13,18 @@
 //! Processes sharing a cache order their work on a key with the key locks of [`lock`]; the
 //! store itself needs none.
 
+mod big_write;
 mod lock;
+
+pub(crate) use big_write::write_parallel;
 
 pub use lock::{KeyLock, KeyLocks, Locking};
 
 use crate::artifact::{Artifact, ArtifactError, Backing, ContentHash, HEADER_LEN, Header, Kind};
 use std::fs::{self, File};
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime};
-
-/// Pieces of a big object written side by side: copying into the page cache runs at a few
-/// hundred MB/s on the machines texsyn is measured on, and a million-triangle export's
-/// bundle is over 100 MB.
-const WRITE_PIECE: usize = 16 << 20;
-
-/// Writes `bytes` to the empty file `f`, big ones in [`WRITE_PIECE`]s in parallel (Unix;
-/// elsewhere in one piece). The file's bytes are the same either way. Only for a temporary
-/// file that is renamed into place after `sync_all`: the file gets its full length first, so
-/// a failed or interrupted write leaves holes of zeros, not a short file. The error is the
-/// first failed piece's, whatever the thread count.
-pub(crate) fn write_parallel(f: &File, bytes: &[u8]) -> std::io::Result<()> {
-    #[cfg(unix)]
-    if bytes.len() > WRITE_PIECE {
-        use rayon::prelude::*;
-        use std::os::unix::fs::FileExt;
-        f.set_len(bytes.len() as u64)?;
-        let results: Vec<std::io::Result<()>> = bytes
-            .par_chunks(WRITE_PIECE)
-            .enumerate()
-            .map(|(i, piece)| f.write_all_at(piece, (i * WRITE_PIECE) as u64))
-            .collect();
-        return results.into_iter().collect();
-    }
-    let mut f = f;
-    f.write_all(bytes)
-}
 
 /// The format version is in the directory name, so a future layout change starts a fresh
 /// store beside the old one instead of misreading it.
