@@ -456,11 +456,19 @@ fn glb_mesh(
         corners.par_sort_unstable();
     }
     let mut corner_vertex = vec![0u32; faces * 3];
-    let mut positions = Vec::new();
-    let mut vnormals = Vec::new();
-    let mut tangent_sum: Vec<Vec3> = Vec::new();
-    let mut handedness: Vec<f32> = Vec::new();
-    let mut uv = Vec::new();
+    // Sized exactly: a million-triangle mesh's arrays are tens of MB each, and regrowing them
+    // copies into fresh memory.
+    let key = |c: &(u32, u32, u32, u32)| (c.0, c.1, c.2);
+    let vertices = corners.len().min(1)
+        + corners
+            .windows(2)
+            .filter(|w| key(&w[0]) != key(&w[1]))
+            .count();
+    let mut positions = Vec::with_capacity(vertices);
+    let mut vnormals = Vec::with_capacity(vertices);
+    let mut tangent_sum: Vec<Vec3> = Vec::with_capacity(vertices);
+    let mut handedness: Vec<f32> = Vec::with_capacity(vertices);
+    let mut uv = Vec::with_capacity(vertices);
     let mut i = 0;
     while i < corners.len() {
         let (v, ux, uy, _) = corners[i];
@@ -511,7 +519,11 @@ fn glb_mesh(
     } else {
         Vec::new()
     };
-    let mut per_page: Vec<Vec<u32>> = vec![Vec::new(); atlas.pages.len().max(1)];
+    let mut on_page = vec![0usize; atlas.pages.len().max(1)];
+    for &page in &atlas.face_page[..faces] {
+        on_page[page as usize] += 3;
+    }
+    let mut per_page: Vec<Vec<u32>> = on_page.iter().map(|&n| Vec::with_capacity(n)).collect();
     for f in 0..faces {
         let page = atlas.face_page[f] as usize;
         per_page[page].extend_from_slice(&corner_vertex[3 * f..3 * f + 3]);

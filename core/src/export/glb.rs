@@ -100,7 +100,9 @@ const GLB_MAGIC: u32 = 0x4654_6C67; // "glTF"
 const CHUNK_JSON: u32 = 0x4E4F_534A; // "JSON"
 const CHUNK_BIN: u32 = 0x004E_4942; // "BIN\0"
 
-/// Accumulates the BIN chunk, its bufferViews and accessors.
+/// Accumulates the BIN chunk, its bufferViews and accessors. The chunk is sized up front
+/// (see [`write_glb`]) and the arrays are appended to it directly: a million-triangle .glb is
+/// over 50 MB, and every intermediate copy or regrowth of it touches that much fresh memory.
 #[derive(Default)]
 struct Builder {
     bin: Vec<u8>,
@@ -110,50 +112,67 @@ struct Builder {
 
 impl Builder {
     fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
+        self.view_with(target, |bin| bin.extend_from_slice(bytes))
+    }
+
+    /// A bufferView over what `append` adds to the chunk (at a 4-byte boundary).
+    fn view_with(&mut self, target: Option<u32>, append: impl FnOnce(&mut Vec<u8>)) -> usize {
         while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
+        let start = self.bin.len();
+        append(&mut self.bin);
         let mut v = Map::new();
         v.insert("buffer".into(), json!(0));
-        v.insert("byteOffset".into(), json!(self.bin.len()));
-        v.insert("byteLength".into(), json!(bytes.len()));
+        v.insert("byteOffset".into(), json!(start));
+        v.insert("byteLength".into(), json!(self.bin.len() - start));
         if let Some(t) = target {
             v.insert("target".into(), json!(t));
         }
-        self.bin.extend_from_slice(bytes);
         self.views.push(Value::Object(v));
         self.views.len() - 1
     }
 
-    /// A float accessor over `data` (`n` components per element); with `bounds`, per-component
-    /// min and max are recorded.
-    fn floats(&mut self, data: &[f32], n: usize, ty: &str, bounds: bool) -> usize {
-        let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
-        let view = self.view(&bytes, Some(ARRAY_BUFFER));
+    /// A float accessor over `f` of every item (`N` components per element), written into
+    /// the chunk as it is computed; with `bounds`, per-component min and max are recorded.
+    fn floats<T, const N: usize>(
+        &mut self,
+        items: &[T],
+        f: impl Fn(&T) -> [f32; N],
+        ty: &str,
+        bounds: bool,
+    ) -> usize {
+        let mut lo = [f32::INFINITY; N];
+        let mut hi = [f32::NEG_INFINITY; N];
+        let view = self.view_with(Some(ARRAY_BUFFER), |bin| {
+            for item in items {
+                let e = f(item);
+                for k in 0..N {
+                    lo[k] = lo[k].min(e[k]);
+                    hi[k] = hi[k].max(e[k]);
+                    bin.extend_from_slice(&e[k].to_le_bytes());
+                }
+            }
+        });
         let mut a = Map::new();
         a.insert("bufferView".into(), json!(view));
         a.insert("componentType".into(), json!(FLOAT));
-        a.insert("count".into(), json!(data.len() / n));
+        a.insert("count".into(), json!(items.len()));
         a.insert("type".into(), json!(ty));
         if bounds {
-            let mut lo = vec![f32::INFINITY; n];
-            let mut hi = vec![f32::NEG_INFINITY; n];
-            for e in data.chunks_exact(n) {
-                for k in 0..n {
-                    lo[k] = lo[k].min(e[k]);
-                    hi[k] = hi[k].max(e[k]);
-                }
-            }
-            a.insert("min".into(), json!(lo));
-            a.insert("max".into(), json!(hi));
+            a.insert("min".into(), json!(lo.as_slice()));
+            a.insert("max".into(), json!(hi.as_slice()));
         }
         self.accessors.push(Value::Object(a));
         self.accessors.len() - 1
     }
 
     fn indices(&mut self, idx: &[u32]) -> usize {
-        let bytes: Vec<u8> = idx.iter().flat_map(|x| x.to_le_bytes()).collect();
-        let view = self.view(&bytes, Some(ELEMENT_ARRAY_BUFFER));
+        let view = self.view_with(Some(ELEMENT_ARRAY_BUFFER), |bin| {
+            for x in idx {
+                bin.extend_from_slice(&x.to_le_bytes());
+            }
+        });
         self.accessors.push(json!({
             "bufferView": view,
             "componentType": UNSIGNED_INT,
@@ -240,7 +259,24 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
         );
     }
 
-    let mut b = Builder::default();
+    // The BIN chunk's size (with its padding), and room for the header and JSON that go in
+    // front of it at the end, so that neither the chunk nor the file is ever regrown.
+    let per_vertex = 12
+        + 12 * usize::from(!scene.normals.is_empty())
+        + 16 * usize::from(!scene.tangents.is_empty())
+        + 8 * scene.texcoords.len()
+        + 16 * usize::from(scene.colors.is_some())
+        + 12 * scene.extra.len();
+    let pngs: usize = primitives
+        .iter()
+        .flat_map(|(_, m)| [&m.base_color_png, &m.normal_png, &m.metallic_roughness_png])
+        .map(|png| png.as_ref().map_or(0, |b| b.len() + 3))
+        .sum();
+    let indices: usize = primitives.iter().map(|(i, _)| 4 * i.len()).sum();
+    let mut b = Builder {
+        bin: Vec::with_capacity(nv * per_vertex + indices + pngs + 64 * 4 + (256 << 10)),
+        ..Default::default()
+    };
     let mut root = Map::new();
     root.insert(
         "asset".into(),
@@ -257,41 +293,32 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
     if nv > 0 && !primitives.is_empty() {
         node.insert("mesh".into(), json!(0));
         let mut attrs = Map::new();
-        let pos: Vec<f32> = scene.positions.iter().flat_map(|p| p.to_array()).collect();
-        attrs.insert("POSITION".into(), json!(b.floats(&pos, 3, "VEC3", true)));
+        let pos = b.floats(&scene.positions, |p| p.to_array(), "VEC3", true);
+        attrs.insert("POSITION".into(), json!(pos));
         if !scene.normals.is_empty() {
-            let nrm: Vec<f32> = scene
-                .normals
-                .iter()
-                .flat_map(|&n| unit_or(n, Vec3::Z).to_array())
-                .collect();
-            attrs.insert("NORMAL".into(), json!(b.floats(&nrm, 3, "VEC3", false)));
+            let unit = |&n: &Vec3| unit_or(n, Vec3::Z).to_array();
+            let nrm = b.floats(&scene.normals, unit, "VEC3", false);
+            attrs.insert("NORMAL".into(), json!(nrm));
         }
         if !scene.tangents.is_empty() {
-            let tan: Vec<f32> = scene
-                .tangents
-                .iter()
-                .flat_map(|t| {
-                    let w = if t.w < 0.0 { -1.0 } else { 1.0 };
-                    unit_or(t.truncate(), Vec3::X).extend(w).to_array()
-                })
-                .collect();
-            attrs.insert("TANGENT".into(), json!(b.floats(&tan, 4, "VEC4", false)));
+            let unit = |t: &Vec4| {
+                let w = if t.w < 0.0 { -1.0 } else { 1.0 };
+                unit_or(t.truncate(), Vec3::X).extend(w).to_array()
+            };
+            let tan = b.floats(&scene.tangents, unit, "VEC4", false);
+            attrs.insert("TANGENT".into(), json!(tan));
         }
         for (k, t) in scene.texcoords.iter().enumerate() {
-            let uv: Vec<f32> = t.iter().flat_map(|p| p.to_array()).collect();
-            attrs.insert(
-                format!("TEXCOORD_{k}"),
-                json!(b.floats(&uv, 2, "VEC2", false)),
-            );
+            let uv = b.floats(t, |p| p.to_array(), "VEC2", false);
+            attrs.insert(format!("TEXCOORD_{k}"), json!(uv));
         }
         if let Some(c) = &scene.colors {
-            let col: Vec<f32> = c.iter().flat_map(|c| c.map(|x| clamp01(x, 0.0))).collect();
-            attrs.insert("COLOR_0".into(), json!(b.floats(&col, 4, "VEC4", false)));
+            let col = b.floats(c, |c| c.map(|x| clamp01(x, 0.0)), "VEC4", false);
+            attrs.insert("COLOR_0".into(), json!(col));
         }
         for a in &scene.extra {
-            let v: Vec<f32> = a.values.iter().flat_map(|p| p.to_array()).collect();
-            attrs.insert(a.name.clone(), json!(b.floats(&v, 3, "VEC3", false)));
+            let v = b.floats(&a.values, |p| p.to_array(), "VEC3", false);
+            attrs.insert(a.name.clone(), json!(v));
         }
         let mut mesh = Map::new();
         if !scene.name.is_empty() {
@@ -369,18 +396,23 @@ pub fn write_glb(scene: &GlbMesh) -> Vec<u8> {
 
     let has_bin = !b.bin.is_empty();
     let total = 12 + 8 + json_bytes.len() + if has_bin { 8 + b.bin.len() } else { 0 };
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(&GLB_MAGIC.to_le_bytes());
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json_bytes.len() as u32).to_le_bytes());
-    out.extend_from_slice(&CHUNK_JSON.to_le_bytes());
-    out.extend_from_slice(&json_bytes);
-    if has_bin {
-        out.extend_from_slice(&(b.bin.len() as u32).to_le_bytes());
-        out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
-        out.extend_from_slice(&b.bin);
+    let mut head = Vec::with_capacity(total - b.bin.len());
+    head.extend_from_slice(&GLB_MAGIC.to_le_bytes());
+    head.extend_from_slice(&2u32.to_le_bytes());
+    head.extend_from_slice(&(total as u32).to_le_bytes());
+    head.extend_from_slice(&(json_bytes.len() as u32).to_le_bytes());
+    head.extend_from_slice(&CHUNK_JSON.to_le_bytes());
+    head.extend_from_slice(&json_bytes);
+    if !has_bin {
+        return head;
     }
+    head.extend_from_slice(&(b.bin.len() as u32).to_le_bytes());
+    head.extend_from_slice(&CHUNK_BIN.to_le_bytes());
+    // The chunk moves up within its own buffer (reserved with room for this) rather than
+    // being copied into a new one.
+    let mut out = b.bin;
+    out.splice(0..0, head);
+    debug_assert_eq!(out.len(), total);
     out
 }
 

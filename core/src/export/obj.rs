@@ -17,6 +17,12 @@ use std::hash::{BuildHasherDefault, Hasher};
 const BLOCK: usize = 1 << 14;
 const WINDOW: usize = 16;
 
+/// Generous lengths of a `v`, `vt` and `f v/vt` line (shortest `f32`s of up to 15
+/// characters, indices of up to 10 digits): the output's capacity is reserved from them.
+const V_LINE: usize = 2 + 3 * 16;
+const VT_LINE: usize = 3 + 2 * 16;
+const F_LINE: usize = 1 + 3 * 22 + 1;
+
 /// Appends one line per item of `items`, formatted by `line(global index, item, out)` in
 /// parallel blocks, in order.
 fn par_lines<T: Sync>(
@@ -97,23 +103,15 @@ pub fn write_obj_materials(
         let _ = writeln!(head, "mtllib {m}");
     }
     let mut out = head.into_bytes();
-    out.reserve(mesh.positions.len() * 32 + mesh.triangles.len() * 40);
-    par_lines(&mesh.positions, &mut out, |_, p, out| {
-        out.extend_from_slice(b"v ");
-        push_f32(out, p.x);
-        out.push(b' ');
-        push_f32(out, p.y);
-        out.push(b' ');
-        push_f32(out, p.z);
-        out.push(b'\n');
-    });
     // Index (1-based) of each face corner's vt, and the distinct coordinates in order of
     // first use.
     let mut corner_vt: Vec<[u32; 3]> = Vec::new();
     let mut distinct: Vec<Vec2> = Vec::new();
     if let Some(uvs) = corner_uv {
+        // About half of a jump map's corners are distinct (seams are few): one growth at
+        // most, instead of a rehash per doubling.
         let mut index: HashMap<(u32, u32), u32, BuildHasherDefault<PairHasher>> =
-            HashMap::default();
+            HashMap::with_capacity_and_hasher(uvs.len() * 3 / 2, Default::default());
         corner_vt.reserve(uvs.len());
         for c in uvs {
             let mut vt = [0u32; 3];
@@ -128,6 +126,24 @@ pub fn write_obj_materials(
             corner_vt.push(vt);
         }
     }
+    // Room for the longest lines the numbers usually make, so that the text is never moved
+    // to a bigger buffer (a million-triangle OBJ is over 100 MB, and each move copies it into
+    // fresh pages); capacity that is not written costs no memory.
+    out.reserve(
+        mesh.positions.len() * V_LINE
+            + distinct.len() * VT_LINE
+            + mesh.triangles.len() * F_LINE
+            + materials.iter().map(|m| m.len() + 8).sum::<usize>(),
+    );
+    par_lines(&mesh.positions, &mut out, |_, p, out| {
+        out.extend_from_slice(b"v ");
+        push_f32(out, p.x);
+        out.push(b' ');
+        push_f32(out, p.y);
+        out.push(b' ');
+        push_f32(out, p.z);
+        out.push(b'\n');
+    });
     par_lines(&distinct, &mut out, |_, uv, out| {
         out.extend_from_slice(b"vt ");
         push_f32(out, uv.x);
