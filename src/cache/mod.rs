@@ -1,7 +1,8 @@
 //! The object store (DESIGN.md, "The cache"): one immutable file per artifact under
 //! `objects-v1/ab/cdef…`, named by its node key.
 //!
-//! Writes go to a temporary file in the same directory, are fsynced, renamed into place, and
+//! Writes go to a temporary file in the same directory (files above 16 MiB around the page
+//! cache where the filesystem allows, see [`big_write`]), are fsynced, renamed into place, and
 //! the directory is fsynced: an artifact is whole or absent, after a crash too. A rename that
 //! finds the target already present is success (two processes computed the same key; by
 //! determinism they wrote the same bytes); anything else at the path (a directory, a damaged
