@@ -73,7 +73,15 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
     );
     run.score_into(&mut item, out_img.view(), None, reference_img.view())?;
     let offset = c.field.density_offset;
-    let frame = surface_item(run, &c, &variants, &out_img, &grey, offset)?;
+    // The surface row needs the field as well; without it the grid row and the mesh checks
+    // still stand, with a note saying why the second row is missing.
+    let frame = surface_item(run, &c, &variants, &out_img, &grey, offset)
+        .map_err(|e| {
+            item.notes.push(format!(
+                "the relief along the surface could not be scored: {e}"
+            ))
+        })
+        .ok();
     item.extra
         .insert("density_offset".into(), serde_json::json!(offset));
     if offset != 0.0 {
@@ -101,7 +109,7 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
         "mesh".into(),
         serde_json::to_value(&checks).expect("plain numbers"),
     );
-    Ok(vec![item, frame])
+    Ok(std::iter::once(item).chain(frame).collect())
 }
 
 /// The relief read in the sample's frame along the surface ([`super::relief_frame`]): each
