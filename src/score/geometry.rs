@@ -73,8 +73,8 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
     );
     run.score_into(&mut item, out_img.view(), None, reference_img.view())?;
     let offset = c.field.density_offset;
-    // The surface row needs the field as well; without it the grid row and the mesh checks
-    // still stand, with a note saying why the second row is missing.
+    // The grid row and the mesh checks do not depend on the surface row: if that one cannot
+    // be made (whatever the reason), they still stand, with a note saying why it is missing.
     let frame = surface_item(run, &c, &variants, &out_img, &grey, offset)
         .map_err(|e| {
             item.notes.push(format!(

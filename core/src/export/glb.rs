@@ -148,8 +148,10 @@ impl Builder {
             for item in items {
                 let e = f(item);
                 for k in 0..N {
-                    lo[k] = lo[k].min(e[k]);
-                    hi[k] = hi[k].max(e[k]);
+                    if bounds {
+                        lo[k] = lo[k].min(e[k]);
+                        hi[k] = hi[k].max(e[k]);
+                    }
                     bin.extend_from_slice(&e[k].to_le_bytes());
                 }
             }

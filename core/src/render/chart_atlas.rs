@@ -793,9 +793,10 @@ pub fn bake_page(
     for gutter in [false, true] {
         faces.par_iter().for_each(|&f| {
             let t = tri(f);
-            let pad = if gutter { g } else { 0.0 };
-            let lo = t[0].min(t[1]).min(t[2]) - DVec2::splat(pad + 0.5);
-            let hi = t[0].max(t[1]).max(t[2]) + DVec2::splat(pad - 0.5);
+            // Both passes visit the box grown by the gutter, as one pass did: the inside test
+            // on a sliver that is one only through rounding may pass beyond its own box.
+            let lo = t[0].min(t[1]).min(t[2]) - DVec2::splat(g + 0.5);
+            let hi = t[0].max(t[1]).max(t[2]) + DVec2::splat(g - 0.5);
             let (x0, x1) = (
                 lo.x.ceil().max(0.0) as i64,
                 hi.x.floor().min(size.x - 1.0) as i64,
