@@ -788,15 +788,16 @@ pub fn bake_page(
     // Ownership keys: face (inside) < 2^63 | distance bits << 32 | face (gutter).
     let keys: Vec<AtomicU64> = (0..wu * hu).map(|_| AtomicU64::new(u64::MAX)).collect();
     // Two passes over each face's box: every inside key is below every gutter key, so once the
-    // first pass has settled which texels some face covers, the second (the nearest-point
-    // search, most of the bake's work on a dense page) skips them: the same keys as one pass.
+    // first pass has set the inside keys, the second (over the box grown by the gutter) skips
+    // the nearest-point search (most of the bake's work on a dense page) wherever one is set:
+    // every key it skips would have lost, so each texel ends with the same least key as in one
+    // pass, for any thread count.
     for gutter in [false, true] {
         faces.par_iter().for_each(|&f| {
             let t = tri(f);
-            // Both passes visit the box grown by the gutter, as one pass did: the inside test
-            // on a sliver that is one only through rounding may pass beyond its own box.
-            let lo = t[0].min(t[1]).min(t[2]) - DVec2::splat(g + 0.5);
-            let hi = t[0].max(t[1]).max(t[2]) + DVec2::splat(g - 0.5);
+            let pad = if gutter { g } else { 0.0 };
+            let lo = t[0].min(t[1]).min(t[2]) - DVec2::splat(pad + 0.5);
+            let hi = t[0].max(t[1]).max(t[2]) + DVec2::splat(pad - 0.5);
             let (x0, x1) = (
                 lo.x.ceil().max(0.0) as i64,
                 hi.x.floor().min(size.x - 1.0) as i64,
@@ -816,8 +817,12 @@ pub fn bake_page(
                             sign * (b - a).perp_dot(c - a) >= 0.0
                         });
                     let key = match (gutter, inside) {
-                        (false, true) => f as u64,
-                        (false, false) | (true, true) => continue,
+                        // The second pass gives inside keys again over its wider box: the
+                        // inside test on a sliver that is one only through rounding may pass
+                        // beyond the face's own box, where the first pass did not look.
+                        // (`fetch_min` of a key already there changes nothing.)
+                        (_, true) => f as u64,
+                        (false, false) => continue,
                         (true, false) => {
                             if slot.load(Ordering::Relaxed) < 1 << 63 {
                                 continue;
