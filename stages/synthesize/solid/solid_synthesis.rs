@@ -111,7 +111,7 @@ use crate::field::coarse_field_smoothing::smooth_field;
 use crate::field::quaternion_field::RotationField;
 use crate::parameterize::volume_embedding::Volume;
 use crate::random::{counter_hash, counter_unit};
-use glam::{IVec3, Mat3, Vec3};
+use glam::{IVec3, Mat3, Quat, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeSet, HashMap};
@@ -1071,6 +1071,22 @@ pub struct SolidSynthesis<'a> {
     /// `basis · mean` per (level, image), to project without centring.
     mean_proj: Vec<Vec<Vec<f32>>>,
     limits: BatchLimits,
+    /// Per level, the scale of its field where that field is the identity rotation at one
+    /// scale everywhere ([`uniform_scale`]): then every look-up returns exactly that.
+    uniform: Vec<Option<f32>>,
+}
+
+/// `Some(s)` when every rotation of `field` is the identity and every scale is `s`. Then
+/// [`RotationField::rotation_at`] is exactly `Quat::IDENTITY` and [`RotationField::scale_at`]
+/// exactly `s` everywhere: the look-ups sum the eight corners' values times weights in `f64`
+/// (for the rotation: `(0, 0, 0, S)` with `S = Σ w ≈ 1`, which normalizes to within an `f64`
+/// rounding of 1; for the scale `s·S`), then round to `f32`, and a value within a few `f64`
+/// roundings of an `f32` number rounds to that number. A rotation field of another constant
+/// rotation is not taken: its normalization could move a component across an `f32` rounding.
+fn uniform_scale(field: &RotationField) -> Option<f32> {
+    let s = *field.scales.first()?;
+    let identity = |q: &Quat| q.x == 0.0 && q.y == 0.0 && q.z == 0.0 && q.w == 1.0;
+    (field.rotations.iter().all(identity) && field.scales.iter().all(|x| *x == s)).then_some(s)
 }
 
 impl<'a> SolidSynthesis<'a> {
@@ -1132,7 +1148,7 @@ impl<'a> SolidSynthesis<'a> {
         let constant = field.rotations.iter().all(|q| *q == field.rotations[0])
             && field.scales.iter().all(|s| *s == field.scales[0]);
         let nl = pyramid.levels as usize;
-        let smoothed = (0..nl)
+        let smoothed: Vec<Option<RotationField>> = (0..nl)
             .map(|li| {
                 let on = params.field_smoothing > 0.0 && coarse_level(li, nl) && !constant;
                 on.then(|| {
@@ -1170,6 +1186,9 @@ impl<'a> SolidSynthesis<'a> {
                     .collect()
             })
             .collect();
+        let uniform = (0..nl)
+            .map(|li| uniform_scale(smoothed[li].as_ref().unwrap_or(field)))
+            .collect();
         Ok(SolidSynthesis {
             analysis,
             field,
@@ -1182,6 +1201,7 @@ impl<'a> SolidSynthesis<'a> {
             planes,
             mean_proj,
             limits: BatchLimits::default(),
+            uniform,
         })
     }
 
@@ -1189,6 +1209,18 @@ impl<'a> SolidSynthesis<'a> {
     /// `field_smoothing`, else the field itself.
     pub fn field_of(&self, li: usize) -> &RotationField {
         self.smoothed[li].as_ref().unwrap_or(self.field)
+    }
+
+    /// The rotation and scale of array level `li`'s field at object-space `pos`: what
+    /// [`RotationField::rotation_at`] and [`RotationField::scale_at`] return, without the
+    /// look-up where the field is the identity everywhere at one scale (see [`uniform_scale`]).
+    #[inline]
+    fn rotation_scale(&self, li: usize, pos: Vec3) -> (Quat, f32) {
+        if let Some(s) = self.uniform[li] {
+            return (Quat::IDENTITY, s);
+        }
+        let f = self.field_of(li);
+        (f.rotation_at(pos), f.scale_at(pos))
     }
 
     /// The finest level's grid.
@@ -1576,8 +1608,7 @@ impl<'a> SolidSynthesis<'a> {
         let part = v.div_euclid(IVec3::splat(k));
         let centre = (part * k).as_vec3() + 0.5 * k as f32;
         let pos = self.pyramid.position(1, v);
-        let q = self.field_of(0).rotation_at(pos);
-        let s = self.field_of(0).scale_at(pos);
+        let (q, s) = self.rotation_scale(0, pos);
         let u = centre + q.inverse() * (v.as_vec3() - centre) / s;
         self.slab_triple(part, round_v(u))
     }
@@ -1588,8 +1619,7 @@ impl<'a> SolidSynthesis<'a> {
         let vp = v.div_euclid(IVec3::splat(2));
         let tp = parents.get(vp);
         let pos = self.pyramid.position(level - 1, vp);
-        let q = self.field_of(li - 1).rotation_at(pos);
-        let s = self.field_of(li - 1).scale_at(pos);
+        let (q, s) = self.rotation_scale(li - 1, pos);
         let h = self.analysis.spacing(li) as f32;
         let mut d = q.inverse() * ((v - vp * 2).as_vec3() * (h / s));
         let jitter = self.params.levels[li].jitter;
@@ -1794,8 +1824,8 @@ impl<'a> SolidSynthesis<'a> {
     /// `x`, in voxel coordinates of the level.
     fn frame_at(&self, li: usize, x: Vec3) -> Mat3 {
         let pos = self.pyramid.position_f(li as u32 + 1, x);
-        let f = self.field_of(li);
-        Mat3::from_quat(f.rotation_at(pos)) * f.scale_at(pos)
+        let (q, s) = self.rotation_scale(li, pos);
+        Mat3::from_quat(q) * s
     }
 
     /// §4.3: the corrected value of voxel `v` of array level `li`, and the comparisons made.
@@ -1814,8 +1844,7 @@ impl<'a> SolidSynthesis<'a> {
         let weights = a.weights();
         let dmax = self.pyramid.level_dims(level) - 1;
         let pos = self.pyramid.position(level, v);
-        let q = self.field_of(li).rotation_at(pos);
-        let s = self.field_of(li).scale_at(pos);
+        let (q, s) = self.rotation_scale(li, pos);
         let mat = Mat3::from_quat(q);
         let h = a.spacing(li) as f32;
         let (clo, chi) = window.latest_box(v);
@@ -2576,6 +2605,50 @@ mod tests {
         assert!(lattice_steps(m.col(0), m.col(1)).is_none());
         assert!(lattice_steps(Vec3::X * 1.5, Vec3::Y).is_none());
         assert!(lattice_steps(Vec3::X, Vec3::X).is_none());
+    }
+
+    #[test]
+    fn uniform_fields_look_up_exactly_their_rotation_and_scale() {
+        use crate::field::quaternion_field::FieldGrid;
+        let grid = FieldGrid::covering(Vec3::new(-1.0, -2.0, 0.5), Vec3::new(3.0, 1.0, 4.0), 7);
+        let bits = |q: Quat| q.to_array().map(f32::to_bits);
+        // Points inside the grid, on its nodes and cell faces, and outside it.
+        let points: Vec<Vec3> = (0..4000u64)
+            .map(|i| {
+                let u = |a: u64| 8.0 * counter_unit(9, a, i) - 3.0;
+                let p = Vec3::new(u(1), u(2), u(3));
+                if i % 4 == 0 { (p * 4.0).round() / 4.0 } else { p }
+            })
+            .collect();
+        for scale in [1.0f32, 1.7, 0.3, 2.0, 0.1 + 1e-7] {
+            let mut f = RotationField::trivial(grid);
+            f.scales.iter_mut().for_each(|s| *s = scale);
+            if scale == 1.7 {
+                // A negative zero is still the identity.
+                f.rotations[3] = Quat::from_xyzw(-0.0, 0.0, -0.0, 1.0);
+            }
+            assert_eq!(uniform_scale(&f), Some(scale));
+            for &p in &points {
+                assert_eq!(bits(f.rotation_at(p)), bits(Quat::IDENTITY), "at {p}");
+                assert_eq!(f.scale_at(p).to_bits(), scale.to_bits(), "at {p}");
+            }
+        }
+        // Not uniform: one scale differs, one rotation differs, the other sign of the
+        // identity (its look-up is −identity), another constant rotation.
+        let mut f = RotationField::trivial(grid);
+        f.scales[5] = 1.5;
+        assert_eq!(uniform_scale(&f), None);
+        let mut f = RotationField::trivial(grid);
+        f.rotations[5] = Quat::from_rotation_z(0.2);
+        assert_eq!(uniform_scale(&f), None);
+        let mut f = RotationField::trivial(grid);
+        f.rotations.iter_mut().for_each(|q| *q = -Quat::IDENTITY);
+        assert_eq!(uniform_scale(&f), None);
+        assert_ne!(bits(f.rotation_at(points[1])), bits(Quat::IDENTITY));
+        f.rotations
+            .iter_mut()
+            .for_each(|q| *q = Quat::from_rotation_x(std::f32::consts::FRAC_PI_2));
+        assert_eq!(uniform_scale(&f), None);
     }
 
     #[test]
