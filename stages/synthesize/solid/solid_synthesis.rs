@@ -101,7 +101,7 @@
 //!   squares of the weighted exemplar planes ([`Stencil`]), which is all a correction reads.
 
 use super::dependent_set::{
-    CHUNK_VOXELS, ChunkedNeed, NeedGrid, Stencil, chunk_local, dependent_box, dependent_set,
+    CHUNK, CHUNK_BITS, CHUNK_VOXELS, ChunkedNeed, NeedGrid, Stencil, chunk_local, dependent_box, dependent_set,
 };
 use super::field_integration::integrated_neighbourhood;
 use super::history_window::{HistoryWindow, Schedule, Step};
@@ -1912,19 +1912,15 @@ impl<'a> SolidSynthesis<'a> {
                     Some(((ax, sa), (bx, sb))) => {
                         let cx = 3 - ax - bx;
                         let side = (2 * nh + 1) as usize;
-                        let part = |axis: usize, x: i32| {
-                            let x = x.clamp(0, dmax[axis]);
-                            let (t, l) = st.need.axis_part(axis, x);
-                            (t, l, x >= clo[axis] && x < chi[axis])
-                        };
+                        let latest = (clo, chi);
                         let mut cols = [(0, 0, false); MAX_SIDE];
                         let mut rows = [(0, 0, false); MAX_SIDE];
-                        for (t, i) in (-nh..=nh).enumerate() {
-                            cols[t] = part(ax, v[ax] + sa * i);
-                            rows[t] = part(bx, v[bx] + sb * i);
-                        }
-                        let centre = part(cx, v[cx]);
-                        gather_lattice(st, &rows[..side], &cols[..side], centre, out);
+                        let (cols, rows) = (&mut cols[..side], &mut rows[..side]);
+                        axis_parts(st.need, ax, v[ax] - sa * nh, sa, dmax, latest, cols);
+                        axis_parts(st.need, bx, v[bx] - sb * nh, sb, dmax, latest, rows);
+                        let mut centre = [(0, 0, false)];
+                        axis_parts(st.need, cx, v[cx], 0, dmax, latest, &mut centre);
+                        gather_lattice(st, rows, cols, centre[0], out);
                     }
                     None => {
                         let mut o = 0;
@@ -2097,6 +2093,36 @@ fn gather_lattice(
             out[o..o + 3].copy_from_slice(&src[slot].c);
             o += 3;
         }
+    }
+}
+
+/// The parts (see [`ChunkedNeed::axis_part`]) of the positions `start + step·t` along `axis`
+/// for `t = 0, 1, …` into `out`, each clamped to `[0, dmax]` first, with whether it lies in the
+/// latest window `[lo, hi)` on that axis: the lattice gather's per-column and per-row work.
+/// Inlined (a closure here was called out of line, 19 times a plane), with the axis's
+/// multipliers worked out once.
+#[inline(always)]
+fn axis_parts(
+    need: &ChunkedNeed,
+    axis: usize,
+    start: i32,
+    step: i32,
+    dmax: IVec3,
+    (lo, hi): (IVec3, IVec3),
+    out: &mut [(usize, usize, bool)],
+) {
+    let (dmax, lo, hi) = (dmax[axis], lo[axis], hi[axis]);
+    let (origin, table, local) = need.axis_multipliers(axis);
+    let mut x = start;
+    for o in out.iter_mut() {
+        let c = x.clamp(0, dmax);
+        let q = (c - origin) as usize;
+        *o = (
+            (q >> CHUNK_BITS) * table,
+            (q & (CHUNK as usize - 1)) * local,
+            c >= lo && c < hi,
+        );
+        x += step;
     }
 }
 
