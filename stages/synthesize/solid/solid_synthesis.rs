@@ -1070,6 +1070,9 @@ pub struct SolidSynthesis<'a> {
     planes: Option<[bool; 3]>,
     /// `basis · mean` per (level, image), to project without centring.
     mean_proj: Vec<Vec<Vec<f32>>>,
+    /// Per (level, image), the basis in row pairs for [`project_avx512`] (see [`pair_rows`]),
+    /// when the CPU has AVX-512; else empty.
+    paired: Vec<Vec<Vec<f32>>>,
     limits: BatchLimits,
     /// Per level, the scale of its field where that field is the identity rotation at one
     /// scale everywhere ([`uniform_scale`]): then every look-up returns exactly that.
@@ -1189,6 +1192,25 @@ impl<'a> SolidSynthesis<'a> {
         let uniform = (0..nl)
             .map(|li| uniform_scale(smoothed[li].as_ref().unwrap_or(field)))
             .collect();
+        #[cfg(target_arch = "x86_64")]
+        let wide = std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        let wide = false;
+        let paired = (0..pyramid.levels as usize)
+            .map(|li| {
+                (0..images)
+                    .map(|img| {
+                        let (mean, basis) = analysis.pca(li, img);
+                        if wide {
+                            pair_rows(basis, mean.len())
+                        } else {
+                            Vec::new()
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
         Ok(SolidSynthesis {
             analysis,
             field,
@@ -1200,6 +1222,7 @@ impl<'a> SolidSynthesis<'a> {
             reach,
             planes,
             mean_proj,
+            paired,
             limits: BatchLimits::default(),
             uniform,
         })
@@ -1989,8 +2012,14 @@ impl<'a> SolidSynthesis<'a> {
             let (x, proj) = (&sc.vec[..dim], &mut sc.proj[p][..comps]);
             #[cfg(target_arch = "x86_64")]
             if AVX {
-                // SAFETY: `AVX` is set only on the AVX2 path (`correct_chunk_avx2`).
-                unsafe { project_avx2(basis, x, mp, proj) };
+                let paired = &self.paired[li][img];
+                if paired.is_empty() {
+                    // SAFETY: `AVX` is set only on the AVX2 path (`correct_chunk_avx2`).
+                    unsafe { project_avx2(basis, x, mp, proj) };
+                } else {
+                    // SAFETY: `paired` is made only when the CPU has AVX-512 (`new`).
+                    unsafe { project_avx512(basis, paired, x, mp, proj) };
+                }
             } else {
                 project(basis, x, mp, proj);
             }
@@ -2370,6 +2399,92 @@ fn project_avx2(basis: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
     }
 }
 
+/// The whole 8-column blocks of a row-major `comps × dim` basis, rows taken in pairs: for
+/// pair `m` (rows `2m`, `2m + 1`; a last odd row is left out) and block `b`, sixteen floats at
+/// `(m · ⌊dim/8⌋ + b) · 16`, row `2m`'s columns `8b..8b + 8` then row `2m + 1`'s: one
+/// 512-bit load gives [`project_avx512`] both rows' block.
+fn pair_rows(basis: &[f32], dim: usize) -> Vec<f32> {
+    let comps = basis.len() / dim.max(1);
+    let blocks = dim / 8;
+    let mut out = Vec::with_capacity(comps / 2 * blocks * 16);
+    for m in 0..comps / 2 {
+        for b in 0..blocks {
+            for r in [2 * m, 2 * m + 1] {
+                out.extend_from_slice(&basis[r * dim + 8 * b..r * dim + 8 * b + 8]);
+            }
+        }
+    }
+    out
+}
+
+/// [`project`] with two rows in each AVX-512 register: the low eight lanes of pair `m`'s
+/// register are row `2m`'s `acc` lanes of [`project`], the high eight row `2m + 1`'s, each
+/// added to in the same order (a product, then a sum, never fused) from the same zero, and
+/// reduced the same way with the same tail: every output is the same bits as [`project`]'s
+/// (which groups rows in fours only to keep sums in flight; a row's value does not depend on
+/// its group). Half the multiplies and adds of [`project_avx2`]. `paired` is
+/// [`pair_rows`] of `basis`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2")]
+fn project_avx512(basis: &[f32], paired: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
+    use std::arch::x86_64::{
+        _mm256_castps_pd, _mm256_loadu_ps, _mm512_add_ps, _mm512_broadcast_f64x4,
+        _mm512_castpd_ps, _mm512_loadu_ps, _mm512_mul_ps, _mm512_setzero_ps, _mm512_storeu_ps,
+    };
+    const L: usize = 8;
+    const GROUP: usize = 4;
+    let dim = x.len();
+    let comps = out.len();
+    let blocks = dim / L;
+    let whole = blocks * L;
+    let pairs = comps / 2;
+    assert!(basis.len() >= comps * dim && mean.len() >= comps);
+    assert!(paired.len() >= pairs * blocks * 16);
+    // Row `k`'s output from its eight lane sums.
+    let finish = |k: usize, lanes: &[f32]| {
+        let row = &basis[k * dim..(k + 1) * dim];
+        let mut tail = 0.0f32;
+        for i in whole..dim {
+            tail += row[i] * x[i];
+        }
+        let acc: [f32; L] = lanes.try_into().expect("8 lanes");
+        reduce_lanes(acc) + tail - mean[k]
+    };
+    let mut m = 0;
+    while m < pairs {
+        let group = GROUP.min(pairs - m);
+        let mut acc = [_mm512_setzero_ps(); GROUP];
+        let at = paired.as_ptr();
+        for b in 0..blocks {
+            // SAFETY: 8 floats of `x` at `8b + 8 <= whole <= dim`; 16 of `paired` at
+            // `((m + r) · blocks + b) · 16`, inside its `pairs · blocks · 16` (asserted).
+            let xv = unsafe {
+                _mm512_castpd_ps(_mm512_broadcast_f64x4(_mm256_castps_pd(_mm256_loadu_ps(
+                    x.as_ptr().add(b * L),
+                ))))
+            };
+            for r in 0..group {
+                // SAFETY: as above.
+                let rv = unsafe { _mm512_loadu_ps(at.add(((m + r) * blocks + b) * 16)) };
+                acc[r] = _mm512_add_ps(acc[r], _mm512_mul_ps(rv, xv));
+            }
+        }
+        for r in 0..group {
+            let mut lanes = [0.0f32; 16];
+            // SAFETY: an unaligned store of 16 floats to an array of 16.
+            unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), acc[r]) };
+            let k = 2 * (m + r);
+            out[k] = finish(k, &lanes[..L]);
+            out[k + 1] = finish(k + 1, &lanes[L..]);
+        }
+        m += group;
+    }
+    if comps % 2 == 1 {
+        let k = comps - 1;
+        out[k] = dot(&basis[k * dim..(k + 1) * dim], x) - mean[k];
+    }
+}
+
 /// [`lane_sum`]'s final reduction of eight lanes.
 #[inline]
 fn reduce_lanes(mut acc: [f32; 8]) -> f32 {
@@ -2525,6 +2640,38 @@ mod tests {
                         - mean[k] as f64;
                     assert!((a[k] as f64 - d).abs() < 1e-3, "row {k}: {} vs {d}", a[k]);
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn avx512_projection_is_bitwise_the_portable_one() {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2")
+        {
+            // N = 7 and 9 neighbourhoods, an odd row count, fewer rows than a group, a
+            // length under one block, tails of every size.
+            for (seed, dim, comps) in [
+                (1, 243, 20),
+                (2, 147, 20),
+                (3, 243, 7),
+                (4, 8, 3),
+                (5, 5, 4),
+                (6, 250, 13),
+                (7, 17, 1),
+                (8, 64, 18),
+            ] {
+                let basis = floats(seed, dim * comps);
+                let x = floats(seed + 100, dim);
+                let mean = floats(seed + 200, comps);
+                let paired = pair_rows(&basis, dim);
+                let (mut a, mut b) = (vec![0.0f32; comps], vec![0.0f32; comps]);
+                project(&basis, &x, &mean, &mut a);
+                // SAFETY: the CPU has AVX-512F and AVX2 (checked above).
+                unsafe { project_avx512(&basis, &paired, &x, &mean, &mut b) };
+                let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a), bits(&b), "dim {dim}, comps {comps}");
             }
         }
     }
