@@ -101,7 +101,8 @@
 //!   squares of the weighted exemplar planes ([`Stencil`]), which is all a correction reads.
 
 use super::dependent_set::{
-    CHUNK, CHUNK_BITS, CHUNK_VOXELS, ChunkedNeed, NeedGrid, Stencil, chunk_local, dependent_box, dependent_set,
+    CHUNK, CHUNK_BITS, CHUNK_VOXELS, ChunkedNeed, NeedGrid, Stencil, chunk_local, dependent_box,
+    dependent_set,
 };
 use super::field_integration::integrated_neighbourhood;
 use super::history_window::{HistoryWindow, Schedule, Step};
@@ -2428,8 +2429,8 @@ fn pair_rows(basis: &[f32], dim: usize) -> Vec<f32> {
 #[target_feature(enable = "avx512f,avx2")]
 fn project_avx512(basis: &[f32], paired: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
     use std::arch::x86_64::{
-        _mm256_castps_pd, _mm256_loadu_ps, _mm512_add_ps, _mm512_broadcast_f64x4,
-        _mm512_castpd_ps, _mm512_loadu_ps, _mm512_mul_ps, _mm512_setzero_ps, _mm512_storeu_ps,
+        _mm256_castps_pd, _mm256_loadu_ps, _mm512_add_ps, _mm512_broadcast_f64x4, _mm512_castpd_ps,
+        _mm512_loadu_ps, _mm512_mul_ps, _mm512_setzero_ps, _mm512_storeu_ps,
     };
     const L: usize = 8;
     const GROUP: usize = 4;
@@ -2816,7 +2817,11 @@ mod tests {
             .map(|i| {
                 let u = |a: u64| 8.0 * counter_unit(9, a, i) - 3.0;
                 let p = Vec3::new(u(1), u(2), u(3));
-                if i % 4 == 0 { (p * 4.0).round() / 4.0 } else { p }
+                if i % 4 == 0 {
+                    (p * 4.0).round() / 4.0
+                } else {
+                    p
+                }
             })
             .collect();
         for scale in [1.0f32, 1.7, 0.3, 2.0, 0.1 + 1e-7] {
