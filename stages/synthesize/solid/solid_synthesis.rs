@@ -774,6 +774,7 @@ impl<'n> States<'n> {
 struct Scratch {
     vec: Vec<f32>,
     proj: [Vec<f32>; 3],
+    cands: Vec<Triple>,
     /// The distinct candidates, in the order of first visits.
     unique: Vec<Triple>,
     /// Sample positions of an integrated neighbourhood (`field_integration`).
@@ -1767,6 +1768,7 @@ impl<'a> SolidSynthesis<'a> {
         Scratch {
             vec: vec![0.0; self.analysis.dim(li)],
             proj: [vec![0.0; c], vec![0.0; c], vec![0.0; c]],
+            cands: Vec::with_capacity(27 * (self.analysis.k() + 1)),
             unique: Vec::with_capacity(27 * (self.analysis.k() + 1)),
             positions: Vec::new(),
             seen: vec![(Triple::default(), 0); (54 * (self.analysis.k() + 1)).next_power_of_two()],
@@ -1908,18 +1910,7 @@ impl<'a> SolidSynthesis<'a> {
         let whole = WholeFrame::of(&mat, s, h / s);
         let comps = a.components(li);
         let dim = a.dim(li);
-        // The candidates go straight into `unique`, deduplicated as they come (a small hash
-        // set of the triples themselves), in the order of first visits. Coordinates in planes
-        // of weight 0 are never read: they become canonical zeros (`keep`), so candidates
-        // differing only there are compared once.
-        sc.unique.clear();
-        sc.stamp = sc.stamp.wrapping_add(1);
-        if sc.stamp == 0 {
-            sc.seen.iter_mut().for_each(|e| e.1 = 0);
-            sc.memo.clear();
-            sc.stamp = 1;
-        }
-        let keep = weights.map(|x| if x == 0.0 { 0u32 } else { u32::MAX });
+        sc.cands.clear();
         // First, per plane, the pixel each of the nine neighbours `w` names in it shifted back
         // by `w`'s exemplar offset `e`, and `w`'s whole triple shifted back by `−e` (eq. 4),
         // with their candidate lists and features asked for (a hint only): the lists and
@@ -2038,7 +2029,7 @@ impl<'a> SolidSynthesis<'a> {
             // Candidates S_P(v), reduced form. Where the neighbours are coherent most of
             // the nine shifted pixels are the same pixel, whose k candidates are then all
             // already listed: a repeated pixel adds none (none could be a first visit in the
-            // deduplication), so its list is skipped before any copying or hashing.
+            // deduplication below), so its list is skipped before any copying or hashing.
             let mut pixels = [[0u16; 2]; 9];
             let mut distinct = 0;
             for &(px, coherent) in &shifted[p] {
@@ -2048,12 +2039,44 @@ impl<'a> SolidSynthesis<'a> {
                     // One push each: a copy of a few triples is cheaper inline than
                     // through a memcpy call.
                     for t in a.candidates(li, p, px) {
-                        offer(&mut sc.seen, &mut sc.unique, sc.stamp, keep, *t);
+                        sc.cands.push(*t);
                     }
                 }
                 if self.params.coherent_candidates {
-                    offer(&mut sc.seen, &mut sc.unique, sc.stamp, keep, coherent);
+                    sc.cands.push(coherent);
                 }
+            }
+        }
+        // Coordinates in planes of weight 0 are never read: canonical zeros, so candidates
+        // differing only there are compared once.
+        for p in 0..3 {
+            if weights[p] == 0.0 {
+                sc.cands.iter_mut().for_each(|c| c.c[p] = [0, 0]);
+            }
+        }
+        // Deduplicate (a small hash set of the triples themselves), keeping the order of
+        // first visits.
+        sc.unique.clear();
+        sc.stamp = sc.stamp.wrapping_add(1);
+        if sc.stamp == 0 {
+            sc.seen.iter_mut().for_each(|e| e.1 = 0);
+            sc.memo.clear();
+            sc.stamp = 1;
+        }
+        let mask = sc.seen.len() - 1;
+        for c in &sc.cands {
+            let mut i = triple_hash(c) & mask;
+            loop {
+                let e = &mut sc.seen[i];
+                if e.1 != sc.stamp {
+                    *e = (*c, sc.stamp);
+                    sc.unique.push(*c);
+                    break;
+                }
+                if e.0 == *c {
+                    break;
+                }
+                i = (i + 1) & mask;
             }
         }
         let mut best = (f32::INFINITY, sc.unique[0]);
@@ -2165,35 +2188,6 @@ fn round_i(x: f32) -> i32 {
 #[inline]
 fn round_v(v: Vec3) -> IVec3 {
     IVec3::new(round_i(v.x), round_i(v.y), round_i(v.z))
-}
-
-/// Adds `t`, its coordinates in planes of weight 0 zeroed (`keep`: per plane all ones or
-/// zero), to `unique` unless the open-addressing set `seen` (entries stamped with `stamp`)
-/// already holds it.
-#[inline(always)]
-fn offer(
-    seen: &mut [(Triple, u32)],
-    unique: &mut Vec<Triple>,
-    stamp: u32,
-    keep: [u32; 3],
-    t: Triple,
-) {
-    let w: [u32; 3] = bytemuck::cast(t);
-    let c: Triple = bytemuck::cast([w[0] & keep[0], w[1] & keep[1], w[2] & keep[2]]);
-    let mask = seen.len() - 1;
-    let mut i = triple_hash(&c) & mask;
-    loop {
-        let e = &mut seen[i];
-        if e.1 != stamp {
-            *e = (c, stamp);
-            unique.push(c);
-            return;
-        }
-        if e.0 == c {
-            return;
-        }
-        i = (i + 1) & mask;
-    }
 }
 
 /// A hash of a triple's 12 bytes (for the deduplication's table; its bits only choose where
