@@ -1911,54 +1911,6 @@ impl<'a> SolidSynthesis<'a> {
         let comps = a.components(li);
         let dim = a.dim(li);
         sc.cands.clear();
-        // First, per plane, the pixel each of the nine neighbours `w` names in it shifted back
-        // by `w`'s exemplar offset `e`, and `w`'s whole triple shifted back by `−e` (eq. 4),
-        // with their candidate lists and features asked for (a hint only): the lists and
-        // features lie anywhere in the exemplar's tables, and the neighbourhoods' gathers and
-        // projections below give them time to arrive. The values are the same.
-        let mut shifted = [[([0u16; 2], Triple::default()); 9]; 3];
-        for p in 0..3 {
-            if weights[p] == 0.0 {
-                continue;
-            }
-            let c1 = mat.col(p) * s;
-            let c2 = mat.col((p + 1) % 3) * s;
-            let mut previous = None;
-            for (o, slot) in shifted[p].iter_mut().enumerate() {
-                let (d1, d2) = (o as i32 % 3 - 1, o as i32 / 3 - 1);
-                let triple = |wv: IVec3| read(wv).t;
-                // The neighbour's triple, its shifted pixel and `−e` rounded.
-                let (tw, px, back) = if let Some(f) = &whole {
-                    let wv = f.neighbour(v, p, d1, d2).clamp(IVec3::ZERO, dmax);
-                    let tw = triple(wv);
-                    let e = f.shift(wv - v);
-                    let px = [
-                        wrap(tw.c[p][0] as i32 - e[p], w),
-                        wrap(tw.c[p][1] as i32 - e[(p + 1) % 3], hh),
-                    ];
-                    (tw, px, -e)
-                } else {
-                    let wv = round_v(vf + c1 * d1 as f32 + c2 * d2 as f32).clamp(IVec3::ZERO, dmax);
-                    let tw = triple(wv);
-                    let e = mat.transpose() * ((wv - v).as_vec3() * (h / s));
-                    let (e1, e2) = (e[p], e[(p + 1) % 3]);
-                    let px = [
-                        wrap(round_i(tw.c[p][0] as f32 - e1), w),
-                        wrap(round_i(tw.c[p][1] as f32 - e2), hh),
-                    ];
-                    (tw, px, -round_v(e))
-                };
-                let coherent = tw.offset(back.into(), w, hh);
-                if previous != Some(coherent) {
-                    previous = Some(coherent);
-                    prefetch_slice(a.candidates(li, p, px));
-                    if self.params.coherent_candidates {
-                        prefetch_candidate(a, li, weights, &coherent);
-                    }
-                }
-                *slot = (px, coherent);
-            }
-        }
         for p in 0..3 {
             if weights[p] == 0.0 {
                 continue;
@@ -2032,18 +1984,45 @@ impl<'a> SolidSynthesis<'a> {
             // deduplication below), so its list is skipped before any copying or hashing.
             let mut pixels = [[0u16; 2]; 9];
             let mut distinct = 0;
-            for &(px, coherent) in &shifted[p] {
-                if !pixels[..distinct].contains(&px) {
-                    pixels[distinct] = px;
-                    distinct += 1;
-                    // One push each: a copy of a few triples is cheaper inline than
-                    // through a memcpy call.
-                    for t in a.candidates(li, p, px) {
-                        sc.cands.push(*t);
+            for d2 in -1..=1 {
+                for d1 in -1..=1 {
+                    let triple = |wv: IVec3| read(wv).t;
+                    // The neighbour `w`'s triple, the pixel it names in `p` shifted back by
+                    // `w`'s exemplar offset `e`, and `−e` rounded (eq. 4).
+                    let (tw, px, back) = if let Some(f) = &whole {
+                        let wv = f.neighbour(v, p, d1, d2).clamp(IVec3::ZERO, dmax);
+                        let tw = triple(wv);
+                        let e = f.shift(wv - v);
+                        let px = [
+                            wrap(tw.c[p][0] as i32 - e[p], w),
+                            wrap(tw.c[p][1] as i32 - e[(p + 1) % 3], hh),
+                        ];
+                        (tw, px, -e)
+                    } else {
+                        let wv =
+                            round_v(vf + c1 * d1 as f32 + c2 * d2 as f32).clamp(IVec3::ZERO, dmax);
+                        let tw = triple(wv);
+                        let e = mat.transpose() * ((wv - v).as_vec3() * (h / s));
+                        let (e1, e2) = (e[p], e[(p + 1) % 3]);
+                        let px = [
+                            wrap(round_i(tw.c[p][0] as f32 - e1), w),
+                            wrap(round_i(tw.c[p][1] as f32 - e2), hh),
+                        ];
+                        (tw, px, -round_v(e))
+                    };
+                    if !pixels[..distinct].contains(&px) {
+                        pixels[distinct] = px;
+                        distinct += 1;
+                        // One push each: a copy of a few triples is cheaper inline than
+                        // through a memcpy call.
+                        for t in a.candidates(li, p, px) {
+                            sc.cands.push(*t);
+                        }
                     }
-                }
-                if self.params.coherent_candidates {
-                    sc.cands.push(coherent);
+                    if self.params.coherent_candidates {
+                        // The neighbour's whole triple, shifted back (eq. 4).
+                        sc.cands.push(tw.offset(back.into(), w, hh));
+                    }
                 }
             }
         }
@@ -2286,22 +2265,17 @@ const PREFETCH_AHEAD: usize = 4;
 
 /// A cache hint for the lines of `s`.
 #[inline]
-fn prefetch_slice<T>(s: &[T]) {
+fn prefetch_slice(s: &[f32]) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let p = s.as_ptr() as *const i8;
         let bytes = std::mem::size_of_val(s);
-        if bytes == 0 {
-            return;
-        }
-        // Every line from the first byte's to the last byte's (a slice that starts late in
-        // a line reaches one line further than its length in lines).
-        let first = s.as_ptr() as usize;
-        let mut line = first & !63;
-        while line < first + bytes {
-            // SAFETY: a prefetch is a hint that never faults, whatever the address.
-            unsafe { _mm_prefetch(line as *const i8, _MM_HINT_T0) };
-            line += 64;
+        let mut off = 0;
+        while off < bytes {
+            // SAFETY: a prefetch is a hint that never faults; the address is inside `s`.
+            unsafe { _mm_prefetch(p.add(off), _MM_HINT_T0) };
+            off += 64;
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
