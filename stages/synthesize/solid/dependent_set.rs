@@ -316,7 +316,8 @@ pub fn dependent_box(
     Some(((tlo - grow).max(IVec3::ZERO), (thi + grow).min(domain)))
 }
 
-const CHUNK_BITS: i32 = 3;
+/// `log2` of [`CHUNK`].
+pub const CHUNK_BITS: i32 = 3;
 /// Side of the chunks of a [`ChunkedNeed`] (and of the working values that follow it).
 pub const CHUNK: i32 = 1 << CHUNK_BITS;
 /// Voxels per chunk.
@@ -445,16 +446,26 @@ impl ChunkedNeed {
     /// neighbourhood along two axes works out each row's and column's parts once.
     #[inline]
     pub fn axis_part(&self, axis: usize, x: i32) -> (usize, usize) {
-        let q = x - self.lo[axis];
+        let (origin, table, local) = self.axis_multipliers(axis);
+        let q = x - origin;
         debug_assert!(q >= 0 && q < self.n[axis]);
         let (c, m) = ((q >> CHUNK_BITS) as usize, (q & (CHUNK - 1)) as usize);
-        let (cx, cxy) = (self.cn.x as usize, (self.cn.x * self.cn.y) as usize);
+        (c * table, m * local)
+    }
+
+    /// [`ChunkedNeed::axis_part`] as numbers: the box's first coordinate on `axis`, and what
+    /// a chunk step and a step within a chunk along it add to the table and local parts
+    /// (`axis_part(axis, x)` is `(q >> CHUNK_BITS) · table, (q & (CHUNK − 1)) · local` for
+    /// `q = x − origin`).
+    #[inline]
+    pub fn axis_multipliers(&self, axis: usize) -> (i32, usize, usize) {
         let side = CHUNK as usize;
-        match axis {
-            0 => (c, m),
-            1 => (c * cx, m * side),
-            _ => (c * cxy, m * side * side),
-        }
+        let (t, l) = match axis {
+            0 => (1, 1),
+            1 => (self.cn.x as usize, side),
+            _ => ((self.cn.x * self.cn.y) as usize, side * side),
+        };
+        (self.lo[axis], t, l)
     }
 
     /// The slot of the voxel whose summed [`ChunkedNeed::axis_part`]s are `table` and `local`

@@ -101,7 +101,8 @@
 //!   squares of the weighted exemplar planes ([`Stencil`]), which is all a correction reads.
 
 use super::dependent_set::{
-    CHUNK_VOXELS, ChunkedNeed, NeedGrid, Stencil, chunk_local, dependent_box, dependent_set,
+    CHUNK, CHUNK_BITS, CHUNK_VOXELS, ChunkedNeed, NeedGrid, Stencil, chunk_local, dependent_box,
+    dependent_set,
 };
 use super::field_integration::integrated_neighbourhood;
 use super::history_window::{HistoryWindow, Schedule, Step};
@@ -111,7 +112,7 @@ use crate::field::coarse_field_smoothing::smooth_field;
 use crate::field::quaternion_field::RotationField;
 use crate::parameterize::volume_embedding::Volume;
 use crate::random::{counter_hash, counter_unit};
-use glam::{IVec3, Mat3, Vec3};
+use glam::{IVec3, Mat3, Quat, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeSet, HashMap};
@@ -1070,7 +1071,26 @@ pub struct SolidSynthesis<'a> {
     planes: Option<[bool; 3]>,
     /// `basis · mean` per (level, image), to project without centring.
     mean_proj: Vec<Vec<Vec<f32>>>,
+    /// Per (level, image), the basis in row pairs for [`project_avx512`] (see [`pair_rows`]),
+    /// when the CPU has AVX-512; else empty.
+    paired: Vec<Vec<Vec<f32>>>,
     limits: BatchLimits,
+    /// Per level, the scale of its field where that field is the identity rotation at one
+    /// scale everywhere ([`uniform_scale`]): then every look-up returns exactly that.
+    uniform: Vec<Option<f32>>,
+}
+
+/// `Some(s)` when every rotation of `field` is the identity and every scale is `s`. Then
+/// [`RotationField::rotation_at`] is exactly `Quat::IDENTITY` and [`RotationField::scale_at`]
+/// exactly `s` everywhere: the look-ups sum the eight corners' values times weights in `f64`
+/// (for the rotation: `(0, 0, 0, S)` with `S = Σ w ≈ 1`, which normalizes to within an `f64`
+/// rounding of 1; for the scale `s·S`), then round to `f32`, and a value within a few `f64`
+/// roundings of an `f32` number rounds to that number. A rotation field of another constant
+/// rotation is not taken: its normalization could move a component across an `f32` rounding.
+fn uniform_scale(field: &RotationField) -> Option<f32> {
+    let s = *field.scales.first()?;
+    let identity = |q: &Quat| q.x == 0.0 && q.y == 0.0 && q.z == 0.0 && q.w == 1.0;
+    (field.rotations.iter().all(identity) && field.scales.iter().all(|x| *x == s)).then_some(s)
 }
 
 impl<'a> SolidSynthesis<'a> {
@@ -1132,7 +1152,7 @@ impl<'a> SolidSynthesis<'a> {
         let constant = field.rotations.iter().all(|q| *q == field.rotations[0])
             && field.scales.iter().all(|s| *s == field.scales[0]);
         let nl = pyramid.levels as usize;
-        let smoothed = (0..nl)
+        let smoothed: Vec<Option<RotationField>> = (0..nl)
             .map(|li| {
                 let on = params.field_smoothing > 0.0 && coarse_level(li, nl) && !constant;
                 on.then(|| {
@@ -1170,6 +1190,28 @@ impl<'a> SolidSynthesis<'a> {
                     .collect()
             })
             .collect();
+        let uniform = (0..nl)
+            .map(|li| uniform_scale(smoothed[li].as_ref().unwrap_or(field)))
+            .collect();
+        #[cfg(target_arch = "x86_64")]
+        let wide = std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        let wide = false;
+        let paired = (0..pyramid.levels as usize)
+            .map(|li| {
+                (0..images)
+                    .map(|img| {
+                        let (mean, basis) = analysis.pca(li, img);
+                        if wide {
+                            pair_rows(basis, mean.len())
+                        } else {
+                            Vec::new()
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
         Ok(SolidSynthesis {
             analysis,
             field,
@@ -1181,7 +1223,9 @@ impl<'a> SolidSynthesis<'a> {
             reach,
             planes,
             mean_proj,
+            paired,
             limits: BatchLimits::default(),
+            uniform,
         })
     }
 
@@ -1189,6 +1233,18 @@ impl<'a> SolidSynthesis<'a> {
     /// `field_smoothing`, else the field itself.
     pub fn field_of(&self, li: usize) -> &RotationField {
         self.smoothed[li].as_ref().unwrap_or(self.field)
+    }
+
+    /// The rotation and scale of array level `li`'s field at object-space `pos`: what
+    /// [`RotationField::rotation_at`] and [`RotationField::scale_at`] return, without the
+    /// look-up where the field is the identity everywhere at one scale (see [`uniform_scale`]).
+    #[inline]
+    fn rotation_scale(&self, li: usize, pos: Vec3) -> (Quat, f32) {
+        if let Some(s) = self.uniform[li] {
+            return (Quat::IDENTITY, s);
+        }
+        let f = self.field_of(li);
+        (f.rotation_at(pos), f.scale_at(pos))
     }
 
     /// The finest level's grid.
@@ -1576,8 +1632,7 @@ impl<'a> SolidSynthesis<'a> {
         let part = v.div_euclid(IVec3::splat(k));
         let centre = (part * k).as_vec3() + 0.5 * k as f32;
         let pos = self.pyramid.position(1, v);
-        let q = self.field_of(0).rotation_at(pos);
-        let s = self.field_of(0).scale_at(pos);
+        let (q, s) = self.rotation_scale(0, pos);
         let u = centre + q.inverse() * (v.as_vec3() - centre) / s;
         self.slab_triple(part, round_v(u))
     }
@@ -1588,8 +1643,7 @@ impl<'a> SolidSynthesis<'a> {
         let vp = v.div_euclid(IVec3::splat(2));
         let tp = parents.get(vp);
         let pos = self.pyramid.position(level - 1, vp);
-        let q = self.field_of(li - 1).rotation_at(pos);
-        let s = self.field_of(li - 1).scale_at(pos);
+        let (q, s) = self.rotation_scale(li - 1, pos);
         let h = self.analysis.spacing(li) as f32;
         let mut d = q.inverse() * ((v - vp * 2).as_vec3() * (h / s));
         let jitter = self.params.levels[li].jitter;
@@ -1794,8 +1848,8 @@ impl<'a> SolidSynthesis<'a> {
     /// `x`, in voxel coordinates of the level.
     fn frame_at(&self, li: usize, x: Vec3) -> Mat3 {
         let pos = self.pyramid.position_f(li as u32 + 1, x);
-        let f = self.field_of(li);
-        Mat3::from_quat(f.rotation_at(pos)) * f.scale_at(pos)
+        let (q, s) = self.rotation_scale(li, pos);
+        Mat3::from_quat(q) * s
     }
 
     /// §4.3: the corrected value of voxel `v` of array level `li`, and the comparisons made.
@@ -1814,8 +1868,7 @@ impl<'a> SolidSynthesis<'a> {
         let weights = a.weights();
         let dmax = self.pyramid.level_dims(level) - 1;
         let pos = self.pyramid.position(level, v);
-        let q = self.field_of(li).rotation_at(pos);
-        let s = self.field_of(li).scale_at(pos);
+        let (q, s) = self.rotation_scale(li, pos);
         let mat = Mat3::from_quat(q);
         let h = a.spacing(li) as f32;
         let (clo, chi) = window.latest_box(v);
@@ -1883,19 +1936,15 @@ impl<'a> SolidSynthesis<'a> {
                     Some(((ax, sa), (bx, sb))) => {
                         let cx = 3 - ax - bx;
                         let side = (2 * nh + 1) as usize;
-                        let part = |axis: usize, x: i32| {
-                            let x = x.clamp(0, dmax[axis]);
-                            let (t, l) = st.need.axis_part(axis, x);
-                            (t, l, x >= clo[axis] && x < chi[axis])
-                        };
+                        let latest = (clo, chi);
                         let mut cols = [(0, 0, false); MAX_SIDE];
                         let mut rows = [(0, 0, false); MAX_SIDE];
-                        for (t, i) in (-nh..=nh).enumerate() {
-                            cols[t] = part(ax, v[ax] + sa * i);
-                            rows[t] = part(bx, v[bx] + sb * i);
-                        }
-                        let centre = part(cx, v[cx]);
-                        gather_lattice(st, &rows[..side], &cols[..side], centre, out);
+                        let (cols, rows) = (&mut cols[..side], &mut rows[..side]);
+                        axis_parts(st.need, ax, v[ax] - sa * nh, sa, dmax, latest, cols);
+                        axis_parts(st.need, bx, v[bx] - sb * nh, sb, dmax, latest, rows);
+                        let mut centre = [(0, 0, false)];
+                        axis_parts(st.need, cx, v[cx], 0, dmax, latest, &mut centre);
+                        gather_lattice(st, rows, cols, centre[0], out);
                     }
                     None => {
                         let mut o = 0;
@@ -1916,8 +1965,14 @@ impl<'a> SolidSynthesis<'a> {
             let (x, proj) = (&sc.vec[..dim], &mut sc.proj[p][..comps]);
             #[cfg(target_arch = "x86_64")]
             if AVX {
-                // SAFETY: `AVX` is set only on the AVX2 path (`correct_chunk_avx2`).
-                unsafe { project_avx2(basis, x, mp, proj) };
+                let paired = &self.paired[li][img];
+                if paired.is_empty() {
+                    // SAFETY: `AVX` is set only on the AVX2 path (`correct_chunk_avx2`).
+                    unsafe { project_avx2(basis, x, mp, proj) };
+                } else {
+                    // SAFETY: `paired` is made only when the CPU has AVX-512 (`new`).
+                    unsafe { project_avx512(basis, paired, x, mp, proj) };
+                }
             } else {
                 project(basis, x, mp, proj);
             }
@@ -2068,6 +2123,36 @@ fn gather_lattice(
             out[o..o + 3].copy_from_slice(&src[slot].c);
             o += 3;
         }
+    }
+}
+
+/// The parts (see [`ChunkedNeed::axis_part`]) of the positions `start + step·t` along `axis`
+/// for `t = 0, 1, …` into `out`, each clamped to `[0, dmax]` first, with whether it lies in the
+/// latest window `[lo, hi)` on that axis: the lattice gather's per-column and per-row work.
+/// Inlined (a closure here was called out of line, 19 times a plane), with the axis's
+/// multipliers worked out once.
+#[inline(always)]
+fn axis_parts(
+    need: &ChunkedNeed,
+    axis: usize,
+    start: i32,
+    step: i32,
+    dmax: IVec3,
+    (lo, hi): (IVec3, IVec3),
+    out: &mut [(usize, usize, bool)],
+) {
+    let (dmax, lo, hi) = (dmax[axis], lo[axis], hi[axis]);
+    let (origin, table, local) = need.axis_multipliers(axis);
+    let mut x = start;
+    for o in out.iter_mut() {
+        let c = x.clamp(0, dmax);
+        let q = (c - origin) as usize;
+        *o = (
+            (q >> CHUNK_BITS) * table,
+            (q & (CHUNK as usize - 1)) * local,
+            c >= lo && c < hi,
+        );
+        x += step;
     }
 }
 
@@ -2289,6 +2374,92 @@ fn project_avx2(basis: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
     }
 }
 
+/// The whole 8-column blocks of a row-major `comps × dim` basis, rows taken in pairs: for
+/// pair `m` (rows `2m`, `2m + 1`; a last odd row is left out) and block `b`, sixteen floats at
+/// `(m · ⌊dim/8⌋ + b) · 16`, row `2m`'s columns `8b..8b + 8` then row `2m + 1`'s: one
+/// 512-bit load gives [`project_avx512`] both rows' block.
+fn pair_rows(basis: &[f32], dim: usize) -> Vec<f32> {
+    let comps = basis.len() / dim.max(1);
+    let blocks = dim / 8;
+    let mut out = Vec::with_capacity(comps / 2 * blocks * 16);
+    for m in 0..comps / 2 {
+        for b in 0..blocks {
+            for r in [2 * m, 2 * m + 1] {
+                out.extend_from_slice(&basis[r * dim + 8 * b..r * dim + 8 * b + 8]);
+            }
+        }
+    }
+    out
+}
+
+/// [`project`] with two rows in each AVX-512 register: the low eight lanes of pair `m`'s
+/// register are row `2m`'s `acc` lanes of [`project`], the high eight row `2m + 1`'s, each
+/// added to in the same order (a product, then a sum, never fused) from the same zero, and
+/// reduced the same way with the same tail: every output is the same bits as [`project`]'s
+/// (which groups rows in fours only to keep sums in flight; a row's value does not depend on
+/// its group). Half the multiplies and adds of [`project_avx2`]. `paired` is
+/// [`pair_rows`] of `basis`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2")]
+fn project_avx512(basis: &[f32], paired: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
+    use std::arch::x86_64::{
+        _mm256_castps_pd, _mm256_loadu_ps, _mm512_add_ps, _mm512_broadcast_f64x4, _mm512_castpd_ps,
+        _mm512_loadu_ps, _mm512_mul_ps, _mm512_setzero_ps, _mm512_storeu_ps,
+    };
+    const L: usize = 8;
+    const GROUP: usize = 4;
+    let dim = x.len();
+    let comps = out.len();
+    let blocks = dim / L;
+    let whole = blocks * L;
+    let pairs = comps / 2;
+    assert!(basis.len() >= comps * dim && mean.len() >= comps);
+    assert!(paired.len() >= pairs * blocks * 16);
+    // Row `k`'s output from its eight lane sums.
+    let finish = |k: usize, lanes: &[f32]| {
+        let row = &basis[k * dim..(k + 1) * dim];
+        let mut tail = 0.0f32;
+        for i in whole..dim {
+            tail += row[i] * x[i];
+        }
+        let acc: [f32; L] = lanes.try_into().expect("8 lanes");
+        reduce_lanes(acc) + tail - mean[k]
+    };
+    let mut m = 0;
+    while m < pairs {
+        let group = GROUP.min(pairs - m);
+        let mut acc = [_mm512_setzero_ps(); GROUP];
+        let at = paired.as_ptr();
+        for b in 0..blocks {
+            // SAFETY: 8 floats of `x` at `8b + 8 <= whole <= dim`; 16 of `paired` at
+            // `((m + r) · blocks + b) · 16`, inside its `pairs · blocks · 16` (asserted).
+            let xv = unsafe {
+                _mm512_castpd_ps(_mm512_broadcast_f64x4(_mm256_castps_pd(_mm256_loadu_ps(
+                    x.as_ptr().add(b * L),
+                ))))
+            };
+            for r in 0..group {
+                // SAFETY: as above.
+                let rv = unsafe { _mm512_loadu_ps(at.add(((m + r) * blocks + b) * 16)) };
+                acc[r] = _mm512_add_ps(acc[r], _mm512_mul_ps(rv, xv));
+            }
+        }
+        for r in 0..group {
+            let mut lanes = [0.0f32; 16];
+            // SAFETY: an unaligned store of 16 floats to an array of 16.
+            unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), acc[r]) };
+            let k = 2 * (m + r);
+            out[k] = finish(k, &lanes[..L]);
+            out[k + 1] = finish(k + 1, &lanes[L..]);
+        }
+        m += group;
+    }
+    if comps % 2 == 1 {
+        let k = comps - 1;
+        out[k] = dot(&basis[k * dim..(k + 1) * dim], x) - mean[k];
+    }
+}
+
 /// [`lane_sum`]'s final reduction of eight lanes.
 #[inline]
 fn reduce_lanes(mut acc: [f32; 8]) -> f32 {
@@ -2449,6 +2620,38 @@ mod tests {
     }
 
     #[test]
+    fn avx512_projection_is_bitwise_the_portable_one() {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2")
+        {
+            // N = 7 and 9 neighbourhoods, an odd row count, fewer rows than a group, a
+            // length under one block, tails of every size.
+            for (seed, dim, comps) in [
+                (1, 243, 20),
+                (2, 147, 20),
+                (3, 243, 7),
+                (4, 8, 3),
+                (5, 5, 4),
+                (6, 250, 13),
+                (7, 17, 1),
+                (8, 64, 18),
+            ] {
+                let basis = floats(seed, dim * comps);
+                let x = floats(seed + 100, dim);
+                let mean = floats(seed + 200, comps);
+                let paired = pair_rows(&basis, dim);
+                let (mut a, mut b) = (vec![0.0f32; comps], vec![0.0f32; comps]);
+                project(&basis, &x, &mean, &mut a);
+                // SAFETY: the CPU has AVX-512F and AVX2 (checked above).
+                unsafe { project_avx512(&basis, &paired, &x, &mean, &mut b) };
+                let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a), bits(&b), "dim {dim}, comps {comps}");
+            }
+        }
+    }
+
+    #[test]
     fn sse_distance_is_bitwise_the_portable_one() {
         for (seed, n) in [(1, 20), (2, 3), (3, 0), (4, 17), (5, 64)] {
             let (a, b) = (floats(seed, n), floats(seed + 50, n));
@@ -2576,6 +2779,54 @@ mod tests {
         assert!(lattice_steps(m.col(0), m.col(1)).is_none());
         assert!(lattice_steps(Vec3::X * 1.5, Vec3::Y).is_none());
         assert!(lattice_steps(Vec3::X, Vec3::X).is_none());
+    }
+
+    #[test]
+    fn uniform_fields_look_up_exactly_their_rotation_and_scale() {
+        use crate::field::quaternion_field::FieldGrid;
+        let grid = FieldGrid::covering(Vec3::new(-1.0, -2.0, 0.5), Vec3::new(3.0, 1.0, 4.0), 7);
+        let bits = |q: Quat| q.to_array().map(f32::to_bits);
+        // Points inside the grid, on its nodes and cell faces, and outside it.
+        let points: Vec<Vec3> = (0..4000u64)
+            .map(|i| {
+                let u = |a: u64| 8.0 * counter_unit(9, a, i) - 3.0;
+                let p = Vec3::new(u(1), u(2), u(3));
+                if i % 4 == 0 {
+                    (p * 4.0).round() / 4.0
+                } else {
+                    p
+                }
+            })
+            .collect();
+        for scale in [1.0f32, 1.7, 0.3, 2.0, 0.1 + 1e-7] {
+            let mut f = RotationField::trivial(grid);
+            f.scales.iter_mut().for_each(|s| *s = scale);
+            if scale == 1.7 {
+                // A negative zero is still the identity.
+                f.rotations[3] = Quat::from_xyzw(-0.0, 0.0, -0.0, 1.0);
+            }
+            assert_eq!(uniform_scale(&f), Some(scale));
+            for &p in &points {
+                assert_eq!(bits(f.rotation_at(p)), bits(Quat::IDENTITY), "at {p}");
+                assert_eq!(f.scale_at(p).to_bits(), scale.to_bits(), "at {p}");
+            }
+        }
+        // Not uniform: one scale differs, one rotation differs, the other sign of the
+        // identity (its look-up is −identity), another constant rotation.
+        let mut f = RotationField::trivial(grid);
+        f.scales[5] = 1.5;
+        assert_eq!(uniform_scale(&f), None);
+        let mut f = RotationField::trivial(grid);
+        f.rotations[5] = Quat::from_rotation_z(0.2);
+        assert_eq!(uniform_scale(&f), None);
+        let mut f = RotationField::trivial(grid);
+        f.rotations.iter_mut().for_each(|q| *q = -Quat::IDENTITY);
+        assert_eq!(uniform_scale(&f), None);
+        assert_ne!(bits(f.rotation_at(points[1])), bits(Quat::IDENTITY));
+        f.rotations
+            .iter_mut()
+            .for_each(|q| *q = Quat::from_rotation_x(std::f32::consts::FRAC_PI_2));
+        assert_eq!(uniform_scale(&f), None);
     }
 
     #[test]
