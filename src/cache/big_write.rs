@@ -142,6 +142,7 @@ mod direct {
     }
 
     /// Whether `f` is on tmpfs (whose files live in the page cache anyway).
+    #[allow(clippy::unnecessary_cast)] // `f_type`'s type and the constant's differ by platform
     fn on_tmpfs(f: &File) -> bool {
         // Safety: fstatfs fills the zeroed struct it is given, for a descriptor `f` owns.
         unsafe {
