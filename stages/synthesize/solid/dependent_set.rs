@@ -442,8 +442,9 @@ impl ChunkedNeed {
 
     /// What coordinate `x` on `axis` (0, 1, 2 for x, y, z) adds to [`ChunkedNeed::slot_in_set`]:
     /// its part of the chunk-table index and its part of the offset in the chunk. A voxel's
-    /// slot is [`ChunkedNeed::slot_of_parts`] of the sums of its three axes' parts, so a
-    /// neighbourhood along two axes works out each row's and column's parts once.
+    /// slot is [`ChunkedNeed::slot_of_parts`] of the sums of its three axes' parts. The
+    /// correction kernel's gather computes the same parts inline from
+    /// [`ChunkedNeed::axis_multipliers`] (`solid_synthesis::axis_parts`), which must agree.
     #[inline]
     pub fn axis_part(&self, axis: usize, x: i32) -> (usize, usize) {
         let (origin, table, local) = self.axis_multipliers(axis);

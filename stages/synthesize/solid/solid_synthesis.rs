@@ -1072,7 +1072,9 @@ pub struct SolidSynthesis<'a> {
     /// `basis · mean` per (level, image), to project without centring.
     mean_proj: Vec<Vec<Vec<f32>>>,
     /// Per (level, image), the basis in row pairs for [`project_avx512`] (see [`pair_rows`]),
-    /// when the CPU has AVX-512; else empty.
+    /// when the CPU has AVX-512F (and the basis has at least 8 values and 2 rows); else
+    /// empty, and the AVX2 projection runs. Non-empty only after that detection: the unsafe
+    /// call in the kernel relies on it.
     paired: Vec<Vec<Vec<f32>>>,
     limits: BatchLimits,
     /// Per level, the scale of its field where that field is the identity rotation at one
@@ -1088,7 +1090,12 @@ pub struct SolidSynthesis<'a> {
 /// roundings of an `f32` number rounds to that number. A rotation field of another constant
 /// rotation is not taken: its normalization could move a component across an `f32` rounding.
 fn uniform_scale(field: &RotationField) -> Option<f32> {
+    // Scales are validated finite (0.1..=10, quaternion_field.rs); an infinite one would not
+    // be exact (a corner of weight 0 gives inf·0 = NaN in the look-up).
     let s = *field.scales.first()?;
+    if !s.is_finite() {
+        return None;
+    }
     let identity = |q: &Quat| q.x == 0.0 && q.y == 0.0 && q.z == 0.0 && q.w == 1.0;
     (field.rotations.iter().all(identity) && field.scales.iter().all(|x| *x == s)).then_some(s)
 }
@@ -1782,7 +1789,12 @@ impl<'a> SolidSynthesis<'a> {
     /// version reaches `threshold` and that is active in `step`, pushed to `done` (slot in the
     /// chunk, new value) in slot order; returns the comparisons made. On x86-64 CPUs with
     /// AVX2 the same code runs compiled for AVX2: wider vectors for the same operations in the
-    /// same order (Rust never fuses a multiply and an add), so the values are the same bits.
+    /// same order (Rust never fuses a multiply and an add), so the values are the same bits;
+    /// where the CPU also has AVX-512F, its projection is [`project_avx512`] (two basis rows
+    /// per register, the same products and sums per lane). Checks: CI's emulated Nehalem runs
+    /// the portable path against the locks, this machine's runs the widest path its CPU has,
+    /// and each vector projection has a bitwise unit test against the portable one (skipped,
+    /// and saying so, on a CPU without it).
     #[allow(clippy::too_many_arguments)]
     fn correct_chunk(
         &self,
@@ -2146,6 +2158,7 @@ fn axis_parts(
     let mut x = start;
     for o in out.iter_mut() {
         let c = x.clamp(0, dmax);
+        debug_assert!(c >= origin, "a gather coordinate below the need's origin");
         let q = (c - origin) as usize;
         *o = (
             (q >> CHUNK_BITS) * table,
@@ -2648,6 +2661,9 @@ mod tests {
                 let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&a), bits(&b), "dim {dim}, comps {comps}");
             }
+        } else {
+            // Not a pass: this CPU cannot run the path (CI's emulated CPUs check the others).
+            eprintln!("avx512_projection_is_bitwise_the_portable_one: skipped, no AVX-512F");
         }
     }
 
