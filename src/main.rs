@@ -148,7 +148,9 @@ enum Command {
     /// Render three views of a mesh (textured through its OBJ texture coordinates) to a PNG.
     Render {
         mesh: PathBuf,
-        /// Texture image for the mesh's texture coordinates.
+        /// Texture image for the mesh's texture coordinates. Without it an OBJ's materials'
+        /// `map_Kd` images (beside the OBJ) are used, one per material: every page of a baked
+        /// atlas.
         #[arg(long)]
         texture: Option<PathBuf>,
         /// Output PNG.

@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3};
 use std::path::Path;
-use texsyn::export::{GlbMesh, MtlMaps, write_glb, write_mtl, write_obj};
+use texsyn::export::{GlbMesh, MtlMaps, write_glb, write_mtl, write_obj, write_obj_materials};
 use texsyn::geom::Mesh;
 use texsyn::geom::primitives::{cuboid, uv_quad};
 use texsyn::image::{Image, decode_image};
@@ -88,6 +88,79 @@ fn render_command_shows_an_obj_texture_upright_through_its_uvs() {
             QUADRANTS[q]
         );
     }
+}
+
+/// A 4×4 PNG of one colour.
+fn solid_png(c: [u8; 3]) -> Vec<u8> {
+    let img = image::RgbImage::from_pixel(4, 4, image::Rgb(c));
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+    out.into_inner()
+}
+
+/// Pixels of the first view within 1 of colour `c`.
+fn count_close(img: &image::RgbaImage, c: [u8; 3]) -> usize {
+    let s = img.height();
+    (0..s)
+        .flat_map(|y| (0..s).map(move |x| (x, y)))
+        .filter(|&(x, y)| close(img.get_pixel(x, y).0, c, 1))
+        .count()
+}
+
+#[test]
+fn render_command_shows_each_obj_material_page_without_a_texture_option() {
+    // The quad's two triangles on two pages, as a baked atlas of two pages is written.
+    let dir = tempfile::tempdir().unwrap();
+    let (mesh, corner_uv) = uv_quad();
+    assert_eq!(mesh.triangles.len(), 2);
+    let (red, blue) = ([200, 30, 30], [40, 50, 230]);
+    let obj = dir.path().join("paged.obj");
+    let text = write_obj_materials(
+        &mesh,
+        Some(&corner_uv),
+        Some("paged.mtl"),
+        &["page0".into(), "page1".into()],
+        Some(&[0, 1]),
+    );
+    std::fs::write(&obj, text).unwrap();
+    let page = |name: &str, file: &str| {
+        let maps = MtlMaps {
+            diffuse: Some(file.into()),
+            ..MtlMaps::default()
+        };
+        write_mtl(name, &maps)
+    };
+    let mtl = page("page0", "page0.png") + &page("page1", "page1.png");
+    std::fs::write(dir.path().join("paged.mtl"), mtl).unwrap();
+    std::fs::write(dir.path().join("page0.png"), solid_png(red)).unwrap();
+    std::fs::write(dir.path().join("page1.png"), solid_png(blue)).unwrap();
+
+    let img = render_mesh_file(&obj, None, &unlit(96)).unwrap();
+    let (r, b) = (count_close(&img, red), count_close(&img, blue));
+    let (x0, y0, x1, y1) = foreground_box(&img, 0).unwrap();
+    let area = ((x1 - x0 + 1) * (y1 - y0 + 1)) as usize;
+    // Each triangle is half the quad and shows its own page.
+    assert!(r + b > area * 9 / 10, "red {r} + blue {b} of {area}");
+    assert!(r.abs_diff(b) < area / 10, "red {r} vs blue {b}");
+
+    // An explicit texture still wins over the materials.
+    let green = [30, 180, 50];
+    let png = dir.path().join("green.png");
+    std::fs::write(&png, solid_png(green)).unwrap();
+    let img = render_mesh_file(&obj, Some(&png), &unlit(96)).unwrap();
+    assert_eq!(count_close(&img, red) + count_close(&img, blue), 0);
+    assert!(count_close(&img, green) > area * 9 / 10);
+
+    // A missing page is a warning: that triangle takes its material's Kd (white), the other
+    // keeps its page. A missing MTL renders the mesh grey, as before.
+    std::fs::remove_file(dir.path().join("page1.png")).unwrap();
+    let img = render_mesh_file(&obj, None, &unlit(96)).unwrap();
+    assert!(count_close(&img, red) > area * 4 / 10);
+    assert_eq!(count_close(&img, blue), 0);
+    assert!(count_close(&img, [255, 255, 255]) > area * 4 / 10);
+    std::fs::remove_file(dir.path().join("paged.mtl")).unwrap();
+    let img = render_mesh_file(&obj, None, &unlit(96)).unwrap();
+    assert_eq!(count_close(&img, red), 0);
 }
 
 #[test]

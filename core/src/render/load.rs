@@ -1,10 +1,12 @@
 //! The `render` command's backend: load a mesh (and optionally a texture) and render the views.
 
-use super::shader::{ConstantShader, CornerUvShader, SurfaceShader, VertexColorShader};
+use super::shader::{
+    ConstantShader, CornerUvShader, MaterialUvShader, SurfaceShader, VertexColorShader,
+};
 use super::views::{ViewOptions, render_views};
 use crate::geom::Mesh;
 use crate::geom::io::MeshError;
-use crate::image::{ImageError, decode_image};
+use crate::image::{Image, ImageError, decode_image};
 use glam::{Vec2, Vec3};
 use std::path::{Path, PathBuf};
 
@@ -32,10 +34,21 @@ pub enum RenderError {
 }
 
 /// A mesh as the `render` command sees it: geometry plus per-face corner uvs if the file has
-/// them (OBJ convention).
+/// them (OBJ convention), and what its materials say.
 struct Loaded {
     mesh: Mesh,
     corner_uv: Option<Vec<[Vec2; 3]>>,
+    materials: FaceMaterials,
+}
+
+/// Per face, the OBJ material's diffuse texture (`map_Kd`, an index into `textures`) and colour
+/// (`Kd`); empty for other formats and for OBJs without a readable MTL.
+#[derive(Default)]
+struct FaceMaterials {
+    texture: Vec<Option<u32>>,
+    colour: Vec<Vec3>,
+    /// The distinct `map_Kd` files, resolved against the OBJ's folder.
+    textures: Vec<PathBuf>,
 }
 
 fn obj_error(path: &Path, e: tobj::LoadError) -> RenderError {
@@ -45,8 +58,9 @@ fn obj_error(path: &Path, e: tobj::LoadError) -> RenderError {
     }
 }
 
-/// Reads an OBJ with tobj, keeping its per-corner texture coordinates and vertex colours.
-/// Groups and objects are merged into one mesh; materials are ignored.
+/// Reads an OBJ with tobj, keeping its per-corner texture coordinates, vertex colours and each
+/// face's material (from the `mtllib` files, read beside the OBJ). Groups and objects are merged
+/// into one mesh. An MTL that cannot be read is a warning: the mesh renders without it.
 fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
     let bytes = crate::geom::io::read_regular_file(path).map_err(|source| RenderError::Io {
         path: path.to_owned(),
@@ -58,10 +72,46 @@ fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, _) = tobj::load_obj_buf(&mut bytes.as_slice(), &opts, |_| {
-        Err(tobj::LoadError::OpenFileFailed)
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let (models, materials) = tobj::load_obj_buf(&mut bytes.as_slice(), &opts, |mtl| {
+        let mtl_path = dir.join(mtl);
+        let bytes = crate::geom::io::read_regular_file(&mtl_path).map_err(|e| {
+            tracing::warn!(
+                "{}: {e}; its materials are left out of the render",
+                mtl_path.display()
+            );
+            tobj::LoadError::OpenFileFailed
+        })?;
+        tobj::load_mtl_buf(&mut bytes.as_slice()).inspect_err(|e| {
+            tracing::warn!(
+                "{}: cannot read MTL ({e}); its materials are left out of the render",
+                mtl_path.display()
+            )
+        })
     })
     .map_err(|e| obj_error(path, e))?;
+    let materials = materials.unwrap_or_default();
+    // Each material's texture slot (files named by several materials share one) and colour.
+    let mut textures: Vec<PathBuf> = vec![];
+    let material_texture: Vec<Option<u32>> = materials
+        .iter()
+        .map(|m| {
+            let file = dir.join(m.diffuse_texture.as_deref()?.trim());
+            let slot = textures.iter().position(|t| *t == file).unwrap_or_else(|| {
+                textures.push(file);
+                textures.len() - 1
+            });
+            Some(slot as u32)
+        })
+        .collect();
+    let material_colour: Vec<Vec3> = materials
+        .iter()
+        .map(|m| m.diffuse.map_or(NEUTRAL_GREY, Vec3::from_array))
+        .collect();
+    let mut face_materials = FaceMaterials {
+        textures,
+        ..FaceMaterials::default()
+    };
     let invalid = |message: String| RenderError::Invalid {
         path: path.to_owned(),
         message,
@@ -88,6 +138,19 @@ fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
         }
         let has_uv = m.texcoord_indices.len() == m.indices.len() && !m.texcoords.is_empty();
         all_uv &= has_uv;
+        let (texture, colour) = m.material_id.map_or((None, NEUTRAL_GREY), |k| {
+            (
+                material_texture.get(k).copied().flatten(),
+                material_colour.get(k).copied().unwrap_or(NEUTRAL_GREY),
+            )
+        });
+        let faces = m.indices.len() / 3;
+        face_materials
+            .texture
+            .extend(std::iter::repeat_n(texture, faces));
+        face_materials
+            .colour
+            .extend(std::iter::repeat_n(colour, faces));
         for (k, t) in m.indices.chunks_exact(3).enumerate() {
             if let Some(&bad) = t.iter().find(|&&v| v as usize >= nv) {
                 return Err(invalid(format!(
@@ -126,13 +189,17 @@ fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
     Ok(Loaded {
         mesh: Mesh::with_colors(positions, triangles, colors),
         corner_uv,
+        materials: face_materials,
     })
 }
 
-/// Loads `mesh_path` (OBJ via tobj, keeping its texture coordinates; other formats via
-/// [`crate::geom::io::read_mesh`]) and renders the three preview views. The surface is the
-/// `texture` applied through the OBJ's uvs when both exist, else the mesh's vertex colours, else
-/// a neutral grey. A texture given for a mesh without uvs is ignored with a warning.
+/// Loads `mesh_path` (OBJ via tobj, keeping its texture coordinates and materials; other
+/// formats via [`crate::geom::io::read_mesh`]) and renders the three preview views. The surface
+/// is the `texture` applied through the OBJ's uvs when both exist; else, for an OBJ with uvs
+/// whose materials name `map_Kd` images (read beside the OBJ), each face's own image, so a
+/// baked atlas of several pages renders as written (faces without one take their material's
+/// `Kd`); else the mesh's vertex colours; else a neutral grey. A texture given for a mesh
+/// without uvs is ignored with a warning, and so is a material image that cannot be read.
 pub fn render_mesh_file(
     mesh_path: &Path,
     texture: Option<&Path>,
@@ -164,6 +231,7 @@ pub fn render_mesh_file(
         Loaded {
             mesh: crate::geom::io::read_mesh(mesh_path)?,
             corner_uv: None,
+            materials: FaceMaterials::default(),
         }
     };
     if loaded.mesh.triangles.is_empty() {
@@ -183,7 +251,43 @@ pub fn render_mesh_file(
         }
         None => None,
     };
+    // Without an explicit texture, the materials' own images.
+    let mut page_slot: Vec<Option<u32>> = vec![];
+    let mut pages: Vec<Image> = vec![];
+    if texture.is_none()
+        && loaded.corner_uv.is_some()
+        && loaded.materials.texture.iter().any(Option::is_some)
+    {
+        for file in &loaded.materials.textures {
+            let read = crate::geom::io::read_regular_file(file)
+                .map_err(|source| RenderError::Io {
+                    path: file.clone(),
+                    source,
+                })
+                .and_then(|bytes| Ok(decode_image(file, &bytes)?));
+            match read {
+                Ok(img) => {
+                    page_slot.push(Some(pages.len() as u32));
+                    pages.push(img);
+                }
+                Err(e) => {
+                    tracing::warn!(
+                        "{}: {e}; the faces of its material render without it",
+                        mesh_path.display()
+                    );
+                    page_slot.push(None);
+                }
+            }
+        }
+    }
+    let face_page: Vec<Option<u32>> = loaded
+        .materials
+        .texture
+        .iter()
+        .map(|t| t.and_then(|k| page_slot.get(k as usize).copied().flatten()))
+        .collect();
     let mesh = &loaded.mesh;
+    let material_shader;
     let uv_shader;
     let vc_shader;
     let grey = ConstantShader(NEUTRAL_GREY);
@@ -191,6 +295,15 @@ pub fn render_mesh_file(
         (Some(img), Some(uv)) => {
             uv_shader = CornerUvShader::new(uv, img.view());
             &uv_shader
+        }
+        (None, Some(uv)) if !pages.is_empty() => {
+            material_shader = MaterialUvShader {
+                corner_uv: uv,
+                face_texture: &face_page,
+                textures: pages.iter().map(Image::view).collect(),
+                untextured: &loaded.materials.colour,
+            };
+            &material_shader
         }
         _ => {
             if image.is_some() {

@@ -25,5 +25,7 @@ pub mod views;
 pub use atlas::{ATLAS_GUTTER, Atlas, AtlasError, bake, build_atlas};
 pub use chart_atlas::{ChartAtlas, ChartAtlasError, bake_page, build_chart_atlas};
 pub use load::{RenderError, render_mesh_file};
-pub use shader::{ConstantShader, CornerUvShader, SurfaceShader, VertexColorShader};
+pub use shader::{
+    ConstantShader, CornerUvShader, MaterialUvShader, SurfaceShader, VertexColorShader,
+};
 pub use views::{ViewOptions, render_views, render_views_of_each};

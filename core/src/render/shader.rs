@@ -50,20 +50,49 @@ fn wrap01(t: f32) -> f32 {
     }
 }
 
+/// `texture` at the point `bary` of a face whose corners have texture coordinates `uv` (OBJ
+/// convention: v up, repeat wrapping), bilinearly.
+fn sample_corner_uv(texture: &ImageView<'_>, uv: &[Vec2; 3], bary: Vec3) -> Vec3 {
+    if texture.width == 0 || texture.height == 0 {
+        return MISSING_COLOR;
+    }
+    let p = uv[0] * bary.x + uv[1] * bary.y + uv[2] * bary.z;
+    let (u, v) = (wrap01(p.x), wrap01(p.y));
+    let (w, h) = (texture.width as f32, texture.height as f32);
+    let texel = Vec2::new(u * w - 0.5, (1.0 - v) * h - 0.5);
+    let c = texture.sample(texel);
+    Vec3::new(c[0], c[1], c[2])
+}
+
 impl SurfaceShader for CornerUvShader<'_> {
     fn albedo(&self, face: usize, bary: Vec3) -> Vec3 {
         let Some(uv) = self.corner_uv.get(face) else {
             return MISSING_COLOR;
         };
-        if self.texture.width == 0 || self.texture.height == 0 {
+        sample_corner_uv(&self.texture, uv, bary)
+    }
+}
+
+/// Per-face textures through per-corner texture coordinates: face `f` samples
+/// `textures[face_texture[f]]`, or is `untextured[f]` when it has none. This is an OBJ whose
+/// materials name their `map_Kd` images, several pages of a baked atlas among them.
+pub struct MaterialUvShader<'a> {
+    pub corner_uv: &'a [[Vec2; 3]],
+    pub face_texture: &'a [Option<u32>],
+    pub textures: Vec<ImageView<'a>>,
+    /// Colour of a face without a texture (its material's `Kd`, else neutral grey).
+    pub untextured: &'a [Vec3],
+}
+
+impl SurfaceShader for MaterialUvShader<'_> {
+    fn albedo(&self, face: usize, bary: Vec3) -> Vec3 {
+        let (Some(uv), Some(&tex)) = (self.corner_uv.get(face), self.face_texture.get(face)) else {
             return MISSING_COLOR;
+        };
+        match tex.and_then(|k| self.textures.get(k as usize)) {
+            Some(texture) => sample_corner_uv(texture, uv, bary),
+            None => self.untextured.get(face).copied().unwrap_or(MISSING_COLOR),
         }
-        let p = uv[0] * bary.x + uv[1] * bary.y + uv[2] * bary.z;
-        let (u, v) = (wrap01(p.x), wrap01(p.y));
-        let (w, h) = (self.texture.width as f32, self.texture.height as f32);
-        let texel = Vec2::new(u * w - 0.5, (1.0 - v) * h - 0.5);
-        let c = self.texture.sample(texel);
-        Vec3::new(c[0], c[1], c[2])
     }
 }
 
@@ -132,6 +161,31 @@ mod tests {
         let s2 = CornerUvShader::new(&uv2, img.view());
         assert_eq!(s2.albedo(0, Vec3::X), Vec3::new(1.0, 0.0, 0.0));
         assert_eq!(s.albedo(5, Vec3::X), MISSING_COLOR);
+    }
+
+    #[test]
+    fn material_uv_shader_takes_each_faces_own_texture() {
+        let solid = |c: [f32; 4]| {
+            let mut img = Image::new(2, 2);
+            img.pixels = vec![c; 4];
+            img
+        };
+        let (red, blue) = (solid([1.0, 0.0, 0.0, 1.0]), solid([0.0, 0.0, 1.0, 1.0]));
+        let uv = [[Vec2::new(0.5, 0.5); 3]; 4];
+        let face_texture = [Some(1), Some(0), None, Some(7)];
+        let untextured = [Vec3::ZERO, Vec3::ZERO, Vec3::new(0.2, 0.3, 0.4), Vec3::ZERO];
+        let s = MaterialUvShader {
+            corner_uv: &uv,
+            face_texture: &face_texture,
+            textures: vec![red.view(), blue.view()],
+            untextured: &untextured,
+        };
+        assert_eq!(s.albedo(0, Vec3::X), Vec3::new(0.0, 0.0, 1.0));
+        assert_eq!(s.albedo(1, Vec3::X), Vec3::new(1.0, 0.0, 0.0));
+        assert_eq!(s.albedo(2, Vec3::X), Vec3::new(0.2, 0.3, 0.4));
+        // A texture index past the list is the face's untextured colour, not a panic.
+        assert_eq!(s.albedo(3, Vec3::X), Vec3::ZERO);
+        assert_eq!(s.albedo(4, Vec3::X), MISSING_COLOR);
     }
 
     #[test]
