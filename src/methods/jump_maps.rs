@@ -38,7 +38,7 @@ const JUMP_MAP_VERSION: u32 = 1;
 const FIELD_VERSION: u32 = 2;
 const PARAMETERIZE_VERSION: u32 = 1;
 const WALK_VERSION: u32 = 2;
-const RECONSTRUCT_VERSION: u32 = 4;
+const RECONSTRUCT_VERSION: u32 = 5;
 
 /// A `jump_maps` config.
 #[derive(Debug, Clone, Deserialize, Serialize)]

@@ -7,9 +7,10 @@
 //! - `textured.glb` and `baked.obj` + `baked.mtl`: the blended result baked into a chart atlas
 //!   ([`crate::render::chart_atlas`]) of one or more pages (`baked_<map>.png`, or
 //!   `baked_<map>_<page>.png` when there are several), one glTF primitive and one OBJ
-//!   `usemtl` per page, with the normal map re-expressed in the atlas's tangent frames and the
-//!   roughness map in glTF's metallic-roughness slot, so Blender and three.js show what texsyn
-//!   renders.
+//!   `usemtl` per page, with the normal map re-expressed in the frames a viewer decodes it
+//!   with (the .glb's per-vertex normals and tangents, interpolated at each texel; see
+//!   [`NormalRebase`]) and the roughness map in glTF's metallic-roughness slot, so Blender and
+//!   three.js show what texsyn renders.
 //! - `preview.png`: three views drawn with the blending shader by texsyn's rasterizer.
 //!
 //! Surfaces are exported in the order given; the first is the base colour.
@@ -255,12 +256,18 @@ fn export_files<S: SurfaceShader>(
     // `baked.obj` needs only the atlas's coordinates: its text is made beside the bake (whose
     // PNG encoding is sequential), not after it.
     let mut baked_obj = Vec::new();
-    let mut glb = GlbMesh::default();
     // Tangents only for a normal map, which is never the first surface (the base colour).
     let normal_map = surfaces.iter().skip(1).any(|s| s.name == "normal");
+    // A normal map is baked against the .glb's own interpolated vertex frames (what a viewer
+    // decodes it with), so those come first; without one the .glb's arrays are built beside
+    // the bake.
+    let first = normal_map.then(|| glb_mesh(mesh, &atlas, &frames, true));
+    let mut beside = None;
     rayon::in_place_scope(|scope| {
-        // So are the .glb's vertex arrays; its materials are attached after the bake.
-        scope.spawn(|_| glb = glb_mesh(mesh, &atlas, &frames, normal_map));
+        // Its materials are attached after the bake.
+        if first.is_none() {
+            scope.spawn(|_| beside = Some(glb_mesh(mesh, &atlas, &frames, false)));
+        }
         scope.spawn(|_| {
             // OBJ texture coordinates have v up.
             let obj_uv: Vec<[Vec2; 3]> = atlas
@@ -278,10 +285,17 @@ fn export_files<S: SurfaceShader>(
             .into_bytes();
         });
         for page in 0..pages {
-            let rebased = find("normal").map(|s| NormalRebase {
-                inner: &s.shader,
-                frames: &frames,
-            });
+            let rebased = find("normal")
+                .zip(first.as_ref())
+                .map(|(s, (glb, corner_vertex))| NormalRebase {
+                    inner: &s.shader,
+                    exemplar: &frames.exemplar,
+                    target: VertexFrames {
+                        corner_vertex,
+                        normals: &glb.normals,
+                        tangents: &glb.tangents,
+                    },
+                });
             let shaders: Vec<&dyn SurfaceShader> = surfaces
                 .iter()
                 .map(|s| match (&rebased, s.name.as_str()) {
@@ -346,6 +360,7 @@ fn export_files<S: SurfaceShader>(
     }
     files.push(("baked.obj".into(), baked_obj));
     files.push(("baked.mtl".into(), baked_mtl.into_bytes()));
+    let (mut glb, _) = first.or(beside).unwrap_or_default();
     files.push(("textured.glb".into(), {
         attach_materials(&mut glb, materials);
         write_glb(&glb)
@@ -405,23 +420,67 @@ impl TangentFrames {
     }
 }
 
-/// Re-expresses a tangent-space normal map sampled in the exemplar's frame in the atlas's.
+/// The .glb's per-vertex shading frames, looked up through each face corner's vertex.
+struct VertexFrames<'a> {
+    corner_vertex: &'a [u32],
+    normals: &'a [Vec3],
+    /// glTF tangents: `xyz` and the bitangent's sign `w` (bitangent = w · normal × tangent).
+    tangents: &'a [Vec4],
+}
+
+impl VertexFrames<'_> {
+    /// The orthonormal frame (tangent, bitangent, normal) interpolated at `bary` of `face`, as
+    /// a viewer decodes a tangent-space normal map with: the corners' normals and tangents
+    /// interpolated and normalized, the tangent made orthogonal to the normal, the bitangent
+    /// from the corners' sign. `None` where the frame degenerates.
+    fn at(&self, face: usize, bary: Vec3) -> Option<(Vec3, Vec3, Vec3)> {
+        let corner = |k: usize| Some(*self.corner_vertex.get(3 * face + k)? as usize);
+        let (mut n, mut t, mut w) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
+        for k in 0..3 {
+            let v = corner(k)?;
+            n += bary[k] * *self.normals.get(v)?;
+            let tw = *self.tangents.get(v)?;
+            t += bary[k] * tw.truncate();
+            w += bary[k] * tw.w;
+        }
+        let n = n.try_normalize()?;
+        let t = (t - t.dot(n) * n).try_normalize()?;
+        let b = if w < 0.0 { -1.0 } else { 1.0 } * n.cross(t);
+        Some((t, b, n))
+    }
+}
+
+/// Re-expresses a tangent-space normal map sampled in the exemplar's frame in the frame the
+/// .glb's vertices give each texel. The exemplar's normal perturbs the *interpolated* normal
+/// (a flat map leaves the smooth shading as it is), and the result is written in that same
+/// interpolated frame, so a viewer decoding the page with the .glb's normals and tangents gets
+/// back the intended normal, inside charts and across their borders alike.
 struct NormalRebase<'a, S: SurfaceShader> {
     inner: &'a S,
-    frames: &'a TangentFrames,
+    /// Per face: the exemplar's texel x, texel y (up) and the face normal.
+    exemplar: &'a [(Vec3, Vec3, Vec3)],
+    target: VertexFrames<'a>,
 }
 
 impl<S: SurfaceShader> SurfaceShader for NormalRebase<'_, S> {
     fn albedo(&self, face: usize, bary: Vec3) -> Vec3 {
         let c = self.inner.albedo(face, bary);
-        let (ex, ey, n) = self.frames.exemplar[face];
-        let (ax, ay) = self.frames.atlas[face];
-        if ex == Vec3::ZERO || ax == Vec3::ZERO {
+        let Some(&(ex, ey, _)) = self.exemplar.get(face) else {
             return c;
-        }
+        };
+        let Some((tx, ty, n)) = self.target.at(face, bary) else {
+            return c;
+        };
+        // The exemplar's axes in the plane of the interpolated normal.
+        let Some(ex) = (ex - ex.dot(n) * n).try_normalize() else {
+            return c;
+        };
+        let Some(ey) = (ey - ey.dot(n) * n - ey.dot(ex) * ex).try_normalize() else {
+            return c;
+        };
         let t = c * 2.0 - Vec3::ONE;
         let world = t.x * ex + t.y * ey + t.z * n;
-        let local = Vec3::new(world.dot(ax), world.dot(ay), world.dot(n)).normalize_or_zero();
+        let local = Vec3::new(world.dot(tx), world.dot(ty), world.dot(n)).normalize_or_zero();
         (local + Vec3::ONE) * 0.5
     }
 }
@@ -430,12 +489,14 @@ impl<S: SurfaceShader> SurfaceShader for NormalRebase<'_, S> {
 /// shared inside charts and split along their borders; the tangent of a vertex is the mean of
 /// its faces' atlas frames (smooth inside a chart, as normal-mapped meshes expect); one
 /// primitive per page.
+///
+/// Also returns each face corner's vertex (`3 · face + corner`).
 fn glb_mesh(
     mesh: &Mesh,
     atlas: &ChartAtlas,
     frames: &TangentFrames,
     want_tangents: bool,
-) -> GlbMesh {
+) -> (GlbMesh, Vec<u32>) {
     let normals = mesh.vertex_normals();
     let faces = mesh.triangles.len();
     // Corners sorted by (vertex, uv bits): equal keys share one glTF vertex.
@@ -530,7 +591,7 @@ fn glb_mesh(
     }
     let mut pages = per_page.into_iter();
     let indices = pages.next().unwrap_or_default();
-    GlbMesh {
+    let glb = GlbMesh {
         name: "texsyn".into(),
         positions,
         normals: vnormals,
@@ -546,7 +607,8 @@ fn glb_mesh(
                 material: GlbMaterial::default(),
             })
             .collect(),
-    }
+    };
+    (glb, corner_vertex)
 }
 
 /// Gives the .glb's primitives (one per page, in page order) their baked materials.
@@ -568,37 +630,108 @@ mod tests {
         Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]])
     }
 
-    #[test]
-    fn normal_maps_are_turned_from_the_exemplar_frame_into_the_atlas_frame() {
-        let mesh = triangle();
-        // Exemplar: texel x along world +x, texel y (down) along world -y, so the normal
-        // map's +Y (up the image) is world +y.
-        let set = vec![[
+    /// The exemplar frame of `triangle()` used below: texel x along world +x, texel y (down)
+    /// along world −y, so the normal map's +Y (up the image) is world +y.
+    fn exemplar_set() -> Vec<[Vec2; 3]> {
+        vec![[
             Vec2::new(0.0, 10.0),
             Vec2::new(10.0, 10.0),
             Vec2::new(0.0, 0.0),
-        ]];
+        ]]
+    }
+
+    fn rebase(frames: &TangentFrames, target: VertexFrames<'_>, tilt: Vec3, bary: Vec3) -> Vec3 {
+        let inner = ConstantShader((tilt + Vec3::ONE) * 0.5);
+        NormalRebase {
+            inner: &inner,
+            exemplar: &frames.exemplar,
+            target,
+        }
+        .albedo(0, bary)
+            * 2.0
+            - Vec3::ONE
+    }
+
+    #[test]
+    fn normal_maps_are_turned_from_the_exemplar_frame_into_the_atlas_frame() {
+        let mesh = triangle();
         // Atlas: u along world +y, v (down the image) along world +x: image up is world -x.
         let atlas_uv = vec![[
             Vec2::new(0.0, 0.0),
             Vec2::new(0.0, 0.5),
             Vec2::new(0.5, 0.0),
         ]];
-        let frames = TangentFrames::new(&mesh, &set, &atlas_uv);
+        let frames = TangentFrames::new(&mesh, &exemplar_set(), &atlas_uv);
+        // The .glb's frames of a flat triangle: normal +z, tangent (u) world +y; image up
+        // (bitangent) is world -x = +z × +y, so w = +1.
+        let (normals, tangents) = (vec![Vec3::Z; 3], vec![Vec4::new(0.0, 1.0, 0.0, 1.0); 3]);
+        let target = || VertexFrames {
+            corner_vertex: &[0, 1, 2],
+            normals: &normals,
+            tangents: &tangents,
+        };
         // A normal tilted towards exemplar +X, i.e. world +x.
-        let tilt = Vec3::new(0.6, 0.0, 0.8);
-        let inner = ConstantShader((tilt + Vec3::ONE) * 0.5);
-        let rebased = NormalRebase {
-            inner: &inner,
-            frames: &frames,
-        }
-        .albedo(0, Vec3::splat(1.0 / 3.0));
-        let local = rebased * 2.0 - Vec3::ONE;
+        let local = rebase(
+            &frames,
+            target(),
+            Vec3::new(0.6, 0.0, 0.8),
+            Vec3::splat(1.0 / 3.0),
+        );
         // World +x is atlas -Y (image up is world -x) and has no atlas X component.
         assert!(
             (local - Vec3::new(0.0, -0.6, 0.8)).length() < 1e-5,
             "{local}"
         );
+    }
+
+    #[test]
+    fn a_viewer_decoding_the_page_with_the_glb_frames_gets_the_intended_normal() {
+        // Smooth shading: the three vertex normals lean apart (a patch of a sphere), and the
+        // tangents turn with them, so no texel's frame is the face's own.
+        let mesh = triangle();
+        let frames = TangentFrames::new(&mesh, &exemplar_set(), &exemplar_set());
+        let normals = vec![
+            Vec3::new(-0.3, -0.3, 1.0).normalize(),
+            Vec3::new(0.4, -0.1, 1.0).normalize(),
+            Vec3::new(-0.1, 0.4, 1.0).normalize(),
+        ];
+        let tangents: Vec<Vec4> = normals
+            .iter()
+            .zip([0.0f32, 0.3, -0.3])
+            .map(|(n, turn)| {
+                let t = Vec3::new(turn.cos(), turn.sin(), 0.0);
+                (t - t.dot(*n) * *n).normalize().extend(1.0)
+            })
+            .collect();
+        let target = || VertexFrames {
+            corner_vertex: &[0, 1, 2],
+            normals: &normals,
+            tangents: &tangents,
+        };
+        let tilt = Vec3::new(0.48, -0.36, 0.8);
+        for bary in [
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.2, 0.3, 0.5),
+            Vec3::splat(1.0 / 3.0),
+        ] {
+            let (t, b, n) = target().at(0, bary).unwrap();
+            // What the viewer shows: the decoded value in the interpolated frame.
+            let local = rebase(&frames, target(), tilt, bary);
+            let shown = local.x * t + local.y * b + local.z * n;
+            // What was meant: the exemplar's tilt around the interpolated normal, along the
+            // exemplar's axes (world +x, +y) laid into that normal's plane.
+            let ex = (Vec3::X - Vec3::X.dot(n) * n).normalize();
+            let ey = (Vec3::Y - Vec3::Y.dot(n) * n - Vec3::Y.dot(ex) * ex).normalize();
+            let meant = (tilt.x * ex + tilt.y * ey + tilt.z * n).normalize();
+            assert!(
+                (shown - meant).length() < 1e-5,
+                "at {bary}: shown {shown}, meant {meant}"
+            );
+            // A flat map keeps the smooth shading.
+            let flat = rebase(&frames, target(), Vec3::Z, bary);
+            assert!((flat - Vec3::Z).length() < 1e-5, "at {bary}: {flat}");
+        }
     }
 
     #[test]
