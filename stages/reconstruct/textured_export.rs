@@ -624,6 +624,7 @@ fn attach_materials(glb: &mut GlbMesh, materials: Vec<GlbMaterial>) {
 mod tests {
     use super::*;
     use crate::render::shader::ConstantShader;
+    use texsyn_core::math::PureMath;
 
     /// One triangle in the xy plane (normal +z).
     fn triangle() -> Mesh {
@@ -699,7 +700,7 @@ mod tests {
             .iter()
             .zip([0.0f32, 0.3, -0.3])
             .map(|(n, turn)| {
-                let t = Vec3::new(turn.cos(), turn.sin(), 0.0);
+                let t = Vec3::new(turn.cos_pure(), turn.sin_pure(), 0.0);
                 (t - t.dot(*n) * *n).normalize().extend(1.0)
             })
             .collect();

@@ -1072,10 +1072,10 @@ pub struct SolidSynthesis<'a> {
     /// `basis · mean` per (level, image), to project without centring.
     mean_proj: Vec<Vec<Vec<f32>>>,
     /// Per (level, image), the basis in row pairs for [`project_avx512`] (see [`pair_rows`]),
-    /// when the CPU has AVX-512F (and the basis has at least 8 values and 2 rows); else
-    /// empty, and the AVX2 projection runs. Non-empty only after that detection: the unsafe
-    /// call in the kernel relies on it.
-    paired: Vec<Vec<Vec<f32>>>,
+    /// when the CPU has AVX-512F (`None` otherwise; an image's rows are empty where the basis
+    /// has fewer than 8 values or 2 rows, and the AVX2 projection runs). The token is the
+    /// detection's proof, which the unsafe call in the kernel relies on.
+    paired: Option<(Avx512, Vec<Vec<Vec<f32>>>)>,
     limits: BatchLimits,
     /// Per level, the scale of its field where that field is the identity rotation at one
     /// scale everywhere ([`uniform_scale`]): then every look-up returns exactly that.
@@ -1200,25 +1200,19 @@ impl<'a> SolidSynthesis<'a> {
         let uniform = (0..nl)
             .map(|li| uniform_scale(smoothed[li].as_ref().unwrap_or(field)))
             .collect();
-        #[cfg(target_arch = "x86_64")]
-        let wide = std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx2");
-        #[cfg(not(target_arch = "x86_64"))]
-        let wide = false;
-        let paired = (0..pyramid.levels as usize)
-            .map(|li| {
-                (0..images)
-                    .map(|img| {
-                        let (mean, basis) = analysis.pca(li, img);
-                        if wide {
+        let paired = Avx512::detect().map(|token| {
+            let rows = (0..pyramid.levels as usize)
+                .map(|li| {
+                    (0..images)
+                        .map(|img| {
+                            let (mean, basis) = analysis.pca(li, img);
                             pair_rows(basis, mean.len())
-                        } else {
-                            Vec::new()
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
+                        })
+                        .collect()
+                })
+                .collect();
+            (token, rows)
+        });
         Ok(SolidSynthesis {
             analysis,
             field,
@@ -1807,11 +1801,11 @@ impl<'a> SolidSynthesis<'a> {
         done: &mut Vec<(u16, VoxelState)>,
     ) -> u64 {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            return unsafe { self.correct_chunk_avx2(li, st, window, step, chunk, sc, done) };
+        if let Some(avx2) = Avx2::detect() {
+            // SAFETY: the token exists, so the CPU supports AVX2.
+            return unsafe { self.correct_chunk_avx2(avx2, li, st, window, step, chunk, sc, done) };
         }
-        self.correct_chunk_portable::<false>(li, st, window, step, chunk, sc, done)
+        self.correct_chunk_portable(Portable, li, st, window, step, chunk, sc, done)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -1819,6 +1813,7 @@ impl<'a> SolidSynthesis<'a> {
     #[allow(clippy::too_many_arguments)]
     unsafe fn correct_chunk_avx2(
         &self,
+        avx2: Avx2,
         li: usize,
         st: &States,
         window: &HistoryWindow,
@@ -1827,15 +1822,17 @@ impl<'a> SolidSynthesis<'a> {
         sc: &mut Scratch,
         done: &mut Vec<(u16, VoxelState)>,
     ) -> u64 {
-        self.correct_chunk_portable::<true>(li, st, window, step, chunk, sc, done)
+        self.correct_chunk_portable(avx2, li, st, window, step, chunk, sc, done)
     }
 
-    /// [`SolidSynthesis::correct_chunk`], compiled for whatever the caller is compiled for
-    /// (`AVX`: the caller has AVX2, so [`project`] may use its 8-wide registers).
+    /// [`SolidSynthesis::correct_chunk`], compiled for whatever the caller is compiled for;
+    /// `kernels` says which projection it may call (a token of [`Avx2`]: the caller has
+    /// AVX2, so the projection may use its 8-wide registers).
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn correct_chunk_portable<const AVX: bool>(
+    fn correct_chunk_portable<K: Kernels>(
         &self,
+        kernels: K,
         li: usize,
         st: &States,
         window: &HistoryWindow,
@@ -1848,7 +1845,7 @@ impl<'a> SolidSynthesis<'a> {
         for (m, &x) in bytes.iter().enumerate() {
             let v = origin + chunk_local(m);
             if x >= threshold && step.active(v) {
-                let (s, n) = self.correct::<AVX>(li, st, window, v, sc);
+                let (s, n) = self.correct(kernels, li, st, window, v, sc);
                 done.push((m as u16, s));
                 c += n as u64;
             }
@@ -1866,8 +1863,9 @@ impl<'a> SolidSynthesis<'a> {
 
     /// §4.3: the corrected value of voxel `v` of array level `li`, and the comparisons made.
     #[inline(always)]
-    fn correct<const AVX: bool>(
+    fn correct<K: Kernels>(
         &self,
+        kernels: K,
         li: usize,
         st: &States,
         window: &HistoryWindow,
@@ -1976,20 +1974,28 @@ impl<'a> SolidSynthesis<'a> {
             let mp = &self.mean_proj[li][img];
             let (x, proj) = (&sc.vec[..dim], &mut sc.proj[p][..comps]);
             #[cfg(target_arch = "x86_64")]
-            if AVX {
-                let paired = &self.paired[li][img];
-                if paired.is_empty() {
-                    // SAFETY: `AVX` is set only on the AVX2 path (`correct_chunk_avx2`).
-                    unsafe { project_avx2(basis, x, mp, proj) };
-                } else {
-                    // SAFETY: `paired` is made only when the CPU has AVX-512 (`new`).
-                    unsafe { project_avx512(basis, paired, x, mp, proj) };
+            if K::AVX2 {
+                match &self.paired {
+                    Some((Avx512(()), rows)) if !rows[li][img].is_empty() => {
+                        // SAFETY: the `Avx512` token exists only after `Avx512::detect`
+                        // found AVX-512F and AVX2.
+                        unsafe { project_avx512(basis, &rows[li][img], x, mp, proj) };
+                    }
+                    _ => {
+                        // SAFETY: only `Avx2` has `AVX2` set, and a value of it (`kernels`)
+                        // exists only after `Avx2::detect` found AVX2.
+                        let _proof = kernels;
+                        unsafe { project_avx2(basis, x, mp, proj) };
+                    }
                 }
             } else {
                 project(basis, x, mp, proj);
             }
             #[cfg(not(target_arch = "x86_64"))]
-            project(basis, x, mp, proj);
+            {
+                let _ = kernels;
+                project(basis, x, mp, proj);
+            }
             // Candidates S_P(v), reduced form. Where the neighbours are coherent most of
             // the nine shifted pixels are the same pixel, whose k candidates are then all
             // already listed: a repeated pixel adds none (none could be a first visit in the
@@ -2332,6 +2338,55 @@ fn project(basis: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
     while k < comps {
         out[k] = dot(&basis[k * dim..(k + 1) * dim], x) - mean[k];
         k += 1;
+    }
+}
+
+/// Which projection kernels the correction may call. A value of a type whose `AVX2` is true
+/// exists only once the CPU was found to have AVX2, so holding one is what makes the unsafe
+/// calls sound: no safe caller can reach them on a CPU without it.
+trait Kernels: Copy {
+    const AVX2: bool;
+}
+
+/// The portable kernels, on any CPU.
+#[derive(Clone, Copy)]
+struct Portable;
+
+impl Kernels for Portable {
+    const AVX2: bool = false;
+}
+
+/// Proof that the CPU has AVX2: only [`Avx2::detect`] makes one.
+#[derive(Clone, Copy)]
+struct Avx2(());
+
+impl Avx2 {
+    fn detect() -> Option<Avx2> {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Some(Avx2(()));
+        }
+        None
+    }
+}
+
+impl Kernels for Avx2 {
+    const AVX2: bool = true;
+}
+
+/// Proof that the CPU has AVX-512F and AVX2: only [`Avx512::detect`] makes one.
+#[derive(Clone, Copy, Debug)]
+struct Avx512(());
+
+impl Avx512 {
+    fn detect() -> Option<Avx512> {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2")
+        {
+            return Some(Avx512(()));
+        }
+        None
     }
 }
 
