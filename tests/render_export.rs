@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3};
 use std::path::Path;
-use texsyn::export::{GlbMesh, MtlMaps, write_glb, write_mtl, write_obj, write_obj_materials};
+use texsyn::export::{GlbMesh, MtlMaps, write_glb, write_mtl, write_obj};
 use texsyn::geom::Mesh;
 use texsyn::geom::primitives::{cuboid, uv_quad};
 use texsyn::image::{Image, decode_image};
@@ -109,20 +109,22 @@ fn count_close(img: &image::RgbaImage, c: [u8; 3]) -> usize {
 
 #[test]
 fn render_command_shows_each_obj_material_page_without_a_texture_option() {
-    // The quad's two triangles on two pages, as a baked atlas of two pages is written.
+    // The quad's two triangles on two pages, as a baked atlas of two pages is written, but
+    // with the OBJ naming the second material first (so its models are not in material order)
+    // and the MTL and its pages in a subfolder (images are relative to the MTL).
     let dir = tempfile::tempdir().unwrap();
-    let (mesh, corner_uv) = uv_quad();
-    assert_eq!(mesh.triangles.len(), 2);
-    let (red, blue) = ([200, 30, 30], [40, 50, 230]);
     let obj = dir.path().join("paged.obj");
-    let text = write_obj_materials(
-        &mesh,
-        Some(&corner_uv),
-        Some("paged.mtl"),
-        &["page0".into(), "page1".into()],
-        Some(&[0, 1]),
-    );
-    std::fs::write(&obj, text).unwrap();
+    std::fs::write(
+        &obj,
+        "mtllib mats/paged.mtl\n\
+         v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n\
+         vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+         usemtl page1\nf 1/1 2/2 3/3\n\
+         usemtl page0\nf 1/1 3/3 4/4\n",
+    )
+    .unwrap();
+    let mats = dir.path().join("mats");
+    std::fs::create_dir(&mats).unwrap();
     let page = |name: &str, file: &str| {
         let maps = MtlMaps {
             diffuse: Some(file.into()),
@@ -131,17 +133,31 @@ fn render_command_shows_each_obj_material_page_without_a_texture_option() {
         write_mtl(name, &maps)
     };
     let mtl = page("page0", "page0.png") + &page("page1", "page1.png");
-    std::fs::write(dir.path().join("paged.mtl"), mtl).unwrap();
-    std::fs::write(dir.path().join("page0.png"), solid_png(red)).unwrap();
-    std::fs::write(dir.path().join("page1.png"), solid_png(blue)).unwrap();
+    std::fs::write(mats.join("paged.mtl"), mtl).unwrap();
+    let (red, blue) = ([200, 30, 30], [40, 50, 230]);
+    std::fs::write(mats.join("page0.png"), solid_png(red)).unwrap();
+    std::fs::write(mats.join("page1.png"), solid_png(blue)).unwrap();
 
+    // The view shows x right and y up: the first triangle (page1, blue) is the lower right
+    // half, the second (page0, red) the upper left.
     let img = render_mesh_file(&obj, None, &unlit(96)).unwrap();
-    let (r, b) = (count_close(&img, red), count_close(&img, blue));
     let (x0, y0, x1, y1) = foreground_box(&img, 0).unwrap();
+    let at = |fx: f32, fy: f32| {
+        img.get_pixel(
+            x0 + (fx * (x1 - x0) as f32) as u32,
+            y0 + (fy * (y1 - y0) as f32) as u32,
+        )
+        .0
+    };
+    assert!(
+        close(at(0.8, 0.8), blue, 1),
+        "lower right {:?}",
+        at(0.8, 0.8)
+    );
+    assert!(close(at(0.2, 0.2), red, 1), "upper left {:?}", at(0.2, 0.2));
     let area = ((x1 - x0 + 1) * (y1 - y0 + 1)) as usize;
-    // Each triangle is half the quad and shows its own page.
+    let (r, b) = (count_close(&img, red), count_close(&img, blue));
     assert!(r + b > area * 9 / 10, "red {r} + blue {b} of {area}");
-    assert!(r.abs_diff(b) < area / 10, "red {r} vs blue {b}");
 
     // An explicit texture still wins over the materials.
     let green = [30, 180, 50];
@@ -152,14 +168,19 @@ fn render_command_shows_each_obj_material_page_without_a_texture_option() {
     assert!(count_close(&img, green) > area * 9 / 10);
 
     // A missing page is a warning: that triangle takes its material's Kd (white), the other
-    // keeps its page. A missing MTL renders the mesh grey, as before.
-    std::fs::remove_file(dir.path().join("page1.png")).unwrap();
+    // keeps its page; with no page left both are white. A missing MTL renders grey.
+    let white = [255, 255, 255];
+    std::fs::remove_file(mats.join("page1.png")).unwrap();
     let img = render_mesh_file(&obj, None, &unlit(96)).unwrap();
     assert!(count_close(&img, red) > area * 4 / 10);
     assert_eq!(count_close(&img, blue), 0);
-    assert!(count_close(&img, [255, 255, 255]) > area * 4 / 10);
-    std::fs::remove_file(dir.path().join("paged.mtl")).unwrap();
+    assert!(count_close(&img, white) > area * 4 / 10);
+    std::fs::remove_file(mats.join("page0.png")).unwrap();
     let img = render_mesh_file(&obj, None, &unlit(96)).unwrap();
+    assert!(count_close(&img, white) > area * 9 / 10);
+    std::fs::remove_file(mats.join("paged.mtl")).unwrap();
+    let img = render_mesh_file(&obj, None, &unlit(96)).unwrap();
+    assert_eq!(count_close(&img, white), 0);
     assert_eq!(count_close(&img, red), 0);
 }
 

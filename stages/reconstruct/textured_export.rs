@@ -654,7 +654,7 @@ mod tests {
     }
 
     #[test]
-    fn normal_maps_are_turned_from_the_exemplar_frame_into_the_atlas_frame() {
+    fn normal_maps_are_turned_from_the_exemplar_frame_into_the_glb_frame() {
         let mesh = triangle();
         // Atlas: u along world +y, v (down the image) along world +x: image up is world -x.
         let atlas_uv = vec![[
@@ -688,7 +688,8 @@ mod tests {
     #[test]
     fn a_viewer_decoding_the_page_with_the_glb_frames_gets_the_intended_normal() {
         // Smooth shading: the three vertex normals lean apart (a patch of a sphere), and the
-        // tangents turn with them, so no texel's frame is the face's own.
+        // tangents turn with them, so no texel's frame is the face's own. Both handednesses
+        // (w = −1: a mirrored chart).
         let mesh = triangle();
         let frames = TangentFrames::new(&mesh, &exemplar_set(), &exemplar_set());
         let normals = vec![
@@ -696,42 +697,62 @@ mod tests {
             Vec3::new(0.4, -0.1, 1.0).normalize(),
             Vec3::new(-0.1, 0.4, 1.0).normalize(),
         ];
-        let tangents: Vec<Vec4> = normals
-            .iter()
-            .zip([0.0f32, 0.3, -0.3])
-            .map(|(n, turn)| {
-                let t = Vec3::new(turn.cos_pure(), turn.sin_pure(), 0.0);
-                (t - t.dot(*n) * *n).normalize().extend(1.0)
-            })
-            .collect();
-        let target = || VertexFrames {
-            corner_vertex: &[0, 1, 2],
-            normals: &normals,
-            tangents: &tangents,
-        };
-        let tilt = Vec3::new(0.48, -0.36, 0.8);
-        for bary in [
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-            Vec3::new(0.2, 0.3, 0.5),
-            Vec3::splat(1.0 / 3.0),
-        ] {
-            let (t, b, n) = target().at(0, bary).unwrap();
-            // What the viewer shows: the decoded value in the interpolated frame.
-            let local = rebase(&frames, target(), tilt, bary);
-            let shown = local.x * t + local.y * b + local.z * n;
-            // What was meant: the exemplar's tilt around the interpolated normal, along the
-            // exemplar's axes (world +x, +y) laid into that normal's plane.
-            let ex = (Vec3::X - Vec3::X.dot(n) * n).normalize();
-            let ey = (Vec3::Y - Vec3::Y.dot(n) * n - Vec3::Y.dot(ex) * ex).normalize();
-            let meant = (tilt.x * ex + tilt.y * ey + tilt.z * n).normalize();
-            assert!(
-                (shown - meant).length() < 1e-5,
-                "at {bary}: shown {shown}, meant {meant}"
-            );
-            // A flat map keeps the smooth shading.
-            let flat = rebase(&frames, target(), Vec3::Z, bary);
-            assert!((flat - Vec3::Z).length() < 1e-5, "at {bary}: {flat}");
+        for w in [1.0f32, -1.0] {
+            let tangents: Vec<Vec4> = normals
+                .iter()
+                .zip([0.0f32, 0.3, -0.3])
+                .map(|(n, turn)| {
+                    let t = Vec3::new(turn.cos_pure(), turn.sin_pure(), 0.0);
+                    (t - t.dot(*n) * *n).normalize().extend(w)
+                })
+                .collect();
+            let target = || VertexFrames {
+                corner_vertex: &[0, 1, 2],
+                normals: &normals,
+                tangents: &tangents,
+            };
+            let tilt = Vec3::new(0.48, -0.36, 0.8);
+            for bary in [
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(0.0, 1.0, 0.0),
+                Vec3::new(0.2, 0.3, 0.5),
+                Vec3::splat(1.0 / 3.0),
+            ] {
+                let local = rebase(&frames, target(), tilt, bary);
+                // What was meant: the exemplar's tilt around the interpolated normal, along
+                // the exemplar's axes (world +x, +y) laid into that normal's plane.
+                let n = (0..3)
+                    .map(|k| bary[k] * normals[k])
+                    .sum::<Vec3>()
+                    .normalize();
+                let ex = (Vec3::X - Vec3::X.dot(n) * n).normalize();
+                let ey = (Vec3::Y - Vec3::Y.dot(n) * n - Vec3::Y.dot(ex) * ex).normalize();
+                let meant = (tilt.x * ex + tilt.y * ey + tilt.z * n).normalize();
+                // Decoded in the frame the bake used: exactly what was meant.
+                let (t, b, n2) = target().at(0, bary).unwrap();
+                let exact = local.x * t + local.y * b + local.z * n2;
+                assert!(
+                    (exact - meant).length() < 1e-5,
+                    "w {w} at {bary}: {exact} vs {meant}"
+                );
+                // Decoded as the glTF sample viewer does, from the vertex arrays alone: the
+                // corners' tangent, bitangent (w · n × t) and normal interpolated and
+                // normalized, not made orthogonal again. The same to second order.
+                let lerp = |f: &dyn Fn(usize) -> Vec3| {
+                    (0..3).map(|k| bary[k] * f(k)).sum::<Vec3>().normalize()
+                };
+                let vt = lerp(&|k| tangents[k].truncate());
+                let vb = lerp(&|k| w * normals[k].cross(tangents[k].truncate()));
+                let vn = lerp(&|k| normals[k]);
+                let shown = (local.x * vt + local.y * vb + local.z * vn).normalize();
+                assert!(
+                    (shown - meant).length() < 0.02,
+                    "w {w} at {bary}: shown {shown}, meant {meant}"
+                );
+                // A flat map keeps the smooth shading.
+                let flat = rebase(&frames, target(), Vec3::Z, bary);
+                assert!((flat - Vec3::Z).length() < 1e-5, "at {bary}: {flat}");
+            }
         }
     }
 

@@ -10,5 +10,5 @@ pub mod obj;
 pub mod png;
 
 pub use glb::{GlbAttribute, GlbMaterial, GlbMesh, write_glb};
-pub use obj::{MtlMaps, write_mtl, write_obj, write_obj_materials};
+pub use obj::{MtlMaps, write_mtl, write_obj};
 pub use png::encode_png;

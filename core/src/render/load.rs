@@ -47,7 +47,7 @@ struct Loaded {
 struct FaceMaterials {
     texture: Vec<Option<u32>>,
     colour: Vec<Vec3>,
-    /// The distinct `map_Kd` files, resolved against the OBJ's folder.
+    /// The distinct `map_Kd` files, resolved against their MTL's folder.
     textures: Vec<PathBuf>,
 }
 
@@ -59,7 +59,8 @@ fn obj_error(path: &Path, e: tobj::LoadError) -> RenderError {
 }
 
 /// Reads an OBJ with tobj, keeping its per-corner texture coordinates, vertex colours and each
-/// face's material (from the `mtllib` files, read beside the OBJ). Groups and objects are merged
+/// face's material (from the `mtllib` files, relative to the OBJ; their images relative to each
+/// MTL). Groups and objects are merged
 /// into one mesh. An MTL that cannot be read is a warning: the mesh renders without it.
 fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
     let bytes = crate::geom::io::read_regular_file(path).map_err(|source| RenderError::Io {
@@ -82,12 +83,21 @@ fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
             );
             tobj::LoadError::OpenFileFailed
         })?;
-        tobj::load_mtl_buf(&mut bytes.as_slice()).inspect_err(|e| {
-            tracing::warn!(
-                "{}: cannot read MTL ({e}); its materials are left out of the render",
-                mtl_path.display()
-            )
-        })
+        let (mut materials, names) =
+            tobj::load_mtl_buf(&mut bytes.as_slice()).inspect_err(|e| {
+                tracing::warn!(
+                    "{}: cannot read MTL ({e}); its materials are left out of the render",
+                    mtl_path.display()
+                )
+            })?;
+        // An MTL names its images relative to itself (as Blender and three.js read them).
+        let mtl_dir = mtl_path.parent().unwrap_or(Path::new(""));
+        for m in &mut materials {
+            if let Some(file) = &mut m.diffuse_texture {
+                *file = mtl_dir.join(file.trim()).to_string_lossy().into_owned();
+            }
+        }
+        Ok((materials, names))
     })
     .map_err(|e| obj_error(path, e))?;
     let materials = materials.unwrap_or_default();
@@ -96,7 +106,7 @@ fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
     let material_texture: Vec<Option<u32>> = materials
         .iter()
         .map(|m| {
-            let file = dir.join(m.diffuse_texture.as_deref()?.trim());
+            let file = PathBuf::from(m.diffuse_texture.as_deref()?);
             let slot = textures.iter().position(|t| *t == file).unwrap_or_else(|| {
                 textures.push(file);
                 textures.len() - 1
@@ -196,7 +206,7 @@ fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
 /// Loads `mesh_path` (OBJ via tobj, keeping its texture coordinates and materials; other
 /// formats via [`crate::geom::io::read_mesh`]) and renders the three preview views. The surface
 /// is the `texture` applied through the OBJ's uvs when both exist; else, for an OBJ with uvs
-/// whose materials name `map_Kd` images (read beside the OBJ), each face's own image, so a
+/// whose materials name `map_Kd` images (relative to their MTL), each face's own image, so a
 /// baked atlas of several pages renders as written (faces without one take their material's
 /// `Kd`); else the mesh's vertex colours; else a neutral grey. A texture given for a mesh
 /// without uvs is ignored with a warning, and so is a material image that cannot be read.
@@ -296,7 +306,8 @@ pub fn render_mesh_file(
             uv_shader = CornerUvShader::new(uv, img.view());
             &uv_shader
         }
-        (None, Some(uv)) if !pages.is_empty() => {
+        // Even when no page could be read: the faces then show their materials' `Kd`.
+        (None, Some(uv)) if loaded.materials.texture.iter().any(Option::is_some) => {
             material_shader = MaterialUvShader {
                 corner_uv: uv,
                 face_texture: &face_page,

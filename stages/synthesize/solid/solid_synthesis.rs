@@ -1976,7 +1976,7 @@ impl<'a> SolidSynthesis<'a> {
             #[cfg(target_arch = "x86_64")]
             if K::AVX2 {
                 match &self.paired {
-                    Some((Avx512(()), rows)) if !rows[li][img].is_empty() => {
+                    Some((_avx512, rows)) if !rows[li][img].is_empty() => {
                         // SAFETY: the `Avx512` token exists only after `Avx512::detect`
                         // found AVX-512F and AVX2.
                         unsafe { project_avx512(basis, &rows[li][img], x, mp, proj) };
@@ -2341,54 +2341,61 @@ fn project(basis: &[f32], x: &[f32], mean: &[f32], out: &mut [f32]) {
     }
 }
 
-/// Which projection kernels the correction may call. A value of a type whose `AVX2` is true
-/// exists only once the CPU was found to have AVX2, so holding one is what makes the unsafe
-/// calls sound: no safe caller can reach them on a CPU without it.
-trait Kernels: Copy {
-    const AVX2: bool;
-}
+/// The detection tokens, in their own module so that nothing else can build one: their
+/// fields are private here.
+mod kernels {
+    /// Which projection kernels the correction may call. A value of a type whose `AVX2` is true
+    /// exists only once the CPU was found to have AVX2, so holding one is what makes the unsafe
+    /// calls sound: no safe caller can reach them on a CPU without it.
+    pub(super) trait Kernels: Copy {
+        const AVX2: bool;
+    }
 
-/// The portable kernels, on any CPU.
-#[derive(Clone, Copy)]
-struct Portable;
+    /// The portable kernels, on any CPU.
+    #[derive(Clone, Copy)]
+    pub(super) struct Portable;
 
-impl Kernels for Portable {
-    const AVX2: bool = false;
-}
+    impl Kernels for Portable {
+        const AVX2: bool = false;
+    }
 
-/// Proof that the CPU has AVX2: only [`Avx2::detect`] makes one.
-#[derive(Clone, Copy)]
-struct Avx2(());
+    /// Proof that the CPU has AVX2: only [`Avx2::detect`] makes one.
+    #[derive(Clone, Copy)]
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    pub(super) struct Avx2(());
 
-impl Avx2 {
-    fn detect() -> Option<Avx2> {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            return Some(Avx2(()));
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    impl Avx2 {
+        pub(super) fn detect() -> Option<Avx2> {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                return Some(Avx2(()));
+            }
+            None
         }
-        None
+    }
+
+    impl Kernels for Avx2 {
+        const AVX2: bool = true;
+    }
+
+    /// Proof that the CPU has AVX-512F and AVX2: only [`Avx512::detect`] makes one.
+    #[derive(Clone, Copy, Debug)]
+    pub(super) struct Avx512(());
+
+    impl Avx512 {
+        pub(super) fn detect() -> Option<Avx512> {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx2")
+            {
+                return Some(Avx512(()));
+            }
+            None
+        }
     }
 }
-
-impl Kernels for Avx2 {
-    const AVX2: bool = true;
-}
-
-/// Proof that the CPU has AVX-512F and AVX2: only [`Avx512::detect`] makes one.
-#[derive(Clone, Copy, Debug)]
-struct Avx512(());
-
-impl Avx512 {
-    fn detect() -> Option<Avx512> {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx2")
-        {
-            return Some(Avx512(()));
-        }
-        None
-    }
-}
+use kernels::{Avx2, Avx512, Kernels, Portable};
 
 /// [`project`] in AVX registers: lane `i` of row `k`'s register is `project`'s `acc[r][i]`,
 /// added to in the same order (a product, then a sum, never fused), so every output is the
