@@ -201,6 +201,54 @@ fn the_pyramid_depth_follows_synthesize_levels_when_only_they_are_given() {
 }
 
 #[test]
+fn a_surface_the_atlas_cannot_hold_gets_vertex_colours_in_its_glb() {
+    // 64² texels cannot hold the elephant's 5,558 triangles with their gutters: the run still
+    // writes the surface, its .glb with the refined surface's vertex colours, and no bake.
+    let cache = tempfile::tempdir().unwrap();
+    let r = run(
+        "solid_trivial.toml",
+        &["reconstruct.atlas_size=64"],
+        cache.path(),
+    )
+    .unwrap();
+    let out = materialized(&r, "reconstruct");
+    assert!(!out.path().join("baked_surface.png").exists());
+    let glb = std::fs::read(out.path().join("solid_surface.glb")).unwrap();
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let json: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    let attributes = &json["meshes"][0]["primitives"][0]["attributes"];
+    assert!(attributes.get("COLOR_0").is_some(), "{attributes}");
+    assert!(attributes.get("TEXCOORD_0").is_none(), "{attributes}");
+    assert!(
+        json.get("images")
+            .is_none_or(|i| i.as_array().is_some_and(|a| a.is_empty()))
+    );
+    // The same vertices as the coloured PLY.
+    let ply = std::fs::read(out.path().join("solid_surface.ply")).unwrap();
+    let head = String::from_utf8_lossy(&ply[..ply.len().min(512)]).into_owned();
+    let vertices: usize = head
+        .lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    let accessor = attributes["COLOR_0"].as_u64().unwrap() as usize;
+    assert_eq!(
+        json["accessors"][accessor]["count"].as_u64(),
+        Some(vertices as u64)
+    );
+    // With room, the bake is back.
+    let r = run("solid_trivial.toml", &[], cache.path()).unwrap();
+    assert!(
+        materialized(&r, "reconstruct")
+            .path()
+            .join("baked_surface.png")
+            .exists()
+    );
+}
+
+#[test]
 fn a_box_request_writes_a_raw_volume_with_its_header() {
     let cache = tempfile::tempdir().unwrap();
     let r = run(

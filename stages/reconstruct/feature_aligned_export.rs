@@ -56,7 +56,12 @@ impl FeatureAlignedExportParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
         if self.atlas_size != 0 {
-            check_range("reconstruct.atlas_size", self.atlas_size, 64, 8192)?;
+            check_range(
+                "reconstruct.atlas_size",
+                self.atlas_size,
+                64,
+                crate::render::MAX_ATLAS_SIZE,
+            )?;
         }
         check_range("reconstruct.streak_length", self.streak_length, 1, 200)?;
         if !self.up.iter().all(|x| x.is_finite()) || Vec3::from(self.up).length() < 1e-12 {

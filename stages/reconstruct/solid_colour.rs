@@ -24,7 +24,7 @@ use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use crate::parameterize::volume_embedding::{Request, Section, Volume};
 use crate::reconstruct::textured_export::encode_png;
-use crate::render::AtlasError;
+use crate::render::{AtlasError, MAX_ATLAS_SIZE, srgb};
 use glam::{IVec3, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -61,7 +61,12 @@ impl Default for SolidExportParams {
 impl SolidExportParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
-        check_range("reconstruct.atlas_size", self.atlas_size, 64, 8192)?;
+        check_range(
+            "reconstruct.atlas_size",
+            self.atlas_size,
+            64,
+            MAX_ATLAS_SIZE,
+        )?;
         check_range("reconstruct.edge_voxels", self.edge_voxels, 0.5, 16.0)
     }
 }
@@ -212,30 +217,66 @@ fn export_surface(
         crate::geom::io::write_ply(&coloured, coloured.colors.as_deref()),
     )];
     let shader = SolidShader { mesh, vol, colours };
-    let atlas = crate::render::build_atlas(mesh, p.atlas_size)?;
-    let baked = crate::render::bake(&atlas, mesh, &shader);
-    progress(0.7);
-    let png = encode_png(&baked, false);
+    // The per-triangle atlas has room for a limited number of triangles: past it, the .glb
+    // carries the refined surface's vertex colours (as the PLY does) rather than the run
+    // failing after its synthesis.
+    let atlas = match crate::render::build_atlas(mesh, p.atlas_size) {
+        Ok(atlas) => Some(atlas),
+        Err(e) => {
+            tracing::warn!(
+                "reconstruct.atlas_size: {e}; solid_surface.glb carries the refined surface's \
+                 vertex colours (COLOR_0) instead of a baked texture, and baked_surface.png is \
+                 not written"
+            );
+            None
+        }
+    };
     let normals = mesh.vertex_normals();
     let mut glb = crate::export::GlbMesh {
         name: "solid".into(),
         material: crate::export::GlbMaterial {
-            base_color_png: Some(png.clone()),
             double_sided: true,
             ..Default::default()
         },
         ..Default::default()
     };
-    for t in &mesh.triangles {
-        for c in 0..3 {
-            glb.positions.push(mesh.positions[t[c] as usize]);
-            glb.normals.push(normals[t[c] as usize]);
-            glb.indices.push(glb.indices.len() as u32);
+    match atlas {
+        Some(atlas) => {
+            let baked = crate::render::bake(&atlas, mesh, &shader);
+            progress(0.7);
+            let png = encode_png(&baked, false);
+            glb.material.base_color_png = Some(png.clone());
+            for t in &mesh.triangles {
+                for c in 0..3 {
+                    glb.positions.push(mesh.positions[t[c] as usize]);
+                    glb.normals.push(normals[t[c] as usize]);
+                    glb.indices.push(glb.indices.len() as u32);
+                }
+            }
+            glb.texcoords = vec![atlas.corner_uv.iter().flatten().copied().collect()];
+            files.push(("solid_surface.glb".into(), crate::export::write_glb(&glb)));
+            files.push(("baked_surface.png".into(), png));
+        }
+        None => {
+            glb.positions = coloured.positions.clone();
+            glb.normals = coloured.vertex_normals().to_vec();
+            // glTF's COLOR_0 is linear; the colours are sRGB-encoded.
+            glb.colors = coloured.colors.as_ref().map(|c| {
+                c.iter()
+                    .map(|c| {
+                        [
+                            srgb::to_linear(c[0]),
+                            srgb::to_linear(c[1]),
+                            srgb::to_linear(c[2]),
+                            1.0,
+                        ]
+                    })
+                    .collect()
+            });
+            glb.indices = coloured.triangles.iter().flatten().copied().collect();
+            files.push(("solid_surface.glb".into(), crate::export::write_glb(&glb)));
         }
     }
-    glb.texcoords = vec![atlas.corner_uv.iter().flatten().copied().collect()];
-    files.push(("solid_surface.glb".into(), crate::export::write_glb(&glb)));
-    files.push(("baked_surface.png".into(), png));
     let opts = crate::render::ViewOptions {
         size: p.preview_size,
         up: Vec3::from(p.up),

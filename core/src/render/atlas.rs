@@ -46,6 +46,9 @@ pub struct Atlas {
     pub corner_uv: Vec<[Vec2; 3]>,
 }
 
+/// The largest atlas side any `reconstruct.atlas_size` accepts.
+pub const MAX_ATLAS_SIZE: u32 = 8192;
+
 /// The atlas cannot be built.
 #[derive(Debug, thiserror::Error)]
 pub enum AtlasError {
@@ -59,6 +62,40 @@ pub enum AtlasError {
         gutter: f32,
         suggested: u32,
     },
+    /// Not even the largest accepted side would do: no `atlas_size` to suggest.
+    #[error(
+        "a {size}×{size} texture atlas cannot hold {faces} triangles with {gutter}-texel \
+         gutters, and neither can the largest ({largest}×{largest}): this per-triangle atlas \
+         needs a mesh with fewer triangles"
+    )]
+    TooManyTriangles {
+        size: u32,
+        faces: usize,
+        gutter: f32,
+        largest: u32,
+    },
+}
+
+impl AtlasError {
+    /// The error for a `size` too small for `faces` triangles that `suggested` would hold:
+    /// a size to use only when a config may name it.
+    fn for_size(size: u32, faces: usize, suggested: u32) -> AtlasError {
+        if suggested > MAX_ATLAS_SIZE {
+            AtlasError::TooManyTriangles {
+                size,
+                faces,
+                gutter: ATLAS_GUTTER,
+                largest: MAX_ATLAS_SIZE,
+            }
+        } else {
+            AtlasError::TooSmall {
+                size,
+                faces,
+                gutter: ATLAS_GUTTER,
+                suggested,
+            }
+        }
+    }
 }
 
 /// A triangle laid flat: longest edge from corner `corners[0]` to `corners[1]` along x, length
@@ -303,12 +340,7 @@ pub fn build_atlas(mesh: &Mesh, size: u32) -> Result<Atlas, AtlasError> {
         while suggested < 1 << 16 && pack(&shapes, &order, 0.0, suggested as f64).is_none() {
             suggested *= 2;
         }
-        AtlasError::TooSmall {
-            size,
-            faces,
-            gutter: ATLAS_GUTTER,
-            suggested: suggested.saturating_mul(2),
-        }
+        AtlasError::for_size(size, faces, suggested.saturating_mul(2))
     };
     let mut best = pack(&shapes, &order, 0.0, side).ok_or_else(too_small)?;
     let max_len = shapes.iter().map(|s| s.len).fold(0.0, f64::max);
@@ -560,6 +592,25 @@ pub(crate) fn dilate_rect(px: &mut [[u8; 4]], w: usize, h: usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn no_error_suggests_a_size_past_the_largest() {
+        let within = AtlasError::for_size(2048, 1000, MAX_ATLAS_SIZE).to_string();
+        assert!(within.contains("at least 8192"), "{within}");
+        let past = AtlasError::for_size(2048, 5_000_000, 2 * MAX_ATLAS_SIZE).to_string();
+        assert!(!past.contains("16384"), "{past}");
+        assert!(
+            past.contains("8192×8192") && past.contains("fewer triangles"),
+            "{past}"
+        );
+        // A real mesh too big for a small atlas gets a size it may use.
+        let mesh = crate::geom::primitives::torus(40, 40, 0.5);
+        let e = build_atlas(&mesh, 64).unwrap_err();
+        let AtlasError::TooSmall { suggested, .. } = e else {
+            panic!("{e}")
+        };
+        assert!(suggested <= MAX_ATLAS_SIZE && build_atlas(&mesh, suggested).is_ok());
+    }
     use crate::image::Image;
     use crate::render::views::tests::{assert_rgb_near, uv_sphere};
 

@@ -22,7 +22,7 @@ pub mod shader;
 pub mod srgb;
 pub mod views;
 
-pub use atlas::{ATLAS_GUTTER, Atlas, AtlasError, bake, build_atlas};
+pub use atlas::{ATLAS_GUTTER, Atlas, AtlasError, MAX_ATLAS_SIZE, bake, build_atlas};
 pub use chart_atlas::{ChartAtlas, ChartAtlasError, bake_page, build_chart_atlas};
 pub use load::{RenderError, render_mesh_file};
 pub use shader::{
