@@ -8,7 +8,9 @@
 //!
 //! - the surface: the mesh refined until its edges are about `edge_voxels` voxels long, with a
 //!   colour per vertex (`solid_surface.ply`), the original mesh with a baked texture
-//!   (`solid_surface.glb`, `baked_surface.png`) and a preview of the coloured surface;
+//!   (`solid_surface.glb`, `baked_surface.png`; when the per-triangle atlas cannot hold the
+//!   mesh, the .glb is the refined surface with its vertex colours and there is no bake) and
+//!   a preview of the coloured surface;
 //! - a section: the cut as an image, one pixel per sample of the plane (`section.png`);
 //! - a box: the voxels as raw RGB with a JSON header, the same voxels as a multi-part
 //!   OpenEXR (one part per z-slice, `volume.exr`) that image tools open directly, and its
@@ -231,7 +233,6 @@ fn export_surface(
             None
         }
     };
-    let normals = mesh.vertex_normals();
     let mut glb = crate::export::GlbMesh {
         name: "solid".into(),
         material: crate::export::GlbMaterial {
@@ -246,6 +247,7 @@ fn export_surface(
             progress(0.7);
             let png = encode_png(&baked, false);
             glb.material.base_color_png = Some(png.clone());
+            let normals = mesh.vertex_normals();
             for t in &mesh.triangles {
                 for c in 0..3 {
                     glb.positions.push(mesh.positions[t[c] as usize]);
@@ -258,6 +260,7 @@ fn export_surface(
             files.push(("baked_surface.png".into(), png));
         }
         None => {
+            progress(0.7);
             glb.positions = coloured.positions.clone();
             glb.normals = coloured.vertex_normals().to_vec();
             // glTF's COLOR_0 is linear; the colours are sRGB-encoded.

@@ -77,10 +77,11 @@ pub enum AtlasError {
 }
 
 impl AtlasError {
-    /// The error for a `size` too small for `faces` triangles that `suggested` would hold:
-    /// a size to use only when a config may name it.
-    fn for_size(size: u32, faces: usize, suggested: u32) -> AtlasError {
-        if suggested > MAX_ATLAS_SIZE {
+    /// The error for a `size` too small for `faces` triangles, which fit (bare, with their
+    /// gutters) a side of `fits`: twice that, for room, up to the largest size a config may
+    /// name; no size when even the largest cannot hold them.
+    fn for_size(size: u32, faces: usize, fits: u32) -> AtlasError {
+        if fits > MAX_ATLAS_SIZE {
             AtlasError::TooManyTriangles {
                 size,
                 faces,
@@ -92,7 +93,7 @@ impl AtlasError {
                 size,
                 faces,
                 gutter: ATLAS_GUTTER,
-                suggested,
+                suggested: fits.saturating_mul(2).min(MAX_ATLAS_SIZE),
             }
         }
     }
@@ -340,7 +341,7 @@ pub fn build_atlas(mesh: &Mesh, size: u32) -> Result<Atlas, AtlasError> {
         while suggested < 1 << 16 && pack(&shapes, &order, 0.0, suggested as f64).is_none() {
             suggested *= 2;
         }
-        AtlasError::for_size(size, faces, suggested.saturating_mul(2))
+        AtlasError::for_size(size, faces, suggested)
     };
     let mut best = pack(&shapes, &order, 0.0, side).ok_or_else(too_small)?;
     let max_len = shapes.iter().map(|s| s.len).fold(0.0, f64::max);
@@ -595,8 +596,11 @@ mod tests {
 
     #[test]
     fn no_error_suggests_a_size_past_the_largest() {
-        let within = AtlasError::for_size(2048, 1000, MAX_ATLAS_SIZE).to_string();
-        assert!(within.contains("at least 8192"), "{within}");
+        // Fitting at 2048 suggests 4096; fitting only at 8192 suggests 8192 (not 16384).
+        let within = AtlasError::for_size(1024, 1000, 2048).to_string();
+        assert!(within.contains("at least 4096"), "{within}");
+        let last = AtlasError::for_size(2048, 1_000_000, MAX_ATLAS_SIZE).to_string();
+        assert!(last.contains("at least 8192"), "{last}");
         let past = AtlasError::for_size(2048, 5_000_000, 2 * MAX_ATLAS_SIZE).to_string();
         assert!(!past.contains("16384"), "{past}");
         assert!(
