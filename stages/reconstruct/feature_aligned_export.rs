@@ -22,7 +22,7 @@ use crate::check::{ParamError, check_range};
 use crate::export::encode_png;
 use crate::geom::Mesh;
 use crate::geom::edge_refine::Refined;
-use crate::render::{VertexColorShader, ViewOptions, render_views, srgb};
+use crate::render::{VertexColorShader, ViewOptions, render_views};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -342,23 +342,8 @@ fn glb(
         ..Default::default()
     };
     let Some(atlas) = atlas else {
-        let mesh = &refined.mesh;
-        scene.positions = mesh.positions.clone();
-        scene.normals = mesh.vertex_normals().to_vec();
-        scene.colors = Some(
-            colours
-                .iter()
-                .map(|c| {
-                    [
-                        srgb::to_linear(c[0]),
-                        srgb::to_linear(c[1]),
-                        srgb::to_linear(c[2]),
-                        1.0,
-                    ]
-                })
-                .collect(),
-        );
-        scene.indices = mesh.triangles.iter().flatten().copied().collect();
+        let scene =
+            crate::export::GlbMesh::vertex_coloured("feature_aligned", &refined.mesh, colours);
         return Ok((crate::export::write_glb(&scene), None));
     };
     let shader = RefinedColours::new(input, refined, colours);

@@ -26,7 +26,7 @@ use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use crate::parameterize::volume_embedding::{Request, Section, Volume};
 use crate::reconstruct::textured_export::encode_png;
-use crate::render::{AtlasError, MAX_ATLAS_SIZE, srgb};
+use crate::render::{AtlasError, MAX_ATLAS_SIZE};
 use glam::{IVec3, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -261,22 +261,8 @@ fn export_surface(
         }
         None => {
             progress(0.7);
-            glb.positions = coloured.positions.clone();
-            glb.normals = coloured.vertex_normals().to_vec();
-            // glTF's COLOR_0 is linear; the colours are sRGB-encoded.
-            glb.colors = coloured.colors.as_ref().map(|c| {
-                c.iter()
-                    .map(|c| {
-                        [
-                            srgb::to_linear(c[0]),
-                            srgb::to_linear(c[1]),
-                            srgb::to_linear(c[2]),
-                            1.0,
-                        ]
-                    })
-                    .collect()
-            });
-            glb.indices = coloured.triangles.iter().flatten().copied().collect();
+            let colours = coloured.colors.as_deref().unwrap_or_default();
+            let glb = crate::export::GlbMesh::vertex_coloured("solid", &coloured, colours);
             files.push(("solid_surface.glb".into(), crate::export::write_glb(&glb)));
         }
     }

@@ -84,6 +84,31 @@ pub struct GlbMesh {
     pub more_primitives: Vec<GlbPrimitive>,
 }
 
+impl GlbMesh {
+    /// `mesh` coloured per vertex, double-sided, without a texture: `srgb` holds its vertices'
+    /// sRGB-encoded colours (as texsyn's images and PLYs do), written as glTF's linear
+    /// `COLOR_0` (alpha 1). The fallback of the per-triangle atlas exports.
+    pub fn vertex_coloured(name: &str, mesh: &crate::geom::Mesh, srgb: &[[f32; 4]]) -> GlbMesh {
+        use crate::render::srgb::to_linear;
+        GlbMesh {
+            name: name.into(),
+            positions: mesh.positions.clone(),
+            normals: mesh.vertex_normals().to_vec(),
+            colors: Some(
+                srgb.iter()
+                    .map(|c| [to_linear(c[0]), to_linear(c[1]), to_linear(c[2]), 1.0])
+                    .collect(),
+            ),
+            indices: mesh.triangles.iter().flatten().copied().collect(),
+            material: GlbMaterial {
+                double_sided: true,
+                ..Default::default()
+            },
+            ..Default::default()
+        }
+    }
+}
+
 /// A primitive of a [`GlbMesh`] beyond the first: its triangles and their material.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct GlbPrimitive {
@@ -426,6 +451,22 @@ mod sample;
 pub(crate) mod tests {
     use super::sample::sample_mesh;
     use super::*;
+
+    #[test]
+    fn vertex_coloured_meshes_carry_linear_colours_of_every_vertex() {
+        let mesh = crate::geom::Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]);
+        let srgb = [[0.5, 0.0, 1.0, 0.3], [1.0; 4], [0.0; 4]];
+        let g = GlbMesh::vertex_coloured("m", &mesh, &srgb);
+        let colours = g.colors.as_ref().unwrap();
+        assert_eq!(colours.len(), 3);
+        // sRGB 0.5 is linear 0.2140; alpha is opaque whatever it was.
+        assert!((colours[0][0] - 0.2140).abs() < 1e-3, "{:?}", colours[0]);
+        assert_eq!(&colours[0][1..], &[0.0, 1.0, 1.0]);
+        assert_eq!((colours[1], colours[2]), ([1.0; 4], [0.0, 0.0, 0.0, 1.0]));
+        assert_eq!((g.positions.len(), g.normals.len()), (3, 3));
+        assert_eq!(g.indices, [0, 1, 2]);
+        assert!(g.material.double_sided && g.material.base_color_png.is_none());
+    }
 
     fn u32_at(b: &[u8], o: usize) -> u32 {
         u32::from_le_bytes(b[o..o + 4].try_into().unwrap())
