@@ -17,10 +17,11 @@
 use texsyn::image::Image;
 use texsyn::image::patch_score::ScoreParams;
 use texsyn::score::relief_frame::score_along_maps;
+use texsyn_core::math::PureMath;
 
 /// `R(θ) diag(a, b) R(θ)ᵀ`, row-major.
 fn stretch(a: f32, b: f32, theta: f32) -> [f32; 4] {
-    let (s, c) = theta.sin_cos();
+    let (s, c) = (theta.sin_pure(), theta.cos_pure());
     [
         a * c * c + b * s * s,
         (a - b) * c * s,
