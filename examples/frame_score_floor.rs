@@ -6,8 +6,10 @@
 //! image" is the sample itself laid out verbatim under one constant `M`: texel `c` holds the
 //! sample at `M (c − centre)`, taken at the nearest sample texel (as synthesis copies texels)
 //! or bilinearly. With `M` the identity the score is that of a verbatim crop (ratio 0,
-//! largest offset 1); any stretch resamples twice, and what that alone costs is the best the
-//! row can report for a map with that stretch.
+//! largest offset 1); any stretch resamples twice, and the ratio and gradient ratio that
+//! costs are the best the row can report for a map with that stretch. Coverage and largest
+//! offset are not floors: they depend on how many patches fit in the square, which shrinks
+//! with the stretch (the pipeline scores 20,000 patches of a 257² grid), and on rounding.
 //!
 //! ```text
 //! cargo run --release --example frame_score_floor [SAMPLE.png]
@@ -47,18 +49,25 @@ fn main() -> anyhow::Result<()> {
         [g, g, g, 1.0]
     });
     let at = |x: usize, y: usize| lum[y * w + x];
-    println!("| M | copy | grid | ratio | coverage | largest offset | gradient ratio |");
-    println!("|---|---|---|---:|---:|---:|---:|");
+    println!("| M | copy | grid | queries | ratio | gradient ratio | coverage | largest offset |");
+    println!("|---|---|---|---:|---:|---:|---:|---:|");
+    // λ as in `max_stretch`: `A`'s eigenvalues λ and 1/λ, surface lengths λ² : 1. A rhombus
+    // sheet of angle α maps to the square affinely, with λ⁴ = (1 + cos α) / (1 − cos α) along
+    // the square's diagonal.
     let cases = [
         ("identity", stretch(1.0, 1.0, 0.0)),
-        ("stretch 1.1 (λ² = 1.21)", stretch(1.1, 1.0 / 1.1, 0.0)),
-        ("stretch 1.3", stretch(1.3, 1.0 / 1.3, 0.0)),
+        ("λ 1.1 along a side", stretch(1.1, 1.0 / 1.1, 0.0)),
+        ("λ 1.3 along a side", stretch(1.3, 1.0 / 1.3, 0.0)),
         (
-            "stretch 1.73 (a 3:1 sheet)",
+            "λ 1.316 at 45° (a 60° rhombus)",
+            stretch(1.316, 1.0 / 1.316, 0.785),
+        ),
+        (
+            "λ 1.732 along a side",
             stretch(3f32.sqrt(), 1.0 / 3f32.sqrt(), 0.0),
         ),
         (
-            "stretch 1.73 at 45°",
+            "λ 1.732 at 45° (a 36.87° rhombus)",
             stretch(3f32.sqrt(), 1.0 / 3f32.sqrt(), 0.785),
         ),
         ("uniform 1.5 (minified)", stretch(1.5, 1.5, 0.0)),
@@ -97,12 +106,13 @@ fn main() -> anyhow::Result<()> {
             let maps = vec![m; (side * side) as usize];
             let s = score_along_maps(img.view(), &maps, grey.view(), &ScoreParams::default())?;
             println!(
-                "| {name} | {} | {side}² | {:.3} | {:.3} | {:.3} | {:.3} |",
+                "| {name} | {} | {side}² | {} | {:.3} | {:.3} | {:.3} | {:.3} |",
                 if bilinear { "bilinear" } else { "nearest" },
+                s.score.queries,
                 s.score.ratio,
+                s.score.gradient_ratio,
                 s.score.coverage,
-                s.score.largest_offset,
-                s.score.gradient_ratio
+                s.score.largest_offset
             );
         }
     }

@@ -1,6 +1,6 @@
 //! Geometry-image synthesis quality on flat sheets (issue 12 §2), scored as `texsyn score`
-//! scores a user's run: nops grown over a flat rectangle at density offset 0, 7×7 patches, at
-//! most 20,000 queries, seed 0.
+//! scores a user's run: relief_cow's settings (nops, synthesis seed 1) grown over a flat
+//! sheet at density offset 0, 7×7 patches, at most 20,000 queries, score seed 0.
 //!
 //! A square sheet maps to the geometry image without distortion, so the surface metric is the
 //! identity, every texel takes the middle scale and the relief image is the synthesizer's
@@ -8,16 +8,15 @@
 //! 0.627, coverage 0.653, largest offset 0.017, gradient 0.972; the issue's bar is 0.6, 0.4,
 //! 0.15 and 0.8).
 //!
-//! A 3:1 sheet stretches the grid uniformly (a grid step along the long side covers three
-//! times the surface of one across), and there the default loses most of that quality: read
-//! along the surface, 0.753 / 0.229 / 0.001 / 0.346 (ratio / coverage / largest offset /
-//! gradient), the correction pass blurring what the scanline pass laid out noisily (0.0
-//! correction passes: 1.042 / 0.298 / 0.001 / 0.810). Along a stretched map the surface row
-//! cannot reach the issue's ratio of 0.6 by much even for a perfect result: the sample laid
-//! out verbatim under this sheet's stretch (1.73) and read back scores 0.583 when copied texel
-//! by texel (`examples/frame_score_floor.rs`). So that test asks for a ratio near that floor
-//! (≤ 0.65) with the issue's coverage and gradient. Main does not meet it yet: it is ignored,
-//! and run with `cargo test --release --test gi_sheet_quality -- --ignored`.
+//! A 60° rhombus maps to the square affinely (its equal sides put its corners on the square's
+//! corners), so the metric is one constant stretch, λ = 1.316 along the square's diagonal
+//! (surface lengths 1.73 : 1), without curl. There the default loses most of its quality:
+//! along the surface 0.838 / 0.247 / 0.001 / 0.501 (ratio / coverage / largest offset /
+//! gradient). Even a perfect result cannot reach the issue's ratio there: the sample laid out
+//! verbatim under that map and read back scores 0.674 when copied texel by texel, 0.481
+//! bilinearly (`examples/frame_score_floor.rs`). So that test asks for a ratio of 0.7 with
+//! the issue's coverage, offset and gradient. Main does not meet it yet: it is ignored, and
+//! run with `cargo test --release --test gi_sheet_quality -- --ignored`.
 
 mod common;
 use common::cli::{succeeded, texsyn};
@@ -26,54 +25,62 @@ use serde_json::Value;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-/// A flat `width × height` sheet of `nx × ny` quads (two triangles each) as OBJ text.
-fn sheet_obj(width: f64, height: f64, nx: usize, ny: usize) -> String {
+/// A flat parallelogram sheet spanned by `e1` (along each row) and `e2` (across the rows), of
+/// `quads × quads` quads (two triangles each, counter-clockwise about +z), as OBJ text. Its
+/// first vertex is a corner, where the parameterization starts spreading the boundary over
+/// the square's sides by arc length: with equal sides every corner of the sheet lands on a
+/// corner of the square, and the map is affine.
+fn sheet_obj(e1: [f64; 2], e2: [f64; 2], quads: usize) -> String {
     let mut s = String::new();
-    for i in 0..=ny {
-        for j in 0..=nx {
-            let (x, y) = (width * j as f64 / nx as f64, height * i as f64 / ny as f64);
+    for i in 0..=quads {
+        for j in 0..=quads {
+            let (a, b) = (j as f64 / quads as f64, i as f64 / quads as f64);
+            let (x, y) = (a * e1[0] + b * e2[0], a * e1[1] + b * e2[1]);
             writeln!(s, "v {x} {y} 0").unwrap();
         }
     }
-    for i in 0..ny {
-        for j in 0..nx {
-            let a = i * (nx + 1) + j + 1;
-            let (b, c) = (a + 1, a + nx + 1);
+    for i in 0..quads {
+        for j in 0..quads {
+            let a = i * (quads + 1) + j + 1;
+            let (b, c) = (a + 1, a + quads + 1);
             writeln!(s, "f {a} {b} {}\nf {a} {} {c}", c + 1, c + 1).unwrap();
         }
     }
     s
 }
 
-/// The relief_cow config on a `width × height` sheet, written into `dir`.
-fn sheet_config(dir: &Path, width: f64, height: f64) -> PathBuf {
-    let (nx, ny) = if width >= height {
-        (((30.0 * width / height).round() as usize).max(1), 30)
-    } else {
-        (30, ((30.0 * height / width).round() as usize).max(1))
-    };
-    std::fs::write(dir.join("sheet.obj"), sheet_obj(width, height, nx, ny)).unwrap();
+/// The relief_cow config on the sheet spanned by `e1` and `e2`, written into `dir`.
+fn sheet_config(dir: &Path, e1: [f64; 2], e2: [f64; 2]) -> PathBuf {
+    std::fs::write(dir.join("sheet.obj"), sheet_obj(e1, e2, 30)).unwrap();
     let nops = repo().join("configs/assets/nops.png");
     let text = std::fs::read_to_string(repo().join("configs/relief_cow.toml"))
         .unwrap()
-        .replace("assets/cow.obj", "sheet.obj")
-        .replace("assets/nops.png", nops.to_str().unwrap());
-    assert!(text.contains("sheet.obj"), "relief_cow.toml names its mesh");
+        .replace("\"assets/cow.obj\"", "\"sheet.obj\"")
+        .replace(
+            "\"assets/nops.png\"",
+            &format!("{:?}", nops.to_str().unwrap()),
+        );
+    assert!(
+        text.contains("\"sheet.obj\"") && !text.contains("\"assets/nops.png\""),
+        "relief_cow.toml names its mesh and sample"
+    );
     let path = dir.join("sheet.toml");
     std::fs::write(&path, text).unwrap();
     path
 }
 
 /// `texsyn score` of the sheet at density offset 0: the grid row and the surface row.
-fn sheet_scores(width: f64, height: f64) -> (Value, Value) {
+fn sheet_scores(e1: [f64; 2], e2: [f64; 2]) -> (Value, Value) {
     let d = tempfile::tempdir().unwrap();
-    let config = sheet_config(d.path(), width, height);
+    let config = sheet_config(d.path(), e1, e2);
     let o = succeeded(texsyn(
         &[
             "score",
             config.to_str().unwrap(),
             "--set",
             "field.density_offset=0",
+            "--set",
+            "reconstruct.preview_size=32",
             "--cache",
             "c",
             "--json",
@@ -81,6 +88,7 @@ fn sheet_scores(width: f64, height: f64) -> (Value, Value) {
         d.path(),
     ));
     let v: Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    assert_eq!(v["patch"].as_u64(), Some(7), "{v}");
     let items = v["items"].as_array().expect("items");
     assert_eq!(items.len(), 2, "{v}");
     (items[0]["score"].clone(), items[1]["score"].clone())
@@ -93,7 +101,7 @@ fn measures(s: &Value) -> [f64; 4] {
 
 #[test]
 fn an_undistorted_sheet_is_synthesized_near_the_issue_bar() {
-    let (grid, surface) = sheet_scores(1.0, 1.0);
+    let (grid, surface) = sheet_scores([1.0, 0.0], [0.0, 1.0]);
     let [ratio, coverage, offset, gradient] = measures(&grid);
     // The issue's bar for coverage, largest offset and gradient; the ratio within 0.1 of its
     // 0.6 (0.627 measured), so that a regression of the synthesizer's core shows here.
@@ -113,12 +121,14 @@ fn an_undistorted_sheet_is_synthesized_near_the_issue_bar() {
 }
 
 #[test]
-#[ignore = "issue 12: the default does not reach the bar on a stretched sheet yet (0.753 / 0.229 / 0.001 / 0.346)"]
-fn a_stretched_sheet_comes_near_the_floor_along_the_surface() {
-    let (_, surface) = sheet_scores(3.0, 1.0);
+#[ignore = "issue 12: main does not reach it yet (surface row 0.838 / 0.247 / 0.001 / 0.501)"]
+fn a_rhombus_sheet_comes_near_the_floor_along_the_surface() {
+    // 60°: an affine map, stretched λ = 1.316 along the square's diagonal (surface lengths
+    // 1.73 : 1), where a verbatim layout copied texel by texel scores 0.674.
+    let (_, surface) = sheet_scores([1.0, 0.0], [0.5, 0.75f64.sqrt()]);
     let [ratio, coverage, offset, gradient] = measures(&surface);
     assert!(
-        ratio <= 0.65 && coverage >= 0.4 && offset <= 0.15 && gradient >= 0.8,
+        ratio <= 0.7 && coverage >= 0.4 && offset <= 0.15 && gradient >= 0.8,
         "{surface}"
     );
 }
