@@ -16,7 +16,7 @@
 //! of the input's geometry image, which numbers its vertices the same way), i.e. relative to
 //! the input surface.
 
-use super::relief_frame::score_along_maps;
+use super::relief_frame::{LayoutCopy, floor_along_maps, score_along_maps};
 use super::{Item, Run, ScoreFailure};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
@@ -180,6 +180,38 @@ fn surface_item(
         }
         Err(e) => item.notes.push(format!("not scored: {e}")),
     }
+    // What a flawless synthesis would score on this row with these maps.
+    let copy = if c.synthesize.subtexel && c.synthesize.anisotropic {
+        LayoutCopy::Bilinear
+    } else {
+        LayoutCopy::Nearest
+    };
+    match floor_along_maps(
+        out_img.width,
+        out_img.height,
+        &maps,
+        reference_img.view(),
+        copy,
+        &run.params,
+    ) {
+        Ok(f) => {
+            item.extra.insert(
+                "floor".into(),
+                serde_json::json!({
+                    "ratio": round3(f.ratio),
+                    "gradient_ratio": round3(f.gradient_ratio),
+                }),
+            );
+            item.notes.push(
+                "floor: the ratio and gradient ratio of a perfect result read the same way (the \
+                 sample copied verbatim under each patch's map, texel by texel as synthesis \
+                 copies): wherever the maps stretch, reading back through them costs this much \
+                 even with no synthesis error"
+                    .into(),
+            );
+        }
+        Err(e) => item.notes.push(format!("floor not computed: {e}")),
+    }
     item.extra
         .insert("density_offset".into(), serde_json::json!(offset));
     item.notes.push(
@@ -273,4 +305,9 @@ mod tests {
         let c = mesh_checks(&Mesh::new(p, fin), None);
         assert_eq!((c.non_manifold_edges, c.flipped_faces), (1, None));
     }
+}
+
+/// `x` to three decimals (the precision the reports print), so JSON floors read cleanly.
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
 }

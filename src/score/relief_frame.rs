@@ -110,6 +110,172 @@ pub fn windows_along_maps(grid: ImageView<'_>, maps: &[[f32; 4]], side: u32, cou
     out
 }
 
+/// How a perfect synthesis would copy the sample's texels into the grid, for
+/// [`floor_along_maps`]: as synthesis copies them (`subtexel` off: the nearest texel) or
+/// bilinearly (`subtexel` on).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LayoutCopy {
+    Nearest,
+    Bilinear,
+}
+
+/// The patch centres [`score_along_maps`] scores: the pool (centres whose patch lies inside
+/// the square and whose map has an inverse), the seeded picks into it, whether they are a
+/// subset, and each texel's inverse map.
+struct Pool {
+    pool: Vec<usize>,
+    picked: Vec<usize>,
+    subsampled: bool,
+    inv: Vec<Option<[f64; 4]>>,
+}
+
+fn pool(w: usize, h: usize, maps: &[[f32; 4]], p: &ScoreParams) -> Result<Pool, ScoreError> {
+    let r = (p.patch / 2) as f64;
+    let inv: Vec<Option<[f64; 4]>> = maps.iter().map(inverse).collect();
+    let inside =
+        |x: f64, y: f64| x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64;
+    // The patch's four corners (and so, the map being linear, all its taps) lie in the square.
+    let pool: Vec<usize> = (0..w * h)
+        .filter(|&k| {
+            inv[k].is_some_and(|m| {
+                [(-r, -r), (r, -r), (-r, r), (r, r)].iter().all(|&(u, v)| {
+                    let (x, y) = (
+                        (k % w) as f64 + m[0] * u + m[1] * v,
+                        (k / w) as f64 + m[2] * u + m[3] * v,
+                    );
+                    inside(x, y)
+                })
+            })
+        })
+        .collect();
+    if pool.is_empty() {
+        return Err(ScoreError::NoPatchInMask { patch: p.patch });
+    }
+    let (picked, subsampled) = query_subset(pool.len(), p);
+    Ok(Pool {
+        pool,
+        picked,
+        subsampled,
+        inv,
+    })
+}
+
+/// Counter stream of the floor's sample positions.
+const STREAM_FLOOR: u64 = 0x7366_0001;
+
+/// The floor of [`score_along_maps`] for these maps: the same patches scored on a *perfect*
+/// result instead of `grid`. Around each scored centre `c` the grid holds the sample laid out
+/// verbatim under `c`'s map, grid point `c + g` showing sample point `x_c + M_c g` (copied as
+/// `copy` says; `x_c` a seeded position, between texels as a layout's are unless the map's
+/// steps are whole), and the patch
+/// is read back through `M_c⁻¹` bilinearly, as the row reads the output. With `M_c` the
+/// identity and `x_c` whole that is an exact crop (ratio 0); a stretch resamples twice, and what that costs
+/// is the best the row can report for these maps. The ratio and gradient ratio are the
+/// floor's meaningful numbers; coverage and largest offset describe random crops, not a
+/// layout.
+pub fn floor_along_maps(
+    width: u32,
+    height: u32,
+    maps: &[[f32; 4]],
+    exemplar: ImageView<'_>,
+    copy: LayoutCopy,
+    p: &ScoreParams,
+) -> Result<PatchScore, ScoreError> {
+    let (w, h) = (width as usize, height as usize);
+    if maps.len() != w * h {
+        return Err(ScoreError::PixelCount {
+            which: "maps of the output",
+            width,
+            height,
+            pixels: maps.len(),
+        });
+    }
+    let Pool {
+        pool,
+        picked,
+        subsampled,
+        inv,
+    } = pool(w, h, maps, p)?;
+    let (ew, eh) = (exemplar.width as i64, exemplar.height as i64);
+    let r = (p.patch / 2) as f64;
+    let side = p.patch as usize;
+    // Grid point `g` (an offset from the centre) of the perfect layout around a centre with
+    // map `m` (grid to sample) and sample position `x0`.
+    let layout = |m: &[f64; 4], x0: (f64, f64), gx: f64, gy: f64| -> [f32; 3] {
+        let (x, y) = (x0.0 + m[0] * gx + m[1] * gy, x0.1 + m[2] * gx + m[3] * gy);
+        match copy {
+            LayoutCopy::Bilinear => bilinear(exemplar, x, y),
+            LayoutCopy::Nearest => {
+                let xi = ((x + 0.5).floor() as i64).clamp(0, ew - 1);
+                let yi = ((y + 0.5).floor() as i64).clamp(0, eh - 1);
+                let px = exemplar.pixels[(yi * ew + xi) as usize];
+                [px[0], px[1], px[2]]
+            }
+        }
+    };
+    // The grid read at fractional offset `d` (grid steps) from the centre, bilinear between
+    // grid points.
+    let read = |m: &[f64; 4], x0: (f64, f64), d: (f64, f64)| -> [f32; 3] {
+        let (gx, gy) = (d.0.floor(), d.1.floor());
+        let (fx, fy) = ((d.0 - gx) as f32, (d.1 - gy) as f32);
+        let mut out = [0.0f32; 3];
+        for (dx, dy, wt) in [
+            (0.0, 0.0, (1.0 - fx) * (1.0 - fy)),
+            (1.0, 0.0, fx * (1.0 - fy)),
+            (0.0, 1.0, (1.0 - fx) * fy),
+            (1.0, 1.0, fx * fy),
+        ] {
+            if wt > 0.0 {
+                let px = layout(m, x0, gx + dx, gy + dy);
+                for c in 0..3 {
+                    out[c] += wt * px[c];
+                }
+            }
+        }
+        out
+    };
+    let mut patches = ResampledPatches {
+        patch: p.patch,
+        rgb: Vec::with_capacity(picked.len() * side * side),
+        at: Vec::with_capacity(picked.len()),
+    };
+    let mut g = GradientEnergy::default();
+    for &i in &picked {
+        let k = pool[i];
+        let m = inv[k].expect("pooled centres have an inverse");
+        let fwd = maps[k].map(|v| v as f64);
+        // A whole-texel position whose layout stays inside the sample: the patch's reach
+        // plus a grid step either way.
+        let reach = r + 1.0 + fwd.iter().map(|v| v.abs()).sum::<f64>();
+        let span = |len: i64| (len as f64 - 2.0 * reach).max(1.0);
+        // A seeded position. A layout carries its positions continuously, so under a map
+        // with fractional steps its grid points (the patch's centre too) fall between texels
+        // at every phase; under whole steps (the identity) they stay on texels.
+        let whole = fwd.iter().all(|v| (v - v.round()).abs() < 1e-4);
+        let pick = |stream_index: u64, len: i64| {
+            let u = crate::random::counter_unit(p.seed, STREAM_FLOOR, stream_index) as f64;
+            let x = reach + u * span(len);
+            (if whole { x.floor() } else { x }).min((len - 1) as f64)
+        };
+        let x0 = (pick(2 * k as u64, ew), pick(2 * k as u64 + 1, eh));
+        for v in 0..side {
+            for u in 0..side {
+                let (a, b) = (u as f64 - r, v as f64 - r);
+                patches
+                    .rgb
+                    .push(read(&fwd, x0, (m[0] * a + m[1] * b, m[2] * a + m[3] * b)));
+            }
+        }
+        patches
+            .at
+            .push((x0.0 as i64 - r as i64, x0.1 as i64 - r as i64));
+        let here = read(&fwd, x0, (0.0, 0.0));
+        g.add_x(&read(&fwd, x0, (m[0], m[2])), &here);
+        g.add_y(&read(&fwd, x0, (m[1], m[3])), &here);
+    }
+    patch_score_resampled(&patches, subsampled, g.value(), exemplar, p)
+}
+
 /// Scores the grid image `grid` read along `maps` (one per texel, row-major; see the module
 /// docs) against `exemplar` with `p`'s patches, query count and seed.
 pub fn score_along_maps(
@@ -128,29 +294,18 @@ pub fn score_along_maps(
         });
     }
     let r = (p.patch / 2) as f64;
-    let inv: Vec<Option<[f64; 4]>> = maps.iter().map(inverse).collect();
     let inside =
         |x: f64, y: f64| x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64;
     let at = |k: usize, m: &[f64; 4], u: f64, v: f64| {
         let (x, y) = ((k % w) as f64, (k / w) as f64);
         (x + m[0] * u + m[1] * v, y + m[2] * u + m[3] * v)
     };
-    // The pool: centres whose patch's four corners (and so, the map being linear, all its
-    // taps) lie in the square.
-    let pool: Vec<usize> = (0..w * h)
-        .filter(|&k| {
-            inv[k].is_some_and(|m| {
-                [(-r, -r), (r, -r), (-r, r), (r, r)].iter().all(|&(u, v)| {
-                    let (x, y) = at(k, &m, u, v);
-                    inside(x, y)
-                })
-            })
-        })
-        .collect();
-    if pool.is_empty() {
-        return Err(ScoreError::NoPatchInMask { patch: p.patch });
-    }
-    let (picked, subsampled) = query_subset(pool.len(), p);
+    let Pool {
+        pool,
+        picked,
+        subsampled,
+        inv,
+    } = pool(w, h, maps, p)?;
 
     // Each centre's position in the sample's frame: M integrated along row 0, then down.
     let mut pos = vec![(0.0f64, 0.0f64); w * h];
@@ -405,5 +560,125 @@ mod tests {
                 "max_queries {max_queries}"
             );
         }
+    }
+
+    /// `R(θ) diag(a, 1/a) R(θ)ᵀ` after a turn by `φ`: a stretch and a rotation, row-major.
+    fn stretched(a: f64, theta: f64, phi: f64) -> [f32; 4] {
+        let (s, c) = (theta.sin(), theta.cos());
+        let b = 1.0 / a;
+        let sym = [
+            a * c * c + b * s * s,
+            (a - b) * c * s,
+            (a - b) * c * s,
+            a * s * s + b * c * c,
+        ];
+        let (s, c) = (phi.sin(), phi.cos());
+        [
+            c * sym[0] - s * sym[2],
+            c * sym[1] - s * sym[3],
+            s * sym[0] + c * sym[2],
+            s * sym[1] + c * sym[3],
+        ]
+        .map(|v| v as f32)
+    }
+
+    /// The sample laid out verbatim in an `n × n` grid under one constant map `m` (grid
+    /// point `c` shows sample point `x0 + m (c − centre)`, the nearest texel).
+    fn verbatim_layout(ex: &Image, n: u32, m: [f32; 4]) -> Image {
+        let m = m.map(|v| v as f64);
+        let (x0, y0) = (ex.width as f64 / 2.0, ex.height as f64 / 2.0);
+        let centre = (n / 2) as f64;
+        Image::from_fn(n, n, |x, y| {
+            let (gx, gy) = (x as f64 - centre, y as f64 - centre);
+            let sx =
+                ((x0 + m[0] * gx + m[1] * gy + 0.5).floor() as i64).clamp(0, ex.width as i64 - 1);
+            let sy =
+                ((y0 + m[2] * gx + m[3] * gy + 0.5).floor() as i64).clamp(0, ex.height as i64 - 1);
+            ex.pixels[(sy * ex.width as i64 + sx) as usize]
+        })
+    }
+
+    #[test]
+    fn the_floor_of_identity_maps_is_an_exact_crop() {
+        let ex = sample(96, 3);
+        let maps = vec![[1.0f32, 0.0, 0.0, 1.0]; 80 * 80];
+        for copy in [LayoutCopy::Nearest, LayoutCopy::Bilinear] {
+            let f = floor_along_maps(80, 80, &maps, ex.view(), copy, &params()).unwrap();
+            assert!(f.ratio < 1e-6, "{copy:?}: {}", f.ratio);
+            assert!(
+                (f.gradient_ratio - 1.0).abs() < 0.15,
+                "{copy:?}: {}",
+                f.gradient_ratio
+            );
+        }
+    }
+
+    #[test]
+    fn the_floor_is_what_a_verbatim_layout_scores_under_the_same_map() {
+        // Per patch, the floor lays the sample out around that patch alone; a whole grid laid
+        // out verbatim under the same constant map and scored along it must agree, for
+        // stretches, shears and turns, and both must cost something once the map stretches.
+        let ex = sample(160, 5);
+        let n = 97;
+        let p = params();
+        let identity = floor_along_maps(
+            n,
+            n,
+            &vec![[1.0, 0.0, 0.0, 1.0]; 97 * 97],
+            ex.view(),
+            LayoutCopy::Nearest,
+            &p,
+        )
+        .unwrap()
+        .ratio;
+        for m in [
+            stretched(1.3, 0.0, 0.0),
+            stretched(1.316, std::f64::consts::FRAC_PI_4, 0.0),
+            stretched(1.2, 0.3, 0.5),
+        ] {
+            let maps = vec![m; (n * n) as usize];
+            let grid = verbatim_layout(&ex, n, m);
+            let whole = score_along_maps(grid.view(), &maps, ex.view(), &p)
+                .unwrap()
+                .score;
+            let floor = floor_along_maps(n, n, &maps, ex.view(), LayoutCopy::Nearest, &p).unwrap();
+            assert!(
+                (floor.ratio - whole.ratio).abs() < 0.1 * whole.ratio.max(0.1),
+                "{m:?}: floor {} against a whole layout's {}",
+                floor.ratio,
+                whole.ratio
+            );
+            assert!(
+                (floor.gradient_ratio - whole.gradient_ratio).abs() < 0.1,
+                "{m:?}: floor gradient {} against {}",
+                floor.gradient_ratio,
+                whole.gradient_ratio
+            );
+            assert!(floor.ratio > identity + 0.05, "{m:?}: {}", floor.ratio);
+            // A bilinear copy is smoother than the nearest texel's, so it scores lower.
+            let bilinear =
+                floor_along_maps(n, n, &maps, ex.view(), LayoutCopy::Bilinear, &p).unwrap();
+            assert!(
+                bilinear.ratio < floor.ratio,
+                "{m:?}: bilinear {} against {}",
+                bilinear.ratio,
+                floor.ratio
+            );
+        }
+    }
+
+    #[test]
+    fn the_floor_names_a_map_count_that_does_not_fit() {
+        let ex = sample(64, 1);
+        let e = floor_along_maps(
+            40,
+            40,
+            &vec![[1.0, 0.0, 0.0, 1.0]; 10],
+            ex.view(),
+            LayoutCopy::Nearest,
+            &params(),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("maps of the output"), "{e}");
     }
 }
