@@ -340,7 +340,8 @@ fn row(point: &Point, dir: &SweepDir, failure: Option<&String>, shards: u32) -> 
 }
 
 /// The numbers of a `texsyn score` report as columns: `<output> ratio`, `… coverage`,
-/// `… gradient ratio`, and each numeric extra (`<output> <name>`).
+/// `… gradient ratio`, each numeric extra (`<output> <name>`) and each number of an extra
+/// that groups them (`<output> <name> <member>`).
 fn score_columns(report: &serde_json::Value) -> Vec<(String, f64)> {
     let mut out = Vec::new();
     let Some(items) = report.get("items").and_then(|v| v.as_array()) else {
@@ -366,6 +367,13 @@ fn score_columns(report: &serde_json::Value) -> Vec<(String, f64)> {
             for (k, v) in extra {
                 if let Some(x) = v.as_f64() {
                     out.push((format!("{name} {k}"), x));
+                } else if let Some(members) = v.as_object() {
+                    // One level of grouped numbers, e.g. the surface row's `floor`.
+                    for (m, x) in members {
+                        if let Some(x) = x.as_f64() {
+                            out.push((format!("{name} {k} {m}"), x));
+                        }
+                    }
                 }
             }
         }
@@ -386,7 +394,7 @@ mod tests {
     #[test]
     fn score_columns_name_the_output_and_the_measure() {
         let report = serde_json::json!({"items": [
-            {"output": "texture.png", "score": {"ratio": 0.5, "coverage": 0.25, "gradient_ratio": 0.75}, "extra": {"seams": 2.0, "note": "x"}},
+            {"output": "texture.png", "score": {"ratio": 0.5, "coverage": 0.25, "gradient_ratio": 0.75}, "extra": {"seams": 2.0, "note": "x", "floor": {"ratio": 0.125, "what": "y"}}},
             {"output": "other.png", "score": null}
         ]});
         let cols = score_columns(&report);
@@ -397,9 +405,11 @@ mod tests {
                 "texture.png ratio",
                 "texture.png coverage",
                 "texture.png gradient ratio",
+                "texture.png floor ratio",
                 "texture.png seams"
             ]
         );
         assert_eq!(cols[1].1, 0.25);
+        assert_eq!(cols[3].1, 0.125);
     }
 }
