@@ -12,10 +12,10 @@
 //! corners), so the metric is one constant stretch, λ = 1.316 along the square's diagonal
 //! (surface lengths 1.73 : 1), without curl. There the default loses most of its quality:
 //! along the surface 0.838 / 0.247 / 0.001 / 0.501 (ratio / coverage / largest offset /
-//! gradient). Even a perfect result cannot reach the issue's ratio there: the sample laid out
-//! verbatim under that map and read back scores 0.674 when copied texel by texel, 0.481
-//! bilinearly (`examples/frame_score_floor.rs`). So that test asks for a ratio of 0.7 with
-//! the issue's coverage, offset and gradient. Main does not meet it yet: it is ignored, and
+//! gradient). Even a perfect result scores more than 0 there: the sample laid out verbatim
+//! under each patch's map (the field's turn included) and read back scores 0.604 / 1.154
+//! (ratio / gradient; the surface row's `floor`, which `texsyn score` reports). So that test
+//! asks for a ratio within 0.1 of the floor with the issue's coverage, offset and gradient. Main does not meet it yet: it is ignored, and
 //! run with `cargo test --release --test gi_sheet_quality -- --ignored`.
 
 mod common;
@@ -69,8 +69,9 @@ fn sheet_config(dir: &Path, e1: [f64; 2], e2: [f64; 2]) -> PathBuf {
     path
 }
 
-/// `texsyn score` of the sheet at density offset 0: the grid row and the surface row.
-fn sheet_scores(e1: [f64; 2], e2: [f64; 2]) -> (Value, Value) {
+/// `texsyn score` of the sheet at density offset 0: the grid row, the surface row and the
+/// surface row's floor (what a perfect result scores there).
+fn sheet_scores(e1: [f64; 2], e2: [f64; 2]) -> (Value, Value, Value) {
     let d = tempfile::tempdir().unwrap();
     let config = sheet_config(d.path(), e1, e2);
     let o = succeeded(texsyn(
@@ -91,7 +92,11 @@ fn sheet_scores(e1: [f64; 2], e2: [f64; 2]) -> (Value, Value) {
     assert_eq!(v["patch"].as_u64(), Some(7), "{v}");
     let items = v["items"].as_array().expect("items");
     assert_eq!(items.len(), 2, "{v}");
-    (items[0]["score"].clone(), items[1]["score"].clone())
+    (
+        items[0]["score"].clone(),
+        items[1]["score"].clone(),
+        items[1]["extra"]["floor"].clone(),
+    )
 }
 
 fn measures(s: &Value) -> [f64; 4] {
@@ -101,7 +106,7 @@ fn measures(s: &Value) -> [f64; 4] {
 
 #[test]
 fn an_undistorted_sheet_is_synthesized_near_the_issue_bar() {
-    let (grid, surface) = sheet_scores([1.0, 0.0], [0.0, 1.0]);
+    let (grid, surface, floor) = sheet_scores([1.0, 0.0], [0.0, 1.0]);
     let [ratio, coverage, offset, gradient] = measures(&grid);
     // The issue's bar for coverage, largest offset and gradient; the ratio within 0.1 of its
     // 0.6 (0.627 measured), so that a regression of the synthesizer's core shows here.
@@ -110,7 +115,9 @@ fn an_undistorted_sheet_is_synthesized_near_the_issue_bar() {
     assert!(offset <= 0.15, "largest offset {offset}: {grid}");
     assert!(gradient >= 0.8, "gradient ratio {gradient}: {grid}");
     assert_eq!(grid["queries"].as_u64(), Some(20_000), "{grid}");
-    // Without distortion the surface row reads the grid as it is.
+    // Without distortion the surface row reads the grid as it is, and a perfect result would
+    // be an exact copy.
+    assert!(floor["ratio"].as_f64().unwrap() < 1e-6, "{floor}");
     let s = measures(&surface);
     for (a, b) in s.iter().zip([ratio, coverage, offset, gradient]) {
         assert!(
@@ -124,11 +131,13 @@ fn an_undistorted_sheet_is_synthesized_near_the_issue_bar() {
 #[ignore = "issue 12: main does not reach it yet (surface row 0.838 / 0.247 / 0.001 / 0.501)"]
 fn a_rhombus_sheet_comes_near_the_floor_along_the_surface() {
     // 60°: an affine map, stretched λ = 1.316 along the square's diagonal (surface lengths
-    // 1.73 : 1), where a verbatim layout copied texel by texel scores 0.674.
-    let (_, surface) = sheet_scores([1.0, 0.0], [0.5, 0.75f64.sqrt()]);
+    // 1.73 : 1), where a perfect result read along the surface scores 0.604 (the row's
+    // floor, measured 2026-12-03): within 0.1 of it, with the issue's other bars.
+    let (_, surface, floor) = sheet_scores([1.0, 0.0], [0.5, 0.75f64.sqrt()]);
     let [ratio, coverage, offset, gradient] = measures(&surface);
+    let floor_ratio = floor["ratio"].as_f64().expect("a floor");
     assert!(
-        ratio <= 0.7 && coverage >= 0.4 && offset <= 0.15 && gradient >= 0.8,
-        "{surface}"
+        ratio <= floor_ratio + 0.1 && coverage >= 0.4 && offset <= 0.15 && gradient >= 0.8,
+        "{surface}, floor {floor}"
     );
 }
