@@ -271,6 +271,11 @@ pub fn mesh_checks(mesh: &Mesh, reference: Option<&Mesh>) -> MeshChecks {
     }
 }
 
+/// `x` to three decimals (the precision the reports print), so JSON floors read cleanly.
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -305,9 +310,4 @@ mod tests {
         let c = mesh_checks(&Mesh::new(p, fin), None);
         assert_eq!((c.non_manifold_edges, c.flipped_faces), (1, None));
     }
-}
-
-/// `x` to three decimals (the precision the reports print), so JSON floors read cleanly.
-fn round3(x: f64) -> f64 {
-    (x * 1000.0).round() / 1000.0
 }

@@ -377,6 +377,7 @@ mod tests {
     use crate::image::Image;
     use crate::image::patch_score::patch_score;
     use crate::random::counter_unit;
+    use texsyn_core::math::PureMath;
 
     /// A smooth random grey texture: value noise on 7- and 3-texel lattices, bilinear
     /// with a smoothstep (features of a few texels, so that resampling it is nearly exact).
@@ -564,7 +565,7 @@ mod tests {
 
     /// `R(θ) diag(a, 1/a) R(θ)ᵀ` after a turn by `φ`: a stretch and a rotation, row-major.
     fn stretched(a: f64, theta: f64, phi: f64) -> [f32; 4] {
-        let (s, c) = (theta.sin(), theta.cos());
+        let (s, c) = (theta.sin_pure(), theta.cos_pure());
         let b = 1.0 / a;
         let sym = [
             a * c * c + b * s * s,
@@ -572,7 +573,7 @@ mod tests {
             (a - b) * c * s,
             a * s * s + b * c * c,
         ];
-        let (s, c) = (phi.sin(), phi.cos());
+        let (s, c) = (phi.sin_pure(), phi.cos_pure());
         [
             c * sym[0] - s * sym[2],
             c * sym[1] - s * sym[3],
@@ -673,7 +674,7 @@ mod tests {
         let e = floor_along_maps(
             40,
             40,
-            &vec![[1.0, 0.0, 0.0, 1.0]; 10],
+            &[[1.0, 0.0, 0.0, 1.0]; 10],
             ex.view(),
             LayoutCopy::Nearest,
             &params(),
