@@ -26,6 +26,7 @@ use crate::stages::analyse_exemplar::texel_variants::{TexelVariants, TexelVarian
 use crate::stages::field::param_field::ParamField;
 use crate::stages::reconstruct::displacement::grid_mesh;
 use crate::stages::synthesize::geometry_texture::{sample_frame_maps, texel_controls};
+use crate::stages::synthesize::surface_metric::{MAX_STRETCH, surface_metrics};
 use std::collections::HashMap;
 use std::path::Path;
 use texsyn_core::math::PureMath;
@@ -211,6 +212,32 @@ fn surface_item(
             );
         }
         Err(e) => item.notes.push(format!("floor not computed: {e}")),
+    }
+    // How unevenly the geometry image samples the surface, which the surface metric has to
+    // undo (and which no per-texel scale can).
+    let mut stretch: Vec<f32> = surface_metrics(&gi).iter().map(|m| m.stretch()).collect();
+    stretch.sort_unstable_by(f32::total_cmp);
+    if !stretch.is_empty() {
+        let at = |q: f64| stretch[((stretch.len() - 1) as f64 * q).round() as usize] as f64;
+        let clamped = stretch
+            .iter()
+            .filter(|&&l| l as f64 >= MAX_STRETCH - 1e-3)
+            .count();
+        item.extra.insert(
+            "stretch".into(),
+            serde_json::json!({
+                "median": round3(at(0.5)),
+                "p90": round3(at(0.9)),
+                "at_max": round3(clamped as f64 / stretch.len() as f64),
+            }),
+        );
+        item.notes.push(format!(
+            "stretch: λ of the geometry image's surface metric (a grid step along its long \
+             direction spans λ² times the surface length of one across it; 1 = isotropic), \
+             median, 90th percentile, and the fraction at its cap of {MAX_STRETCH}; on the \
+             cow more `parameterize.stretch_iterations` even out the area per texel but raise \
+             λ"
+        ));
     }
     item.extra
         .insert("density_offset".into(), serde_json::json!(offset));

@@ -93,6 +93,15 @@ impl SurfaceMetric {
         }
     }
 
+    /// `λ`, the larger eigenvalue of `A` (clamped as `A` is): a grid step along the stretched
+    /// direction spans `λ²` times the length on the surface of a step across it. 1 where
+    /// isotropic.
+    pub fn stretch(&self) -> f32 {
+        let (a, b, c) = (self.a[0], self.a[1], self.a[3]);
+        let half = 0.5 * (a + c);
+        half + (half * half - (a * c - b * b)).max(0.0).sqrt()
+    }
+
     /// `A v`: a grid offset in sample texels.
     #[inline]
     pub fn to_sample(&self, v: Vec2) -> Vec2 {
@@ -180,6 +189,20 @@ mod tests {
         for l in &lens {
             assert!((l / lens[0] - 1.0).abs() < 1e-5, "{lens:?}");
         }
+        // λ² is the square root of the metric's eigenvalue ratio: G = [[9, 3], [3, 1.25]].
+        let (ev_hi, ev_lo) = {
+            let (a, b, c) = (9.0f64, 3.0, 1.25);
+            let h = 0.5 * (a + c);
+            let d = (h * h - (a * c - b * b)).sqrt();
+            (h + d, h - d)
+        };
+        let want = (ev_hi / ev_lo).powf(0.25);
+        assert!(
+            (m.stretch() as f64 - want).abs() < 1e-4,
+            "{} against {want}",
+            m.stretch()
+        );
+        assert_eq!(SurfaceMetric::IDENTITY.stretch(), 1.0);
         // The common length is the isotropic spacing: √|det J| = √1.5.
         assert!((lens[0] - 1.5f64.sqrt()).abs() < 1e-5, "{}", lens[0]);
         assert!((m.spacing as f64 - 1.5f64.sqrt()).abs() < 1e-5);
@@ -207,6 +230,11 @@ mod tests {
         let m = SurfaceMetric::from_metric(1.0, 0.0, 1e4);
         assert!((m.a[3] as f64 - MAX_STRETCH).abs() < 1e-5 && m.a[1] == 0.0);
         assert!((m.a[0] as f64 - 1.0 / MAX_STRETCH).abs() < 1e-6);
+        assert!(
+            (m.stretch() as f64 - MAX_STRETCH).abs() < 1e-5,
+            "{}",
+            m.stretch()
+        );
         // Along the stretched axis a grid step is several sample texels; across, a sample
         // texel is several grid steps.
         assert_eq!(m.to_grid((0, 4)), (0, 1));
