@@ -53,6 +53,15 @@ fn inverse(m: &[f32; 4]) -> Option<[f64; 4]> {
 /// texels around it (a weight of 0 reads nothing, so whole positions read one texel exactly).
 fn bilinear(image: ImageView<'_>, x: f64, y: f64) -> [f32; 3] {
     let (w, h) = (image.width as i64, image.height as i64);
+    bilinear_by(x, y, |xi, yi| {
+        let px = image.pixels[(yi.clamp(0, h - 1) * w + xi.clamp(0, w - 1)) as usize];
+        [px[0], px[1], px[2]]
+    })
+}
+
+/// The value at fractional `(x, y)`, bilinear between the four whole points around it, each
+/// read by `at(x, y)` (a point of weight 0 is not read).
+fn bilinear_by(x: f64, y: f64, at: impl Fn(i64, i64) -> [f32; 3]) -> [f32; 3] {
     let (x0, y0) = (x.floor(), y.floor());
     let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
     let (x0, y0) = (x0 as i64, y0 as i64);
@@ -64,8 +73,7 @@ fn bilinear(image: ImageView<'_>, x: f64, y: f64) -> [f32; 3] {
         (1, 1, fx * fy),
     ] {
         if wt > 0.0 {
-            let (xi, yi) = ((x0 + dx).clamp(0, w - 1), (y0 + dy).clamp(0, h - 1));
-            let px = image.pixels[(yi * w + xi) as usize];
+            let px = at(x0 + dx, y0 + dy);
             for c in 0..3 {
                 out[c] += wt * px[c];
             }
@@ -216,23 +224,7 @@ pub fn floor_along_maps(
     // The grid read at fractional offset `d` (grid steps) from the centre, bilinear between
     // grid points.
     let read = |m: &[f64; 4], x0: (f64, f64), d: (f64, f64)| -> [f32; 3] {
-        let (gx, gy) = (d.0.floor(), d.1.floor());
-        let (fx, fy) = ((d.0 - gx) as f32, (d.1 - gy) as f32);
-        let mut out = [0.0f32; 3];
-        for (dx, dy, wt) in [
-            (0.0, 0.0, (1.0 - fx) * (1.0 - fy)),
-            (1.0, 0.0, fx * (1.0 - fy)),
-            (0.0, 1.0, (1.0 - fx) * fy),
-            (1.0, 1.0, fx * fy),
-        ] {
-            if wt > 0.0 {
-                let px = layout(m, x0, gx + dx, gy + dy);
-                for c in 0..3 {
-                    out[c] += wt * px[c];
-                }
-            }
-        }
-        out
+        bilinear_by(d.0, d.1, |gx, gy| layout(m, x0, gx as f64, gy as f64))
     };
     let mut patches = ResampledPatches {
         patch: p.patch,
