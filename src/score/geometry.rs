@@ -25,7 +25,9 @@ use crate::methods::geometry_images::GeometryImagesConfig;
 use crate::stages::analyse_exemplar::texel_variants::{TexelVariants, TexelVariantsRef};
 use crate::stages::field::param_field::ParamField;
 use crate::stages::reconstruct::displacement::grid_mesh;
-use crate::stages::synthesize::geometry_texture::{sample_frame_maps, texel_controls};
+use crate::stages::synthesize::geometry_texture::{
+    TexelControls, sample_frame_maps, texel_controls,
+};
 use crate::stages::synthesize::surface_metric::{MAX_STRETCH, surface_metrics};
 use std::collections::HashMap;
 use std::path::Path;
@@ -178,40 +180,20 @@ fn surface_item(
                 "skipped_patches".into(),
                 serde_json::json!(f.skipped as f64 / (f.skipped + f.readable) as f64),
             );
+            let grid = (out_img.width, out_img.height);
+            floor_item(
+                &mut item,
+                c,
+                &controls,
+                variants,
+                size,
+                grid,
+                &maps,
+                &reference_img,
+                run,
+            );
         }
         Err(e) => item.notes.push(format!("not scored: {e}")),
-    }
-    // What a flawless synthesis would score on this row with these maps.
-    let copy = if c.synthesize.subtexel && c.synthesize.anisotropic {
-        LayoutCopy::Bilinear
-    } else {
-        LayoutCopy::Nearest
-    };
-    match floor_along_maps(
-        out_img.width,
-        out_img.height,
-        &maps,
-        reference_img.view(),
-        copy,
-        &run.params,
-    ) {
-        Ok(f) => {
-            item.extra.insert(
-                "floor".into(),
-                serde_json::json!({
-                    "ratio": round3(f.ratio),
-                    "gradient_ratio": round3(f.gradient_ratio),
-                }),
-            );
-            item.notes.push(
-                "floor: the ratio and gradient ratio of a perfect result read the same way (the \
-                 sample copied verbatim under each patch's map, texel by texel as synthesis \
-                 copies): wherever the maps stretch, reading back through them costs this much \
-                 even with no synthesis error"
-                    .into(),
-            );
-        }
-        Err(e) => item.notes.push(format!("floor not computed: {e}")),
     }
     // How unevenly the geometry image samples the surface, which the surface metric has to
     // undo (and which no per-texel scale can).
@@ -248,6 +230,70 @@ fn surface_item(
             .into(),
     );
     Ok(item)
+}
+
+/// The surface row's `floor`: what a verbatim layout under the same maps scores, copied the
+/// way synthesis copies (texels of the variant turned and scaled as the field says, or
+/// bilinearly with `subtexel` and the surface metric).
+#[allow(clippy::too_many_arguments)]
+fn floor_item(
+    item: &mut Item,
+    c: &GeometryImagesConfig,
+    controls: &TexelControls,
+    variants: &TexelVariantsRef<'_>,
+    size: f32,
+    grid: (u32, u32),
+    maps: &[[f32; 4]],
+    reference_img: &Image,
+    run: &Run,
+) {
+    let subtexel = c.synthesize.subtexel && c.synthesize.anisotropic;
+    let copy = if subtexel {
+        LayoutCopy::Bilinear
+    } else {
+        LayoutCopy::Nearest
+    };
+    // The variants' frames: the same maps without the surface metric.
+    let turned_and_scaled = TexelControls {
+        metric: Vec::new(),
+        orient: controls.orient.clone(),
+        scale: controls.scale.clone(),
+    };
+    let frames: Vec<[f32; 4]> = sample_frame_maps(&turned_and_scaled, variants)
+        .into_iter()
+        .map(|m| m.map(|v| v / size))
+        .collect();
+    match floor_along_maps(
+        grid.0,
+        grid.1,
+        maps,
+        &frames,
+        reference_img.view(),
+        copy,
+        &run.params,
+    ) {
+        Ok(f) => {
+            item.extra.insert(
+                "floor".into(),
+                serde_json::json!({
+                    "ratio": round3(f.ratio),
+                    "gradient_ratio": round3(f.gradient_ratio),
+                }),
+            );
+            item.notes.push(format!(
+                "floor: the ratio and gradient ratio of the sample laid out verbatim under each \
+                 patch's map and read back the same way, copied as synthesis copies ({}): what \
+                 reading through these maps costs a flawless layout. Not a lower bound: a \
+                 blurrier result can score a lower ratio",
+                if subtexel {
+                    "bilinearly"
+                } else {
+                    "texel by texel from the turned and scaled variant"
+                }
+            ));
+        }
+        Err(e) => item.notes.push(format!("floor not computed: {e}")),
+    }
 }
 
 /// Soundness of an output mesh.

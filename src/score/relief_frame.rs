@@ -171,33 +171,50 @@ fn pool(w: usize, h: usize, maps: &[[f32; 4]], p: &ScoreParams) -> Result<Pool, 
 /// Counter stream of the floor's sample positions.
 const STREAM_FLOOR: u64 = 0x7366_0001;
 
-/// The floor of [`score_along_maps`] for these maps: the same patches scored on a *perfect*
-/// result instead of `grid`. Around each scored centre `c` the grid holds the sample laid out
-/// verbatim under `c`'s map, grid point `c + g` showing sample point `x_c + M_c g` (copied as
-/// `copy` says; `x_c` a seeded position, between texels as a layout's are unless the map's
-/// steps are whole), and the patch
-/// is read back through `M_c⁻¹` bilinearly, as the row reads the output. With `M_c` the
-/// identity and `x_c` whole that is an exact crop (ratio 0); a stretch resamples twice, and what that costs
-/// is the best the row can report for these maps. The ratio and gradient ratio are the
-/// floor's meaningful numbers; coverage and largest offset describe random crops, not a
-/// layout.
+/// The floor of [`score_along_maps`] for these maps: the same patches scored on a
+/// verbatim layout instead of `grid`. Around each scored centre `c` the grid holds the
+/// sample laid out under `c`'s map, grid point `c + g` showing sample point `x_c + M_c g`,
+/// and the patch is read back through `M_c⁻¹` bilinearly, as the row reads the output.
+///
+/// How the layout is copied follows synthesis: it copies texels of a variant, the sample
+/// turned and scaled by the variant's frame `F_c` (`frames`, per texel, grid-free: variant
+/// texels to sample texels; empty for the sample's own texels). With [`LayoutCopy::Nearest`]
+/// grid point `g` takes the variant texel nearest to `F_c⁻¹ (x_c + M_c g)`, read from the
+/// sample at that texel's position (bilinearly, as the variants are made); with
+/// [`LayoutCopy::Bilinear`] the sample at `x_c + M_c g` itself. `x_c` is a seeded position,
+/// between variant texels as a layout's positions are, unless `F_c⁻¹ M_c` has whole steps
+/// (then every grid point sits on a texel, as synthesis without the surface metric copies).
+///
+/// With `M_c = F_c` that is an exact crop (ratio 0). A stretch resamples twice, and the floor
+/// says what that costs a flawless layout; it is no lower bound: a blurrier result can score
+/// a lower ratio (with a lower gradient ratio). The ratio and gradient ratio are the floor's
+/// meaningful numbers; coverage and largest offset describe scattered crops. The gradient is
+/// taken at the scored centres only (the row's own over every texel with a map). Patches whose
+/// layout would reach past the sample's border are left out rather than clamped.
 pub fn floor_along_maps(
     width: u32,
     height: u32,
     maps: &[[f32; 4]],
+    frames: &[[f32; 4]],
     exemplar: ImageView<'_>,
     copy: LayoutCopy,
     p: &ScoreParams,
 ) -> Result<PatchScore, ScoreError> {
     let (w, h) = (width as usize, height as usize);
-    if maps.len() != w * h {
-        return Err(ScoreError::PixelCount {
-            which: "maps of the output",
-            width,
-            height,
-            pixels: maps.len(),
-        });
+    for (which, len) in [
+        ("maps of the output", maps.len()),
+        ("frames of the output", frames.len()),
+    ] {
+        if len != w * h && !(which.starts_with("frames") && len == 0) {
+            return Err(ScoreError::PixelCount {
+                which,
+                width,
+                height,
+                pixels: len,
+            });
+        }
     }
+    crate::image::patch_score::validate_exemplar(exemplar, p)?;
     let Pool {
         pool,
         picked,
@@ -207,24 +224,39 @@ pub fn floor_along_maps(
     let (ew, eh) = (exemplar.width as i64, exemplar.height as i64);
     let r = (p.patch / 2) as f64;
     let side = p.patch as usize;
-    // Grid point `g` (an offset from the centre) of the perfect layout around a centre with
-    // map `m` (grid to sample) and sample position `x0`.
-    let layout = |m: &[f64; 4], x0: (f64, f64), gx: f64, gy: f64| -> [f32; 3] {
-        let (x, y) = (x0.0 + m[0] * gx + m[1] * gy, x0.1 + m[2] * gx + m[3] * gy);
+    let apply = |m: &[f64; 4], v: (f64, f64)| (m[0] * v.0 + m[1] * v.1, m[2] * v.0 + m[3] * v.1);
+    let inverse64 = |m: &[f64; 4]| inverse(&m.map(|v| v as f32));
+    const IDENTITY: [f64; 4] = [1.0, 0.0, 0.0, 1.0];
+    // One centre's layout: its map `m` (grid to sample), frame `f` and `f⁻¹`, and position.
+    struct Layout {
+        m: [f64; 4],
+        f: [f64; 4],
+        f_inv: [f64; 4],
+        x0: (f64, f64),
+    }
+    let layout = |l: &Layout, gx: f64, gy: f64| -> [f32; 3] {
+        let (dx, dy) = apply(&l.m, (gx, gy));
+        let (x, y) = (l.x0.0 + dx, l.x0.1 + dy);
         match copy {
             LayoutCopy::Bilinear => bilinear(exemplar, x, y),
-            LayoutCopy::Nearest => {
+            LayoutCopy::Nearest if l.f == IDENTITY => {
                 let xi = ((x + 0.5).floor() as i64).clamp(0, ew - 1);
                 let yi = ((y + 0.5).floor() as i64).clamp(0, eh - 1);
                 let px = exemplar.pixels[(yi * ew + xi) as usize];
                 [px[0], px[1], px[2]]
             }
+            LayoutCopy::Nearest => {
+                let (zx, zy) = apply(&l.f_inv, (x, y));
+                let z = ((zx + 0.5).floor(), (zy + 0.5).floor());
+                let (sx, sy) = apply(&l.f, z);
+                bilinear(exemplar, sx, sy)
+            }
         }
     };
     // The grid read at fractional offset `d` (grid steps) from the centre, bilinear between
     // grid points.
-    let read = |m: &[f64; 4], x0: (f64, f64), d: (f64, f64)| -> [f32; 3] {
-        bilinear_by(d.0, d.1, |gx, gy| layout(m, x0, gx as f64, gy as f64))
+    let read = |l: &Layout, d: (f64, f64)| -> [f32; 3] {
+        bilinear_by(d.0, d.1, |gx, gy| layout(l, gx as f64, gy as f64))
     };
     let mut patches = ResampledPatches {
         patch: p.patch,
@@ -234,36 +266,55 @@ pub fn floor_along_maps(
     let mut g = GradientEnergy::default();
     for &i in &picked {
         let k = pool[i];
-        let m = inv[k].expect("pooled centres have an inverse");
-        let fwd = maps[k].map(|v| v as f64);
-        // A whole-texel position whose layout stays inside the sample: the patch's reach
-        // plus a grid step either way.
-        let reach = r + 1.0 + fwd.iter().map(|v| v.abs()).sum::<f64>();
-        let span = |len: i64| (len as f64 - 2.0 * reach).max(1.0);
-        // A seeded position. A layout carries its positions continuously, so under a map
-        // with fractional steps its grid points (the patch's centre too) fall between texels
-        // at every phase; under whole steps (the identity) they stay on texels.
-        let whole = fwd.iter().all(|v| (v - v.round()).abs() < 1e-4);
+        let m_inv = inv[k].expect("pooled centres have an inverse");
+        let m = maps[k].map(|v| v as f64);
+        let (f, f_inv) = match frames.get(k).map(|f| f.map(|v| v as f64)) {
+            Some(f) => match inverse64(&f) {
+                Some(f_inv) => (f, f_inv),
+                None => continue,
+            },
+            None => (IDENTITY, IDENTITY),
+        };
+        // How far the layout reaches from its position: the patch, a grid step of
+        // interpolation either way, and half a variant texel of rounding, plus a texel.
+        let norm = |a: &[f64; 4]| a.iter().map(|v| v.abs()).sum::<f64>();
+        let reach = r + norm(&m) + 0.5 * norm(&f) + 1.0;
+        if 2.0 * reach + 1.0 > ew.min(eh) as f64 {
+            continue;
+        }
+        // In variant texels, the layout's steps are `F⁻¹ M`.
+        let steps = [
+            f_inv[0] * m[0] + f_inv[1] * m[2],
+            f_inv[0] * m[1] + f_inv[1] * m[3],
+            f_inv[2] * m[0] + f_inv[3] * m[2],
+            f_inv[2] * m[1] + f_inv[3] * m[3],
+        ];
+        let whole = steps.iter().all(|v| (v - v.round()).abs() < 1e-4);
         let pick = |stream_index: u64, len: i64| {
             let u = crate::random::counter_unit(p.seed, STREAM_FLOOR, stream_index) as f64;
-            let x = reach + u * span(len);
-            (if whole { x.floor() } else { x }).min((len - 1) as f64)
+            reach + u * (len as f64 - 1.0 - 2.0 * reach)
         };
-        let x0 = (pick(2 * k as u64, ew), pick(2 * k as u64 + 1, eh));
+        let mut x0 = (pick(2 * k as u64, ew), pick(2 * k as u64 + 1, eh));
+        if whole {
+            // Every grid point on a variant texel: the position on one too.
+            let (zx, zy) = apply(&f_inv, x0);
+            x0 = apply(&f, ((zx + 0.5).floor(), (zy + 0.5).floor()));
+        }
+        let l = Layout { m, f, f_inv, x0 };
         for v in 0..side {
             for u in 0..side {
-                let (a, b) = (u as f64 - r, v as f64 - r);
                 patches
                     .rgb
-                    .push(read(&fwd, x0, (m[0] * a + m[1] * b, m[2] * a + m[3] * b)));
+                    .push(read(&l, apply(&m_inv, (u as f64 - r, v as f64 - r))));
             }
         }
+        let round = |t: f64| (t + 0.5).floor() as i64;
         patches
             .at
-            .push((x0.0 as i64 - r as i64, x0.1 as i64 - r as i64));
-        let here = read(&fwd, x0, (0.0, 0.0));
-        g.add_x(&read(&fwd, x0, (m[0], m[2])), &here);
-        g.add_y(&read(&fwd, x0, (m[1], m[3])), &here);
+            .push((round(x0.0) - r as i64, round(x0.1) - r as i64));
+        let here = read(&l, (0.0, 0.0));
+        g.add_x(&read(&l, (m_inv[0], m_inv[2])), &here);
+        g.add_y(&read(&l, (m_inv[1], m_inv[3])), &here);
     }
     patch_score_resampled(&patches, subsampled, g.value(), exemplar, p)
 }
@@ -596,7 +647,7 @@ mod tests {
         let ex = sample(96, 3);
         let maps = vec![[1.0f32, 0.0, 0.0, 1.0]; 80 * 80];
         for copy in [LayoutCopy::Nearest, LayoutCopy::Bilinear] {
-            let f = floor_along_maps(80, 80, &maps, ex.view(), copy, &params()).unwrap();
+            let f = floor_along_maps(80, 80, &maps, &[], ex.view(), copy, &params()).unwrap();
             assert!(f.ratio < 1e-6, "{copy:?}: {}", f.ratio);
             assert!(
                 (f.gradient_ratio - 1.0).abs() < 0.15,
@@ -618,6 +669,7 @@ mod tests {
             n,
             n,
             &vec![[1.0, 0.0, 0.0, 1.0]; 97 * 97],
+            &[],
             ex.view(),
             LayoutCopy::Nearest,
             &p,
@@ -634,7 +686,8 @@ mod tests {
             let whole = score_along_maps(grid.view(), &maps, ex.view(), &p)
                 .unwrap()
                 .score;
-            let floor = floor_along_maps(n, n, &maps, ex.view(), LayoutCopy::Nearest, &p).unwrap();
+            let floor =
+                floor_along_maps(n, n, &maps, &[], ex.view(), LayoutCopy::Nearest, &p).unwrap();
             assert!(
                 (floor.ratio - whole.ratio).abs() < 0.1 * whole.ratio.max(0.1),
                 "{m:?}: floor {} against a whole layout's {}",
@@ -650,7 +703,7 @@ mod tests {
             assert!(floor.ratio > identity + 0.05, "{m:?}: {}", floor.ratio);
             // A bilinear copy is smoother than the nearest texel's, so it scores lower.
             let bilinear =
-                floor_along_maps(n, n, &maps, ex.view(), LayoutCopy::Bilinear, &p).unwrap();
+                floor_along_maps(n, n, &maps, &[], ex.view(), LayoutCopy::Bilinear, &p).unwrap();
             assert!(
                 bilinear.ratio < floor.ratio,
                 "{m:?}: bilinear {} against {}",
@@ -667,11 +720,91 @@ mod tests {
             40,
             40,
             &[[1.0, 0.0, 0.0, 1.0]; 10],
+            &[],
             ex.view(),
             LayoutCopy::Nearest,
             &params(),
         )
         .unwrap_err();
         assert!(e.to_string().contains("maps of the output"), "{e}");
+    }
+
+    /// Columns that alternate dark and light, each of its own contrast in each band of 8
+    /// rows: a texture that a map and its inverse lay out very differently.
+    fn stripes(side: u32) -> Image {
+        Image::from_fn(side, side, |x, y| {
+            let r = 0.3 + 0.7 * counter_unit(4, 4, ((y / 8) * side + x) as u64);
+            let g = 0.5 + if x % 2 == 0 { 0.45 } else { -0.45 } * r;
+            [g, g, g, 1.0]
+        })
+    }
+
+    #[test]
+    fn the_floor_lays_the_sample_out_under_the_map_not_its_inverse() {
+        // Grid steps of 2 sample texels along x land every grid point of a row on the same
+        // parity of stripe: read back, a patch has lost its alternation, far from every
+        // sample patch. Laid out under the inverse (steps of ½) it would read back exact.
+        let ex = stripes(128);
+        let n = 97;
+        let p = params();
+        let m = [2.0f32, 0.0, 0.0, 0.5];
+        let maps = vec![m; (n * n) as usize];
+        let floor = floor_along_maps(n, n, &maps, &[], ex.view(), LayoutCopy::Nearest, &p).unwrap();
+        let grid = verbatim_layout(&ex, n, m);
+        let whole = score_along_maps(grid.view(), &maps, ex.view(), &p)
+            .unwrap()
+            .score;
+        assert!(floor.ratio > 1.0, "floor {}", floor.ratio);
+        assert!(
+            (floor.ratio - whole.ratio).abs() < 0.1 * whole.ratio,
+            "floor {} against a whole layout's {}",
+            floor.ratio,
+            whole.ratio
+        );
+    }
+
+    #[test]
+    fn the_floor_copies_texels_of_the_turned_variant() {
+        // Synthesis copies whole texels of the variant turned by the field: under a map that
+        // is only that turn, the layout has no rounding jaggies, only the turn's resampling
+        // (which costs the most here), so it scores below a layout rounded in the sample's
+        // own texels (measured 0.476 against 0.527).
+        let ex = sample(160, 5);
+        let n = 97;
+        let p = params();
+        let turn = stretched(1.0, 0.0, 0.5);
+        let maps = vec![turn; (n * n) as usize];
+        let frames = maps.clone();
+        let variant =
+            floor_along_maps(n, n, &maps, &frames, ex.view(), LayoutCopy::Nearest, &p).unwrap();
+        let own = floor_along_maps(n, n, &maps, &[], ex.view(), LayoutCopy::Nearest, &p).unwrap();
+        assert!(
+            variant.ratio < own.ratio - 0.02,
+            "turned variant {} against the sample's texels {}",
+            variant.ratio,
+            own.ratio
+        );
+        // A bilinear copy takes no texels of either (the positions drawn differ a little).
+        let a =
+            floor_along_maps(n, n, &maps, &frames, ex.view(), LayoutCopy::Bilinear, &p).unwrap();
+        let b = floor_along_maps(n, n, &maps, &[], ex.view(), LayoutCopy::Bilinear, &p).unwrap();
+        assert!(
+            (a.ratio - b.ratio).abs() < 0.02,
+            "{} against {}",
+            a.ratio,
+            b.ratio
+        );
+        // Frames that do not fit the grid are named.
+        let e = floor_along_maps(
+            n,
+            n,
+            &maps,
+            &frames[..5],
+            ex.view(),
+            LayoutCopy::Nearest,
+            &p,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("frames of the output"), "{e}");
     }
 }

@@ -371,7 +371,7 @@ fn score_columns(report: &serde_json::Value) -> Vec<(String, f64)> {
                     // One level of grouped numbers, e.g. the surface row's `floor`.
                     for (m, x) in members {
                         if let Some(x) = x.as_f64() {
-                            out.push((format!("{name} {k} {m}"), x));
+                            out.push((format!("{name} {k} {}", m.replace('_', " ")), x));
                         }
                     }
                 }
@@ -394,7 +394,7 @@ mod tests {
     #[test]
     fn score_columns_name_the_output_and_the_measure() {
         let report = serde_json::json!({"items": [
-            {"output": "texture.png", "score": {"ratio": 0.5, "coverage": 0.25, "gradient_ratio": 0.75}, "extra": {"seams": 2.0, "note": "x", "floor": {"ratio": 0.125, "what": "y"}}},
+            {"output": "texture.png", "score": {"ratio": 0.5, "coverage": 0.25, "gradient_ratio": 0.75}, "extra": {"seams": 2.0, "note": "x", "floor": {"gradient_ratio": 0.125, "what": "y"}}},
             {"output": "other.png", "score": null}
         ]});
         let cols = score_columns(&report);
@@ -405,7 +405,7 @@ mod tests {
                 "texture.png ratio",
                 "texture.png coverage",
                 "texture.png gradient ratio",
-                "texture.png floor ratio",
+                "texture.png floor gradient ratio",
                 "texture.png seams"
             ]
         );

@@ -160,7 +160,8 @@ pub struct GeometrySynthParams {
     /// repeating a texel where a grid step is less than one sample texel. Default: false.
     pub subtexel: bool,
     /// With the surface metric, the largest stretch `λ` undone, 1..=4 (see [`SurfaceMetric`]):
-    /// where one grid direction covers more than `λ` times the surface of the other, the rest
+    /// where a grid step one way spans more than `λ²` times the surface length of a step the
+    /// other way, the rest
     /// is left to the grid. A grid step along the stretched direction covers `λ` times the
     /// isotropic spacing, and relief finer than that is lost there. Default: 4.
     pub max_stretch: f32,

@@ -13,7 +13,8 @@
 //! `√(oᵀ G o)` on the surface. Its unimodular square root `A = (G / √det G)^{1/2}` maps grid
 //! offsets to sample offsets so that equal surface lengths are equal sample lengths, with the
 //! area (and so the isotropic scale `R`) left to the variants: `A` is symmetric with
-//! eigenvalues `λ` and `1/λ`, `λ² ` the ratio of the metric's eigenvalues. Synthesis reads
+//! eigenvalues `λ` and `1/λ`, `λ⁴` the ratio of the metric's eigenvalues (so `λ²` is the
+//! ratio of the surface lengths of grid steps along its two axes). Synthesis reads
 //! template tap `s` (sample texels) at grid offset `round(A⁻¹ s)` and shifts a coherent
 //! candidate by `A o` for a neighbour at grid offset `o`.
 //!
@@ -24,7 +25,7 @@
 use crate::geom::geometry_image::GeometryImage;
 use glam::{DVec3, Vec2};
 
-/// Largest `λ` (square root of the metric's eigenvalue ratio) that is undone; beyond it the
+/// Largest `λ` (fourth root of the metric's eigenvalue ratio) that is undone; beyond it the
 /// map keeps `λ = MAX_STRETCH` along the same axes.
 pub const MAX_STRETCH: f64 = 4.0;
 

@@ -383,6 +383,12 @@ fn finish(
     }
 }
 
+/// Checks the parameters and an exemplar as every score does (pixel count, room for a patch
+/// and for the self baseline), for callers that read the exemplar before scoring against it.
+pub fn validate_exemplar(exemplar: ImageView<'_>, p: &ScoreParams) -> Result<(), ScoreError> {
+    validate(None, exemplar, p)
+}
+
 fn validate(
     output: Option<ImageView<'_>>,
     exemplar: ImageView<'_>,
