@@ -278,12 +278,14 @@ fn floor_item(
                 serde_json::json!({
                     "ratio": round3(f.ratio),
                     "gradient_ratio": round3(f.gradient_ratio),
+                    "patches": f.queries,
                 }),
             );
             item.notes.push(format!(
                 "floor: the ratio and gradient ratio of the sample laid out verbatim under each \
                  patch's map and read back the same way, copied as synthesis copies ({}): what \
-                 reading through these maps costs a flawless layout. Not a lower bound: a \
+                 reading through these maps costs a flawless layout, over `patches` of the \
+                 row's patches (those whose layout fits in the sample). Not a lower bound: a \
                  blurrier result can score a lower ratio",
                 if subtexel {
                     "bilinearly"

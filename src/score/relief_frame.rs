@@ -185,7 +185,8 @@ const STREAM_FLOOR: u64 = 0x7366_0001;
 /// between variant texels as a layout's positions are, unless `F_c⁻¹ M_c` has whole steps
 /// (then every grid point sits on a texel, as synthesis without the surface metric copies).
 ///
-/// With `M_c = F_c` that is an exact crop (ratio 0). A stretch resamples twice, and the floor
+/// With `M_c = F_c` whole (the identity) that is an exact crop (ratio 0); a turned or scaled
+/// frame still costs its resampling. A stretch resamples twice, and the floor
 /// says what that costs a flawless layout; it is no lower bound: a blurrier result can score
 /// a lower ratio (with a lower gradient ratio). The ratio and gradient ratio are the floor's
 /// meaningful numbers; coverage and largest offset describe scattered crops. The gradient is
@@ -275,11 +276,12 @@ pub fn floor_along_maps(
             },
             None => (IDENTITY, IDENTITY),
         };
-        // How far the layout reaches from its position: the patch, a grid step of
-        // interpolation either way, and half a variant texel of rounding, plus a texel.
-        let norm = |a: &[f64; 4]| a.iter().map(|v| v.abs()).sum::<f64>();
-        let reach = r + norm(&m) + 0.5 * norm(&f) + 1.0;
-        if 2.0 * reach + 1.0 > ew.min(eh) as f64 {
+        // How far the layout reaches from its position along x and along y: the patch, a
+        // grid step of interpolation either way, half a variant texel of rounding and a texel
+        // of the sample's bilinear read.
+        let row = |a: &[f64; 4], i: usize| a[2 * i].abs() + a[2 * i + 1].abs();
+        let reach = [0, 1].map(|i| r + row(&m, i) + 0.5 * row(&f, i) + 1.0);
+        if 2.0 * reach[0] + 1.0 > ew as f64 || 2.0 * reach[1] + 1.0 > eh as f64 {
             continue;
         }
         // In variant texels, the layout's steps are `F⁻¹ M`.
@@ -290,11 +292,14 @@ pub fn floor_along_maps(
             f_inv[2] * m[1] + f_inv[3] * m[3],
         ];
         let whole = steps.iter().all(|v| (v - v.round()).abs() < 1e-4);
-        let pick = |stream_index: u64, len: i64| {
+        let pick = |stream_index: u64, len: i64, reach: f64| {
             let u = crate::random::counter_unit(p.seed, STREAM_FLOOR, stream_index) as f64;
             reach + u * (len as f64 - 1.0 - 2.0 * reach)
         };
-        let mut x0 = (pick(2 * k as u64, ew), pick(2 * k as u64 + 1, eh));
+        let mut x0 = (
+            pick(2 * k as u64, ew, reach[0]),
+            pick(2 * k as u64 + 1, eh, reach[1]),
+        );
         if whole {
             // Every grid point on a variant texel: the position on one too.
             let (zx, zy) = apply(&f_inv, x0);
@@ -315,6 +320,12 @@ pub fn floor_along_maps(
         let here = read(&l, (0.0, 0.0));
         g.add_x(&read(&l, (m_inv[0], m_inv[2])), &here);
         g.add_y(&read(&l, (m_inv[1], m_inv[3])), &here);
+    }
+    if patches.at.is_empty() {
+        return Err(ScoreError::FloorReach {
+            width: exemplar.width,
+            height: exemplar.height,
+        });
     }
     patch_score_resampled(&patches, subsampled, g.value(), exemplar, p)
 }
@@ -727,6 +738,18 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("maps of the output"), "{e}");
+        // Maps so coarse that no patch's layout fits in the sample: said so, not clamped.
+        let e = floor_along_maps(
+            40,
+            40,
+            &[[40.0, 0.0, 0.0, 40.0]; 1600],
+            &[],
+            ex.view(),
+            LayoutCopy::Nearest,
+            &params(),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("verbatim layout"), "{e}");
     }
 
     /// Columns that alternate dark and light, each of its own contrast in each band of 8
@@ -743,7 +766,8 @@ mod tests {
     fn the_floor_lays_the_sample_out_under_the_map_not_its_inverse() {
         // Grid steps of 2 sample texels along x land every grid point of a row on the same
         // parity of stripe: read back, a patch has lost its alternation, far from every
-        // sample patch. Laid out under the inverse (steps of ½) it would read back exact.
+        // sample patch (measured 5.75, and 5.68 for a whole layout). Laid out under the
+        // inverse (steps of ½) it would read back exact.
         let ex = stripes(128);
         let n = 97;
         let p = params();
@@ -754,6 +778,7 @@ mod tests {
         let whole = score_along_maps(grid.view(), &maps, ex.view(), &p)
             .unwrap()
             .score;
+        eprintln!("stripes: floor {floor:?}, whole layout {whole:?}");
         assert!(floor.ratio > 1.0, "floor {}", floor.ratio);
         assert!(
             (floor.ratio - whole.ratio).abs() < 0.1 * whole.ratio,

@@ -100,6 +100,12 @@ pub enum ScoreError {
         patch: u32,
     },
     #[error(
+        "exemplar {width}×{height} is too small for any patch's verbatim layout under these \
+         maps (the floor): each needs its patch plus a grid step of interpolation inside the \
+         exemplar"
+    )]
+    FloorReach { width: u32, height: u32 },
+    #[error(
         "exemplar {width}×{height} is too small for the self baseline with {patch}×{patch} \
          patches: its {crop}×{crop} crops (half its shorter side) need a whole patch inside \
          and one beside wherever they fall (a square exemplar needs at least {min_side}×{min_side})"
