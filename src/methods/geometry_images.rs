@@ -84,6 +84,7 @@ pub struct Inputs {
 pub struct ParameterizeSection {
     pub size: u32,
     pub extremity_cuts: u32,
+    pub stretch_cuts: u32,
     pub stretch_iterations: u32,
 }
 
@@ -93,6 +94,7 @@ impl Default for ParameterizeSection {
         ParameterizeSection {
             size: d.size,
             extremity_cuts: d.extremity_cuts,
+            stretch_cuts: d.stretch_cuts,
             stretch_iterations: d.stretch_iterations,
         }
     }
@@ -105,6 +107,7 @@ impl ParameterizeSection {
         GeometryImageParams {
             size: self.size,
             extremity_cuts: self.extremity_cuts,
+            stretch_cuts: self.stretch_cuts,
             stretch_iterations: self.stretch_iterations,
             coarse_levels: levels,
         }

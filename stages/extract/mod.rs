@@ -371,6 +371,9 @@ pub fn extract_mesh_texture(
             let gi_params = GeometryImageParams {
                 size: gi_size,
                 coarse_levels: 1,
+                // The patch is a disk already; its extraction predates stretch cuts and
+                // its results are locked (dragon_*.lock).
+                stretch_cuts: 0,
                 ..GeometryImageParams::default()
             };
             let build = build_geometry_image(&patch, &gi_params, &|f| progress(0.6 * f))

@@ -337,11 +337,13 @@ fn farthest(dist: &[f64], limit: usize) -> Option<(u32, f64)> {
 }
 
 /// A cut graph that opens the single component of `he` into a disk (see the module doc),
-/// plus `extremity_cuts` paths to extremities.
+/// plus `extremity_cuts` paths to extremities, then a shortest path from the cut to each of
+/// `targets` (vertices of `he`; one already on the cut adds nothing).
 pub fn cut_graph(
     he: &HalfEdgeMesh,
     positions: &[Vec3],
     extremity_cuts: u32,
+    targets: &[u32],
 ) -> Result<CutGraph, CutError> {
     let comps = he.components();
     if comps.len() != 1 {
@@ -468,16 +470,8 @@ pub fn cut_graph(
             on_cut[b as usize] = true;
         }
     }
-    for _ in 0..extremity_cuts {
-        let sources: Vec<u32> = (0..nv as u32).filter(|&v| on_cut[v as usize]).collect();
-        let (dist, parent) = aug.dijkstra(&sources, true);
-        let Some((x, d)) = farthest(&dist, nv) else {
-            break;
-        };
-        if d <= 0.0 {
-            break;
-        }
-        extremities.push(x);
+    // Cuts the shortest path from the cut to `x` (found in `parent`) into the cut.
+    let mut cut_path_to = |x: u32, parent: &[u32], on_cut: &mut [bool]| {
         let mut v = x;
         while !on_cut[v as usize] {
             on_cut[v as usize] = true;
@@ -485,6 +479,37 @@ pub fn cut_graph(
             is_cut[e as usize] = true;
             v = aug.other(e, v);
         }
+    };
+    let sources_of =
+        |on_cut: &[bool]| -> Vec<u32> { (0..nv as u32).filter(|&v| on_cut[v as usize]).collect() };
+    for _ in 0..extremity_cuts {
+        let (dist, parent) = aug.dijkstra(&sources_of(&on_cut), true);
+        let Some((x, d)) = farthest(&dist, nv) else {
+            break;
+        };
+        if d <= 0.0 {
+            break;
+        }
+        extremities.push(x);
+        cut_path_to(x, &parent, &mut on_cut);
+    }
+    for &x in targets {
+        if (x as usize) >= nv || !he.is_used(x) {
+            return Err(CutError::Internal(format!(
+                "cut target {x} is not a vertex of the mesh"
+            )));
+        }
+        if on_cut[x as usize] {
+            continue;
+        }
+        let (dist, parent) = aug.dijkstra(&sources_of(&on_cut), true);
+        if !dist[x as usize].is_finite() {
+            return Err(CutError::Internal(format!(
+                "cut target {x} is not reachable from the cut"
+            )));
+        }
+        extremities.push(x);
+        cut_path_to(x, &parent, &mut on_cut);
     }
     let edges: Vec<u32> = (0..ne as u32).filter(|&e| is_cut[e as usize]).collect();
     // A fold from +0 (an empty float sum is -0).
@@ -992,7 +1017,7 @@ mod tests {
     fn octahedron_is_cut_along_a_path_between_opposite_vertices() {
         let m = octahedron();
         let he = HalfEdgeMesh::new(&m).unwrap();
-        let cut = cut_graph(&he, &m.positions, 0).unwrap();
+        let cut = cut_graph(&he, &m.positions, 0, &[]).unwrap();
         // Opposite vertices are two edges apart; the cut is a path of two edges.
         assert_eq!(cut.edges.len(), 2);
         let d = check_disk(&m, &cut);
@@ -1003,7 +1028,7 @@ mod tests {
     fn torus_cut_is_two_short_loops_and_gives_a_disk() {
         let m = torus(24, 10);
         let he = HalfEdgeMesh::new(&m).unwrap();
-        let cut = cut_graph(&he, &m.positions, 0).unwrap();
+        let cut = cut_graph(&he, &m.positions, 0, &[]).unwrap();
         assert_eq!(cut.genus, 1);
         // One tube circle (≈ π) and one loop the long way round the inside (≈ 2π·1.5),
         // measured on the polygonal mesh: well under a generous bound and over the minimum.
@@ -1084,7 +1109,7 @@ mod tests {
         let tris = m.triangles[20..].to_vec();
         let m = Mesh::new(m.positions.clone(), tris);
         let he = HalfEdgeMesh::new(&m).unwrap();
-        let cut = cut_graph(&he, &m.positions, 0).unwrap();
+        let cut = cut_graph(&he, &m.positions, 0, &[]).unwrap();
         assert_eq!((cut.genus, cut.boundary_loops), (0, 2));
         // The loops are 23 ring steps apart along the tube; the shortest path between them
         // runs along the inner equator (radius 1.5).
@@ -1100,13 +1125,45 @@ mod tests {
     }
 
     #[test]
+    fn a_target_gets_a_path_from_the_cut_and_a_bad_target_is_an_error() {
+        let m = octahedron();
+        let he = HalfEdgeMesh::new(&m).unwrap();
+        let plain = cut_graph(&he, &m.positions, 0, &[]).unwrap();
+        let on_plain = |v: u32| {
+            plain.edges.iter().any(|&e| {
+                let (a, b) = he.edge_vertices(e);
+                a == v || b == v
+            })
+        };
+        let target = (0..6)
+            .find(|&v| !on_plain(v))
+            .expect("a vertex off the cut");
+        let cut = cut_graph(&he, &m.positions, 0, &[target]).unwrap();
+        assert_eq!(cut.extremities, vec![target]);
+        assert!(cut.edges.len() > plain.edges.len());
+        assert!(cut.edges.iter().any(|&e| {
+            let (a, b) = he.edge_vertices(e);
+            a == target || b == target
+        }));
+        check_disk(&m, &cut);
+        // A vertex already on the cut adds nothing.
+        let on = (0..6).find(|&v| on_plain(v)).unwrap();
+        let same = cut_graph(&he, &m.positions, 0, &[on]).unwrap();
+        assert_eq!(same.edges, plain.edges);
+        assert!(matches!(
+            cut_graph(&he, &m.positions, 0, &[6]),
+            Err(CutError::Internal(_))
+        ));
+    }
+
+    #[test]
     fn extremity_cuts_reach_the_farthest_vertex() {
         // A long box-like strip closed into a sphere: octahedron stretched along x.
         let mut m = octahedron();
         m.positions[0] = Vec3::new(10.0, 0.0, 0.0);
         let m = Mesh::new(m.positions.clone(), m.triangles.clone());
         let he = HalfEdgeMesh::new(&m).unwrap();
-        let cut = cut_graph(&he, &m.positions, 1).unwrap();
+        let cut = cut_graph(&he, &m.positions, 1, &[]).unwrap();
         assert_eq!(cut.extremities.len(), 1);
         let d = check_disk(&m, &cut);
         assert!(d.disk.vertex_count() > 7);
@@ -1121,7 +1178,7 @@ mod tests {
         t.extend(a.triangles.iter().map(|x| x.map(|v| v + 6)));
         let m = Mesh::new(p, t);
         let he = HalfEdgeMesh::new(&m).unwrap();
-        let err = cut_graph(&he, &m.positions, 0).unwrap_err();
+        let err = cut_graph(&he, &m.positions, 0, &[]).unwrap_err();
         assert!(matches!(err, CutError::SeveralComponents { count: 2 }));
         assert!(err.to_string().contains("2 connected components"));
     }
