@@ -168,6 +168,14 @@ pub fn run_all(runs: usize) -> Result<String> {
         notes.push("TEXSYN_BENCH_ONLY=sweep: only the sweep rows".into());
         return Ok(table(runs, &rows, "", &notes));
     }
+    if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("geometry_images") {
+        match &data {
+            Some(d) => geometry_image_rows(d, runs.min(3), &mut rows)?,
+            None => notes.push("the shared data is missing: no geometry-image rows".into()),
+        }
+        notes.push("TEXSYN_BENCH_ONLY=geometry_images: only the geometry-image rows".into());
+        return Ok(table(runs, &rows, "", &notes));
+    }
     if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("solid") {
         let t = solid_rows(&mut rows, runs)?;
         notes.push("TEXSYN_BENCH_ONLY=solid: only the solid rows".into());
@@ -374,6 +382,24 @@ fn geometry_image_rows(data: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<
         measured: format!("{t:.2} s"),
         goal: "< 5 s on 2 cores".into(),
         verdict: verdict_below(t, 5.0),
+    });
+    // The shipped configs' stretch-driven cuts: each candidate is a whole rebuild.
+    let cut = GeometryImageParams {
+        stretch_cuts: 8,
+        ..gp.clone()
+    };
+    let (tc, b) = time(runs, || build_geometry_image(&big, &cut, &|_| {}));
+    let b = b.map_err(|e| anyhow::anyhow!("{e}"))?;
+    rows.push(Row {
+        what: format!(
+            "geometry images: the same with `stretch_cuts = 8` (the shipped configs'; {} kept, \
+             mean anisotropy {:.2})",
+            b.stretch_cuts.len(),
+            b.anisotropy
+        ),
+        measured: format!("{tc:.2} s ({:.1}× the above)", tc / t),
+        goal: "(no goal; cached once per mesh and size)".into(),
+        verdict: "—".into(),
     });
     let dragon = read("ChineseDragon-10kv.off")?;
     let ep = ExtractParams {

@@ -479,7 +479,7 @@ fn stretch_cuts_make_the_cow_map_less_anisotropic_without_losing_its_extremities
             },
         )
     };
-    let (uncut, cut) = (at(0), at(16));
+    let (uncut, cut) = (at(0), at(8));
     assert!(uncut.stretch_cuts.is_empty());
     assert!(!cut.stretch_cuts.is_empty());
     // Every kept cut runs to its vertex: each is a vertex of the cut.
@@ -498,7 +498,7 @@ fn stretch_cuts_make_the_cow_map_less_anisotropic_without_losing_its_extremities
         cut.stretch,
         cut.stretch_cuts.len()
     );
-    // The shape distortion falls by a good part (7.3 → 4.2 at 257), the area distortion
+    // The shape distortion falls by a good part (7.3 → 4.8 here, 4.2 at 257), the area distortion
     // stays within the bound, and nothing flips.
     assert!(
         cut.anisotropy < 0.8 * uncut.anisotropy,
