@@ -50,9 +50,10 @@
 //!   triangles are most anisotropic (parameter-area-weighted mean of ln σ₁/σ₂) and rebuilds the
 //!   whole map; the cut is kept when the mean anisotropy falls, no more triangles flip and
 //!   the L² stretch stays within [`STRETCH_CUT_AREA_BOUND`] of the uncut map's (so thin parts
-//!   keep their samples); a refused vertex is not tried again. Gu et al. stop at the first
-//!   cut that does not help; here a fixed number of candidates is tried, because on the cow
-//!   a refused candidate was often followed by a kept one.
+//!   keep their samples); a refused vertex is not tried again, and a candidate whose
+//!   rebuild fails (no room on the perimeter, an unsolvable map) is refused too. Gu et al.
+//!   stop at the first cut that does not help; here a fixed number of candidates is tried,
+//!   because on the cow a refused candidate was often followed by a kept one.
 //! - Our addition: the tree-cotree cut is straightened (each cut path replaced by the
 //!   shortest path between its cut-nodes that keeps the cut a disk, running along the rest of
 //!   the cut for free). Shortest-path trees leave branches running side by side one or two
@@ -100,10 +101,11 @@ pub struct GeometryImageParams {
     pub extremity_cuts: u32,
     /// Stretch-driven cuts (Gu et al. 2002's iterative cut augmentation, with anisotropy as the
     /// stretch): after the map is built, a shortest path from the cut to the vertex whose
-    /// triangles the map distorts most in shape is added to the cut and the map rebuilt, while
-    /// that lowers the map's mean anisotropy (see the module doc for when a cut is kept);
-    /// this many candidates are tried. Range 0 to 64. Default: 0 (each candidate is a whole
-    /// rebuild: refined_elephant's 44k vertices take about 9× as long with 8, for a small gain
+    /// triangles the map distorts most in shape is added to the cut and the map rebuilt; the
+    /// cut is kept if that lowers the map's mean anisotropy (see the module doc for the exact
+    /// rule), and the next candidate is the worst vertex not tried yet. This many candidates
+    /// are tried. Range 0 to 64. Default: 0 (each candidate is a whole rebuild:
+    /// refined_elephant's 44k vertices took 7.6–9.2× as long with 8, for a small gain
     /// there). The shipped configs set 8: relief_cow keeps 3 of them, mean anisotropy
     /// 7.3 → 4.2, the surface metric's median stretch 2.43 → 1.83.
     #[serde(skip_serializing_if = "is_zero")]
@@ -265,39 +267,46 @@ pub fn build_geometry_image(
     let builds = p.stretch_cuts as f32 + 1.0;
     let mut targets = Vec::new();
     let mut best = build_for_cut(mesh, p, &targets, &|f| progress(f / builds))?;
-    let mut best_shape = map_shape_distortion(&best, &[]);
+    let mut best_shape = map_shape_distortion(&best);
     let (uncut_anisotropy, uncut_stretch) = (best_shape.anisotropy, best.stretch);
-    // Stretch-driven cuts (Gu et al. 2002's cut augmentation), greedy: a cut to the worst vertex is kept
-    // when it lowers the shape distortion without flipping more triangles or letting the
-    // area distortion grow past STRETCH_CUT_AREA_BOUND times the uncut map's; a vertex whose
-    // cut was refused is not tried again.
+    // Stretch-driven cuts (Gu et al. 2002's cut augmentation), greedy: a cut to the worst
+    // vertex not tried yet is kept when it lowers the shape distortion without flipping more
+    // triangles or letting the area distortion grow past STRETCH_CUT_AREA_BOUND times the
+    // uncut map's. A candidate whose rebuild fails (no room on the perimeter for its path, or
+    // a map that cannot be solved) is refused like one that does not help: the option must
+    // never cost the user the map they had.
     let mut tried = Vec::new();
     for k in 0..p.stretch_cuts {
-        let Some(x) = best_shape.worst_vertex else {
+        let Some(&x) = best_shape.ranking.iter().find(|v| !tried.contains(*v)) else {
             break;
         };
         tried.push(x);
         targets.push(x);
         let sub = |f: f32| progress((k as f32 + 1.0 + f) / builds);
         let next = match build_for_cut(mesh, p, &targets, &sub) {
-            Ok(b) => b,
-            // No room on the perimeter for another cut path: keep what there is.
-            Err(GeometryImageError::PerimeterTooShort { .. }) => {
-                targets.pop();
-                break;
+            Ok(b) => Some(b),
+            Err(e) => {
+                let e = e.to_string();
+                tracing::warn!(vertex = x, "stretch cut refused, its rebuild failed: {e}");
+                None
             }
-            Err(e) => return Err(e),
         };
-        let next_shape = map_shape_distortion(&next, &tried);
-        let kept = next_shape.anisotropy < best_shape.anisotropy
-            && next.flipped_triangles <= best.flipped_triangles
-            && next.stretch <= STRETCH_CUT_AREA_BOUND * uncut_stretch;
-        if kept {
-            best = next;
-            best_shape = next_shape;
-        } else {
-            targets.pop();
-            best_shape = map_shape_distortion(&best, &tried);
+        match next {
+            Some(next)
+                if next.stretch <= STRETCH_CUT_AREA_BOUND * uncut_stretch
+                    && next.flipped_triangles <= best.flipped_triangles =>
+            {
+                let next_shape = map_shape_distortion(&next);
+                if next_shape.anisotropy < best_shape.anisotropy {
+                    best = next;
+                    best_shape = next_shape;
+                } else {
+                    targets.pop();
+                }
+            }
+            _ => {
+                targets.pop();
+            }
         }
     }
     if p.stretch_cuts > 0 {
@@ -326,35 +335,49 @@ pub const STRETCH_CUT_AREA_BOUND: f32 = 1.25;
 struct ShapeDistortion {
     /// The parameter-area-weighted mean of `ln(σ₁ / σ₂)` over the disk's triangles.
     anisotropy: f64,
-    /// The input vertex off the disk's boundary whose triangles have the largest such mean.
-    worst_vertex: Option<u32>,
+    /// The input vertices off the disk's boundary (not on the cut or the mesh's boundary),
+    /// by the mean `ln(σ₁ / σ₂)` of their triangles, largest first (ties: smaller index).
+    ranking: Vec<u32>,
 }
 
 /// The map's shape distortion: the parameter-area-weighted mean of `ln(σ₁ / σ₂)` over the
 /// disk's triangles (σ the singular values of the map from the triangle to the plane; 0 for
-/// a conformal map), and the input vertex off the disk's boundary, not in `skip`, whose
-/// triangles have the largest such mean (ties: smaller index). Weighting by parameter area
-/// counts what the grid's samples see. Flipped and degenerate triangles are left out (the
-/// caller compares flip counts separately).
-fn map_shape_distortion(b: &GeometryImageBuild, skip: &[u32]) -> ShapeDistortion {
-    let side = (b.image.n - 1) as f32;
-    let on_border = |q: Vec2| q.x <= 0.0 || q.y <= 0.0 || q.x >= side || q.y >= side;
+/// a conformal map), and the input vertices ranked by the same mean over their triangles,
+/// leaving out those on the disk's boundary, which a cut cannot reach further. Weighting by
+/// parameter area counts what the grid's samples see. Flipped and degenerate triangles are
+/// left out (the caller compares flip counts separately).
+fn map_shape_distortion(b: &GeometryImageBuild) -> ShapeDistortion {
     let nv = b
         .original_vertex
         .iter()
         .filter(|&&v| v != u32::MAX)
         .max()
         .map_or(0, |&v| v as usize + 1);
+    // The disk's boundary: its edges used by one triangle (found by sorting, not hashing,
+    // so the order is fixed). Their input vertices lie on the cut or the mesh's boundary.
+    let mut edges: Vec<(u32, u32)> = b
+        .disk
+        .triangles
+        .iter()
+        .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
+        .collect();
+    edges.sort_unstable();
     let mut excluded = vec![false; nv];
-    for &v in skip {
-        if let Some(e) = excluded.get_mut(v as usize) {
-            *e = true;
+    let mut i = 0;
+    while i < edges.len() {
+        let mut j = i + 1;
+        while j < edges.len() && edges[j] == edges[i] {
+            j += 1;
         }
-    }
-    for (dv, &v) in b.original_vertex.iter().enumerate() {
-        if v != u32::MAX && on_border(b.disk_uv[dv]) {
-            excluded[v as usize] = true;
+        if j - i == 1 {
+            for dv in [edges[i].0, edges[i].1] {
+                let v = b.original_vertex[dv as usize];
+                if v != u32::MAX {
+                    excluded[v as usize] = true;
+                }
+            }
         }
+        i = j;
     }
     let mut per_vertex = vec![(0.0f64, 0.0f64); nv];
     let (mut sum, mut weight) = (0.0f64, 0.0f64);
@@ -376,20 +399,14 @@ fn map_shape_distortion(b: &GeometryImageBuild, skip: &[u32]) -> ShapeDistortion
             }
         }
     }
-    let mut worst: Option<(u32, f64)> = None;
-    for v in 0..nv {
-        let (s, w) = per_vertex[v];
-        if excluded[v] || w <= 0.0 {
-            continue;
-        }
-        let a = s / w;
-        if worst.is_none_or(|(_, wa)| a > wa) {
-            worst = Some((v as u32, a));
-        }
-    }
+    let mut ranked: Vec<(u32, f64)> = (0..nv)
+        .filter(|&v| !excluded[v] && per_vertex[v].1 > 0.0)
+        .map(|v| (v as u32, per_vertex[v].0 / per_vertex[v].1))
+        .collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
     ShapeDistortion {
         anisotropy: if weight > 0.0 { sum / weight } else { 0.0 },
-        worst_vertex: worst.map(|(v, _)| v),
+        ranking: ranked.into_iter().map(|(v, _)| v).collect(),
     }
 }
 

@@ -61,7 +61,8 @@ pub struct CutGraph {
     /// Genus and boundary loops of the (single) component.
     pub genus: i64,
     pub boundary_loops: usize,
-    /// The vertices the extremity cuts run to, in the order they were added.
+    /// The vertices the extremity cuts and then the cuts to `targets` run to, in the order
+    /// they were added (a target already on the cut is not listed).
     pub extremities: Vec<u32>,
 }
 
