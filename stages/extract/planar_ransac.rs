@@ -359,36 +359,6 @@ impl PlanarExtraction {
     }
 }
 
-/// Vertices on the patch's boundary (on an edge that only one triangle uses), ascending.
-pub fn boundary_vertices(mesh: &Mesh) -> Vec<u32> {
-    let mut edges: Vec<(u32, u32)> = Vec::with_capacity(mesh.triangles.len() * 3);
-    for t in &mesh.triangles {
-        for e in 0..3 {
-            let (a, b) = (t[e], t[(e + 1) % 3]);
-            if a != b {
-                edges.push((a.min(b), a.max(b)));
-            }
-        }
-    }
-    edges.sort_unstable();
-    let mut on = vec![false; mesh.positions.len()];
-    let mut i = 0;
-    while i < edges.len() {
-        let mut j = i + 1;
-        while j < edges.len() && edges[j] == edges[i] {
-            j += 1;
-        }
-        if j - i == 1 {
-            on[edges[i].0 as usize] = true;
-            on[edges[i].1 as usize] = true;
-        }
-        i = j;
-    }
-    (0..mesh.positions.len() as u32)
-        .filter(|&v| on[v as usize])
-        .collect()
-}
-
 /// A `size`×`size` texel image over `square` of the patch's parameter domain `uv`: at each
 /// sample point `q`, `hit` picks the triangle and barycentric weights under it (a texel with
 /// no triangle stays zero), `texel` writes the relief channels from the interpolated point,
@@ -483,7 +453,7 @@ pub fn planar_extract(
     let fit = fit_sampling_plane(patch, size, params)?;
     progress(0.2);
     let faces = patch.triangles.len();
-    let boundary = boundary_vertices(patch);
+    let boundary = patch.boundary_vertices();
     if boundary.is_empty() {
         return Err(ExtractError::NoBoundary {
             faces,

@@ -353,31 +353,14 @@ fn map_shape_distortion(b: &GeometryImageBuild) -> ShapeDistortion {
         .filter(|&&v| v != u32::MAX)
         .max()
         .map_or(0, |&v| v as usize + 1);
-    // The disk's boundary: its edges used by one triangle (found by sorting, not hashing,
-    // so the order is fixed). Their input vertices lie on the cut or the mesh's boundary.
-    let mut edges: Vec<(u32, u32)> = b
-        .disk
-        .triangles
-        .iter()
-        .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
-        .collect();
-    edges.sort_unstable();
+    // The disk's boundary vertices are copies of input vertices on the cut or the mesh's
+    // boundary.
     let mut excluded = vec![false; nv];
-    let mut i = 0;
-    while i < edges.len() {
-        let mut j = i + 1;
-        while j < edges.len() && edges[j] == edges[i] {
-            j += 1;
+    for dv in b.disk.boundary_vertices() {
+        let v = b.original_vertex[dv as usize];
+        if v != u32::MAX {
+            excluded[v as usize] = true;
         }
-        if j - i == 1 {
-            for dv in [edges[i].0, edges[i].1] {
-                let v = b.original_vertex[dv as usize];
-                if v != u32::MAX {
-                    excluded[v as usize] = true;
-                }
-            }
-        }
-        i = j;
     }
     let mut per_vertex = vec![(0.0f64, 0.0f64); nv];
     let (mut sum, mut weight) = (0.0f64, 0.0f64);

@@ -112,6 +112,37 @@ impl Mesh {
         })
     }
 
+    /// Vertices on the mesh's boundary (on an edge that only one triangle uses), ascending.
+    /// Edges are matched by sorting, not hashing, so the result never depends on an order.
+    pub fn boundary_vertices(&self) -> Vec<u32> {
+        let mut edges: Vec<(u32, u32)> = Vec::with_capacity(self.triangles.len() * 3);
+        for t in &self.triangles {
+            for e in 0..3 {
+                let (a, b) = (t[e], t[(e + 1) % 3]);
+                if a != b {
+                    edges.push((a.min(b), a.max(b)));
+                }
+            }
+        }
+        edges.sort_unstable();
+        let mut on = vec![false; self.positions.len()];
+        let mut i = 0;
+        while i < edges.len() {
+            let mut j = i + 1;
+            while j < edges.len() && edges[j] == edges[i] {
+                j += 1;
+            }
+            if j - i == 1 {
+                on[edges[i].0 as usize] = true;
+                on[edges[i].1 as usize] = true;
+            }
+            i = j;
+        }
+        (0..self.positions.len() as u32)
+            .filter(|&v| on[v as usize])
+            .collect()
+    }
+
     /// Vertex-to-vertex adjacency (one-ring), built on first use.
     pub fn adjacency(&self) -> &VertexAdjacency {
         self.adjacency
@@ -236,6 +267,24 @@ impl VertexAdjacency {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn boundary_vertices_are_those_on_edges_of_one_triangle() {
+        // A fan of four triangles around vertex 0: its rim is the boundary, the centre not;
+        // vertex 5 is in no triangle.
+        let p = vec![Vec3::ZERO, Vec3::X, Vec3::Y, -Vec3::X, -Vec3::Y, Vec3::ONE];
+        let fan = Mesh::new(p, vec![[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1]]);
+        assert_eq!(fan.boundary_vertices(), vec![1, 2, 3, 4]);
+        // Closed: none.
+        assert!(
+            crate::geom::primitives::octahedron()
+                .boundary_vertices()
+                .is_empty()
+        );
+        // The fan with one triangle missing opens the centre too.
+        let open = Mesh::new(fan.positions.clone(), fan.triangles[..3].to_vec());
+        assert_eq!(open.boundary_vertices(), vec![0, 1, 2, 3, 4]);
+    }
 
     #[test]
     fn adjacency_of_two_triangles_is_symmetric_and_sorted() {
