@@ -285,6 +285,11 @@ pub fn build_geometry_image(
         let sub = |f: f32| progress((k as f32 + 1.0 + f) / builds);
         let next = match build_for_cut(mesh, p, &targets, &sub) {
             Ok(b) => Some(b),
+            // Expected near the end of a long search: no warning.
+            Err(GeometryImageError::PerimeterTooShort { .. }) => {
+                tracing::info!(vertex = x, "stretch cut refused: no room on the perimeter");
+                None
+            }
             Err(e) => {
                 let e = e.to_string();
                 tracing::warn!(vertex = x, "stretch cut refused, its rebuild failed: {e}");
