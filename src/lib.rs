@@ -5,16 +5,12 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod artifact;
-pub mod bench;
 pub mod cache;
 pub mod config;
-pub mod lockfile;
 pub mod methods;
-pub mod pack;
+pub mod ops;
 pub mod pipeline;
 pub mod score;
-pub mod slurm;
-pub mod sweep;
 
 // The core (meshes, images, solvers, randomness, rasterizer, writers) and the stage algorithms
 // are crates of their own (DESIGN.md, Layout); re-exported so `crate::geom::…`,

@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use texsyn::cache::{Cache, parse_size};
 use texsyn::config::Config;
-use texsyn::lockfile::LockFile;
+use texsyn::ops::lockfile::LockFile;
 use texsyn::methods::Plan;
 use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, Shard, outputs};
-use texsyn::sweep::Sweep;
+use texsyn::ops::sweep::Sweep;
 
 #[derive(Parser)]
 #[command(
@@ -190,15 +190,6 @@ enum Command {
         #[arg(long)]
         max_size: String,
     },
-    /// Measure the speed goals of BENCHMARKS.md and print (or write) the table.
-    Bench {
-        /// Write the Markdown report here.
-        #[arg(short, long)]
-        output: Option<PathBuf>,
-        /// Runs per measurement (the median is reported).
-        #[arg(long, default_value_t = 5)]
-        runs: usize,
-    },
 }
 
 /// `--executor slurm`'s options; each overrides the sweep's `[slurm]` value of that name.
@@ -222,10 +213,10 @@ struct SlurmFlags {
 }
 
 /// The sweep's `[slurm]` table with the command line's flags over it, checked.
-fn slurm_options(sweep: &Sweep, flags: &SlurmFlags) -> Result<texsyn::slurm::SlurmOptions> {
+fn slurm_options(sweep: &Sweep, flags: &SlurmFlags) -> Result<texsyn::ops::slurm::SlurmOptions> {
     use serde::Deserialize;
     let mut opts = match &sweep.slurm {
-        Some(t) => texsyn::slurm::SlurmOptions::deserialize(toml::Value::Table(t.clone()))
+        Some(t) => texsyn::ops::slurm::SlurmOptions::deserialize(toml::Value::Table(t.clone()))
             .map_err(|e| {
                 anyhow::anyhow!(
                     "{}: [slurm]: {}",
@@ -534,8 +525,8 @@ fn real_main() -> Result<i32> {
             if Sweep::is_sweep_file(config) {
                 return sweep_verify(config, lockfile, sets, *fresh, &cache_dir, progress, &cli);
             }
-            let text = texsyn::lockfile::read_text(lockfile)?;
-            if texsyn::sweep::lock::SweepLock::is_sweep_lock(&text) {
+            let text = texsyn::ops::lockfile::read_text(lockfile)?;
+            if texsyn::ops::sweep::lock::SweepLock::is_sweep_lock(&text) {
                 bail!(
                     "{} is a sweep's lock, and {} is not a sweep: verify the sweep file with it",
                     lockfile.display(),
@@ -566,7 +557,7 @@ fn real_main() -> Result<i32> {
             let unbumped: Vec<&str> = differences
                 .iter()
                 .filter_map(|d| match d {
-                    texsyn::lockfile::Difference::ContentChangedUnderSameKey { node, .. } => {
+                    texsyn::ops::lockfile::Difference::ContentChangedUnderSameKey { node, .. } => {
                         Some(node.as_str())
                     }
                     _ => None,
@@ -698,7 +689,7 @@ fn real_main() -> Result<i32> {
             output,
         } => {
             let cache = Cache::open(&cache_dir)?;
-            let report = texsyn::pack::pack(config, sets, &cache, output, progress)?;
+            let report = texsyn::ops::pack::pack(config, sets, &cache, output, progress)?;
             if cli.json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else if !cli.quiet {
@@ -716,7 +707,7 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
         Command::Unpack { archive, output } => {
-            let report = texsyn::pack::unpack(archive, &cache_dir, output.as_deref())?;
+            let report = texsyn::ops::pack::unpack(archive, &cache_dir, output.as_deref())?;
             if cli.json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else if !cli.quiet {
@@ -766,22 +757,6 @@ fn real_main() -> Result<i32> {
                     texsyn::memory::human(report.kept_bytes),
                     cache.root().display()
                 );
-            }
-            Ok(0)
-        }
-        Command::Bench { output, runs } => {
-            let mut report = texsyn::bench::run_all(*runs.max(&1))?;
-            match output {
-                Some(p) => {
-                    // The quality table is `texsyn score`'s, not the bench's: kept as it is.
-                    if let Ok(old) = std::fs::read_to_string(p)
-                        && let Some(i) = old.find(texsyn::score::QUALITY_HEADING)
-                    {
-                        report = format!("{}\n{}", report.trim_end(), &old[i..]);
-                    }
-                    write_atomic(p, report.as_bytes())?
-                }
-                None => print!("{report}"),
             }
             Ok(0)
         }
@@ -1029,7 +1004,7 @@ fn sweep_command(cli: &Cli, args: SweepArgs, cache_dir: &Path) -> Result<i32> {
         out,
         slurm_flags,
     } = args;
-    use texsyn::sweep::{
+    use texsyn::ops::sweep::{
         CommonArgs, PointState, SweepDir, local, lock::SweepLock, point_state, slurm_executor,
         table,
     };
@@ -1046,7 +1021,7 @@ fn sweep_command(cli: &Cli, args: SweepArgs, cache_dir: &Path) -> Result<i32> {
     for p in &sweep.points {
         states.push(point_state(&sweep, &dir, p, &cache)?);
     }
-    let todo: Vec<&texsyn::sweep::Point> = sweep
+    let todo: Vec<&texsyn::ops::sweep::Point> = sweep
         .points
         .iter()
         .zip(&states)
@@ -1106,21 +1081,21 @@ fn sweep_command(cli: &Cli, args: SweepArgs, cache_dir: &Path) -> Result<i32> {
         };
         let list = slurm_executor::TaskList::new(&exe, &sweep, &dir, &common);
         let mut last = String::new();
-        let mut progress = |s: &[texsyn::slurm::TaskOutcome]| {
+        let mut progress = |s: &[texsyn::ops::slurm::TaskOutcome]| {
             if quiet {
                 return;
             }
             let active = s
                 .iter()
-                .filter(|t| matches!(t.status, texsyn::slurm::TaskStatus::Active(_)))
+                .filter(|t| matches!(t.status, texsyn::ops::slurm::TaskStatus::Active(_)))
                 .count();
             let ended = s
                 .iter()
                 .filter(|t| {
                     matches!(
                         t.status,
-                        texsyn::slurm::TaskStatus::Exited(_)
-                            | texsyn::slurm::TaskStatus::Lost { .. }
+                        texsyn::ops::slurm::TaskStatus::Exited(_)
+                            | texsyn::ops::slurm::TaskStatus::Lost { .. }
                     )
                 })
                 .count();
@@ -1201,7 +1176,7 @@ fn sweep_command(cli: &Cli, args: SweepArgs, cache_dir: &Path) -> Result<i32> {
             dir.clear_reports(p, shards);
         }
         let mut failures = Default::default();
-        let mut ready: Vec<&texsyn::sweep::Point> = todo.clone();
+        let mut ready: Vec<&texsyn::ops::sweep::Point> = todo.clone();
         if shards > 1 {
             // The shards of every point first, then each point whose shards all succeeded
             // gathers them.
@@ -1285,7 +1260,7 @@ fn sweep_hashes(
     cache_dir: &Path,
     progress: ProgressMode,
 ) -> Result<i32> {
-    use texsyn::sweep::lock::{PointLock, SweepLock};
+    use texsyn::ops::sweep::lock::{PointLock, SweepLock};
     let sweep = Sweep::load(path)?;
     let mut lock = SweepLock::default();
     for p in &sweep.points {
@@ -1316,7 +1291,7 @@ fn sweep_verify(
     progress: ProgressMode,
     cli: &Cli,
 ) -> Result<i32> {
-    use texsyn::sweep::lock::SweepLock;
+    use texsyn::ops::sweep::lock::SweepLock;
     let sweep = Sweep::load(path)?;
     let lock = SweepLock::read(lockfile)?;
     let temp = fresh.then(|| outputs::TempDir::new("texsyn-verify"));

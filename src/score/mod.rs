@@ -334,7 +334,7 @@ pub fn report_text(r: &Report) -> String {
     s
 }
 
-/// The heading of BENCHMARKS.md's quality table, which `texsyn bench -o` keeps.
+/// The heading of BENCHMARKS.md's quality table, which `cargo run --release -p texsyn-bench -- -o` keeps.
 pub const QUALITY_HEADING: &str = "## Quality: nearest-patch scores of every shipped config";
 
 /// The quality table of several reports (BENCHMARKS.md): one row per scored item.

@@ -1,0 +1,452 @@
+//! The `texsyn` command as a user meets it: the lock file, bad inputs, and the small commands.
+
+use crate::common;
+use common::cli::{object_count, stderr, stdout, succeeded, texsyn};
+use common::repo;
+use std::path::Path;
+use std::process::Output;
+
+/// `texsyn run demo.toml --cache c --out <out>`, then the `extra` arguments, in `dir`.
+fn run_demo(dir: &Path, out: &str, extra: &[&str]) -> Output {
+    texsyn(
+        &[&["run", "demo.toml", "--cache", "c", "--out", out], extra].concat(),
+        dir,
+    )
+}
+
+/// A scratch copy of the demo's config and assets, so tests can break them.
+fn scratch() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("assets")).unwrap();
+    for f in ["cow.obj", "wood1.png"] {
+        std::fs::copy(
+            repo().join("configs/assets").join(f),
+            dir.path().join("assets").join(f),
+        )
+        .unwrap();
+    }
+    let text = std::fs::read_to_string(repo().join("configs/demo.toml")).unwrap();
+    let text = text
+        .replace("atlas_size = 2048", "atlas_size = 1024")
+        .replace("preview_size = 512", "preview_size = 64");
+    std::fs::write(dir.path().join("demo.toml"), text).unwrap();
+    dir
+}
+
+#[test]
+fn a_lock_file_that_disagrees_names_each_mismatching_node() {
+    let dir = scratch();
+    let d = dir.path();
+    let cache = d.join("cache");
+    let o = succeeded(texsyn(
+        &["hashes", "demo.toml", "--cache", cache.to_str().unwrap()],
+        d,
+    ));
+    let lock = stdout(&o);
+    assert_eq!(lock.lines().filter(|l| !l.starts_with('#')).count(), 7);
+    std::fs::write(d.join("good.lock"), &lock).unwrap();
+    let verify = |lock: &str| {
+        texsyn(
+            &[
+                "verify",
+                "demo.toml",
+                lock,
+                "--cache",
+                cache.to_str().unwrap(),
+            ],
+            d,
+        )
+    };
+    succeeded(verify("good.lock"));
+
+    // Change the locked content hash of the walk: verify must fail and name that node.
+    let tampered: String = lock
+        .lines()
+        .map(|l| {
+            if l.starts_with("synthesize ") {
+                let mut f: Vec<String> = l.split(' ').map(String::from).collect();
+                f[2] = "0".repeat(64);
+                f.join(" ")
+            } else {
+                l.to_owned()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(d.join("bad.lock"), &tampered).unwrap();
+    let o = verify("bad.lock");
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    // Same key, other content: named as the missing version bump it is.
+    assert!(
+        e.contains("mismatch: synthesize: key unchanged, content changed: version not bumped"),
+        "{e}"
+    );
+    assert!(!e.contains("mismatch: reconstruct"), "{e}");
+
+    // `hashes -o` will not overwrite that line without being asked.
+    let hashes_to = |extra: &[&str]| {
+        texsyn(
+            &[
+                &["hashes", "demo.toml", "--cache", cache.to_str().unwrap()][..],
+                extra,
+            ]
+            .concat(),
+            d,
+        )
+    };
+    let o = hashes_to(&["-o", "bad.lock"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("unbumped: synthesize:"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.join("bad.lock")).unwrap(),
+        tampered
+    );
+    succeeded(hashes_to(&["-o", "bad.lock", "--accept-unbumped"]));
+    assert_eq!(std::fs::read_to_string(d.join("bad.lock")).unwrap(), lock);
+
+    // A changed key is an ordinary mismatch, and `hashes -o` replaces it.
+    let rekeyed = lock.lines().map(|l| {
+        if l.starts_with("synthesize ") {
+            let mut f: Vec<String> = l.split(' ').map(String::from).collect();
+            f[1] = "1".repeat(64);
+            f.join(" ")
+        } else {
+            l.to_owned()
+        }
+    });
+    std::fs::write(
+        d.join("rekeyed.lock"),
+        rekeyed.collect::<Vec<_>>().join("\n"),
+    )
+    .unwrap();
+    let e = stderr(&verify("rekeyed.lock"));
+    assert!(e.contains("mismatch: synthesize: key "), "{e}");
+    assert!(!e.contains("version not bumped"), "{e}");
+    succeeded(hashes_to(&["-o", "rekeyed.lock"]));
+    assert_eq!(
+        std::fs::read_to_string(d.join("rekeyed.lock")).unwrap(),
+        lock
+    );
+}
+
+#[test]
+fn a_mesh_with_a_nan_is_an_error_naming_file_and_line_and_writes_nothing() {
+    let dir = scratch();
+    let d = dir.path();
+    let obj = std::fs::read_to_string(d.join("assets/cow.obj")).unwrap();
+    let mut lines: Vec<String> = obj.lines().map(String::from).collect();
+    let i = lines.iter().position(|l| l.starts_with("v ")).unwrap() + 4;
+    lines[i] = "v 0.1 nan 0.2".into();
+    std::fs::write(d.join("assets/cow.obj"), lines.join("\n")).unwrap();
+    let o = run_demo(d, "o", &[]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("cow.obj") && e.contains(&format!("line {}", i + 1)),
+        "{e}"
+    );
+    assert!(
+        e.to_lowercase().contains("nan") || e.contains("finite"),
+        "{e}"
+    );
+    assert_eq!(
+        object_count(&d.join("c")),
+        0,
+        "nothing may be cached from a failed import"
+    );
+    assert!(!d.join("o").exists());
+}
+
+#[test]
+fn config_mistakes_are_named_by_key() {
+    let dir = scratch();
+    let d = dir.path();
+    // Each bad --set, with what the error must name.
+    let cases: [(&str, &[&str]); 4] = [
+        ("synthesize.sede=3", &["synthesize", "sede"]),
+        (
+            "synthesize.boundary_fraction=2",
+            &["synthesize.boundary_fraction"],
+        ),
+        (
+            "field.sinks=[{ vertex = 999999 }]",
+            &["field.sinks[0]", "999999"],
+        ),
+        ("method=\"nope\"", &["nope"]),
+    ];
+    for (set, names) in cases {
+        let o = texsyn(&["run", "demo.toml", "--set", set], d);
+        assert!(!o.status.success(), "--set {set}");
+        let err = stderr(&o);
+        assert!(names.iter().all(|n| err.contains(n)), "{err}");
+    }
+}
+
+#[test]
+fn a_scale_too_large_for_the_mesh_names_one_that_fits_and_keeps_earlier_outputs() {
+    let dir = scratch();
+    let d = dir.path();
+    succeeded(run_demo(d, "o", &["-q"]));
+    let before = std::fs::read(d.join("o/textured.obj")).unwrap();
+    let o = run_demo(d, "o", &["--set", "parameterize.scale=5000"]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("parameterize.scale = 5000"), "{e}");
+    // The named scale must really fit: rerun with it.
+    let fit: String = e
+        .split("fit at scale ≤ ")
+        .nth(1)
+        .expect("names a fitting scale")
+        .chars()
+        .take_while(|c| c.is_ascii_digit() || *c == '.')
+        .collect();
+    assert_eq!(
+        std::fs::read(d.join("o/textured.obj")).unwrap(),
+        before,
+        "earlier outputs intact"
+    );
+    let fit: f32 = fit.parse().unwrap();
+    succeeded(run_demo(
+        d,
+        "o2",
+        &[
+            "-q",
+            "--set",
+            &format!("parameterize.scale={}", fit * 0.999),
+        ],
+    ));
+}
+
+#[test]
+fn status_graph_gc_and_render_do_their_jobs() {
+    let dir = scratch();
+    let d = dir.path();
+    let o = succeeded(texsyn(&["status", "demo.toml", "--cache", "c"], d));
+    let s = stdout(&o);
+    assert!(s.contains("import.mesh") && s.contains("would run"), "{s}");
+    assert!(!s.contains("cached"), "{s}");
+    succeeded(run_demo(d, "o", &["-q"]));
+    let s = stdout(&texsyn(&["status", "demo.toml", "--cache", "c"], d));
+    assert_eq!(
+        s.lines().filter(|l| l.ends_with("cached")).count(),
+        7,
+        "{s}"
+    );
+    let s = stdout(&texsyn(
+        &[
+            "status",
+            "demo.toml",
+            "--cache",
+            "c",
+            "--set",
+            "synthesize.seed=9",
+        ],
+        d,
+    ));
+    assert!(
+        s.lines()
+            .any(|l| l.starts_with("synthesize") && l.ends_with("would run")),
+        "{s}"
+    );
+    assert!(
+        s.lines()
+            .any(|l| l.starts_with("reconstruct") && l.contains("if its inputs change")),
+        "{s}"
+    );
+
+    let dot = stdout(&texsyn(&["graph", "demo.toml"], d));
+    assert!(
+        dot.starts_with("digraph") && dot.contains("jump_walk") && dot.contains("->"),
+        "{dot}"
+    );
+
+    let before = object_count(&d.join("c"));
+    succeeded(texsyn(&["gc", "--max-size", "1M", "--cache", "c"], d));
+    let after = object_count(&d.join("c"));
+    assert!(after < before, "{before} -> {after}");
+    let total: u64 = std::fs::read_dir(d.join("c/objects-v1"))
+        .unwrap()
+        .flatten()
+        .flat_map(|s| std::fs::read_dir(s.path()).unwrap().flatten())
+        .map(|f| f.metadata().unwrap().len())
+        .sum();
+    assert!(total <= 1 << 20);
+
+    succeeded(texsyn(
+        &[
+            "render",
+            "o/textured.obj",
+            "--texture",
+            "o/texture.png",
+            "-o",
+            "r.png",
+            "--size",
+            "64",
+        ],
+        d,
+    ));
+    let img = image::open(d.join("r.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (192, 64));
+}
+
+#[test]
+fn json_output_reports_every_node() {
+    let dir = scratch();
+    let d = dir.path();
+    let o = succeeded(run_demo(d, "o", &["--json"]));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let nodes = v["nodes"].as_array().unwrap();
+    assert_eq!(nodes.len(), 7);
+    assert!(nodes.iter().all(|n| n["status"] == "ran"));
+    assert!(
+        v["outputs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|f| f["path"].as_str().unwrap().ends_with("textured.glb"))
+    );
+}
+
+#[test]
+fn synth2d_writes_an_image_of_the_requested_size() {
+    let dir = tempfile::tempdir().unwrap();
+    succeeded(texsyn(
+        &[
+            "run",
+            repo().join("configs/synth2d.toml").to_str().unwrap(),
+            "--cache",
+            "c",
+            "--out",
+            "o",
+            "-q",
+            "--set",
+            "synthesize.width=100",
+            "--set",
+            "synthesize.height=40",
+        ],
+        dir.path(),
+    ));
+    let img = image::open(dir.path().join("o/synthesized.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (100, 40));
+}
+
+/// CPU seconds (user + system) of this process's finished children.
+fn children_cpu_seconds() -> f64 {
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: getrusage writes into the struct we pass; RUSAGE_CHILDREN is valid.
+    assert_eq!(unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut u) }, 0);
+    let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    s(u.ru_utime) + s(u.ru_stime)
+}
+
+/// `cpu_seconds`: each node that ran says the CPU its process spent on it, a difference of the
+/// process's CPU clock: all nodes together are at most the child's whole CPU time (measured
+/// here by getrusage; the process's running total per node would add up to several times it);
+/// cached nodes say nothing.
+#[test]
+fn run_json_reports_the_cpu_each_node_that_ran_took() {
+    let t = tempfile::tempdir().unwrap();
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/demo.toml");
+    let run = || {
+        let o = common::cli::succeeded(common::cli::texsyn(
+            &[
+                "run",
+                demo.to_str().unwrap(),
+                "--cache",
+                "c",
+                "--out",
+                "o",
+                "--json",
+            ],
+            t.path(),
+        ));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    let before = children_cpu_seconds();
+    let first = run();
+    // Other tests' children may end meanwhile: this is an upper bound of the run's CPU.
+    let child_cpu = children_cpu_seconds() - before;
+    let nodes = first["nodes"].as_array().unwrap();
+    let cpu: Vec<f64> = nodes
+        .iter()
+        .map(|n| {
+            n["cpu_seconds"]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{}: ran, but no cpu_seconds", n["node"]))
+        })
+        .collect();
+    assert!(cpu.iter().all(|&c| c >= 0.0), "{cpu:?}");
+    let total: f64 = cpu.iter().sum();
+    // The nodes' clock ticks are 1/100 s: a tick per node of slack.
+    assert!(
+        total > 0.0 && total <= child_cpu + 0.01 * cpu.len() as f64,
+        "nodes {total} CPU s, the whole process {child_cpu} CPU s"
+    );
+    let again = run();
+    for n in again["nodes"].as_array().unwrap() {
+        assert_eq!(n["status"], "cached");
+        assert!(
+            n.get("cpu_seconds").is_none(),
+            "{}: cached, yet cpu_seconds",
+            n["node"]
+        );
+    }
+}
+
+#[test]
+fn run_json_reports_each_nodes_own_peak_memory() {
+    let t = tempfile::tempdir().unwrap();
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/demo.toml");
+    let o = common::cli::succeeded(common::cli::texsyn(
+        &[
+            "run",
+            demo.to_str().unwrap(),
+            "--cache",
+            "c",
+            "--out",
+            "o",
+            "--json",
+        ],
+        t.path(),
+    ));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let peaks: Vec<(String, u64)> = r["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| {
+            let peak = n["peak_memory_bytes"].as_u64();
+            (
+                n["node"].as_str().unwrap().to_owned(),
+                peak.expect("every node ran: a peak"),
+            )
+        })
+        .collect();
+    let run = r["peak_memory_bytes"].as_u64().unwrap();
+    // Each is a peak of this process: none above the run's (within the kernel's lag in
+    // updating its counters).
+    for (node, p) in &peaks {
+        assert!(
+            *p > 0 && *p as f64 <= run as f64 * 1.02,
+            "{node}: {p} vs run {run}"
+        );
+    }
+    // Measured per node: a process's high-water mark never falls, so a node with a lower peak
+    // than an earlier one shows the mark was reset for it (the small field after the exemplar
+    // analysis).
+    assert!(
+        peaks.windows(2).any(|w| w[1].1 < w[0].1),
+        "peaks never fall from node to node: not measured per node: {peaks:?}"
+    );
+    // The reconstruct's 2048² atlas (16 MiB of RGBA floats at least) shows in its peak.
+    let get = |n: &str| peaks.iter().find(|(m, _)| m == n).unwrap().1;
+    assert!(
+        get("reconstruct") > get("import.mesh") + (16 << 20),
+        "{peaks:?}"
+    );
+}

@@ -1,0 +1,239 @@
+//! The feature-aligned method end to end: its outputs, determinism, what a rerun recomputes,
+//! that the feature constraint puts the texture's lines on the shape's lines, and the errors a
+//! user meets.
+
+use crate::common;
+use common::{
+    artifact, assert_runs_fail_naming, assert_same_hashes_on_any_thread_count, materialized, ran,
+    repo, run_config,
+};
+use texsyn::artifact::Format;
+use texsyn::artifact::feature_aligned::OrientedField;
+use texsyn::geom::edge_refine::Refined;
+use texsyn::pipeline::RunResult;
+use texsyn::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
+use texsyn::stages::synthesize::texture_optimization::{SurfaceSynthesis, curve_distance};
+
+/// Small: a coarse scale (fandisk refined to about 20,000 vertices), few iterations and tiny
+/// previews and atlas.
+const SMALL: &[&str] = &[
+    "parameterize.scale=60",
+    "synthesize.iterations=3",
+    "reconstruct.preview_size=48",
+    "reconstruct.atlas_size=256",
+];
+
+fn run(config: &str, sets: &[&str], cache: &std::path::Path) -> Result<RunResult, String> {
+    run_config(&repo().join("configs").join(config), SMALL, sets, cache)
+}
+
+#[test]
+fn outputs_are_written_and_the_same_for_any_thread_count() {
+    assert_same_hashes_on_any_thread_count(|cache| {
+        run("feature_aligned.toml", &[], cache).unwrap()
+    });
+    let cache = tempfile::tempdir().unwrap();
+    let r = run("feature_aligned.toml", &[], cache.path()).unwrap();
+    let out = materialized(&r, "reconstruct");
+    for f in [
+        "textured.ply",
+        "textured.glb",
+        "preview.png",
+        "unaligned_preview.png",
+        "comparison.png",
+        "lines.obj",
+        "lines_preview.png",
+        "field.png",
+        "texture_features.png",
+        "report.json",
+    ] {
+        assert!(out.path().join(f).is_file(), "{f} missing");
+    }
+    let refined = Refined::view(artifact(&r, "parameterize")).unwrap();
+    let ply = std::fs::read(out.path().join("textured.ply")).unwrap();
+    let header = String::from_utf8_lossy(&ply[..200]).to_string();
+    assert!(
+        header.contains(&format!("element vertex {}\n", refined.mesh.vertex_count())),
+        "{header}"
+    );
+    // The refined mesh's edges are at most one texel (1/60 object units) long.
+    let longest =
+        texsyn::geom::edge_refine::longest_edge(&refined.mesh.positions, &refined.mesh.triangles);
+    assert!(longest <= 1.0 / 60.0 + 1e-6, "{longest}");
+    // The report carries the field's singularities with both orientations.
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["shape_features"]["source"], "crease");
+    // Fig. 3 / Fig. 6: the greedy orientation leaves fewer singularities than an arbitrary one
+    // (fandisk: 0 against 45 at the shipped scale).
+    let greedy = report["field"]["singular_triangles"].as_u64().unwrap();
+    let arbitrary = report["field"]["singular_triangles_arbitrary_orientation"]
+        .as_u64()
+        .unwrap();
+    assert!(greedy < arbitrary, "greedy {greedy}, arbitrary {arbitrary}");
+    // lines.obj reads back as curves (the round trip users rely on to edit them).
+    let obj = std::fs::read(out.path().join("lines.obj")).unwrap();
+    let curves =
+        texsyn::stages::extract::shape_features::read_curves_file("lines.obj", &obj).unwrap();
+    let field = OrientedField::view(artifact(&r, "field")).unwrap();
+    assert_eq!(curves.len(), field.field.curves.len());
+}
+
+#[test]
+fn the_feature_constraint_puts_texture_lines_on_shape_lines() {
+    // Near the shape's curves (within half a patch), each vertex's source texel should be as far
+    // from the exemplar's lines as the vertex is from the shape's lines (§5.2). The mean
+    // mismatch with the constraint must be at most half of that without it.
+    let cache = tempfile::tempdir().unwrap();
+    let r = run("feature_aligned.toml", &[], cache.path()).unwrap();
+    let refined = Refined::view(artifact(&r, "parameterize")).unwrap();
+    let field = OrientedField::view(artifact(&r, "field")).unwrap();
+    let tf = TextureFeatures::view(artifact(&r, "analyse_exemplar")).unwrap();
+    let sources: Vec<u32> = field
+        .field
+        .curves
+        .iter()
+        .flat_map(|(c, _)| refined.refine_path(&c.vertices, c.closed))
+        .collect();
+    let texel = 1.0 / 60.0;
+    let d = curve_distance(&refined.mesh, &sources);
+    let patch =
+        texsyn::stages::synthesize::texture_optimization::TextureOptimizationParams::default()
+            .patch;
+    let mismatch = |node: &str| {
+        let s = SurfaceSynthesis::view(artifact(&r, node)).unwrap();
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for (v, src) in s.source.iter().enumerate() {
+            let dv = d[v] / texel;
+            if dv < patch as f32 / 2.0 {
+                let x = (src[0].round() as i64).clamp(0, tf.width as i64 - 1) as usize;
+                let y = (src[1].round() as i64).clamp(0, tf.height as i64 - 1) as usize;
+                sum += (tf.distance[y * tf.width as usize + x] - dv).abs() as f64;
+                n += 1;
+            }
+        }
+        assert!(n > 100, "{node}: only {n} vertices near the curves");
+        sum / n as f64
+    };
+    let (with, without) = (mismatch("synthesize"), mismatch("synthesize.unaligned"));
+    assert!(
+        with <= 0.5 * without,
+        "mean |D(source) − d(vertex)|: {with:.2} texels with the constraint, {without:.2} without"
+    );
+}
+
+#[test]
+fn a_rerun_recomputes_only_what_changed() {
+    let cache = tempfile::tempdir().unwrap();
+    run("feature_aligned.toml", &[], cache.path()).unwrap();
+    let r = run("feature_aligned.toml", &["synthesize.seed=7"], cache.path()).unwrap();
+    assert_eq!(
+        ran(&r),
+        ["synthesize", "synthesize.unaligned", "reconstruct"],
+        "a new seed reruns synthesis and export only"
+    );
+    let r = run(
+        "feature_aligned.toml",
+        &["reconstruct.streak_length=5"],
+        cache.path(),
+    )
+    .unwrap();
+    assert_eq!(ran(&r), ["reconstruct"]);
+    let r = run("feature_aligned.toml", &["compare=false"], cache.path()).unwrap();
+    assert_eq!(ran(&r), ["reconstruct"], "the aligned synthesis is reused");
+}
+
+#[test]
+fn user_curves_and_crest_lines_configs_run() {
+    let cache = tempfile::tempdir().unwrap();
+    let r = run(
+        "feature_aligned_curves.toml",
+        &["parameterize.scale=40", "compare=false"],
+        cache.path(),
+    )
+    .unwrap();
+    let field = OrientedField::view(artifact(&r, "field")).unwrap();
+    assert!(!field.field.curves.is_empty());
+    let r = run(
+        "feature_aligned_crest.toml",
+        &["parameterize.scale=40", "compare=false"],
+        cache.path(),
+    )
+    .unwrap();
+    let out = materialized(&r, "reconstruct");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["shape_features"]["source"], "crest");
+}
+
+/// A file in a temporary directory, for inputs no shipped config has.
+fn write(dir: &std::path::Path, name: &str, bytes: &[u8]) -> String {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p.display().to_string()
+}
+
+fn png(w: u32, h: u32, f: impl Fn(u32, u32) -> u8) -> Vec<u8> {
+    let img = image::GrayImage::from_fn(w, h, |x, y| image::Luma([f(x, y)]));
+    let mut out = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+        .unwrap();
+    out
+}
+
+#[test]
+fn bad_inputs_are_clear_errors_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let flat = write(
+        dir.path(),
+        "flat.obj",
+        b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n",
+    );
+    let grey = write(dir.path(), "grey.png", &png(64, 64, |_, _| 128));
+    let small_mask = write(
+        dir.path(),
+        "mask.png",
+        &png(10, 10, |x, _| (x == 5) as u8 * 255),
+    );
+    let mesh = format!("inputs.mesh=\"{flat}\"");
+    let exemplar = format!("inputs.exemplar=\"{grey}\"");
+    let mask = format!("inputs.feature_mask=\"{small_mask}\"");
+    assert_runs_fail_naming(
+        run,
+        &[
+            (
+                "feature_aligned.toml",
+                &[&mesh, "extract.features=\"crease\""],
+                &["extract.crease.angle", "extract.curves"],
+            ),
+            (
+                "feature_aligned.toml",
+                &[&exemplar],
+                &["analyse_exemplar.threshold", "inputs.feature_mask"],
+            ),
+            (
+                "feature_aligned.toml",
+                &[&mask],
+                &["inputs.feature_mask", "10×10", "96×96"],
+            ),
+            (
+                "feature_aligned.toml",
+                &[
+                    "extract.features=\"curves\"",
+                    "extract.curves=[{points=[[0.0,0.0,0.0],[5.0,5.0,5.0]]}]",
+                ],
+                &["extract.curves[0]"],
+            ),
+            (
+                "feature_aligned_curves.toml",
+                &["synthesize.patch=48"],
+                &["synthesize.patch", "64×64", "every rotation"],
+            ),
+            (
+                "feature_aligned.toml",
+                &["parameterize.scale=100000"],
+                &["parameterize.scale", "parameterize.max_vertices"],
+            ),
+        ],
+    );
+}

@@ -1,0 +1,185 @@
+//! The graph-matching method end to end: its outputs, determinism, what a rerun recomputes, and
+//! the errors a user meets before any work starts.
+
+use crate::common;
+use common::{
+    artifact, assert_runs_fail_naming, assert_same_hashes_on_any_thread_count, materialized, ran,
+    repo, run_config,
+};
+use texsyn::artifact::Format;
+use texsyn::pipeline::RunResult;
+use texsyn::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
+use texsyn::stages::synthesize::graph_matching::GraphMatching;
+
+/// Small: a coarse scale (about 12,000 vertices at the finest level, in three levels), no
+/// pre-subdivision, the paper's region and tiny previews.
+const SMALL: &[&str] = &[
+    "parameterize.scale=90",
+    "parameterize.area_factor=0",
+    "synthesize.region=3",
+    "reconstruct.preview_size=48",
+];
+
+fn run(config: &str, sets: &[&str], cache: &std::path::Path) -> Result<RunResult, String> {
+    run_config(&repo().join("configs").join(config), SMALL, sets, cache)
+}
+
+fn hierarchy(r: &RunResult) -> Sqrt2Hierarchy {
+    Sqrt2Hierarchy::view(artifact(r, "parameterize")).unwrap()
+}
+
+#[test]
+fn outputs_are_the_finest_level_coloured_and_the_same_for_any_thread_count() {
+    assert_same_hashes_on_any_thread_count(|cache| run("graph_matching.toml", &[], cache).unwrap());
+    // Exact search is the part that runs in parallel (the texel scan).
+    assert_same_hashes_on_any_thread_count(|cache| {
+        run(
+            "graph_matching_open.toml",
+            &["synthesize.search=\"exact\"", "parameterize.scale=40"],
+            cache,
+        )
+        .unwrap()
+    });
+    let cache = tempfile::tempdir().unwrap();
+    let r = run(
+        "graph_matching.toml",
+        &["reconstruct.level_previews=true"],
+        cache.path(),
+    )
+    .unwrap();
+    let h = hierarchy(&r);
+    assert!(h.levels() >= 2, "scale 90 subdivides the cow");
+    let finest = *h.level_vertices.last().unwrap() as usize;
+    let out = materialized(&r, "reconstruct");
+    let ply = std::fs::read(out.path().join("textured.ply")).unwrap();
+    let header = String::from_utf8_lossy(&ply[..200]).to_string();
+    assert!(
+        header.contains(&format!("element vertex {finest}\n")),
+        "{header}"
+    );
+    for f in ["textured.glb", "preview.png"] {
+        assert!(out.path().join(f).is_file(), "{f}");
+    }
+    for l in 0..h.levels() {
+        assert!(out.path().join(format!("level_{l:02}.png")).is_file());
+    }
+    // Every vertex got its colour from a texel, and the graph cut copied more than the matched
+    // vertex (with transfer = "vertex" there would be exactly one per match).
+    let g = GraphMatching::view(artifact(&r, "synthesize")).unwrap();
+    assert_eq!(g.colours.len(), finest);
+    assert!(
+        g.stats.transferred as f64 > 1.5 * g.stats.matches as f64,
+        "{:?}",
+        g.stats
+    );
+    // wood1.png is 96×96: every source texel is inside it.
+    assert!(
+        g.sources
+            .iter()
+            .all(|s| (0.0..96.0).contains(&s[0]) && (0.0..96.0).contains(&s[1])),
+        "a source outside the exemplar"
+    );
+}
+
+#[test]
+fn a_new_seed_reruns_synthesis_and_export_only() {
+    let cache = tempfile::tempdir().unwrap();
+    run("graph_matching.toml", &[], cache.path()).unwrap();
+    let r = run("graph_matching.toml", &["synthesize.seed=9"], cache.path()).unwrap();
+    assert_eq!(ran(&r), vec!["synthesize", "reconstruct"]);
+    // A new key reruns the field (and what follows), not the subdivision or the stack.
+    let r = run(
+        "graph_matching.toml",
+        &["field.keys=[{ vertex = 5, direction = [1, 0, 0] }]"],
+        cache.path(),
+    )
+    .unwrap();
+    assert_eq!(
+        ran(&r),
+        vec!["field.keys", "field", "synthesize", "reconstruct"]
+    );
+}
+
+#[test]
+fn a_mesh_finer_than_the_texture_is_used_as_it_is() {
+    // Table 1's donkey: scale 30 against 1/ē = 110. Here the cow (ē ≈ 0.021) at scale 20.
+    let cache = tempfile::tempdir().unwrap();
+    let r = run(
+        "graph_matching.toml",
+        &["parameterize.scale=20", "parameterize.area_factor=0"],
+        cache.path(),
+    )
+    .unwrap();
+    let h = hierarchy(&r);
+    assert_eq!(h.levels(), 1);
+    assert_eq!(h.level_vertices, vec![2904]);
+}
+
+#[test]
+fn open_meshes_and_displacement_run() {
+    let cache = tempfile::tempdir().unwrap();
+    let r = run("graph_matching_open.toml", &[], cache.path()).unwrap();
+    assert!(hierarchy(&r).levels() >= 2);
+    let r = run("graph_matching_displacement.toml", &[], cache.path()).unwrap();
+    let out = materialized(&r, "reconstruct");
+    for f in ["displaced.obj", "displaced.ply", "displaced_preview.png"] {
+        assert!(out.path().join(f).is_file(), "{f}");
+    }
+}
+
+#[test]
+fn bad_inputs_are_named_before_synthesis() {
+    assert_runs_fail_naming(
+        run,
+        &[
+            (
+                "graph_matching.toml",
+                &["parameterize.scale=100000"],
+                &["parameterize.scale", "vertices", "fits"],
+            ),
+            (
+                "graph_matching.toml",
+                &["synthesize.region=60"],
+                &["synthesize.region", "96×96", "at most 48"],
+            ),
+            (
+                "graph_matching.toml",
+                &["field.keys=[{ vertex = 99999, direction = [0, 1, 0] }]"],
+                &["field.keys[0]", "99999", "2904"],
+            ),
+            (
+                "graph_matching.toml",
+                &["synthesize.sigma=0"],
+                &["synthesize.sigma"],
+            ),
+        ],
+    );
+    // A wrong key is found before any other work: nothing but the imports is in the cache.
+    // (A scale that is too fine is found by the subdivision, which builds levels until the
+    // next would pass the budget, so that the scale it names is one that fits.)
+    let cache = tempfile::tempdir().unwrap();
+    let e = run(
+        "graph_matching.toml",
+        &["field.keys=[{ vertex = 99999, direction = [0, 1, 0] }]"],
+        cache.path(),
+    );
+    assert!(e.is_err());
+    // The cache's objects (its lock files, left by the imports, are not objects).
+    let objects = common::cli::object_count(cache.path());
+    assert!(objects <= 2, "{objects} objects stored before the error");
+    // The scale is required: it decides how far the mesh is subdivided.
+    let text = std::fs::read_to_string(repo().join("configs/graph_matching.toml")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("c.toml");
+    std::fs::write(
+        &cfg,
+        text.replace("scale = 120.0", "")
+            .replace("assets/", &format!("{}/configs/assets/", repo().display())),
+    )
+    .unwrap();
+    let e = common::plan_config(&cfg, &[], &[]).err().unwrap();
+    assert!(
+        e.contains("parameterize.scale") && e.contains("required"),
+        "{e}"
+    );
+}

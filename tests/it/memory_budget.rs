@@ -1,0 +1,164 @@
+//! The memory budget (issue 11, item 9): a parameter whose estimated need is over the budget
+//! is refused before work starts, naming a value that fits; and the estimates are within 2×
+//! of what a run really takes (peak resident memory of the child process).
+
+use crate::common;
+use common::repo;
+use std::process::Command;
+
+fn texsyn(args: &[&str], dir: &std::path::Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_texsyn"))
+        .args(args)
+        .args(["--cache", &dir.join("cache").to_string_lossy()])
+        .args(["--out", &dir.join("out").to_string_lossy()])
+        .arg("--quiet")
+        .current_dir(repo())
+        .output()
+        .unwrap()
+}
+
+/// The largest peak resident set of the children waited for so far, in bytes.
+fn children_peak() -> u64 {
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: getrusage writes into the struct we pass; RUSAGE_CHILDREN is valid.
+    assert_eq!(unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut u) }, 0);
+    u.ru_maxrss as u64 * 1024
+}
+
+#[test]
+fn estimates_are_within_twice_the_measured_peak_and_oversized_runs_are_refused() {
+    crate::full_tier_only!("inputs sized to measure memory");
+    let dir = tempfile::tempdir().unwrap();
+    // Runs in order of increasing peak, so the children's maximum is each run's own.
+    let cases: [(&[&str], u64); 3] = [
+        (
+            // A solid section: dense masks over the volume's box, half a byte per voxel of the
+            // cube bound (72 MB measured at 384).
+            &[
+                "run",
+                "configs/solid_trivial.toml",
+                "--set",
+                "parameterize.resolution=384",
+                "--set",
+                "parameterize.request={kind=\"section\",point=[0.0,0.0,0.0],normal=[0.0,0.0,1.0]}",
+            ],
+            384 * 384 * 384 / 2 + (48 << 20),
+        ),
+        (
+            &[
+                "run",
+                "configs/synth2d.toml",
+                "--set",
+                "synthesize.width=2048",
+                "--set",
+                "synthesize.height=2048",
+            ],
+            52 * 2048 * 2048 + (32 << 20),
+        ),
+        (
+            // Geometry-image texel variants: 8 orientations, 3 scales (4^-1 + 1 + 4).
+            &[
+                "run",
+                "configs/dragon_knot.toml",
+                "--set",
+                "analyse_exemplar.scales=3",
+                "--set",
+                "synthesize.search=\"per_texel\"",
+            ],
+            (580.0 * 8.0 * 5.25) as u64 * 128 * 128 + (64 << 20),
+        ),
+    ];
+    for (args, estimate) in cases {
+        let out = texsyn(args, dir.path());
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let peak = children_peak();
+        assert!(
+            estimate as f64 <= 2.0 * peak as f64 && peak as f64 <= 2.0 * estimate as f64,
+            "{args:?}: estimate {estimate} B, measured peak {peak} B"
+        );
+    }
+    // 16384² is inside synthesize.width's range but not inside 4 GiB.
+    let out = texsyn(
+        &[
+            "run",
+            "configs/synth2d.toml",
+            "--max-memory",
+            "4GiB",
+            "--set",
+            "synthesize.width=16384",
+            "--set",
+            "synthesize.height=16384",
+        ],
+        dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("synthesize.width = 16384") && err.contains("fits") && err.contains("4.0 GiB"),
+        "{err}"
+    );
+    // The same for the per-triangle baked atlas (solid and feature-aligned; jump maps' chart
+    // pages follow the surface's area and are not estimated).
+    let out = texsyn(
+        &[
+            "run",
+            "configs/solid_trivial.toml",
+            "--max-memory",
+            "64MiB",
+            "--set",
+            "reconstruct.atlas_size=8192",
+        ],
+        dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("reconstruct.atlas_size = 8192") && err.contains("fits"),
+        "{err}"
+    );
+    // And for a geometry-image sample's per-texel variants (5.9 GB measured at 256² with 5
+    // scales; the default k-coherence search needs no such structures and no check).
+    let out = texsyn(
+        &[
+            "run",
+            "configs/dragon_knot.toml",
+            "--max-memory",
+            "1GiB",
+            "--set",
+            "extract.size=256",
+            "--set",
+            "analyse_exemplar.scales=5",
+            "--set",
+            "synthesize.search=\"per_texel\"",
+        ],
+        dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("extract.size = 256") && err.contains("fits"),
+        "{err}"
+    );
+    // And for a solid's resolution (a surface request: 16 bytes per voxel of the cube bound up
+    // to the batch bound, and half a byte per voxel for the volume's masks).
+    let out = texsyn(
+        &[
+            "run",
+            "configs/solid_trivial.toml",
+            "--max-memory",
+            "1GiB",
+            "--set",
+            "parameterize.resolution=4096",
+        ],
+        dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("parameterize.resolution = 4096") && err.contains("fits"),
+        "{err}"
+    );
+}
