@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use texsyn::cache::{Cache, parse_size};
 use texsyn::config::Config;
-use texsyn::ops::lockfile::LockFile;
 use texsyn::methods::Plan;
-use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, Shard, outputs};
+use texsyn::ops::lockfile::LockFile;
 use texsyn::ops::sweep::Sweep;
+use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, Shard, outputs};
 
 #[derive(Parser)]
 #[command(
@@ -557,9 +557,9 @@ fn real_main() -> Result<i32> {
             let unbumped: Vec<&str> = differences
                 .iter()
                 .filter_map(|d| match d {
-                    texsyn::ops::lockfile::Difference::ContentChangedUnderSameKey { node, .. } => {
-                        Some(node.as_str())
-                    }
+                    texsyn::ops::lockfile::Difference::ContentChangedUnderSameKey {
+                        node, ..
+                    } => Some(node.as_str()),
                     _ => None,
                 })
                 .collect();
@@ -623,10 +623,9 @@ fn real_main() -> Result<i32> {
                 }
                 let (plan, result) = run_config(config, sets, &cache_dir, progress)?;
                 let section = plan.score.clone().unwrap_or_default();
-                let cfg = Config::load(config, sets)?;
                 // A solid surface has no planar image: a section of the same solid is
                 // synthesized (from the cached bricks where they overlap) and scored.
-                let report = match texsyn::score::solid::substitute_section(&plan, &result, &cfg) {
+                let report = match plan.score_substitute(&result) {
                     Some(set) => {
                         let mut with = sets.clone();
                         with.push(set.clone());
@@ -893,8 +892,8 @@ fn score_plan(
     result: &RunResult,
     section: &texsyn::score::ScoreSection,
 ) -> Result<texsyn::score::Report> {
-    let cfg = Config::load(config, sets)?;
-    texsyn::score::score_run(&cfg, plan, result, section)
+    let _ = sets;
+    plan.score_run(result, section)
         .with_context(|| format!("scoring {}", config.display()))
 }
 

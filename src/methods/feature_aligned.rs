@@ -17,7 +17,7 @@
 //! default) also synthesizes without the feature constraint on the same field, the middle
 //! column of the paper's Fig. 7.
 
-use super::{MethodError, import};
+use super::{Method, MethodError, Planned, import};
 use crate::artifact::Bundle;
 use crate::artifact::feature_aligned::OrientedField;
 use crate::config::Config;
@@ -25,6 +25,8 @@ use crate::geom::Mesh;
 use crate::geom::edge_refine::{Refined, refine_edges};
 use crate::image::Image;
 use crate::pipeline::{Dag, Handle, NodeError, NodeSpec, Stage};
+use crate::score::surface::FeatureAlignedNodes;
+use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::texture_feature_lines::{
     TextureFeatureParams, TextureFeatures, detect_texture_features, feature_overlay,
     features_from_mask,
@@ -129,7 +131,35 @@ struct SynthParams {
     optimization: TextureOptimizationParams,
 }
 
-pub fn build(config: &Config) -> Result<Dag, MethodError> {
+/// The `feature_aligned` method.
+pub struct FeatureAligned;
+
+impl Method for FeatureAligned {
+    fn name(&self) -> &'static str {
+        "feature_aligned"
+    }
+
+    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
+        let (dag, planned) = build(config)?;
+        Ok((dag, Box::new(planned)))
+    }
+}
+
+/// What the feature-aligned score reads: its nodes and the texture scale.
+struct FeatureAlignedScore {
+    nodes: FeatureAlignedNodes,
+    scale: f32,
+}
+
+impl Planned for FeatureAlignedScore {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        crate::score::surface::feature_aligned(run, &self.nodes, self.scale, |r, v| {
+            carry_field(r, v).map_err(|e| e.to_string())
+        })
+    }
+}
+
+fn build(config: &Config) -> Result<(Dag, FeatureAlignedScore), MethodError> {
     let c: FeatureAlignedConfig = config.parse()?;
     if !config.gives("parameterize", "scale") {
         return Err(config
@@ -402,7 +432,17 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             Ok(Bundle::from(files))
         },
     );
-    Ok(dag)
+    let mut synthesize = vec![(aligned, "the refined mesh's colours")];
+    synthesize.extend(unaligned.map(|u| (u, "the unaligned comparison's colours")));
+    let nodes = FeatureAlignedNodes {
+        parameterize: refined,
+        field,
+        analyse_exemplar: features,
+        exemplar,
+        synthesize,
+    };
+    let scale = c.parameterize.scale;
+    Ok((dag, FeatureAlignedScore { nodes, scale }))
 }
 
 /// The input mesh's field on the refined mesh: each new vertex the mean of its parents',

@@ -16,7 +16,7 @@
 //! the parameterization's `coarse_levels` is `analyse_exemplar.levels`, not a setting of its
 //! own.
 
-use super::{MethodError, import};
+use super::{Method, MethodError, Planned, import};
 use crate::artifact::Bundle;
 use crate::check::ParamError;
 use crate::config::{Config, check_range};
@@ -24,6 +24,8 @@ use crate::geom::Mesh;
 use crate::geom::geometry_image::TexelImage;
 use crate::image::Image;
 use crate::pipeline::{Dag, Handle, NodeError, NodeSpec, Stage};
+use crate::score::geometry::GeometryImageNodes;
+use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::texel_variants::{
     TexelVariantParams, build_texel_variants_with, check_sample_size,
 };
@@ -204,7 +206,40 @@ fn checked(config: &Config) -> Result<GeometryImagesConfig, MethodError> {
     Ok(c)
 }
 
-pub fn build(config: &Config) -> Result<Dag, MethodError> {
+/// The `geometry_images` method.
+pub struct GeometryImages;
+
+impl Method for GeometryImages {
+    fn name(&self) -> &'static str {
+        "geometry_images"
+    }
+
+    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
+        let (dag, planned) = build(config)?;
+        Ok((dag, Box::new(planned)))
+    }
+}
+
+/// What the geometry-image score reads: its nodes, the synthesis parameters and the field's
+/// density offset.
+struct GeometryImagesScore {
+    nodes: GeometryImageNodes,
+    synthesize: GeometrySynthParams,
+    density_offset: f32,
+}
+
+impl Planned for GeometryImagesScore {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        crate::score::geometry::geometry_images(
+            run,
+            &self.nodes,
+            &self.synthesize,
+            self.density_offset,
+        )
+    }
+}
+
+fn build(config: &Config) -> Result<(Dag, GeometryImagesScore), MethodError> {
     let c = checked(config)?;
     let mut dag = Dag::default();
     let mesh = import::<Mesh>(
@@ -277,7 +312,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
                 .map_err(NodeError::input)
         },
     );
-    dag.node(
+    let reconstruct = dag.node(
         NodeSpec::new(Stage::Reconstruct, "displacement", RECONSTRUCT_VERSION),
         c.reconstruct.clone(),
         (gi, synthesized, texels),
@@ -287,7 +322,18 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             Ok(Bundle::from(files))
         },
     );
-    Ok(dag)
+    let score = GeometryImagesScore {
+        nodes: GeometryImageNodes {
+            parameterize: gi,
+            analyse_exemplar: variants,
+            field,
+            synthesize: synthesized,
+            reconstruct,
+        },
+        synthesize: c.synthesize.clone(),
+        density_offset: c.field.density_offset,
+    };
+    Ok((dag, score))
 }
 
 /// An image sample read as a height field (§5; a colour image by its luma, with a warning,

@@ -14,12 +14,14 @@
 //! subdivision, so a key on a vertex that does not exist is reported before any work starts;
 //! so is a region larger than the exemplar (read from the image header when the plan is made).
 
-use super::{MethodError, import};
+use super::{Method, MethodError, Planned, import};
 use crate::artifact::Bundle;
 use crate::config::Config;
 use crate::geom::Mesh;
 use crate::image::Image;
 use crate::pipeline::{Dag, NodeError, NodeSpec, Stage};
+use crate::score::surface::GraphMatchingNodes;
+use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::gaussian_stack::{StackParams, build_stack};
 use crate::stages::field::sweep_field::{SweepFieldParams, resolve_keys, sweep_field};
 use crate::stages::parameterize::sqrt2_subdivision::{SubdivisionParams, build_hierarchy};
@@ -71,7 +73,37 @@ struct SynthParams {
     matching: MatchParams,
 }
 
-pub fn build(config: &Config) -> Result<Dag, MethodError> {
+/// The `graph_matching` method.
+pub struct GraphMatchingMethod;
+
+impl Method for GraphMatchingMethod {
+    fn name(&self) -> &'static str {
+        "graph_matching"
+    }
+
+    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
+        let (dag, planned) = build(config)?;
+        Ok((dag, Box::new(planned)))
+    }
+}
+
+/// What graph matching's score reads: its nodes and the texture scale.
+struct GraphMatchingScore {
+    nodes: GraphMatchingNodes,
+    scale: f32,
+}
+
+impl Planned for GraphMatchingScore {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        Ok(vec![crate::score::surface::graph_matching(
+            run,
+            &self.nodes,
+            self.scale,
+        )?])
+    }
+}
+
+fn build(config: &Config) -> Result<(Dag, GraphMatchingScore), MethodError> {
     let c: GraphMatchingConfig = config.parse()?;
     if !config.gives("parameterize", "scale") {
         return Err(config
@@ -213,7 +245,14 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             })))
         },
     );
-    Ok(dag)
+    let nodes = GraphMatchingNodes {
+        parameterize: hierarchy,
+        field,
+        synthesize: colours,
+        exemplar,
+    };
+    let scale = c.parameterize.scale;
+    Ok((dag, GraphMatchingScore { nodes, scale }))
 }
 
 /// The region must fit the exemplar: checked from the image header, before any node runs. An

@@ -12,13 +12,15 @@
 //! the automatic scale), so a new exemplar of the same size reruns it cheaply and, by early
 //! cutoff, nothing downstream on its account.
 
-use super::{MethodError, import};
+use super::{Method, MethodError, Planned, import};
 use crate::artifact::Bundle;
 use crate::artifact::jump_maps::{OrientationField, TexelAddresses};
 use crate::config::Config;
 use crate::geom::Mesh;
 use crate::image::{Image, ImageView};
 use crate::pipeline::{Dag, FileInput, Handle, NodeError, NodeSpec, Stage};
+use crate::score::charts::JumpMapNodes;
+use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::jump_map::{
     JumpMap, JumpMapParams, build_jump_map, check_exemplar_size,
 };
@@ -71,7 +73,27 @@ pub struct Inputs {
     pub maps: BTreeMap<String, PathBuf>,
 }
 
-pub fn build(config: &Config) -> Result<Dag, MethodError> {
+/// The `jump_maps` method.
+pub struct JumpMaps;
+
+impl Method for JumpMaps {
+    fn name(&self) -> &'static str {
+        "jump_maps"
+    }
+
+    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
+        let (dag, nodes) = build(config)?;
+        Ok((dag, Box::new(nodes)))
+    }
+}
+
+impl Planned for JumpMapNodes {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        crate::score::charts::jump_maps(run, self)
+    }
+}
+
+fn build(config: &Config) -> Result<(Dag, JumpMapNodes), MethodError> {
     let c: JumpMapsConfig = config.parse()?;
     config.check("analyse_exemplar", c.analyse_exemplar.validate())?;
     config.check("field", c.field.validate())?;
@@ -204,7 +226,13 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             })?))
         },
     );
-    Ok(dag)
+    let nodes = JumpMapNodes {
+        mesh,
+        parameterize: param,
+        synthesize: walk,
+        exemplar,
+    };
+    Ok((dag, nodes))
 }
 
 /// The jump map of an exemplar (analyse-exemplar, §2 of the 2002 paper); `synth2d` uses the

@@ -1,4 +1,11 @@
-//! Methods: each expands its config section into a DAG of pipeline nodes (DESIGN.md, "A run").
+//! Methods: each expands its config into a DAG of pipeline nodes (DESIGN.md, "A run").
+//!
+//! A method is one type implementing [`Method`]: the name configs give it, its config schema
+//! (one serde struct per section, parsed and validated once, in [`Method::plan`]) and the DAG
+//! it wires from the stages' nodes. What it keeps for after the run, the typed handles of the
+//! nodes its score reads, is its [`Planned`]. Every caller (the CLI, score, sweeps, packs, the
+//! benchmarks and tests) finds methods through the registry here ([`find`], [`plan`]); a
+//! library user adds one with [`register`].
 
 pub mod feature_aligned;
 pub mod geometry_images;
@@ -9,18 +16,84 @@ pub mod synth2d;
 
 use crate::artifact::Format;
 use crate::config::{Config, ConfigError};
-use crate::pipeline::{Dag, Handle, NodeError, NodeSpec, Stage};
+use crate::pipeline::{Dag, Handle, NodeError, NodeSpec, RunResult, Stage};
+use crate::score::{Item, Report, ScoreFailure, ScoreSection};
 use std::path::{Path, PathBuf};
+use std::sync::RwLock;
 
-/// The methods a config may name.
-pub const METHODS: &[&str] = &[
-    "jump_maps",
-    "synth2d",
-    "geometry_images",
-    "solid",
-    "graph_matching",
-    "feature_aligned",
+/// One published method.
+pub trait Method: Send + Sync + 'static {
+    /// The name a config gives it (`method = "…"`).
+    fn name(&self) -> &'static str;
+    /// Parses and validates the config's sections (the config comes without `[score]`),
+    /// refuses parameters over the memory budget, and wires the DAG.
+    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError>;
+}
+
+/// What a planned method keeps for after its run.
+pub trait Planned: Send + Sync {
+    /// Scores the run's results against their exemplars (README, "Scoring"), reading the
+    /// nodes it kept handles to. An output with no exemplar-aligned image goes to
+    /// `not_scored` with the reason.
+    fn score(
+        &self,
+        run: &crate::score::Run<'_>,
+        not_scored: &mut Vec<String>,
+    ) -> Result<Vec<Item>, ScoreFailure>;
+
+    /// For a run with nothing to score as it is (a solid's surface request): the `--set`
+    /// that asks for a scoreable variant, which `texsyn score` runs and scores instead.
+    fn score_substitute(&self, _result: &RunResult) -> Option<String> {
+        None
+    }
+}
+
+/// The methods texsyn ships.
+static BUILT_IN: [&dyn Method; 6] = [
+    &jump_maps::JumpMaps,
+    &synth2d::Synth2d,
+    &geometry_images::GeometryImages,
+    &solid::Solid,
+    &graph_matching::GraphMatchingMethod,
+    &feature_aligned::FeatureAligned,
 ];
+
+/// Methods added at run time by a library user.
+static REGISTERED: RwLock<Vec<&'static dyn Method>> = RwLock::new(Vec::new());
+
+/// Adds a method that configs can then name; a name already taken is refused.
+pub fn register(method: &'static dyn Method) -> Result<(), MethodError> {
+    let mut registered = REGISTERED.write().unwrap_or_else(|e| e.into_inner());
+    if BUILT_IN
+        .iter()
+        .chain(registered.iter())
+        .any(|m| m.name() == method.name())
+    {
+        return Err(MethodError::Taken(method.name()));
+    }
+    registered.push(method);
+    Ok(())
+}
+
+/// The method a config names.
+pub fn find(name: &str) -> Option<&'static dyn Method> {
+    let registered = REGISTERED.read().unwrap_or_else(|e| e.into_inner());
+    BUILT_IN
+        .iter()
+        .chain(registered.iter())
+        .find(|m| m.name() == name)
+        .copied()
+}
+
+/// The names of every method, built in first.
+pub fn names() -> Vec<&'static str> {
+    let registered = REGISTERED.read().unwrap_or_else(|e| e.into_inner());
+    BUILT_IN
+        .iter()
+        .chain(registered.iter())
+        .map(|m| m.name())
+        .collect()
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum MethodError {
@@ -34,53 +107,73 @@ pub enum MethodError {
         method: String,
         known: String,
     },
+    #[error("a method named {0:?} is registered already")]
+    Taken(&'static str),
 }
 
-/// A config turned into work: the DAG and the nodes whose bundles are the run's outputs.
+/// A config turned into work: the DAG, and what the method keeps for after the run.
 pub struct Plan {
     pub dag: Dag,
     /// The config's `method`.
     pub method: String,
     /// The config's `[score]` section, when it has one (validated).
-    pub score: Option<crate::score::ScoreSection>,
+    pub score: Option<ScoreSection>,
     /// Default output directory (`out/<config stem>`), used unless `--out` is given.
     pub default_out: PathBuf,
+    /// The config the method planned from (without `[score]`).
+    config: Config,
+    planned: Box<dyn Planned>,
+}
+
+impl Plan {
+    /// Scores a run of this plan (its `result`) with `section`'s parameters.
+    pub fn score_run(
+        &self,
+        result: &RunResult,
+        section: &ScoreSection,
+    ) -> Result<Report, ScoreFailure> {
+        crate::score::report(&self.config, &self.method, section, |params, not_scored| {
+            let run = crate::score::Run {
+                config: &self.config,
+                result,
+                params: params.clone(),
+            };
+            self.planned.score(&run, not_scored)
+        })
+    }
+
+    /// See [`Planned::score_substitute`].
+    pub fn score_substitute(&self, result: &RunResult) -> Option<String> {
+        self.planned.score_substitute(result)
+    }
+
+    /// Whether some of its work can be split among machines (`--shard`).
+    pub fn splits_into_shards(&self) -> bool {
+        self.dag.nodes.iter().any(|n| n.splits_into_shards())
+    }
 }
 
 pub fn plan(config: &Config) -> Result<Plan, MethodError> {
-    let method = config.method()?.to_owned();
+    let name = config.method()?.to_owned();
     // `[score]` reads the run's artifacts after it and never reaches a node, so it is taken
     // out before the method parses its sections (and adding it changes no key).
-    let score = crate::score::ScoreSection::from_config(config)?;
-    let config = &without_score(config);
-    let dag = match method.as_str() {
-        "jump_maps" => jump_maps::build(config)?,
-        "synth2d" => synth2d::build(config)?,
-        "geometry_images" => geometry_images::build(config)?,
-        "solid" => solid::build(config)?,
-        "graph_matching" => graph_matching::build(config)?,
-        "feature_aligned" => feature_aligned::build(config)?,
-        other => {
-            return Err(MethodError::UnknownMethod {
-                path: config.path.clone(),
-                method: other.to_owned(),
-                known: METHODS.join(", "),
-            });
-        }
-    };
+    let score = ScoreSection::from_config(config)?;
+    let mut without_score = config.clone();
+    without_score.table.remove("score");
+    let method = find(&name).ok_or_else(|| MethodError::UnknownMethod {
+        path: config.path.clone(),
+        method: name.clone(),
+        known: names().join(", "),
+    })?;
+    let (dag, planned) = method.plan(&without_score)?;
     Ok(Plan {
         dag,
-        method,
+        method: name,
         score,
         default_out: Path::new("out").join(&config.stem),
+        config: without_score,
+        planned,
     })
-}
-
-/// The config without its `[score]` section: what a method parses.
-pub fn without_score(config: &Config) -> Config {
-    let mut c = config.clone();
-    c.table.remove("score");
-    c
 }
 
 /// A format that an input file is read into by an `import` node.

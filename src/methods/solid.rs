@@ -17,16 +17,19 @@
 //! gets the paper's settings. The field's grid covers the volume's box, so the field node's
 //! key holds `parameterize.margin` too.
 
-use super::{Imports, MethodError, import};
+use super::{Imports, Method, MethodError, Planned, import};
 use crate::artifact::Bundle;
 use crate::artifact::solid::SolidSamples;
 use crate::check::ParamError;
 use crate::config::Config;
 use crate::geom::Mesh;
 use crate::image::Image;
+use crate::pipeline::RunResult;
 use crate::pipeline::Stage::{AnalyseExemplar, Field, Parameterize, Reconstruct, Synthesize};
 use crate::pipeline::shard::{self, ShardMode};
 use crate::pipeline::{Dag, Handle, Keyed, NodeError, NodeSpec, PieceStore, WithTail};
+use crate::score::solid::{PlaneExemplar, SolidNodes, SolidSetup};
+use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::candidate_triples::{self as triples, SolidAnalysis};
 use crate::stages::field::quaternion_field::{self as sketch, RotationField};
 use crate::stages::parameterize::volume_embedding as volume;
@@ -110,7 +113,56 @@ pub enum ExemplarSpec {
     },
 }
 
-pub fn build(config: &Config) -> Result<Dag, MethodError> {
+/// The `solid` method.
+pub struct Solid;
+
+impl Method for Solid {
+    fn name(&self) -> &'static str {
+        "solid"
+    }
+
+    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
+        let (dag, planned) = build(config)?;
+        Ok((dag, Box::new(planned)))
+    }
+}
+
+/// What the solid's score reads: its nodes and the request and exemplars of its config.
+struct SolidScore {
+    nodes: SolidNodes,
+    setup: SolidSetup,
+}
+
+impl Planned for SolidScore {
+    fn score(
+        &self,
+        run: &Run<'_>,
+        not_scored: &mut Vec<String>,
+    ) -> Result<Vec<Item>, ScoreFailure> {
+        crate::score::solid::solid(run, &self.nodes, &self.setup, not_scored)
+    }
+
+    fn score_substitute(&self, result: &RunResult) -> Option<String> {
+        crate::score::solid::substitute_section(result, &self.nodes, &self.setup.request)
+    }
+}
+
+impl ExemplarSpec {
+    fn plane(&self) -> PlaneExemplar {
+        match self {
+            ExemplarSpec::Path(p) => PlaneExemplar {
+                path: p.clone(),
+                transpose: false,
+            },
+            ExemplarSpec::Spec { path, transpose } => PlaneExemplar {
+                path: path.clone(),
+                transpose: *transpose,
+            },
+        }
+    }
+}
+
+fn build(config: &Config) -> Result<(Dag, SolidScore), MethodError> {
     let mut c: SolidConfig = config.parse()?;
     let param = |e: ParamError| MethodError::from(config.param(e));
     let given = ["analyse_exemplar", "synthesize"].map(|t| config.gives(t, "levels"));
@@ -186,7 +238,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
         let name = format!("synthesize.region{}", k + 1);
         pairs.push((synthesis(&mut dag, name, a, Some(k as u8)), a));
     }
-    dag.node(
+    let reconstruct = dag.node(
         NodeSpec::new(Reconstruct, "solid_colour", RECONSTRUCT_VERSION),
         ReconstructParams {
             export: c.reconstruct.clone(),
@@ -206,7 +258,18 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             Ok(Bundle::from(files.map_err(NodeError::input)?))
         },
     );
-    Ok(dag)
+    let i = &c.inputs;
+    let setup = SolidSetup {
+        request: c.parameterize.request.clone(),
+        xy: i.xy.as_ref().map(ExemplarSpec::plane),
+        yz: i.yz.as_ref().map(ExemplarSpec::plane),
+        zx: i.zx.as_ref().map(ExemplarSpec::plane),
+        exemplar: i.exemplar.as_ref().map(ExemplarSpec::plane),
+        regions: c.regions.len(),
+        sketched: !c.field.curves.is_empty() || c.field.curves_file.is_some(),
+    };
+    let nodes = SolidNodes { mesh, reconstruct };
+    Ok((dag, SolidScore { nodes, setup }))
 }
 
 /// The candidate-triple analysis of one exemplar set: `[exemplar, xy, yz, zx]` of the config

@@ -7,13 +7,14 @@
 //! ```
 
 use super::jump_maps::add_jump_map;
-use super::{MethodError, import};
+use super::{Method, MethodError, Planned, import};
 use crate::artifact::Bundle;
 use crate::artifact::jump_maps::AddressImage;
 use crate::check::{ParamError, check_range};
 use crate::config::Config;
 use crate::image::Image;
-use crate::pipeline::{Dag, NodeSpec, Stage};
+use crate::pipeline::{Dag, Handle, NodeSpec, Stage};
+use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::jump_map::JumpMapParams;
 use crate::stages::reconstruct::blend2d::render_2d;
 use crate::stages::reconstruct::textured_export::encode_png;
@@ -113,7 +114,37 @@ impl SynthSection {
     }
 }
 
-pub fn build(config: &Config) -> Result<Dag, MethodError> {
+/// The `synth2d` method.
+pub struct Synth2d;
+
+impl Method for Synth2d {
+    fn name(&self) -> &'static str {
+        "synth2d"
+    }
+
+    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
+        let (dag, nodes) = build(config)?;
+        Ok((dag, Box::new(nodes)))
+    }
+}
+
+/// The nodes `synth2d`'s score reads.
+struct Synth2dNodes {
+    reconstruct: Handle<Bundle>,
+    exemplar: Handle<Image>,
+}
+
+impl Planned for Synth2dNodes {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        Ok(vec![crate::score::synth2d(
+            run,
+            self.reconstruct,
+            self.exemplar,
+        )?])
+    }
+}
+
+fn build(config: &Config) -> Result<(Dag, Synth2dNodes), MethodError> {
     let c: Synth2dConfig = config.parse()?;
     config.check("analyse_exemplar", c.analyse_exemplar.validate())?;
     config.check("synthesize", c.synthesize.validate())?;
@@ -149,7 +180,7 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             })
         },
     );
-    dag.node(
+    let reconstruct = dag.node(
         NodeSpec::new(Stage::Reconstruct, "blend_2d", RENDER_VERSION),
         c.reconstruct.clone(),
         (synth, exemplar),
@@ -177,5 +208,11 @@ pub fn build(config: &Config) -> Result<Dag, MethodError> {
             ]))
         },
     );
-    Ok(dag)
+    Ok((
+        dag,
+        Synth2dNodes {
+            reconstruct,
+            exemplar,
+        },
+    ))
 }

@@ -23,6 +23,7 @@ use super::{Item, Run, ScoreFailure};
 use crate::artifact::jump_maps::{JumpParameterization, TexelAddresses};
 use crate::geom::Mesh;
 use crate::image::{Image, ImageView};
+use crate::pipeline::Handle;
 use crate::random::{counter_hash, counter_unit};
 use crate::stages::parameterize::jump_parameterization::ParamParts;
 use crate::stages::reconstruct::jump_blend::{BlendShader, corner_sets, random_base_set};
@@ -40,11 +41,20 @@ const SEAM_SAMPLES: usize = 8;
 const STREAM_SEAM_X: u64 = 0x5ea0_0001;
 const STREAM_SEAM_Y: u64 = 0x5ea0_0002;
 
-pub(crate) fn jump_maps(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
-    let mesh = run.view::<Mesh>("import.mesh")?;
-    let param = run.view::<JumpParameterization>("parameterize")?;
-    let walk = run.view::<TexelAddresses>("synthesize")?;
-    let ex = run.view::<Image>("import.exemplar")?;
+/// The nodes of a jump-map run that its score reads.
+#[derive(Clone, Copy)]
+pub struct JumpMapNodes {
+    pub mesh: Handle<Mesh>,
+    pub parameterize: Handle<JumpParameterization>,
+    pub synthesize: Handle<TexelAddresses>,
+    pub exemplar: Handle<Image>,
+}
+
+pub fn jump_maps(run: &Run, nodes: &JumpMapNodes) -> Result<Vec<Item>, ScoreFailure> {
+    let mesh = run.view(nodes.mesh)?;
+    let param = run.view(nodes.parameterize)?;
+    let walk = run.view(nodes.synthesize)?;
+    let ex = run.view(nodes.exemplar)?;
     let sets = corner_sets(&mesh.triangles, &param, walk.addresses)
         .map_err(|e| ScoreFailure::new(format!("internal error: {e}")))?;
     let single = random_base_set(&sets);

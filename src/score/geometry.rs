@@ -18,15 +18,16 @@
 
 use super::relief_frame::{LayoutCopy, floor_along_maps, score_along_maps};
 use super::{Item, Run, ScoreFailure};
+use crate::artifact::Bundle;
 use crate::geom::Mesh;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::image::Image;
-use crate::methods::geometry_images::GeometryImagesConfig;
+use crate::pipeline::Handle;
 use crate::stages::analyse_exemplar::texel_variants::{TexelVariants, TexelVariantsRef};
 use crate::stages::field::param_field::ParamField;
 use crate::stages::reconstruct::displacement::grid_mesh;
 use crate::stages::synthesize::geometry_texture::{
-    TexelControls, sample_frame_maps, texel_controls,
+    GeometrySynthParams, TexelControls, sample_frame_maps, texel_controls,
 };
 use crate::stages::synthesize::surface_metric::{MAX_STRETCH, surface_metrics};
 use std::collections::HashMap;
@@ -36,13 +37,26 @@ use texsyn_core::math::PureMath;
 /// The texel channel holding the height (`dn`).
 const HEIGHT: usize = 2;
 
-pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
-    let c: GeometryImagesConfig = run
-        .config
-        .parse()
-        .map_err(|e| ScoreFailure::new(e.to_string()))?;
-    let texels = run.view::<TexelImage>("synthesize")?;
-    let variants = run.view::<TexelVariants>("analyse_exemplar")?;
+/// The nodes of a geometry-image run that its score reads.
+#[derive(Clone, Copy)]
+pub struct GeometryImageNodes {
+    pub parameterize: Handle<GeometryImage>,
+    pub analyse_exemplar: Handle<TexelVariants>,
+    pub field: Handle<ParamField>,
+    pub synthesize: Handle<TexelImage>,
+    pub reconstruct: Handle<Bundle>,
+}
+
+/// Scores the relief and the mesh; `synth` is the run's synthesis parameters and
+/// `density_offset` its field's (`field.density_offset`).
+pub fn geometry_images(
+    run: &Run,
+    nodes: &GeometryImageNodes,
+    synth: &GeometrySynthParams,
+    density_offset: f32,
+) -> Result<Vec<Item>, ScoreFailure> {
+    let texels = run.view(nodes.synthesize)?;
+    let variants = run.view(nodes.analyse_exemplar)?;
     let v = variants.variant(variants.params().middle_scale(), 0);
     let reference = variants.level(v, 0);
     let ref_channels = variants.channels();
@@ -75,10 +89,10 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
         "the sample's relief at the reference scale, unrotated",
     );
     run.score_into(&mut item, out_img.view(), None, reference_img.view())?;
-    let offset = c.field.density_offset;
+    let offset = density_offset;
     // The grid row and the mesh checks do not depend on the surface row: if that one cannot
     // be made (whatever the reason), they still stand, with a note saying why it is missing.
-    let frame = surface_item(run, &c, &variants, &out_img, &grey, offset)
+    let frame = surface_item(run, nodes, synth, &variants, &out_img, &grey, offset)
         .map_err(|e| {
             item.notes.push(format!(
                 "the relief along the surface could not be scored: {e}"
@@ -95,8 +109,8 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
         ));
     }
 
-    let gi = run.view::<GeometryImage>("parameterize")?;
-    let bytes = run.file("reconstruct", "relief.obj")?;
+    let gi = run.view(nodes.parameterize)?;
+    let bytes = run.file(nodes.reconstruct, "relief.obj")?;
     let relief = crate::geom::io::read_mesh_bytes(Path::new("relief.obj"), &bytes)
         .map_err(|e| ScoreFailure::new(format!("reading relief.obj: {e}")))?;
     let (base, _) = grid_mesh(&gi, &gi.positions);
@@ -123,20 +137,21 @@ pub(crate) fn geometry_images(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
 /// can hold, so they are compared with those).
 fn surface_item(
     run: &Run,
-    c: &GeometryImagesConfig,
+    nodes: &GeometryImageNodes,
+    synth: &GeometrySynthParams,
     variants: &TexelVariantsRef<'_>,
     out_img: &Image,
     grey: &dyn Fn(u32, u32, &[f32]) -> Image,
     offset: f32,
 ) -> Result<Item, ScoreFailure> {
-    let gi = run.view::<GeometryImage>("parameterize")?;
-    let field = run.view::<ParamField>("field")?;
+    let gi = run.view(nodes.parameterize)?;
+    let field = run.view(nodes.field)?;
     if field.dir.len() != gi.positions.len() || gi.positions.len() != out_img.pixels.len() {
         return Err(ScoreFailure::new(
             "the field, geometry image and synthesized relief disagree on the sample count",
         ));
     }
-    let controls = texel_controls(&gi, &field, variants.params(), &c.synthesize);
+    let controls = texel_controls(&gi, &field, variants.params(), synth);
     let mut by_scale = controls.scale.clone();
     by_scale.sort_unstable_by(f32::total_cmp);
     let median = by_scale.get(by_scale.len() / 2).copied().unwrap_or(0.0);
@@ -183,7 +198,7 @@ fn surface_item(
             let grid = (out_img.width, out_img.height);
             floor_item(
                 &mut item,
-                c,
+                synth,
                 &controls,
                 variants,
                 size,
@@ -238,7 +253,7 @@ fn surface_item(
 #[allow(clippy::too_many_arguments)]
 fn floor_item(
     item: &mut Item,
-    c: &GeometryImagesConfig,
+    synth: &GeometrySynthParams,
     controls: &TexelControls,
     variants: &TexelVariantsRef<'_>,
     size: f32,
@@ -247,7 +262,7 @@ fn floor_item(
     reference_img: &Image,
     run: &Run,
 ) {
-    let subtexel = c.synthesize.subtexel && c.synthesize.anisotropic;
+    let subtexel = synth.subtexel && synth.anisotropic;
     let copy = if subtexel {
         LayoutCopy::Bilinear
     } else {

@@ -1,5 +1,5 @@
-//! `texsyn score`: nearest-patch quality numbers of a run's results against their exemplars
-//! (issue 12), read from the run's cached artifacts after the run.
+//! `texsyn score`: nearest-patch quality numbers of a run's results against their exemplars,
+//! read from the run's cached artifacts after the run.
 //!
 //! The measures are [`crate::image::patch_score`]'s (see there and the README's "Scoring"):
 //! the mean RMS distance of each output `p × p` patch to its exact nearest exemplar patch,
@@ -11,6 +11,9 @@
 //! [`surface`] (graph matching and feature-aligned texturing: vertex colours on discs
 //! unfolded along the field). Outputs with no exemplar-aligned image (a solid's surface
 //! request) are listed with the reason in [`Report::not_scored`].
+//!
+//! Each method's score hook (`methods::Planned::score`) calls the function for its outputs
+//! here with the typed handles of the nodes it reads; this floor knows no method.
 //!
 //! `[score]` never reaches a node: it is taken out of the config before the method builds
 //! its DAG, so adding it changes no key and no lock file.
@@ -26,8 +29,7 @@ use crate::check::{ParamError, check_range};
 use crate::config::{Config, ConfigError};
 use crate::image::patch_score::{PatchScore, ScoreParams, patch_score_masked};
 use crate::image::{Image, ImageView};
-use crate::methods::Plan;
-use crate::pipeline::RunResult;
+use crate::pipeline::{Handle, RunResult};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -122,7 +124,7 @@ pub struct Item {
 }
 
 impl Item {
-    fn new(output: impl Into<String>, exemplar: impl Into<String>) -> Self {
+    pub fn new(output: impl Into<String>, exemplar: impl Into<String>) -> Self {
         Item {
             output: output.into(),
             exemplar: exemplar.into(),
@@ -148,38 +150,19 @@ pub struct Report {
     pub seconds: f64,
 }
 
-/// Scores a run of `config` (planned as `plan`, run into `result`) with `section`'s
-/// parameters.
-pub fn score_run(
+/// Scores one run: the items of a method's score hook, with the section's parameters.
+pub fn report(
     config: &Config,
-    plan: &Plan,
-    result: &RunResult,
+    method: &str,
     section: &ScoreSection,
+    score: impl FnOnce(&ScoreParams, &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure>,
 ) -> Result<Report, ScoreFailure> {
     let start = std::time::Instant::now();
-    let run = Run {
-        config: crate::methods::without_score(config),
-        plan,
-        result,
-        params: section.params(),
-    };
     let mut not_scored = Vec::new();
-    let items = match plan.method.as_str() {
-        "synth2d" => vec![synth2d(&run)?],
-        "jump_maps" => charts::jump_maps(&run)?,
-        "geometry_images" => geometry::geometry_images(&run)?,
-        "solid" => solid::solid(&run, &mut not_scored)?,
-        "graph_matching" => vec![surface::graph_matching(&run)?],
-        "feature_aligned" => surface::feature_aligned(&run)?,
-        other => {
-            return Err(ScoreFailure::new(format!(
-                "method {other:?} has no scoring"
-            )));
-        }
-    };
+    let items = score(&section.params(), &mut not_scored)?;
     Ok(Report {
         config: config.path.display().to_string(),
-        method: plan.method.clone(),
+        method: method.to_owned(),
         patch: section.patch,
         max_queries: section.max_queries,
         seed: section.seed,
@@ -189,30 +172,25 @@ pub fn score_run(
     })
 }
 
-/// What a method's scoring reads: its config (without `[score]`), its DAG and artifacts.
-pub(crate) struct Run<'a> {
-    pub config: Config,
-    pub plan: &'a Plan,
+/// What a method's score hook reads: its config (for paths relative to it), the run's
+/// artifacts through the typed handles its plan kept, and the scoring parameters.
+pub struct Run<'a> {
+    pub config: &'a Config,
     pub result: &'a RunResult,
     pub params: ScoreParams,
 }
 
 impl<'a> Run<'a> {
-    /// The artifact of node `name`, viewed as `F`.
-    pub fn view<F: Format>(&self, name: &str) -> Result<F::View<'a>, ScoreFailure> {
-        let i = self.plan.dag.node_index(name).ok_or_else(|| {
-            ScoreFailure::new(format!(
-                "internal error: the {} DAG has no node {name:?}",
-                self.plan.method
-            ))
-        })?;
-        F::view(&self.result.artifacts[i])
-            .map_err(|e| ScoreFailure::new(format!("reading {name}'s artifact: {e}")))
+    /// The artifact of the node behind `node`, viewed as `F`.
+    pub fn view<F: Format>(&self, node: Handle<F>) -> Result<F::View<'a>, ScoreFailure> {
+        let report = &self.result.reports[node.index()];
+        F::view(&self.result.artifacts[node.index()])
+            .map_err(|e| ScoreFailure::new(format!("reading {}'s artifact: {e}", report.node)))
     }
 
     /// One file of node `node`'s output bundle.
-    pub fn file(&self, node: &str, file: &str) -> Result<Vec<u8>, ScoreFailure> {
-        let bundle = self.view::<Bundle>(node)?;
+    pub fn file(&self, node: Handle<Bundle>, file: &str) -> Result<Vec<u8>, ScoreFailure> {
+        let bundle = self.view(node)?;
         let entry = bundle
             .entries
             .iter()
@@ -227,7 +205,7 @@ impl<'a> Run<'a> {
     }
 
     /// An output image file of node `node`, decoded.
-    pub fn image(&self, node: &str, file: &str) -> Result<Image, ScoreFailure> {
+    pub fn image(&self, node: Handle<Bundle>, file: &str) -> Result<Image, ScoreFailure> {
         let bytes = self.file(node, file)?;
         crate::image::decode_image(Path::new(file), &bytes)
             .map_err(|e| ScoreFailure::new(format!("decoding {file}: {e}")))
@@ -288,9 +266,13 @@ impl<'a> Run<'a> {
 }
 
 /// `synth2d`: the blended image against the exemplar.
-fn synth2d(run: &Run) -> Result<Item, ScoreFailure> {
-    let out = run.image("reconstruct", "synthesized.png")?;
-    let ex = run.view::<Image>("import.exemplar")?;
+pub fn synth2d(
+    run: &Run,
+    out: Handle<Bundle>,
+    exemplar: Handle<Image>,
+) -> Result<Item, ScoreFailure> {
+    let out = run.image(out, "synthesized.png")?;
+    let ex = run.view(exemplar)?;
     let mut item = Item::new("synthesized.png", "inputs.exemplar");
     run.score_into(&mut item, out.view(), None, ex)?;
     Ok(item)

@@ -16,26 +16,58 @@
 //! than the synthesis is; region exemplars (`[[regions]]`) are not told apart.
 
 use super::{Item, Run, ScoreFailure};
+use crate::artifact::Bundle;
+use crate::geom::Mesh;
 use crate::image::Image;
-use crate::methods::solid::{ExemplarSpec, SolidConfig};
+use crate::pipeline::Handle;
 use crate::stages::parameterize::volume_embedding::Request;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// `section.png`'s colour where no voxel was synthesized (solid_colour.rs).
 const BACKGROUND: [u8; 3] = [235, 236, 240];
 
-pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
-    let c: SolidConfig = run
-        .config
-        .parse()
-        .map_err(|e| ScoreFailure::new(e.to_string()))?;
+/// The nodes of a solid run that its score reads.
+#[derive(Clone, Copy)]
+pub struct SolidNodes {
+    pub mesh: Handle<Mesh>,
+    pub reconstruct: Handle<Bundle>,
+}
+
+/// An exemplar image of a plane, as the config names it (relative to the config).
+#[derive(Clone, Debug)]
+pub struct PlaneExemplar {
+    pub path: PathBuf,
+    pub transpose: bool,
+}
+
+/// What of a solid run's config its score reads.
+#[derive(Clone, Debug)]
+pub struct SolidSetup {
+    pub request: Request,
+    /// `inputs.xy`, `inputs.yz`, `inputs.zx`; `inputs.exemplar` stands in for a missing one.
+    pub xy: Option<PlaneExemplar>,
+    pub yz: Option<PlaneExemplar>,
+    pub zx: Option<PlaneExemplar>,
+    pub exemplar: Option<PlaneExemplar>,
+    /// How many `[[regions]]` the config has.
+    pub regions: usize,
+    /// Whether the rotation field follows sketched curves.
+    pub sketched: bool,
+}
+
+pub fn solid(
+    run: &Run,
+    nodes: &SolidNodes,
+    c: &SolidSetup,
+    not_scored: &mut Vec<String>,
+) -> Result<Vec<Item>, ScoreFailure> {
     // How the written image lies against its exemplar (see `PlaneFrame`).
     let mut frame = PlaneFrame {
         flip_rows: true,
         transpose: false,
         flip_columns: false,
     };
-    let (file, plane) = match c.parameterize.request {
+    let (file, plane) = match c.request {
         Request::Surface => {
             not_scored.push(
                 "solid surface request: the solid is synthesized only where the surface passes, \
@@ -70,13 +102,13 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         Request::Box { .. } => ("volume_middle_slice.png", "xy"),
     };
     let spec = match plane {
-        "xy" => c.inputs.xy.as_ref(),
-        "yz" => c.inputs.yz.as_ref(),
-        _ => c.inputs.zx.as_ref(),
+        "xy" => c.xy.as_ref(),
+        "yz" => c.yz.as_ref(),
+        _ => c.zx.as_ref(),
     };
     let (spec, key) = match spec {
         Some(s) => (s, format!("inputs.{plane}")),
-        None => match c.inputs.exemplar.as_ref() {
+        None => match c.exemplar.as_ref() {
             Some(s) => (s, "inputs.exemplar".to_owned()),
             None => {
                 not_scored.push(format!("solid {file}: no exemplar for the {plane} plane"));
@@ -85,7 +117,7 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         },
     };
     let exemplar = load_exemplar(run, spec, &key)?;
-    let out = frame.apply(&run.image("reconstruct", file)?);
+    let out = frame.apply(&run.image(nodes.reconstruct, file)?);
     let mask: Vec<bool> = out
         .pixels
         .iter()
@@ -96,14 +128,14 @@ pub(crate) fn solid(run: &Run, not_scored: &mut Vec<String>) -> Result<Vec<Item>
         .collect();
     let mut item = Item::new(file, key);
     run.score_into(&mut item, out.view(), Some(&mask), exemplar.view())?;
-    if !c.regions.is_empty() {
+    if c.regions > 0 {
         item.notes.push(format!(
             "the config has {} [[regions]] with exemplars of their own: their voxels in the \
              section are scored against the base exemplar too, and far from it",
-            c.regions.len()
+            c.regions
         ));
     }
-    if !c.field.curves.is_empty() || c.field.curves_file.is_some() {
+    if c.sketched {
         item.notes.push(
             "the rotation field follows sketched curves: where it turns the solid, this \
              world-axis section is not along the exemplar plane"
@@ -147,25 +179,21 @@ impl PlaneFrame {
     }
 }
 
-/// For a solid config whose request is the surface: the `--set` that asks for a section
+/// For a solid run whose request is the surface: the `--set` that asks for a section
 /// instead, through the centre of the mesh's bounding box with normal z (the `xy` exemplar's
 /// plane), which cuts the mesh whatever its shape. `texsyn score` runs that (the bricks the
 /// two requests share are reused from the cache) and scores its `section.png`. `None` for
-/// other methods and requests.
+/// other requests.
 pub fn substitute_section(
-    plan: &crate::methods::Plan,
     result: &crate::pipeline::RunResult,
-    config: &crate::config::Config,
+    nodes: &SolidNodes,
+    request: &Request,
 ) -> Option<String> {
-    if plan.method != "solid" {
+    if *request != Request::Surface {
         return None;
     }
-    let c: SolidConfig = crate::methods::without_score(config).parse().ok()?;
-    if c.parameterize.request != Request::Surface {
-        return None;
-    }
-    let i = plan.dag.node_index("import.mesh")?;
-    let mesh = <crate::geom::Mesh as crate::artifact::Format>::view(&result.artifacts[i]).ok()?;
+    let mesh =
+        <Mesh as crate::artifact::Format>::view(&result.artifacts[nodes.mesh.index()]).ok()?;
     let (lo, hi) = mesh.bounds();
     let m = (lo + hi) * 0.5;
     Some(format!(
@@ -175,12 +203,9 @@ pub fn substitute_section(
 }
 
 /// The exemplar image a spec names, transposed when it says so.
-fn load_exemplar(run: &Run, spec: &ExemplarSpec, key: &str) -> Result<Image, ScoreFailure> {
-    let (path, transpose) = match spec {
-        ExemplarSpec::Path(p) => (p, false),
-        ExemplarSpec::Spec { path, transpose } => (path, *transpose),
-    };
-    let path = run.config.resolve(path);
+fn load_exemplar(run: &Run, spec: &PlaneExemplar, key: &str) -> Result<Image, ScoreFailure> {
+    let transpose = spec.transpose;
+    let path = run.config.resolve(&spec.path);
     let bytes = std::fs::read(&path)
         .map_err(|e| ScoreFailure::new(format!("{} ({key}): {e}", path.display())))?;
     let img = crate::image::decode_image(Path::new(&path), &bytes)

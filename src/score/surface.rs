@@ -28,8 +28,7 @@ use super::{Item, Run, ScoreFailure};
 use crate::artifact::feature_aligned::OrientedField;
 use crate::geom::edge_refine::Refined;
 use crate::image::Image;
-use crate::methods::feature_aligned::{FeatureAlignedConfig, carry_field};
-use crate::methods::graph_matching::GraphMatchingConfig;
+use crate::pipeline::Handle;
 use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
 use crate::stages::field::sweep_field::SweepField;
 use crate::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
@@ -38,16 +37,25 @@ use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
 use glam::{Vec2, Vec3};
 use texsyn_core::math::PureMath;
 
-pub(crate) fn graph_matching(run: &Run) -> Result<Item, ScoreFailure> {
-    let c: GraphMatchingConfig = run
-        .config
-        .parse()
-        .map_err(|e| ScoreFailure::new(e.to_string()))?;
-    let scale = c.parameterize.scale;
-    let h = run.view::<Sqrt2Hierarchy>("parameterize")?;
-    let field = run.view::<SweepField>("field")?;
-    let out = run.view::<GraphMatching>("synthesize")?;
-    let ex = run.view::<Image>("import.exemplar")?;
+/// The nodes of a graph-matching run that its score reads.
+#[derive(Clone, Copy)]
+pub struct GraphMatchingNodes {
+    pub parameterize: Handle<Sqrt2Hierarchy>,
+    pub field: Handle<SweepField>,
+    pub synthesize: Handle<GraphMatching>,
+    pub exemplar: Handle<Image>,
+}
+
+/// Graph matching at `scale` texels per unit (`parameterize.scale`).
+pub fn graph_matching(
+    run: &Run,
+    nodes: &GraphMatchingNodes,
+    scale: f32,
+) -> Result<Item, ScoreFailure> {
+    let h = run.view(nodes.parameterize)?;
+    let field = run.view(nodes.field)?;
+    let out = run.view(nodes.synthesize)?;
+    let ex = run.view(nodes.exemplar)?;
     let level = h.level(h.levels() - 1);
     let normals = level.vertex_normals();
     let mesh = level.to_triangles();
@@ -82,18 +90,31 @@ pub(crate) fn graph_matching(run: &Run) -> Result<Item, ScoreFailure> {
 /// `v = n × u`, turned by the texture's principal angle onto exemplar pixel axes, 1 /
 /// `parameterize.scale` object units per texel), for the aligned result and, with `compare`,
 /// the unaligned one.
-pub(crate) fn feature_aligned(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
-    let c: FeatureAlignedConfig = run
-        .config
-        .parse()
-        .map_err(|e| ScoreFailure::new(e.to_string()))?;
-    let scale = c.parameterize.scale;
-    let refined = run.view::<Refined>("parameterize")?;
-    let field = run.view::<OrientedField>("field")?;
-    let tf = run.view::<TextureFeatures>("analyse_exemplar")?;
-    let ex = run.view::<Image>("import.exemplar")?;
-    let vectors = carry_field(&refined, &field.field.vectors)
-        .map_err(|e| ScoreFailure::new(e.to_string()))?;
+/// The nodes of a feature-aligned run that its score reads: `synthesize` holds the aligned
+/// result and, when the run compares, the unaligned one's node besides.
+#[derive(Clone)]
+pub struct FeatureAlignedNodes {
+    pub parameterize: Handle<Refined>,
+    pub field: Handle<OrientedField>,
+    pub analyse_exemplar: Handle<TextureFeatures>,
+    pub exemplar: Handle<Image>,
+    /// Each synthesis scored, with what it is.
+    pub synthesize: Vec<(Handle<SurfaceSynthesis>, &'static str)>,
+}
+
+/// Feature-aligned texturing at `scale` texels per unit (`parameterize.scale`); `carry`
+/// brings the field's vectors from the input mesh onto the refined one, as synthesis did.
+pub fn feature_aligned(
+    run: &Run,
+    nodes: &FeatureAlignedNodes,
+    scale: f32,
+    carry: impl Fn(&Refined, &[Vec3]) -> Result<Vec<Vec3>, String>,
+) -> Result<Vec<Item>, ScoreFailure> {
+    let refined = run.view(nodes.parameterize)?;
+    let field = run.view(nodes.field)?;
+    let tf = run.view(nodes.analyse_exemplar)?;
+    let ex = run.view(nodes.exemplar)?;
+    let vectors = carry(&refined, &field.field.vectors).map_err(ScoreFailure::new)?;
     let mesh = &refined.mesh;
     let normals: Vec<Vec3> = mesh.vertex_normals().to_vec();
     // `frames` gives (u, n × u)… as (up, right) = (u, u × n); texture optimization's second
@@ -108,12 +129,8 @@ pub(crate) fn feature_aligned(run: &Run) -> Result<Vec<Item>, ScoreFailure> {
         at_length(o, d.length() * scale)
     };
     let mut items = Vec::new();
-    let mut names = vec![("synthesize", "the refined mesh's colours")];
-    if c.compare {
-        names.push(("synthesize.unaligned", "the unaligned comparison's colours"));
-    }
-    for (node, what) in names {
-        let out = run.view::<SurfaceSynthesis>(node)?;
+    for &(node, what) in &nodes.synthesize {
+        let out = run.view(node)?;
         if out.colours.len() != mesh.positions.len() {
             return Err(ScoreFailure::new(
                 "internal error: colours and refined mesh disagree on the vertex count",

@@ -31,6 +31,7 @@ mod output_integrity;
 mod pack;
 mod pipeline;
 mod reader_properties;
+mod registry;
 mod render_export;
 mod score;
 mod slurm;

@@ -334,7 +334,7 @@ impl Sweep {
         };
         let config = self.point_config(point).map_err(|e| wrap(Box::new(e)))?;
         let plan = crate::methods::plan(&config).map_err(|e| wrap(Box::new(e)))?;
-        if self.shards.is_some_and(|n| n > 1) && plan.method != "solid" {
+        if self.shards.is_some_and(|n| n > 1) && !plan.splits_into_shards() {
             return Err(wrap(
                 format!(
                     "shards = {}: only a `solid` run can be split into shards (this is {})",
