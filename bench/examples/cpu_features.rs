@@ -1,6 +1,6 @@
 //! Prints the SIMD features the standard library detects at run time, one per line, as
 //! `name yes|no`. `.ci/verify-emulated-cpu` runs it under the emulator to show that the
-//! emulated CPU really hides AVX and FMA from run-time dispatch (issue 14, item 2).
+//! emulated CPU really hides AVX and FMA from run-time dispatch.
 
 fn main() {
     #[cfg(target_arch = "x86_64")]

@@ -1,4 +1,4 @@
-//! The floor of the geometry-image surface row (issue 12 §2): what a *perfect* synthesis
+//! The floor of the geometry-image surface row: what a *perfect* synthesis
 //! would score when its layout is stretched.
 //!
 //! The surface row of `texsyn score` reads the relief image through each texel's map `M`

@@ -1,4 +1,4 @@
-//! Synthesis quality and variant-analysis cost of a `geometry_images` config (issue 12 §2).
+//! Synthesis quality and variant-analysis cost of a `geometry_images` config.
 //!
 //! Runs the config (with `field.density_offset = 0` and any further `--set` overrides) in a
 //! cache directory and prints, for the synthesize node's output, the nearest-patch measures of

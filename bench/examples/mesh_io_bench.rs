@@ -1,4 +1,4 @@
-//! Mesh import and export speed (issue 15, item 2): what the import node does (parse and
+//! Mesh import and export speed: what the import node does (parse and
 //! validate, `<Mesh as Import>::read` on the file's bytes) for ASCII OFF, OBJ, ASCII PLY,
 //! binary PLY and binary STL, and the OBJ and binary PLY writers, on refined_elephant.off
 //! subdivided twice (711,420 vertices, 1,422,848 triangles).

@@ -1,4 +1,4 @@
-//! Issue 15's first goal: jump maps end to end on a 1.4M-triangle mesh (refined_elephant.off
+//! The goals: jump maps end to end on a 1.4M-triangle mesh (refined_elephant.off
 //! subdivided twice, written as ASCII OFF) in under 10 s cold, file to all outputs. Runs
 //! `texsyn run` as a user does (the running binary) in a fresh cache, so the import, every node
 //! and the writing of the outputs are counted; the run report gives the per-node seconds and

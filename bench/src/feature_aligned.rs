@@ -2,7 +2,7 @@
 //! minute for the field of a 400K-triangle model, about 1 s per greedy step (0.33 s in Fig. 4),
 //! 20 minutes of synthesis, on a Core 2 Duo), on the shipped elephant refined by edge splitting
 //! to about 400,000 triangles with its crest lines; and the nearest-patch score of constrained
-//! against unconstrained synthesis on a flat sheet (issue 10's quality goal).
+//! against unconstrained synthesis on a flat sheet.
 
 use super::{Row, time, verdict_below};
 use anyhow::{Context, Result};
@@ -197,7 +197,7 @@ fn quality_row(brick: &Image, rows: &mut Vec<Row>) -> Result<()> {
         ratios.push(r.iter().sum::<f64>() / r.len() as f64);
     }
     rows.push(Row {
-        what: "feature-aligned quality: nearest-patch ratio (issue 9's measure) of a 192² sheet with one straight shape curve, 96² brick.png, mean of seeds 0–2, with vs without the constraint".into(),
+        what: "feature-aligned quality: nearest-patch ratio (`texsyn score`'s measure) of a 192² sheet with one straight shape curve, 96² brick.png, mean of seeds 0–2, with vs without the constraint".into(),
         measured: format!("{:.3} with, {:.3} without", ratios[0], ratios[1]),
         goal: "with ≤ 1.1 × without".into(),
         verdict: verdict_below(ratios[0], 1.1 * ratios[1]),

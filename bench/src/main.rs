@@ -436,7 +436,7 @@ fn rerun_row(runs: usize) -> Result<Row> {
     })
 }
 
-/// Issue 3's goals (Lai et al. 2005 on a Pentium IV 2.4 GHz: 10 s extraction, 2–10 s
+/// The goals (Lai et al. 2005 on a Pentium IV 2.4 GHz: 10 s extraction, 2–10 s
 /// synthesis at 257², 0.6 s reconstruction).
 fn geometry_image_rows(data: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<()> {
     use texsyn::stages::analyse_exemplar::texel_variants::{
@@ -587,7 +587,7 @@ fn density_rerun_row() -> Result<Row> {
     })
 }
 
-/// Issue 4's goals and the paper's Tables 1–2 (Zhang et al. 2011 on 2×4 cores at 2.27 GHz,
+/// The goals and the paper's Tables 1–2 (Zhang et al. 2011 on 2×4 cores at 2.27 GHz,
 /// volumes of 800–1024: 10–25 min for a surface, 10–20 s for a new cut; dual-grid correction
 /// 4× faster with about 80% fewer dependent voxels). Runs on the demo's cow.
 fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
@@ -626,7 +626,7 @@ fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
         verdict: "—".into(),
     });
     // TEXSYN_BENCH_SOLID_RESOLUTION=1024 measures the surface and cut rows at the paper's size
-    // (issue 15); the standard-correction comparison and the tables stay at 512.
+    //; the standard-correction comparison and the tables stay at 512.
     let resolution: u32 = match std::env::var("TEXSYN_BENCH_SOLID_RESOLUTION") {
         Ok(s) => s.parse().with_context(|| {
             format!("TEXSYN_BENCH_SOLID_RESOLUTION = {s:?}: expected a voxel count such as 1024")
@@ -675,7 +675,7 @@ fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
                 surface.len(), emb.dims[0], emb.dims[1], emb.dims[2]
             ),
             measured: format!("{t_dual:.1} s, {peak} (batches per level: {})", batches.join(", ")),
-            goal: "< 180 s and < 2 GB on 2 cores (issue 15)".into(),
+            goal: "< 180 s and < 2 GB on 2 cores".into(),
             verdict: verdict_below(t_dual, 180.0),
         });
         return Ok(String::new());

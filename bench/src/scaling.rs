@@ -1,4 +1,4 @@
-//! How cost grows with size (issue 15, item 5): every method run by `texsyn run` at three sizes,
+//! How cost grows with size: every method run by `texsyn run` at three sizes,
 //! each four times the last (vertices, voxels or texels), from an empty cache each time, with
 //! each stage's wall time and peak memory from the run report and the exponent of a power law
 //! fitted to them, so that a user can predict a bigger run: t(n) ≈ t(n₀)·(n/n₀)^exponent.
@@ -364,7 +364,7 @@ pub fn section(repo: &Path, data: Option<&Path>) -> Result<String> {
     let cores = std::thread::available_parallelism()
         .map(|n| n.get())
         .unwrap_or(1);
-    let mut s = String::from("\n## How cost grows with size (issue 15, item 5)\n\n");
+    let mut s = String::from("\n## How cost grows with size\n\n");
     s += &format!(
         "`TEXSYN_BENCH_ONLY=scaling cargo run --release -p texsyn-bench` ({:.0} s in all here, {cores} \
 cores shared with other jobs). Each method runs as `texsyn run CONFIG --report FILE --set …` at \

@@ -1,4 +1,4 @@
-//! The sweep goals of BENCHMARKS.md (issue 13): the overhead a sweep adds per point, the local
+//! The sweep goals of BENCHMARKS.md: the overhead a sweep adds per point, the local
 //! executor's speedup with one worker per core, and a 100-point seed sweep of the demo with its jump
 //! map computed once. Runs `texsyn sweep` as a user does (the running binary), in temporary
 //! folders.

@@ -1,7 +1,7 @@
 //! Transcendental functions from one pure-Rust implementation (the `libm` crate, a port of
 //! musl's), so a hashed result does not depend on the platform's C library: `f32::sin` and
 //! friends call the system libm, whose last bits differ between glibc versions, musl, macOS and
-//! Windows, and every artifact (previews and atlases included) is hashed. Issue 14, item 1.
+//! Windows, and every artifact (previews and atlases included) is hashed.
 //!
 //! `clippy.toml` disallows the standard methods (`cargo clippy -- -D clippy::disallowed_methods`
 //! in `.ci/run`); call these instead: `x.sin()` becomes `x.sin_pure()`. `sqrt` and `mul_add`

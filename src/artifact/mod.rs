@@ -692,7 +692,7 @@ mod tests {
         ));
     }
 
-    /// Every header field outside the payload hash is checked on open (issue 11, item 1):
+    /// Every header field outside the payload hash is checked on open:
     /// the kind code, the reserved bytes, the metadata length, the payload length.
     #[test]
     fn damaged_header_fields_are_detected_on_open() {
@@ -719,7 +719,7 @@ mod tests {
         assert!(other.expect_kind(Kind::Mesh).is_err());
     }
 
-    /// An object from a machine of the other byte order is refused by name (issue 14, item 5):
+    /// An object from a machine of the other byte order is refused by name:
     /// flipping the mark plays that machine, no big-endian machine needed.
     #[test]
     fn an_object_of_the_other_byte_order_is_refused() {

@@ -1,5 +1,5 @@
 //! Key locks: one process computes a missing key while the others that need it wait for it
-//! and then read it from the cache (issue 13, item 4).
+//! and then read it from the cache.
 //!
 //! The primitive is an exclusive `flock` ([`std::fs::File::lock`]) on a per-key lock file,
 //! `locks/ab/<key>.lock` under the cache root. It is advisory and only orders the writers:

@@ -299,7 +299,7 @@ pub(crate) fn check_memory(
         .map_err(|e| MethodError::Config(config.invalid(key, &e.to_string())))
 }
 
-/// The texel variants of a geometry-image sample of `extract.size`² texels (issue 11, item 9):
+/// The texel variants of a geometry-image sample of `extract.size`² texels:
 /// `orientations × scales` resampled copies, scale `j` steps from the middle holding `4^j`
 /// times the sample's texels, with their pyramids, feature vectors and trees. Measured on
 /// `configs/dragon_knot.toml` (a geometry-only sample; 8 orientations): peak 0.42 GB at
@@ -327,7 +327,7 @@ pub(crate) fn check_variant_memory(
     )
 }
 
-/// A solid of `parameterize.resolution` voxels on its longest side (issue 11, item 9): the
+/// A solid of `parameterize.resolution` voxels on its longest side: the
 /// volume's voxel masks and their prefix sums are dense over the volume's box (at most
 /// `resolution³` voxels). A box request keeps its finest bricks (12 bytes a voxel) and needs
 /// about 16 bytes per voxel of that cube bound and 180 MB besides (the exemplar analysis);
@@ -340,7 +340,7 @@ pub(crate) fn check_variant_memory(
 /// (`BatchLimits` in `solid_synthesis.rs`: about 1.2 GiB with the resident bricks of two
 /// levels) and keeps only the surface's bricks: the same 16 bytes per voxel while that is
 /// smaller, never more than the batch bound, plus half a byte per voxel for the volume's
-/// masks. Measured on the cow (issue 15): 529 MB at 512, and at 1024 2.77 GB before
+/// masks. Measured on the cow: 529 MB at 512, and at 1024 2.77 GB before
 /// batching, see BENCHMARKS.md for after.
 pub(crate) fn check_solid_memory(
     config: &Config,

@@ -1,4 +1,4 @@
-//! Slurm job arrays over a state folder (issue 13, item 3): submit a list of commands as one
+//! Slurm job arrays over a state folder: submit a list of commands as one
 //! `sbatch` array, wait for them in a way that survives the client being killed, report each
 //! task's exit status, job id and log, and resubmit only what failed or is missing.
 //!

@@ -239,7 +239,7 @@ impl Node {
 
 /// Mixed into every node key: a change to arithmetic that every node shares changes every key,
 /// as a version bump of every algorithm would. v2: transcendental functions from the pure-Rust
-/// libm (`texsyn_core::math`) instead of the platform's C library (issue 14, item 1).
+/// libm (`texsyn_core::math`) instead of the platform's C library.
 pub const KEY_EPOCH: &[u8] = b"texsyn node key v2\0";
 
 /// A method's nodes in topological order (every input refers to an earlier node).

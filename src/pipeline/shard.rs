@@ -1,4 +1,4 @@
-//! One big run across machines: `texsyn run CONFIG --shard i/N` (issue 13, item 5).
+//! One big run across machines: `texsyn run CONFIG --shard i/N`.
 //!
 //! A node that caches its result as keyed pieces ([`super::pieces`]; today the solid's
 //! bricks) can be split: shard `i` of `N` computes a disjoint share of the pieces a whole run

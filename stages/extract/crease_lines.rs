@@ -1,6 +1,6 @@
 //! Sharp creases of a mesh as polylines: the shape features of CAD parts (fandisk) for
 //! feature-aligned texturing (Xu et al., "Feature-Aligned Shape Texturing", §1 and §6 take
-//! feature lines as given; issue 10 asks texsyn to find them: crest lines for organic meshes,
+//! feature lines as given; texsyn finds them: crest lines for organic meshes,
 //! dihedral-angle creases for CAD meshes).
 //!
 //! An edge is a crease when the angle between the normals of its two triangles is at least
@@ -10,7 +10,7 @@
 //! diagonal) are dropped: short creases are noise for texture alignment. Boundary edges and
 //! edges of more than two triangles are never creases (they have no dihedral angle).
 //!
-//! Not wired into a method yet: the feature-aligned method (issue 10) will read it. Crest
+//! Not wired into a method yet: the feature-aligned method will read it. Crest
 //! lines of smooth shapes (Yoshizawa, Belyaev & Seidel 2005) are still to be written.
 
 use crate::check::{ParamError, check_range};

@@ -41,7 +41,7 @@
 //! holds the representative-frame value, turned by the quarter turn between the member's and
 //! the representative's sides; all members' output texels are bit-identical.
 //!
-//! Surface metric (`anisotropic`, the default; issue 12 §2): the paper's templates are laid out
+//! Surface metric (`anisotropic`, the default): the paper's templates are laid out
 //! in grid texels and its scale `R` is one number per sample, so where the geometry image
 //! stretches the surface more one way than the other (long thin parts) the relief came out as
 //! streaks. Each texel instead reads template tap `s` (in sample texels) at grid offset

@@ -1,5 +1,5 @@
 //! The surface's metric over a geometry image, as the per-texel anisotropic map that lets
-//! geometric texture synthesis lay its templates out in surface units (issue 12 §2).
+//! geometric texture synthesis lay its templates out in surface units.
 //!
 //! Lai et al. (§4.3) scale the texture by one number per sample, `R(v)`, the mean distance to
 //! the grid neighbours. A geometry image of a long thin part (a leg, a neck, a trunk) stretches

@@ -1,4 +1,4 @@
-//! Damaged cache objects (issue 11, items 1, 2, 3, 6, 7), as a user meets them through the
+//! Damaged cache objects, as a user meets them through the
 //! `texsyn` command: every damaged object is noticed, recomputed and replaced, never an
 //! error; `verify` says in its exit status and its `--json` that it found damage; `gc` and
 //! `verify` refuse a cache that is not there, and `gc` one whose objects it cannot remove.
@@ -131,10 +131,9 @@ fn assert_replaced(path: &Path, good: &[u8]) {
     );
 }
 
-/// Item 1: a damaged kind code (unknown, or another known kind) is outside the payload hash;
+/// A damaged kind code (unknown, or another known kind) is outside the payload hash;
 /// it is noticed on lookup, and the object is recomputed and replaced, whether or not a node
-/// reads it in that run. (Before: "internal error: … holds kind code 99, expected JumpMap"
-/// on every run that read it, and a rerun that did not read it left it in place.)
+/// reads it in that run.
 #[test]
 fn a_damaged_kind_code_is_recomputed_and_replaced() {
     let (dir, cache, out) = clean_cache();
@@ -166,9 +165,9 @@ fn a_damaged_kind_code_is_recomputed_and_replaced() {
     assert_eq!(hashes(&cache), committed_lock());
 }
 
-/// Item 2: a damaged payload byte in the exported bundle (kind 7) is noticed before the
+/// A damaged payload byte in the exported bundle (kind 7) is noticed before the
 /// bundle is written out; the object is recomputed and replaced, and the outputs are those
-/// of an undamaged run. (Before: "exported bundle is damaged" on every run.)
+/// of an undamaged run.
 #[test]
 fn a_damaged_bundle_payload_is_recomputed_and_replaced() {
     let (dir, cache, out) = clean_cache();
@@ -203,9 +202,8 @@ fn a_damaged_bundle_payload_is_recomputed_and_replaced() {
     );
 }
 
-/// Item 6: a directory where an object belongs is removed and replaced by the object, once:
-/// the next run finds everything cached. (Before: reported as "shorter than its header (0
-/// bytes)", recomputed on every run, the directory left in place.)
+/// A directory where an object belongs is removed and replaced by the object, once:
+/// the next run finds everything cached.
 #[test]
 fn an_object_replaced_by_a_directory_is_recomputed_and_replaced() {
     let (_dir, cache, out) = clean_cache();
@@ -240,9 +238,9 @@ fn an_object_replaced_by_a_directory_is_recomputed_and_replaced() {
     assert_eq!(hashes(&cache), committed_lock());
 }
 
-/// Item 3: `verify` that finds damage repairs it but says so: exit status 3 (a lock mismatch
+/// `verify` that finds damage repairs it but says so: exit status 3 (a lock mismatch
 /// is 1), and `--json` lists each damaged object by node and path. Once repaired, verify
-/// exits 0. (Before: a warning and exit 0.)
+/// exits 0.
 #[test]
 fn verify_that_finds_damage_exits_non_zero_and_names_the_objects() {
     let (_dir, cache, _out) = clean_cache();
@@ -288,8 +286,8 @@ fn verify_that_finds_damage_exits_non_zero_and_names_the_objects() {
     assert_eq!(hashes(&cache), committed_lock());
 }
 
-/// Item 7: `gc` and `verify` on a mistyped `--cache` are errors naming it, and create
-/// nothing. (Before: gc created the folder and reported 0 B.)
+/// `gc` and `verify` on a mistyped `--cache` are errors naming it, and create
+/// nothing.
 #[test]
 fn gc_and_verify_refuse_a_cache_that_does_not_exist() {
     let dir = tempfile::tempdir().unwrap();
@@ -353,8 +351,8 @@ impl Drop for ReadOnly {
     }
 }
 
-/// Item 7: `gc` on a cache whose objects it cannot remove is an error naming the object.
-/// (Before: removed nothing and exited 0.) As root, permission bits do not stop removal, so
+/// `gc` on a cache whose objects it cannot remove is an error naming the object.
+/// As root, permission bits do not stop removal, so
 /// the shards are made immutable with `chattr +i`; where that is unavailable the assertion is
 /// skipped (and says so).
 #[test]

@@ -1,4 +1,4 @@
-//! The jump-map export's chart atlas over pages (issue 15, item 1): a texture spread over
+//! The jump-map export's chart atlas over pages: a texture spread over
 //! several pages opens correctly (the .glb passes the Khronos glTF validator, installed by
 //! `scripts/gltf-validator`; the OBJ loads in tobj with one material per page), chart borders
 //! add no seams, and an atlas that cannot be built names a value the validator accepts.

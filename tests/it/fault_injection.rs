@@ -1,4 +1,4 @@
-//! Faults injected into real runs (issue 11): the binary killed at seeded random moments, and
+//! Faults injected into real runs: the binary killed at seeded random moments, and
 //! a full disk. After each, the output folder holds one run's outputs, all of them, and the
 //! next run ends with the same files as an uninterrupted run, leaving no temporary behind.
 

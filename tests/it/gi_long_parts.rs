@@ -1,4 +1,4 @@
-//! Long thin parts (issue 12 §2): on a capsule eleven times as long as it is wide, the geometry
+//! Long thin parts: on a capsule eleven times as long as it is wide, the geometry
 //! image spaces its samples about twice as far apart along the axis as around it, and
 //! synthesis in grid texels turned the relief into streaks along the part. The relief must
 //! keep its (isotropic) shape on the surface: its squared differences along the axis and

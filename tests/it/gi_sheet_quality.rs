@@ -1,10 +1,10 @@
-//! Geometry-image synthesis quality on flat sheets (issue 12 §2), scored as `texsyn score`
+//! Geometry-image synthesis quality on flat sheets, scored as `texsyn score`
 //! scores a user's run: relief_cow's settings (nops, synthesis seed 1) grown over a flat
 //! sheet at density offset 0, 7×7 patches, at most 20,000 queries, score seed 0.
 //!
 //! A square sheet maps to the geometry image without distortion, so the surface metric is the
 //! identity, every texel takes the middle scale and the relief image is the synthesizer's
-//! plain output: this pins what the synthesizer itself reaches (measured 2026-12-03: ratio
+//! plain output: this pins what the synthesizer itself reaches (measured: ratio
 //! 0.627, coverage 0.653, largest offset 0.017, gradient 0.972; the issue's bar is 0.6, 0.4,
 //! 0.15 and 0.8).
 //!
@@ -148,11 +148,11 @@ fn the_rhombus_floor_comes_from_the_stretch_alone() {
 }
 
 #[test]
-#[ignore = "issue 12: main does not reach it yet (surface row 0.838 / 0.247 / 0.001 / 0.501)"]
+#[ignore = "the synthesizer does not reach it yet (surface row 0.838 / 0.247 / 0.001 / 0.501)"]
 fn a_rhombus_sheet_comes_near_the_floor_along_the_surface() {
     // 60°: an affine map, stretched λ = 1.316 along the square's diagonal (surface lengths
     // 1.73 : 1), where a verbatim layout read along the surface scores 0.691 (the row's
-    // floor, measured 2026-12-03): within 0.1 of it, with the issue's other bars. The test
+    // floor, measured): within 0.1 of it, with the issue's other bars. The test
     // above keeps the floor where it belongs.
     let (_, surface, floor) = sheet_scores([1.0, 0.0], [0.5, 0.75f64.sqrt()], &[]);
     let [ratio, coverage, offset, gradient] = measures(&surface);

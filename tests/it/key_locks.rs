@@ -1,4 +1,4 @@
-//! Processes sharing one cache (issue 13, item 4): a node two runs need at the same moment is
+//! Processes sharing one cache: a node two runs need at the same moment is
 //! computed by one of them while the other waits and reads it; a lock whose holder was killed
 //! is taken over at once; where locks are unavailable, runs go on unlocked with the same
 //! results.

@@ -87,7 +87,7 @@ lock_tests!(
 );
 
 /// The small-setting companion locks in configs/cpu/ (which `.ci/verify-emulated-cpu` checks
-/// under an emulated pre-AVX CPU, issue 14 item 2) verify natively too, each with the `--set`
+/// under emulated CPUs) verify natively too, each with the `--set`
 /// overrides it records, and together they cover every method a shipped config uses.
 #[test]
 fn cpu_companion_locks_verify_and_cover_every_method() {

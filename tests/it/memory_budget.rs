@@ -1,4 +1,4 @@
-//! The memory budget (issue 11, item 9): a parameter whose estimated need is over the budget
+//! The memory budget: a parameter whose estimated need is over the budget
 //! is refused before work starts, naming a value that fits; and the estimates are within 2×
 //! of what a run really takes (peak resident memory of the child process).
 

@@ -1,5 +1,5 @@
 //! The mesh readers' fast paths against the reference readers, and write → read round trips
-//! (issue 15, item 2).
+//!.
 //!
 //! `read_mesh_bytes` reads OFF, OBJ and PLY through fast paths that decline anything unusual
 //! to the one-line-at-a-time reference readers. Two properties keep that honest: on any input

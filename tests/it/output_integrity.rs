@@ -1,4 +1,4 @@
-//! The output folder after failures and kills (issue 11, items 4, 5, 8): a run's outputs are
+//! The output folder after failures and kills: a run's outputs are
 //! written as a set, a swap a killed run left half done is finished or undone by the next
 //! command, dead processes' temporaries are removed (and nothing that is not texsyn's), and
 //! input files that are not regular files, or whose header claims more than they hold, fail

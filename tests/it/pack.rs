@@ -1,4 +1,4 @@
-//! `texsyn pack` and `texsyn unpack` (issue 14, item 4): a run packed into one archive comes
+//! `texsyn pack` and `texsyn unpack`: a run packed into one archive comes
 //! back into an empty cache whole, so `verify` passes and `run` computes nothing; a damaged,
 //! foreign or crafted archive is refused and nothing is imported.
 //!

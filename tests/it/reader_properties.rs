@@ -1,4 +1,4 @@
-//! Property tests of every reader of user files (issue 11, "Beyond the found cases"): meshes
+//! Property tests of every reader of user files: meshes
 //! (OBJ, OFF, PLY ascii and binary, STL ascii and binary), images (PNG, JPEG, EXR), configs,
 //! curve files and lock files. Arbitrary bytes, and valid files with bytes flipped, cut or inserted,
 //! must give `Ok` or an error: never a panic, and never an allocation beyond the input's size

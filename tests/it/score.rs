@@ -223,7 +223,7 @@ fn geometry_images_score_the_relief_and_check_the_mesh() {
     let mesh = &item["extra"]["mesh"];
     let triangles = mesh["triangles"].as_u64().unwrap();
     assert!(triangles > 2 * 60 * 60, "{mesh}");
-    // The cow is closed, and so must its relief be (issue 12 §2).
+    // The cow is closed, and so must its relief be.
     for k in [
         "boundary_edges",
         "non_manifold_edges",

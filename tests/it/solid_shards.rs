@@ -1,4 +1,4 @@
-//! A solid run split into shards (issue 13, item 5; `src/pipeline/shard.rs`): two shards on
+//! A solid run split into shards (`src/pipeline/shard.rs`): two shards on
 //! one cache, then a gather run, give the outputs and hashes of one unsharded run in another
 //! cache; the shards compute each finest brick once between them and the gather none; bad
 //! `--shard` values are refused clearly, before anything is computed.

@@ -5,8 +5,8 @@
 //!
 //! Always faer's *simplicial* factorization, never its supernodal one: the supernodal
 //! kernels pick SIMD code (AVX2 with FMA, or not) by the CPU at run time, so the last bits
-//! of a solution, and every artifact hash downstream, depended on the machine (issue 14: the
-//! solid's field hashed differently under an emulated pre-AVX CPU). The simplicial kernels
+//! of a solution, and every artifact hash downstream, would depend on the machine (the
+//! solid's field hashes differently under an emulated pre-AVX CPU). The simplicial kernels
 //! are plain scalar loops, which Rust compiles without fused multiply-adds, so they round the
 //! same on every x86-64 (and every IEEE 754) machine. Sequential too, for the thread count.
 

@@ -100,7 +100,7 @@ impl NeedGrid {
 /// candidates' `3 × 3` positions are whole voxel steps along two axes, Dong et al. 2008's
 /// crossbars), only the union of those planes' squares: the cube's other voxels are never
 /// read, and every ring of the set that the cube would add there is one the synthesis does
-/// not need (issue 12 §3: the same voxels from a thinner set).
+/// not need (the same voxels from a thinner set).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Stencil {
     pub reach: i32,
