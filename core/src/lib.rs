@@ -6,6 +6,7 @@
 // chains over zips of them read worse than the index loop.
 #![allow(clippy::needless_range_loop)]
 
+pub mod algorithm;
 pub mod check;
 pub mod export;
 pub mod geom;

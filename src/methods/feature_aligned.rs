@@ -46,13 +46,6 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-const EXTRACT_VERSION: u32 = 2;
-const FEATURES_VERSION: u32 = 1;
-const FIELD_VERSION: u32 = 1;
-const REFINE_VERSION: u32 = 2;
-const SYNTH_VERSION: u32 = 1;
-const EXPORT_VERSION: u32 = 3;
-
 /// A `feature_aligned` config.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -227,7 +220,7 @@ fn build(config: &Config) -> Result<(Dag, FeatureAlignedScore), MethodError> {
         curves_format: c.extract.curves_file.as_deref().map(super::extension),
     };
     let shape = dag.node(
-        NodeSpec::new(Stage::Extract, "shape_features", EXTRACT_VERSION),
+        NodeSpec::of(Stage::Extract, crate::stages::extract::shape_features::NODE),
         extract_params,
         (mesh, curves_file),
         |_, ExtractParams { features: p, .. }, (mesh, file)| {
@@ -250,10 +243,9 @@ fn build(config: &Config) -> Result<(Dag, FeatureAlignedScore), MethodError> {
         },
     );
     let features = dag.node(
-        NodeSpec::new(
+        NodeSpec::of(
             Stage::AnalyseExemplar,
-            "texture_feature_lines",
-            FEATURES_VERSION,
+            crate::stages::analyse_exemplar::texture_feature_lines::NODE,
         ),
         c.analyse_exemplar.clone(),
         (exemplar, mask),
@@ -272,7 +264,7 @@ fn build(config: &Config) -> Result<(Dag, FeatureAlignedScore), MethodError> {
         },
     );
     let field = dag.node(
-        NodeSpec::new(Stage::Field, "feature_field", FIELD_VERSION),
+        NodeSpec::of(Stage::Field, crate::stages::field::feature_field::NODE),
         c.field.clone(),
         (mesh, shape),
         |_, p, (mesh, shape)| {
@@ -313,7 +305,7 @@ fn build(config: &Config) -> Result<(Dag, FeatureAlignedScore), MethodError> {
         },
     );
     let refined = dag.node(
-        NodeSpec::new(Stage::Parameterize, "edge_refinement", REFINE_VERSION),
+        NodeSpec::of(Stage::Parameterize, crate::geom::edge_refine::NODE),
         c.parameterize.clone(),
         mesh,
         |_, p, mesh| {
@@ -344,7 +336,7 @@ fn build(config: &Config) -> Result<(Dag, FeatureAlignedScore), MethodError> {
             optimization: c.synthesize.clone(),
         };
         dag.node(
-            NodeSpec::new(Stage::Synthesize, "texture_optimization", SYNTH_VERSION).named(name),
+            NodeSpec::of(Stage::Synthesize, crate::stages::synthesize::texture_optimization::NODE).named(name),
             params,
             (refined, field, exemplar, features),
             |ctx, p, (refined, field, img, tf)| {
@@ -393,7 +385,10 @@ fn build(config: &Config) -> Result<(Dag, FeatureAlignedScore), MethodError> {
     let aligned = synthesis(&mut dag, true);
     let unaligned: Option<Handle<SurfaceSynthesis>> = c.compare.then(|| synthesis(&mut dag, false));
     dag.node(
-        NodeSpec::new(Stage::Reconstruct, "feature_aligned_export", EXPORT_VERSION),
+        NodeSpec::of(
+            Stage::Reconstruct,
+            crate::stages::reconstruct::feature_aligned_export::NODE,
+        ),
         c.reconstruct.clone(),
         (
             mesh, shape, refined, field, aligned, unaligned, exemplar, features,

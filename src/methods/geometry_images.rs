@@ -40,15 +40,8 @@ use crate::stages::synthesize::geometry_texture::{
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-const GEOMETRY_IMAGE_VERSION: u32 = 2;
-const EXTRACT_VERSION: u32 = 1;
-const FIELD_VERSION: u32 = 3;
-const RECONSTRUCT_VERSION: u32 = 6;
-const VARIANTS_VERSION: u32 = 2;
 // 3: the coarsest scanline pass is an exhaustive search again (a jump-penalized one lowered
 // the bumps' mean by 0.16 std).
-// 4: templates laid out in the surface metric (`synthesize.anisotropic`, default true).
-const SYNTH_VERSION: u32 = 4;
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -249,10 +242,9 @@ fn build(config: &Config) -> Result<(Dag, GeometryImagesScore), MethodError> {
         "inputs.mesh",
     )?;
     let gi = dag.node(
-        NodeSpec::new(
+        NodeSpec::of(
             Stage::Parameterize,
-            "geometry_image",
-            GEOMETRY_IMAGE_VERSION,
+            crate::stages::parameterize::geometry_image::NODE,
         ),
         c.parameterize.params(c.analyse_exemplar.levels),
         mesh,
@@ -269,7 +261,7 @@ fn build(config: &Config) -> Result<(Dag, GeometryImagesScore), MethodError> {
     } else {
         let sample = import::<Mesh>(&mut dag, "import.sample", &sample_path, "inputs.sample")?;
         dag.node(
-            NodeSpec::new(Stage::Extract, "geometric_texture", EXTRACT_VERSION),
+            NodeSpec::of(Stage::Extract, crate::stages::extract::MESH_TEXTURE_NODE),
             c.extract.clone(),
             sample,
             |ctx, p, mesh| {
@@ -281,7 +273,10 @@ fn build(config: &Config) -> Result<(Dag, GeometryImagesScore), MethodError> {
     };
 
     let variants = dag.node(
-        NodeSpec::new(Stage::AnalyseExemplar, "texel_variants", VARIANTS_VERSION),
+        NodeSpec::of(
+            Stage::AnalyseExemplar,
+            crate::stages::analyse_exemplar::texel_variants::NODE,
+        ),
         VariantsNodeParams {
             variants: c.analyse_exemplar.clone(),
             per_texel: c.synthesize.search == Search::PerTexel,
@@ -293,13 +288,16 @@ fn build(config: &Config) -> Result<(Dag, GeometryImagesScore), MethodError> {
         },
     );
     let field = dag.node(
-        NodeSpec::new(Stage::Field, "param_field", FIELD_VERSION),
+        NodeSpec::of(Stage::Field, crate::stages::field::param_field::NODE),
         c.field.clone(),
         gi,
         |_, p, gi| param_field(&gi, p).map_err(NodeError::input),
     );
     let synthesized = dag.node(
-        NodeSpec::new(Stage::Synthesize, "geometry_texture", SYNTH_VERSION),
+        NodeSpec::of(
+            Stage::Synthesize,
+            crate::stages::synthesize::geometry_texture::NODE,
+        ),
         c.synthesize.clone(),
         (gi, field, variants),
         |ctx, p, (gi, field, variants)| {
@@ -313,7 +311,10 @@ fn build(config: &Config) -> Result<(Dag, GeometryImagesScore), MethodError> {
         },
     );
     let reconstruct = dag.node(
-        NodeSpec::new(Stage::Reconstruct, "displacement", RECONSTRUCT_VERSION),
+        NodeSpec::of(
+            Stage::Reconstruct,
+            crate::stages::reconstruct::relief_export::NODE,
+        ),
         c.reconstruct.clone(),
         (gi, synthesized, texels),
         |ctx, p, (gi, texels, sample)| {
@@ -351,7 +352,7 @@ fn image_sample(
         strict_grey: c.extract.strict_grey,
     };
     Ok(dag.node(
-        NodeSpec::new(Stage::Extract, "height_field_image", EXTRACT_VERSION),
+        NodeSpec::of(Stage::Extract, crate::stages::extract::height_field::NODE),
         params,
         img,
         move |_, p, img| {

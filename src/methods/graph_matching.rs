@@ -32,13 +32,6 @@ use crate::stages::synthesize::graph_matching::{MatchInput, MatchParams, graph_m
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-const STACK_VERSION: u32 = 1;
-const KEYS_VERSION: u32 = 1;
-const HIERARCHY_VERSION: u32 = 2;
-const FIELD_VERSION: u32 = 2;
-const SYNTH_VERSION: u32 = 4;
-const EXPORT_VERSION: u32 = 1;
-
 /// A `graph_matching` config.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -140,7 +133,8 @@ fn build(config: &Config) -> Result<(Dag, GraphMatchingScore), MethodError> {
     check_region_fits(config, &exemplar_path, &c.synthesize)?;
 
     let keys = dag.node(
-        NodeSpec::new(Stage::Field, "field_keys", KEYS_VERSION).named("field.keys"),
+        NodeSpec::of(Stage::Field, crate::stages::field::sweep_field::KEYS_NODE)
+            .named("field.keys"),
         c.field.keys.clone(),
         mesh,
         |_, keys, mesh| {
@@ -152,13 +146,19 @@ fn build(config: &Config) -> Result<(Dag, GraphMatchingScore), MethodError> {
         },
     );
     let stack = dag.node(
-        NodeSpec::new(Stage::AnalyseExemplar, "gaussian_stack", STACK_VERSION),
+        NodeSpec::of(
+            Stage::AnalyseExemplar,
+            crate::stages::analyse_exemplar::gaussian_stack::NODE,
+        ),
         c.analyse_exemplar.clone(),
         exemplar,
         |_, p, img| build_stack(img, p).map_err(NodeError::input),
     );
     let hierarchy = dag.node(
-        NodeSpec::new(Stage::Parameterize, "sqrt2_hierarchy", HIERARCHY_VERSION),
+        NodeSpec::of(
+            Stage::Parameterize,
+            crate::stages::parameterize::sqrt2_subdivision::NODE,
+        ),
         c.parameterize.clone(),
         mesh,
         |_, p, mesh| {
@@ -176,7 +176,7 @@ fn build(config: &Config) -> Result<(Dag, GraphMatchingScore), MethodError> {
         },
     );
     let field = dag.node(
-        NodeSpec::new(Stage::Field, "sweep_field", FIELD_VERSION),
+        NodeSpec::of(Stage::Field, crate::stages::field::sweep_field::NODE),
         c.field.clone(),
         (hierarchy, keys),
         |_, p, (h, keys)| {
@@ -193,7 +193,7 @@ fn build(config: &Config) -> Result<(Dag, GraphMatchingScore), MethodError> {
         matching: c.synthesize.clone(),
     };
     let colours = dag.node(
-        NodeSpec::new(Stage::Synthesize, "graph_matching", SYNTH_VERSION),
+        NodeSpec::of(Stage::Synthesize, crate::stages::synthesize::graph_matching::NODE),
         params,
         (hierarchy, field, stack),
         |ctx, p, (h, field, stack)| {
@@ -223,7 +223,10 @@ fn build(config: &Config) -> Result<(Dag, GraphMatchingScore), MethodError> {
         },
     );
     dag.node(
-        NodeSpec::new(Stage::Reconstruct, "vertex_colour_export", EXPORT_VERSION),
+        NodeSpec::of(
+            Stage::Reconstruct,
+            crate::stages::reconstruct::vertex_colour_export::NODE,
+        ),
         c.reconstruct.clone(),
         (hierarchy, colours),
         |ctx, p, (h, out)| {

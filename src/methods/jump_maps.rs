@@ -35,13 +35,6 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-/// Node code versions: bump when a node's output for the same inputs changes.
-const JUMP_MAP_VERSION: u32 = 1;
-const FIELD_VERSION: u32 = 2;
-const PARAMETERIZE_VERSION: u32 = 1;
-const WALK_VERSION: u32 = 2;
-const RECONSTRUCT_VERSION: u32 = 5;
-
 /// A `jump_maps` config.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -135,7 +128,7 @@ fn build(config: &Config) -> Result<(Dag, JumpMapNodes), MethodError> {
     let jump_map = add_jump_map(&mut dag, exemplar, c.analyse_exemplar.clone());
 
     let field = dag.node(
-        NodeSpec::new(Stage::Field, "orientation_field", FIELD_VERSION),
+        NodeSpec::of(Stage::Field, crate::stages::field::orientation_field::NODE),
         c.field.clone(),
         mesh,
         |_, p, mesh| {
@@ -149,7 +142,10 @@ fn build(config: &Config) -> Result<(Dag, JumpMapNodes), MethodError> {
     );
 
     let param = dag.node(
-        NodeSpec::new(Stage::Parameterize, "jump_offsets", PARAMETERIZE_VERSION),
+        NodeSpec::of(
+            Stage::Parameterize,
+            crate::stages::parameterize::jump_parameterization::NODE,
+        ),
         c.parameterize.clone(),
         (mesh, field, exemplar),
         |_, p, (mesh, up, img)| {
@@ -159,7 +155,7 @@ fn build(config: &Config) -> Result<(Dag, JumpMapNodes), MethodError> {
     );
 
     let walk = dag.node(
-        NodeSpec::new(Stage::Synthesize, "jump_walk", WALK_VERSION),
+        NodeSpec::of(Stage::Synthesize, crate::stages::synthesize::jump_walk::NODE),
         c.synthesize.clone(),
         (param, jump_map),
         |ctx, p, (param, jm)| {
@@ -201,7 +197,10 @@ fn build(config: &Config) -> Result<(Dag, JumpMapNodes), MethodError> {
         exemplar_format: extension_of(&exemplar_path),
     };
     dag.node(
-        NodeSpec::new(Stage::Reconstruct, "jump_blend_export", RECONSTRUCT_VERSION),
+        NodeSpec::of(
+            Stage::Reconstruct,
+            crate::stages::reconstruct::jump_export::NODE,
+        ),
         params,
         (mesh, param, walk, exemplar, exemplar_file, maps),
         |ctx, p, (mesh, param, walk, exemplar, exemplar_file, maps)| {
@@ -243,7 +242,10 @@ pub(crate) fn add_jump_map(
     params: JumpMapParams,
 ) -> Handle<JumpMap> {
     dag.node(
-        NodeSpec::new(Stage::AnalyseExemplar, "jump_map", JUMP_MAP_VERSION),
+        NodeSpec::of(
+            Stage::AnalyseExemplar,
+            crate::stages::analyse_exemplar::jump_map::NODE,
+        ),
         params,
         exemplar,
         |ctx, p, img| {

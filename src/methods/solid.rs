@@ -42,13 +42,6 @@ use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::sync::Arc;
 
-const ANALYSIS_VERSION: u32 = 1;
-const FIELD_VERSION: u32 = 2;
-const REQUEST_VERSION: u32 = 4;
-const SYNTH_VERSION: u32 = 2;
-// 2: box requests also write volume.exr.
-const RECONSTRUCT_VERSION: u32 = 2;
-
 /// A `solid` config. `[inputs]` and each of `[[regions]]` name an exemplar set: one image for
 /// all three planes (`exemplar`), or one per plane of the local frame (`xy`, `yz`, `zx`; any
 /// may be left out if `exemplar` is given); the images of one set must have the same size.
@@ -203,7 +196,7 @@ fn build(config: &Config) -> Result<(Dag, SolidScore), MethodError> {
     let file = |f: &PathBuf| dag.file(&config.resolve(f), "field.curves_file");
     let curves_file = c.field.curves_file.as_ref().map(file).transpose()?;
     let field = dag.node(
-        NodeSpec::new(Field, "quaternion_field", FIELD_VERSION),
+        NodeSpec::of(Field, crate::stages::field::quaternion_field::NODE),
         c.field.solid_field(c.parameterize.margin),
         (mesh, curves_file),
         |_, p, (mesh, file)| {
@@ -218,7 +211,10 @@ fn build(config: &Config) -> Result<(Dag, SolidScore), MethodError> {
     );
     let regions = (!depths.is_empty()).then_some(depths);
     let request = dag.node(
-        NodeSpec::new(Parameterize, "volume_request", REQUEST_VERSION),
+        NodeSpec::of(
+            Parameterize,
+            crate::stages::parameterize::volume_embedding::NODE,
+        ),
         WithTail(c.parameterize.clone(), regions.clone()),
         mesh,
         |_, WithTail(p, depths), mesh| {
@@ -239,7 +235,7 @@ fn build(config: &Config) -> Result<(Dag, SolidScore), MethodError> {
         pairs.push((synthesis(&mut dag, name, a, Some(k as u8)), a));
     }
     let reconstruct = dag.node(
-        NodeSpec::new(Reconstruct, "solid_colour", RECONSTRUCT_VERSION),
+        NodeSpec::of(Reconstruct, crate::stages::reconstruct::solid_colour::NODE),
         ReconstructParams {
             export: c.reconstruct.clone(),
             request: c.parameterize.request.clone(),
@@ -301,7 +297,11 @@ fn add_analysis(
     let [xy, yz, zx] = planes;
     let [(xy, tx), (yz, ty), (zx, tz)] = [xy?, yz?, zx?];
     Ok(dag.node(
-        NodeSpec::new(AnalyseExemplar, "candidate_triples", ANALYSIS_VERSION).named(name),
+        NodeSpec::of(
+            AnalyseExemplar,
+            crate::stages::analyse_exemplar::candidate_triples::NODE,
+        )
+        .named(name),
         AnalysisParams {
             analysis: params,
             transpose: [tx, ty, tz],
@@ -322,7 +322,7 @@ fn add_synthesis(
     (field, request): (Handle<RotationField>, Handle<Request>),
     params: WithTail<synthesis::SolidParams, u8>,
 ) -> Handle<SolidSamples> {
-    let spec = NodeSpec::new(Synthesize, "solid_bricks", SYNTH_VERSION).named(name);
+    let spec = NodeSpec::of(Synthesize, crate::stages::synthesize::solid::NODE).named(name);
     dag.node(
         spec.pieces("solid brick", &params.0),
         params,

@@ -22,9 +22,6 @@ use crate::stages::synthesize::synth2d::{Synth2dParams, synthesize_2d};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-const SYNTH_VERSION: u32 = 1;
-const RENDER_VERSION: u32 = 1;
-
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Synth2dConfig {
@@ -170,7 +167,7 @@ fn build(config: &Config) -> Result<(Dag, Synth2dNodes), MethodError> {
     )?;
     let jump_map = add_jump_map(&mut dag, exemplar, c.analyse_exemplar.clone());
     let synth = dag.node(
-        NodeSpec::new(Stage::Synthesize, "jump_walk_2d", SYNTH_VERSION),
+        NodeSpec::of(Stage::Synthesize, crate::stages::synthesize::synth2d::NODE),
         s,
         jump_map,
         |_, s, jm| {
@@ -181,7 +178,10 @@ fn build(config: &Config) -> Result<(Dag, Synth2dNodes), MethodError> {
         },
     );
     let reconstruct = dag.node(
-        NodeSpec::new(Stage::Reconstruct, "blend_2d", RENDER_VERSION),
+        NodeSpec::of(
+            Stage::Reconstruct,
+            crate::stages::reconstruct::blend2d::NODE,
+        ),
         c.reconstruct.clone(),
         (synth, exemplar),
         |_, r, (a, exemplar)| {

@@ -280,6 +280,11 @@ impl NodeSpec {
         }
     }
 
+    /// A node of `stage` running `algorithm` (a stage file's `NODE`).
+    pub fn of(stage: Stage, algorithm: texsyn_core::algorithm::Algorithm) -> Self {
+        NodeSpec::new(stage, algorithm.name, algorithm.version)
+    }
+
     /// Names the node (default: its stage's name). Names are unique within a DAG.
     pub fn named(mut self, name: impl Into<String>) -> Self {
         self.name = name.into();

@@ -93,6 +93,10 @@ use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+/// The `candidate_triples` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("candidate_triples", 1);
+
 /// Plane names, by plane index.
 pub const PLANE_NAMES: [&str; 3] = ["xy", "yz", "zx"];
 

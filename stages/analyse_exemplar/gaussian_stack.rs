@@ -19,6 +19,10 @@ use crate::check::{ParamError, check_range};
 use crate::image::ImageView;
 use serde::{Deserialize, Serialize};
 
+/// The `gaussian_stack` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("gaussian_stack", 1);
+
 /// Stack or pyramid (the paper's `a`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

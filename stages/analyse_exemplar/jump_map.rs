@@ -39,6 +39,10 @@ use crate::image::pca::{Pca, PcaParams};
 use rayon::prelude::*;
 use texsyn_core::math::PureMath;
 
+/// The `jump_map` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("jump_map", 1);
+
 /// The smallest weight a found jump gets (weight 0 marks an unused slot).
 pub const MIN_WEIGHT: f32 = 1e-9;
 

@@ -65,6 +65,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use texsyn_core::math::PureMath;
 
+/// The `texel_variants` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("texel_variants", 2);
+
 /// Parameters of the variant set.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

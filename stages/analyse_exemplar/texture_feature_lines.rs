@@ -84,6 +84,10 @@ use crate::image::Image;
 use serde::{Deserialize, Serialize};
 use texsyn_core::math::PureMath;
 
+/// The `texture_feature_lines` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("texture_feature_lines", 1);
+
 /// Below this scale-normalised strength (σ²·λ, in luminance units: about the Hessian answer to
 /// a line of 1.5/255 contrast) nothing is a line, whatever `threshold` says: 8-bit
 /// quantization noise of a flat exemplar is not its structure.

@@ -23,6 +23,10 @@ use crate::image::ImageView;
 use glam::Vec2;
 use std::path::Path;
 
+/// The `height_field_image` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("height_field_image", 1);
+
 /// §4.1.3 on a connected sample patch: `size`×`size` texels (0, 0, h − mean h[, r, g, b]).
 /// The returned plane is the fitted one moved to the mean height, so that texel heights are
 /// measured from it.

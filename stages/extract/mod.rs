@@ -34,6 +34,10 @@ use sample_region::Region;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
+/// The `geometric_texture` node's algorithm and version (part of its key; bump on any change of output).
+pub const MESH_TEXTURE_NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("geometric_texture", 1);
+
 /// Why a texture could not be extracted. Messages name the input and what was wrong.
 #[derive(Debug, thiserror::Error)]
 pub enum ExtractError {

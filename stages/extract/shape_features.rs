@@ -24,6 +24,10 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
+/// The `shape_features` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("shape_features", 2);
+
 /// `auto` picks `crease` when the median crease is at least this long (a fraction of the
 /// bounding-box diagonal). Measured on the shared meshes at the default 30°: fandisk's 34
 /// creases have a median of 0.29; the organic meshes have many short ones where coarse

@@ -73,6 +73,10 @@ use std::f64::consts::PI;
 use std::time::Instant;
 use texsyn_core::math::PureMath;
 
+/// The `feature_field` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("feature_field", 1);
+
 /// Stream of `counter_hash` for arbitrary curve signs.
 const SIGN_STREAM: u64 = 0x5167_0001;
 

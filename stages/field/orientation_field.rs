@@ -31,6 +31,10 @@ use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 use texsyn_core::math::PureMath;
 
+/// The `orientation_field` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("orientation_field", 2);
+
 /// A place on the mesh: a position (snapped to the nearest vertex) or a vertex index.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

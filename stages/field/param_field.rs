@@ -22,6 +22,10 @@ use glam::{DVec3, Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use texsyn_core::math::PureMath;
 
+/// The `param_field` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("param_field", 3);
+
 /// A key tangent vector: a direction at the surface point nearest to `at`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

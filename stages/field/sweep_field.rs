@@ -35,6 +35,14 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
+/// The `sweep_field` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("sweep_field", 2);
+
+/// The `field_keys` node's algorithm and version (part of its key; bump on any change of output).
+pub const KEYS_NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("field_keys", 1);
+
 /// Relaxation passes of the sweep after its breadth-first initialization.
 const SWEEP_PASSES: usize = 30;
 

@@ -89,6 +89,10 @@ use std::cmp::Reverse;
 use std::collections::HashMap;
 use texsyn_core::math::PureMath;
 
+/// The `geometry_image` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("geometry_image", 2);
+
 /// Parameters of [`build_geometry_image`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -19,6 +19,10 @@ use glam::Vec2;
 use serde::{Deserialize, Serialize};
 use texsyn_core::math::PureMath;
 
+/// The `jump_offsets` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("jump_offsets", 1);
+
 /// `[parameterize]`.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]

@@ -42,6 +42,10 @@ use crate::geom::poly_mesh::PolyMesh;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+/// The `sqrt2_hierarchy` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("sqrt2_hierarchy", 2);
+
 /// How far `smooth` moves an old vertex towards the mean of its new face points.
 const RELAXATION: f32 = 0.5;
 

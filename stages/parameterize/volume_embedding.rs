@@ -17,6 +17,10 @@ use crate::geom::Mesh;
 use glam::{IVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
+/// The `volume_request` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("volume_request", 4);
+
 /// What part of the solid to synthesize.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]

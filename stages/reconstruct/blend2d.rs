@@ -16,6 +16,10 @@ use crate::image::{Image, ImageView};
 use rayon::prelude::*;
 use texsyn_core::math::PureMath;
 
+/// The `blend_2d` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("blend_2d", 1);
+
 /// The blend radius that looked best on the test exemplars with the default synthesis
 /// parameters: 1 (a 3×3 kernel, σ = 1). 0 leaves jagged seams; 2 visibly softens them.
 pub const DEFAULT_BLEND_RADIUS: u32 = 1;

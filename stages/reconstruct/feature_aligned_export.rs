@@ -26,6 +26,10 @@ use crate::render::{VertexColorShader, ViewOptions, render_views};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+/// The `feature_aligned_export` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 3);
+
 /// `[reconstruct]` of the feature-aligned method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -13,6 +13,10 @@ use crate::reconstruct::textured_export::{
 use glam::Vec2;
 use std::path::PathBuf;
 
+/// The `jump_blend_export` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("jump_blend_export", 5);
+
 /// An image textured onto the surface with the walk's coordinates: the exemplar itself or a
 /// map aligned with it. Its original file is copied into the export as it is.
 pub struct AlignedMap<'a> {

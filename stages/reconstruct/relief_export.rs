@@ -24,6 +24,10 @@ use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+/// The `displacement` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("displacement", 6);
+
 /// `[reconstruct]` of the geometry-image method: the displacement (§4.4) and the preview.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]

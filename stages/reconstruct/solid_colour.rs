@@ -31,6 +31,10 @@ use glam::{IVec3, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
+/// The `solid_colour` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("solid_colour", 2);
+
 /// `[reconstruct]` of the solid method.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]

@@ -24,6 +24,10 @@ use crate::render::{ConstantShader, VertexColorShader, ViewOptions, render_views
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+/// The `vertex_colour_export` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("vertex_colour_export", 1);
+
 /// `[reconstruct]` of the graph-matching method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -69,6 +69,10 @@ use serde::{Deserialize, Serialize};
 use texsyn_core::math::PureMath;
 use texsyn_core::max_flow::MaxFlow;
 
+/// The `graph_matching` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("graph_matching", 4);
+
 /// How the best texel is searched.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

@@ -22,6 +22,10 @@ use crate::parameterize::edge_offsets::OffsetBox;
 use crate::random::counter_unit;
 use glam::Vec2;
 
+/// The `jump_walk` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("jump_walk", 2);
+
 /// `[synthesize]` parameters of the jump walk.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -33,6 +33,10 @@ use crate::analyse_exemplar::jump_map::JumpMapRef;
 use crate::check::{ParamError, check_range};
 use crate::random::counter_unit;
 
+/// The `jump_walk_2d` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("jump_walk_2d", 1);
+
 /// Parameters of the 2D jump-map synthesis.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]

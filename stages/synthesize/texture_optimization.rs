@@ -125,6 +125,10 @@ use std::cmp::Ordering;
 use std::collections::{BinaryHeap, VecDeque};
 use texsyn_core::math::PureMath;
 
+/// The `texture_optimization` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("texture_optimization", 1);
+
 const STREAM_ORDER: u64 = 1;
 const STREAM_INIT: u64 = 2;
 /// Candidate patches the PCA basis is fitted to (evenly spread over the candidates).

@@ -18,6 +18,10 @@ use super::Mesh;
 use glam::Vec3;
 use std::collections::BTreeMap;
 
+/// The `edge_refinement` node's algorithm and version (part of its key; bump on any change of output).
+pub const NODE: crate::algorithm::Algorithm =
+    crate::algorithm::Algorithm::new("edge_refinement", 2);
+
 /// The refined mesh and where its new vertices came from.
 #[derive(Debug, Clone)]
 pub struct Refined {
