@@ -145,13 +145,13 @@ fn a_method_registered_at_run_time_plans_runs_and_scores() {
         (2 * brick.width(), 2 * brick.height())
     );
 
-    // A tiling copies the exemplar: every patch is found in it (ratio near 0), where a wrong
-    // score hook (another image, another node) would not be.
+    // A tiling copies the exemplar: every patch but those across a tile's edge is found in it
+    // (measured 0.07), where unrelated content scores near 1.
     let section = plan.score.clone().expect("the config has [score]");
     let report = plan.score_run(&result, &section).unwrap();
     assert_eq!(report.method, "toy_tiling");
     let score = report.items[0].score.as_ref().expect("scored");
-    assert!(score.ratio < 0.05, "ratio {}", score.ratio);
+    assert!(score.ratio < 0.2, "ratio {}", score.ratio);
 
     // A rerun finds everything cached.
     let again = pipeline::run(&plan.dag, &cache, RunOptions::default()).unwrap();
