@@ -47,6 +47,7 @@
 use crate::artifact::Artifact;
 use crate::artifact::ContentHash;
 use crate::artifact::{Bundle, Format};
+use crate::pipeline::Dag;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -106,6 +107,23 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError {
 /// file: (path, written?).
 pub fn materialize(bundle: &Artifact, dir: &Path) -> Result<Vec<(PathBuf, bool)>, OutputError> {
     materialize_all(&[bundle], dir)
+}
+
+/// Writes the exports of one run of `dag` (the artifacts of its exporting nodes; `artifacts`
+/// holds each node's, by node index) into `dir` as one set, as [`materialize_all`] does.
+pub fn materialize_exports(
+    dag: &Dag,
+    artifacts: &[Artifact],
+    dir: &Path,
+) -> Result<Vec<(PathBuf, bool)>, OutputError> {
+    let bundles: Vec<&Artifact> = dag
+        .nodes
+        .iter()
+        .zip(artifacts)
+        .filter(|(node, _)| node.exports)
+        .map(|(_, a)| a)
+        .collect();
+    materialize_all(&bundles, dir)
 }
 
 /// Writes the files of all `bundles` (one run's exports) into `dir` as one set: afterwards
