@@ -545,14 +545,18 @@ fn check_patch_fits(
         );
         return Err(config.invalid("synthesize.patch", &msg).into());
     }
-    // Synthesis keeps every candidate patch of the exemplar in full (w² RGB floats per texel,
-    // per level), plus the mesh's share (measured: under 200 MB at 200,000 vertices).
     let texels = w as u64 * h as u64;
     super::check_memory(
         config,
         "synthesize.patch",
         patch as u64,
-        |w| texels * w * w * 12 * p.levels.max(1) as u64 + (200 << 20),
+        |w| {
+            crate::stages::synthesize::texture_optimization::memory_estimate(
+                texels,
+                w,
+                p.levels as u64,
+            )
+        },
         |w| w.to_string(),
     )
 }

@@ -136,7 +136,7 @@ impl Plan {
             let run = crate::score::Run {
                 config: &self.config,
                 result,
-                params: params.clone(),
+                params: *params,
             };
             self.planned.score(&run, not_scored)
         })
@@ -299,78 +299,49 @@ pub(crate) fn check_memory(
         .map_err(|e| MethodError::Config(config.invalid(key, &e.to_string())))
 }
 
-/// The texel variants of a geometry-image sample of `extract.size`² texels:
-/// `orientations × scales` resampled copies, scale `j` steps from the middle holding `4^j`
-/// times the sample's texels, with their pyramids, feature vectors and trees. Measured on
-/// `configs/dragon_knot.toml` (a geometry-only sample; 8 orientations): peak 0.42 GB at
-/// 128² with 3 scales, 1.62 GB at 128² with 5, 5.93 GB at 256² with 5; about 580 bytes per
-/// texel of the unscaled variants' total. A sample with colour has twice the channels and up
-/// to twice the need. Without the per-texel search structures (`per_texel` false, the default
-/// k-coherence search) the variants are their pyramids' texels (12 bytes each, 16 with the
-/// pyramid) and the resampling's copies: estimated at 40 bytes per texel.
+/// The texel variants of a geometry-image sample of `extract.size`² texels
+/// ([`TexelVariantParams::memory_estimate`]).
+///
+/// [`TexelVariantParams::memory_estimate`]: crate::stages::analyse_exemplar::texel_variants::TexelVariantParams::memory_estimate
 pub(crate) fn check_variant_memory(
     config: &Config,
     size: u32,
     p: &crate::stages::analyse_exemplar::texel_variants::TexelVariantParams,
     per_texel: bool,
 ) -> Result<(), MethodError> {
-    let mid = (p.scales as i32 - 1) / 2;
-    let spread: f64 = (-mid..=mid).map(|j| 4f64.powi(j)).sum();
-    let bytes = if per_texel { 580.0 } else { 40.0 };
-    let per_texel = (bytes * p.orientations as f64 * spread) as u64;
     check_memory(
         config,
         "extract.size",
         size as u64,
-        |s| per_texel * s * s + (64 << 20),
+        |s| p.memory_estimate(s, per_texel),
         |s| s.to_string(),
     )
 }
 
-/// A solid of `parameterize.resolution` voxels on its longest side: the
-/// volume's voxel masks and their prefix sums are dense over the volume's box (at most
-/// `resolution³` voxels). A box request keeps its finest bricks (12 bytes a voxel) and needs
-/// about 16 bytes per voxel of that cube bound and 180 MB besides (the exemplar analysis);
-/// a section needs about half a byte per voxel and 48 MB (since its dependent sets are kept in
-/// chunks with no per-voxel lists: 72 MB measured at 384, 163 MB before). Measured
-/// (solid_trivial, elephant): surface 119 MB at 128, 272 MB at 256, 523 MB at 384. The elephant's box fills about half its cube, so the cube bound stays within 2× for
-/// slim and cubic shapes alike.
-///
-/// A surface request synthesizes each level in batches whose working set is bounded
-/// (`BatchLimits` in `solid_synthesis.rs`: about 1.2 GiB with the resident bricks of two
-/// levels) and keeps only the surface's bricks: the same 16 bytes per voxel while that is
-/// smaller, never more than the batch bound, plus half a byte per voxel for the volume's
-/// masks. Measured on the cow: 529 MB at 512, and at 1024 2.77 GB before
-/// batching, see BENCHMARKS.md for after.
+/// A solid of `parameterize.resolution` voxels on its longest side
+/// ([`crate::stages::synthesize::solid::memory_estimate`]).
 pub(crate) fn check_solid_memory(
     config: &Config,
     resolution: u32,
     request: &crate::stages::parameterize::volume_embedding::Request,
 ) -> Result<(), MethodError> {
-    use crate::stages::parameterize::volume_embedding::Request;
-    let estimate: fn(u64) -> u64 = match request {
-        Request::Section { .. } => |r| r * r * r / 2 + (48 << 20),
-        Request::Box { .. } => |r| 16 * r * r * r + (180 << 20),
-        Request::Surface => |r| (16 * r * r * r).min(1_200 << 20) + r * r * r / 2 + (180 << 20),
-    };
     check_memory(
         config,
         "parameterize.resolution",
         resolution as u64,
-        estimate,
+        |r| crate::stages::synthesize::solid::memory_estimate(request, r),
         |r| r.to_string(),
     )
 }
 
-/// The baked atlas of `reconstruct.atlas_size` texels per side: about 9 bytes per texel
-/// (the float image, its 8-bit copy and the PNG) and the mesh besides (measured: 152 MB at
-/// 4096², 547 MB at 8192² for the demo).
+/// The baked atlas of `reconstruct.atlas_size` texels per side
+/// ([`crate::stages::reconstruct::textured_export::atlas_memory_estimate`]).
 pub(crate) fn check_atlas_memory(config: &Config, side: u32) -> Result<(), MethodError> {
     check_memory(
         config,
         "reconstruct.atlas_size",
         side as u64,
-        |a| 9 * a * a + (48 << 20),
+        crate::stages::reconstruct::textured_export::atlas_memory_estimate,
         |a| a.to_string(),
     )
 }

@@ -146,14 +146,12 @@ fn build(config: &Config) -> Result<(Dag, Synth2dNodes), MethodError> {
     config.check("analyse_exemplar", c.analyse_exemplar.validate())?;
     config.check("synthesize", c.synthesize.validate())?;
     config.check("reconstruct", c.reconstruct.validate())?;
-    // About 52 bytes per output pixel (addresses, the blended image, its PNG), measured: 216 MB
-    // at 2048², 853 MB at 4096².
     let (w, h) = (c.synthesize.width as u64, c.synthesize.height as u64);
     super::check_memory(
         config,
         "synthesize.width",
         w,
-        |w| 52 * w * h + (32 << 20),
+        |w| crate::stages::synthesize::synth2d::memory_estimate(w, h),
         |w| format!("{w} (with height {h})"),
     )?;
     let s = c.synthesize.clone();

@@ -213,7 +213,7 @@ fn a_taken_name_is_refused() {
         }
     }
     static IMPOSTOR: Impostor = Impostor;
-    let e = methods::register(&IMPOSTOR).err().expect("refused");
+    let e = methods::register(&IMPOSTOR).expect_err("refused");
     assert!(e.to_string().contains("jump_maps"), "{e}");
     assert!(methods::register(&TILING).is_err(), "registered twice");
 }
