@@ -9,7 +9,7 @@
 //!
 //! The meshes: configs/assets/cow.obj, then `knot.off`, `elephant.off`, `mushroom.off` and
 //! `refined_elephant.off` from the mesh directory where they exist, and the knot with two holes
-//! of tests/geometry_image.rs (third).
+//! of tests/it/geometry_image.rs (third).
 //!
 //! ```text
 //! cargo run --release -p texsyn-bench --example geometry_image_previews -- [OUT_DIR]
@@ -37,7 +37,7 @@ use texsyn::stages::parameterize::geometry_image::{
 use texsyn::stages::reconstruct::displacement::grid_mesh;
 
 fn main() {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     let dir = std::env::var("TEXSYN_GI_MESHES")
         .map(PathBuf::from)
         .unwrap_or(root.join("tests/data/meshes"));

@@ -158,7 +158,7 @@ fn write_stl(m: &Mesh) -> Vec<u8> {
 }
 
 fn big_mesh() -> (Mesh, String) {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let repo = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     let data = [
         std::env::var_os("TEXSYN_SHARED_DATA").map(PathBuf::from),
         Some(repo.join("../shared/data")),

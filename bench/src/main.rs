@@ -44,7 +44,14 @@ struct Args {
     runs: usize,
 }
 
-fn main() -> Result<()> {
+fn main() {
+    if let Err(e) = bench_main() {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn bench_main() -> Result<()> {
     tracing_subscriber::fmt()
         .with_max_level(tracing::Level::WARN)
         .with_writer(std::io::stderr)
@@ -73,8 +80,9 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// The release `texsyn` binary, built now by the cargo that runs the bench (so the timed
-/// binary is the current source's), else found beside this executable.
+/// The `texsyn` binary beside this executable, built now with this executable's profile by
+/// the cargo that runs the bench (so the timed binary is the current source's, and a release
+/// bench times a release binary).
 fn texsyn_exe() -> Result<PathBuf> {
     static EXE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     if let Some(p) = EXE.get() {
@@ -83,15 +91,8 @@ fn texsyn_exe() -> Result<PathBuf> {
     if let Some(cargo) = std::env::var_os("CARGO") {
         let status = std::process::Command::new(cargo)
             .current_dir(repo())
-            .args([
-                "build",
-                "--release",
-                "--quiet",
-                "-p",
-                "texsyn",
-                "--bin",
-                "texsyn",
-            ])
+            .args(["build", "--quiet", "-p", "texsyn", "--bin", "texsyn"])
+            .args((!cfg!(debug_assertions)).then_some("--release"))
             .status()
             .context("running cargo to build the texsyn binary")?;
         anyhow::ensure!(status.success(), "building the texsyn binary failed");
@@ -102,7 +103,7 @@ fn texsyn_exe() -> Result<PathBuf> {
         .join(format!("texsyn{}", std::env::consts::EXE_SUFFIX));
     anyhow::ensure!(
         exe.is_file(),
-        "{} is missing: run `cargo build --release` first",
+        "{} is missing: build texsyn with the bench's profile first",
         exe.display()
     );
     Ok(EXE.get_or_init(|| exe).clone())
@@ -625,8 +626,8 @@ fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
         goal: "(no goal; done once per exemplar set)".into(),
         verdict: "—".into(),
     });
-    // TEXSYN_BENCH_SOLID_RESOLUTION=1024 measures the surface and cut rows at the paper's size
-    //; the standard-correction comparison and the tables stay at 512.
+    // TEXSYN_BENCH_SOLID_RESOLUTION=1024 measures the surface and cut rows at the paper's
+    // size; the standard-correction comparison and the tables stay at 512.
     let resolution: u32 = match std::env::var("TEXSYN_BENCH_SOLID_RESOLUTION") {
         Ok(s) => s.parse().with_context(|| {
             format!("TEXSYN_BENCH_SOLID_RESOLUTION = {s:?}: expected a voxel count such as 1024")
@@ -692,7 +693,7 @@ fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
     });
     // The dependent sets, each voxel once (a batched level synthesizes its batches' overlap
     // twice; that is work, not dependency), with the stencil as read (flat on this trivial
-    // field) and dilated by the whole cube of the reach, as before the stencil was made flat
+    // field) and dilated by the whole cube of the reach, as a cube stencil reads it
     // (same voxel values, thicker sets; what an impact-distance count gives).
     let sets = |scheme: Scheme, cube: bool| -> Result<Vec<LevelDependency>> {
         let params = SolidParams::paper(4).with_scheme(scheme);

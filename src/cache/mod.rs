@@ -479,7 +479,7 @@ mod tests {
         assert!(!cache.object_path(&keys[1]).exists());
     }
 
-    /// a directory where an object belongs is a miss (not "shorter than
+    /// A directory where an object belongs is a miss (not "shorter than
     /// its header"), and storing the object replaces it.
     #[test]
     fn a_directory_at_an_object_path_is_replaced() {
@@ -499,7 +499,7 @@ mod tests {
         assert_eq!(fs::read(&path).unwrap(), bytes);
     }
 
-    /// a known kind code that is not the one expected is a miss.
+    /// A known kind code that is not the one expected is a miss.
     #[test]
     fn an_object_of_another_kind_is_a_miss_and_is_removed() {
         let dir = tempfile::tempdir().unwrap();
@@ -513,7 +513,7 @@ mod tests {
         assert!(!cache.object_path(&key).exists());
     }
 
-    /// gc and verify do not create a cache that is not there.
+    /// `gc` and `verify` do not create a cache that is not there.
     #[test]
     fn open_existing_refuses_a_missing_cache_and_creates_nothing() {
         let dir = tempfile::tempdir().unwrap();

@@ -335,8 +335,12 @@ fn build(config: &Config) -> Result<(Dag, FeatureAlignedScore), MethodError> {
             aligned,
             optimization: c.synthesize.clone(),
         };
+        let spec = NodeSpec::of(
+            Stage::Synthesize,
+            crate::stages::synthesize::texture_optimization::NODE,
+        );
         dag.node(
-            NodeSpec::of(Stage::Synthesize, crate::stages::synthesize::texture_optimization::NODE).named(name),
+            spec.named(name),
             params,
             (refined, field, exemplar, features),
             |ctx, p, (refined, field, img, tf)| {

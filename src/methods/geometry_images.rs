@@ -40,9 +40,6 @@ use crate::stages::synthesize::geometry_texture::{
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-// 3: the coarsest scanline pass is an exhaustive search again (a jump-penalized one lowered
-// the bumps' mean by 0.16 std).
-
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct GeometryImagesConfig {

@@ -396,7 +396,7 @@ pub fn preflight() -> Result<(), SlurmError> {
 /// The wrapper every task runs (see the module doc). `$1` is the state folder, `$2` the task
 /// index for a single (non-array) job.
 const TASK_SCRIPT: &str = r#"#!/bin/bash
-# Written by texsyn (src/slurm.rs): runs one task of a state folder and records how it ended.
+# Written by texsyn (src/ops/slurm.rs): runs one task of a state folder and records how it ended.
 # Usage (by sbatch): task.sh STATE_DIR [INDEX]; an array task takes its index from
 # SLURM_ARRAY_TASK_ID.
 state="$1"

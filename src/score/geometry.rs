@@ -89,23 +89,30 @@ pub fn geometry_images(
         "the sample's relief at the reference scale, unrotated",
     );
     run.score_into(&mut item, out_img.view(), None, reference_img.view())?;
-    let offset = density_offset;
     // The grid row and the mesh checks do not depend on the surface row: if that one cannot
     // be made (whatever the reason), they still stand, with a note saying why it is missing.
-    let frame = surface_item(run, nodes, synth, &variants, &out_img, &grey, offset)
-        .map_err(|e| {
-            item.notes.push(format!(
-                "the relief along the surface could not be scored: {e}"
-            ))
-        })
-        .ok();
-    item.extra
-        .insert("density_offset".into(), serde_json::json!(offset));
-    if offset != 0.0 {
+    let frame = surface_item(
+        run,
+        nodes,
+        synth,
+        &variants,
+        &out_img,
+        &grey,
+        density_offset,
+    )
+    .map_err(|e| {
         item.notes.push(format!(
-            "field.density_offset = {offset}: the texture is synthesized {:.2}× denser than the \
+            "the relief along the surface could not be scored: {e}"
+        ))
+    })
+    .ok();
+    item.extra
+        .insert("density_offset".into(), serde_json::json!(density_offset));
+    if density_offset != 0.0 {
+        item.notes.push(format!(
+            "field.density_offset = {density_offset}: the texture is synthesized {:.2}× denser than the \
              reference, so the ratio compares unlike scales (it is meaningful at 0)",
-            2f32.powf_pure(offset)
+            2f32.powf_pure(density_offset)
         ));
     }
 

@@ -1,5 +1,5 @@
-//! Reading a geometry image's synthesized relief in the sample's frame, along the surface
-//!, for the surface-space score of [`super::geometry`].
+//! Reading a geometry image's synthesized relief in the sample's frame, along the surface,
+//! for the surface-space score of [`super::geometry`].
 //!
 //! The grid-space score compares the relief image's `p × p` grid patches with the sample's.
 //! But synthesis lays the texture out per texel: with the surface metric a tap `s` of the

@@ -85,11 +85,6 @@ pub fn graph_matching(
     Ok(item)
 }
 
-/// Feature-aligned texturing (Xu et al.): the refined mesh's colours, unfolded with the
-/// frame texture optimization matches in (§5: `u` the field projected on the tangent plane,
-/// `v = n × u`, turned by the texture's principal angle onto exemplar pixel axes, 1 /
-/// `parameterize.scale` object units per texel), for the aligned result and, with `compare`,
-/// the unaligned one.
 /// The nodes of a feature-aligned run that its score reads: `synthesize` holds the aligned
 /// result and, when the run compares, the unaligned one's node besides.
 #[derive(Clone)]
@@ -102,8 +97,14 @@ pub struct FeatureAlignedNodes {
     pub synthesize: Vec<(Handle<SurfaceSynthesis>, &'static str)>,
 }
 
-/// Feature-aligned texturing at `scale` texels per unit (`parameterize.scale`); `carry`
-/// brings the field's vectors from the input mesh onto the refined one, as synthesis did.
+/// Feature-aligned texturing (Xu et al.): the refined mesh's colours, unfolded with the
+/// frame texture optimization matches in (§5: `u` the field projected on the tangent plane,
+/// `v = n × u`, turned by the texture's principal angle onto exemplar pixel axes, 1 /
+/// `parameterize.scale` object units per texel), for the aligned result and, with `compare`,
+/// the unaligned one.
+///
+/// `scale` is `parameterize.scale`; `carry` brings the field's vectors from the input mesh
+/// onto the refined one, as synthesis did.
 pub fn feature_aligned(
     run: &Run,
     nodes: &FeatureAlignedNodes,

@@ -69,7 +69,7 @@
 //! One image for all three planes suits textures without a direction (marble, granite). A
 //! layered material cannot show the same stripes in all three planes: a solid layered across
 //! x shows the stripes in xy, the transposed stripes in zx and no stripes in yz, so give the
-//! image for xy, its transpose for zx and weight 0 to yz (tests/solid_synthesis.rs does this
+//! image for xy, its transpose for zx and weight 0 to yz (tests/it/solid_synthesis.rs does this
 //! with wood2).
 //!
 //! # Departures

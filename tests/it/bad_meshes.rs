@@ -1,5 +1,5 @@
-//! Meshes that no method can work with get a message that says what is wrong with the mesh
-//!, not a doubled prefix or a scale printed as "0.0000".
+//! Meshes that no method can work with get a message that says what is wrong with the mesh,
+//! not a doubled prefix or a scale printed as "0.0000".
 
 use crate::common;
 use common::{err, repo, run_config};

@@ -108,9 +108,9 @@ fn a_genus_one_input_gives_a_closed_manifold_relief_with_mates_identical_and_no_
 #[test]
 fn genus_zero_inputs_and_the_tetrahedron_give_closed_manifold_reliefs() {
     // A sphere's cut is a path: the square's border folds back on itself at both of its tips,
-    // where the relief mesh used to get a folded pair of triangles (a non-manifold edge, two
-    // boundary edges) and unused tip samples. The tetrahedron's cut used to be one edge,
-    // which opens nothing.
+    // where a relief mesh can get a folded pair of triangles (a non-manifold edge, two
+    // boundary edges) and unused tip samples. A tetrahedron's cut must be more than one edge,
+    // which would open nothing.
     let dir = tempfile::tempdir().unwrap();
     let tet = dir.path().join("tetrahedron.off");
     std::fs::write(

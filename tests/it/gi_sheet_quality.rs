@@ -5,7 +5,7 @@
 //! A square sheet maps to the geometry image without distortion, so the surface metric is the
 //! identity, every texel takes the middle scale and the relief image is the synthesizer's
 //! plain output: this pins what the synthesizer itself reaches (measured: ratio
-//! 0.627, coverage 0.653, largest offset 0.017, gradient 0.972; the issue's bar is 0.6, 0.4,
+//! 0.627, coverage 0.653, largest offset 0.017, gradient 0.972; the quality bar is 0.6, 0.4,
 //! 0.15 and 0.8).
 //!
 //! A 60° rhombus maps to the square affinely (its equal sides put its corners on the square's
@@ -15,8 +15,8 @@
 //! gradient). Even a perfect result scores more than 0 there: the sample laid out verbatim
 //! under each patch's map (the field's turn included) and read back scores 0.691 / 1.163
 //! (ratio / gradient; the surface row's `floor`, which `texsyn score` reports). So that test
-//! asks for a ratio within 0.1 of the floor with the issue's coverage, offset and gradient. Main does not meet it yet: it is ignored, and
-//! run with `cargo test --release --test gi_sheet_quality -- --ignored`.
+//! asks for a ratio within 0.1 of the floor with the bar's coverage, offset and gradient. The synthesizer does not meet it yet: it is ignored, and
+//! run with `cargo test --release --test it gi_sheet_quality -- --ignored`.
 
 use crate::common;
 use common::cli::{succeeded, texsyn};
@@ -106,10 +106,10 @@ fn measures(s: &Value) -> [f64; 4] {
 }
 
 #[test]
-fn an_undistorted_sheet_is_synthesized_near_the_issue_bar() {
+fn an_undistorted_sheet_is_synthesized_near_the_quality_bar() {
     let (grid, surface, floor) = sheet_scores([1.0, 0.0], [0.0, 1.0], &[]);
     let [ratio, coverage, offset, gradient] = measures(&grid);
-    // The issue's bar for coverage, largest offset and gradient; the ratio within 0.1 of its
+    // The quality bar for coverage, largest offset and gradient; the ratio within 0.1 of its
     // 0.6 (0.627 measured), so that a regression of the synthesizer's core shows here.
     assert!(ratio <= 0.7, "ratio {ratio}: {grid}");
     assert!(coverage >= 0.4, "coverage {coverage}: {grid}");
@@ -152,7 +152,7 @@ fn the_rhombus_floor_comes_from_the_stretch_alone() {
 fn a_rhombus_sheet_comes_near_the_floor_along_the_surface() {
     // 60°: an affine map, stretched λ = 1.316 along the square's diagonal (surface lengths
     // 1.73 : 1), where a verbatim layout read along the surface scores 0.691 (the row's
-    // floor, measured): within 0.1 of it, with the issue's other bars. The test
+    // floor, measured): within 0.1 of it, with the bar's other measures. The test
     // above keeps the floor where it belongs.
     let (_, surface, floor) = sheet_scores([1.0, 0.0], [0.5, 0.75f64.sqrt()], &[]);
     let [ratio, coverage, offset, gradient] = measures(&surface);

@@ -1,5 +1,4 @@
-//! The mesh readers' fast paths against the reference readers, and write → read round trips
-//!.
+//! The mesh readers' fast paths against the reference readers, and write → read round trips.
 //!
 //! `read_mesh_bytes` reads OFF, OBJ and PLY through fast paths that decline anything unusual
 //! to the one-line-at-a-time reference readers. Two properties keep that honest: on any input

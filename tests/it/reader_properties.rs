@@ -216,7 +216,7 @@ proptest! {
 /// A `lines.obj` as a feature-aligned run writes it.
 const OBJ_LINES: &[u8] = b"# feature curves\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\ng crease\nl 1 2 3\nl 3 4 1 3\ng user\nl -1 -2\n";
 
-/// The cases the issue lists, kept as a corpus: each must be a clear error, quickly.
+/// Headers that lie about their sizes, kept as a corpus: each must be a clear error, quickly.
 #[test]
 fn headers_that_claim_more_than_the_file_holds_are_errors() {
     let cases: [(&str, &[u8]); 4] = [

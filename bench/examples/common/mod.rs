@@ -1,5 +1,5 @@
 //! What the examples share: where they write and how they read their settings. Each example
-//! says `mod common;`; helpers shared with the tests come from `tests/common/` by `#[path]`.
+//! says `mod common;`; helpers shared with the tests come from `tests/it/common/` by `#[path]`.
 #![allow(dead_code)] // each example uses a different part
 
 use std::path::PathBuf;

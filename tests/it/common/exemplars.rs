@@ -1,12 +1,18 @@
 //! Where the repository's test data is, and loading its exemplar images. Shared by the
-//! integration tests (through `common`) and the examples (`#[path]`).
+//! integration tests (through `common`) and bench/'s examples (`#[path]`).
 #![allow(dead_code)] // each user takes a different part
 
 use std::path::PathBuf;
 use texsyn::image::{Image, decode_image};
 
+/// The repository's root: the first folder at or above the compiling crate's (the root
+/// crate for the tests, `bench/` for the examples) that holds `tests/data`.
 pub fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    let here = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    here.ancestors()
+        .find(|d| d.join("tests/data").is_dir())
+        .map(PathBuf::from)
+        .unwrap_or(here)
 }
 
 /// The path of an exemplar image in `tests/data/exemplars` (or `name` itself if absolute).

@@ -1,12 +1,17 @@
 //! Meshes for geometry images (Lai et al. 2005 §3, Gu et al. 2002). Shared by
-//! tests/geometry_image.rs and the `geometry_image_previews` example.
+//! tests/it/geometry_image.rs and bench/'s `geometry_image_previews` example.
 #![allow(dead_code)] // each user takes a different part
 
 use texsyn::geom::Mesh;
 
 /// A mesh of the repository, `rel` from its root (e.g. `tests/data/meshes/knot.off`).
 pub fn load_mesh(rel: &str) -> Mesh {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    // The root crate's folder for the tests, `bench/`'s parent for the examples.
+    let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = here
+        .ancestors()
+        .find(|d| d.join(rel).exists())
+        .unwrap_or(here);
     texsyn::geom::io::read_mesh(&root.join(rel)).unwrap()
 }
 
