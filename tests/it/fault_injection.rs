@@ -1,6 +1,7 @@
 //! Faults injected into real runs: the binary killed at seeded random moments, and
 //! a full disk. After each, the output folder holds one run's outputs, all of them, and the
-//! next run ends with the same files as an uninterrupted run, leaving no temporary behind.
+//! next run ends with the same files as an uninterrupted run, leaving no temporary behind
+//! (the full tier). Concurrent runs with `gc` on one cache agree (the default tier).
 
 use crate::common;
 use common::repo;
@@ -187,7 +188,6 @@ fn a_full_disk_fails_clearly_and_keeps_the_outputs_and_the_cache() {
 /// the same time: every run succeeds, and runs of one config agree byte for byte.
 #[test]
 fn concurrent_runs_and_gc_on_one_cache_agree() {
-    crate::full_tier_only!("fault injection");
     let tmp = tempfile::tempdir().unwrap();
     let cache = tmp.path().join("cache");
     let mut children = Vec::new();
