@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use texsyn::cache::{Cache, parse_size};
 use texsyn::config::Config;
-use texsyn::ops::lockfile::LockFile;
 use texsyn::methods::Plan;
-use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, Shard, outputs};
+use texsyn::ops::lockfile::LockFile;
 use texsyn::ops::sweep::Sweep;
+use texsyn::pipeline::{self, ProgressMode, RunOptions, RunResult, Shard, outputs};
 
 #[derive(Parser)]
 #[command(
@@ -557,9 +557,9 @@ fn real_main() -> Result<i32> {
             let unbumped: Vec<&str> = differences
                 .iter()
                 .filter_map(|d| match d {
-                    texsyn::ops::lockfile::Difference::ContentChangedUnderSameKey { node, .. } => {
-                        Some(node.as_str())
-                    }
+                    texsyn::ops::lockfile::Difference::ContentChangedUnderSameKey {
+                        node, ..
+                    } => Some(node.as_str()),
                     _ => None,
                 })
                 .collect();

@@ -5,13 +5,13 @@
 //! peak memory.
 
 use super::{Row, median, subdivide, verdict_below};
-use texsyn::geom::Mesh;
-use texsyn::pipeline::outputs::TempDir;
-use texsyn::ops::sweep::RunReport;
 use anyhow::{Context, Result, bail};
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
+use texsyn::geom::Mesh;
+use texsyn::ops::sweep::RunReport;
+use texsyn::pipeline::outputs::TempDir;
 
 /// ASCII OFF, as a modelling tool writes it (shortest round-trip decimals).
 pub(crate) fn write_off(m: &Mesh, path: &Path) -> Result<()> {

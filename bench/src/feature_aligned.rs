@@ -5,6 +5,9 @@
 //! against unconstrained synthesis on a flat sheet (issue 10's quality goal).
 
 use super::{Row, time, verdict_below};
+use anyhow::{Context, Result};
+use glam::Vec3;
+use std::path::Path;
 use texsyn::geom::edge_refine::refine_edges;
 use texsyn::geom::{Mesh, primitives};
 use texsyn::image::Image;
@@ -19,9 +22,6 @@ use texsyn::stages::synthesize::texture_optimization::{
     FeatureConstraint, SurfaceSynthesisInput, TextureOptimizationParams, curve_distance,
     texture_optimization,
 };
-use anyhow::{Context, Result};
-use glam::Vec3;
-use std::path::Path;
 
 fn load_image(path: &Path) -> Result<Image> {
     let bytes = std::fs::read(path).with_context(|| path.display().to_string())?;

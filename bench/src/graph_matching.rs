@@ -4,6 +4,8 @@
 //! pre-subdivision (§3.2.2, Fig. 6) on three meshes.
 
 use super::{Row, time, verdict_below};
+use anyhow::{Context, Result};
+use std::path::Path;
 use texsyn::geom::Mesh;
 use texsyn::geom::poly_mesh::PolyMesh;
 use texsyn::stages::analyse_exemplar::gaussian_stack::{StackParams, build_stack};
@@ -14,8 +16,6 @@ use texsyn::stages::parameterize::sqrt2_subdivision::{
 use texsyn::stages::synthesize::graph_matching::{
     MatchInput, MatchParams, Search, Transfer, graph_matching,
 };
-use anyhow::{Context, Result};
-use std::path::Path;
 
 /// The cow after four √2 steps (about 70,000 vertices), scaled so that 1/ē ≈ 110 like the
 /// paper's donkey.

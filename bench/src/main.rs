@@ -9,6 +9,9 @@
 //! `$TEXSYN_SHARED_DATA`) when it is there; otherwise the report says which rows it could not
 //! measure. Speed is only measured here, never asserted in tests (the machines are shared).
 
+use anyhow::{Context, Result};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 use texsyn::artifact::{Artifact, Format};
 use texsyn::geom::Mesh;
 use texsyn::stages::analyse_exemplar::jump_map::{JumpMapParams, build_jump_map};
@@ -17,9 +20,6 @@ use texsyn::stages::parameterize::jump_parameterization::{
     JumpParameterization, ParameterizeParams, Scale, jump_parameterization,
 };
 use texsyn::stages::synthesize::jump_walk::{WalkParams, jump_walk};
-use anyhow::{Context, Result};
-use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use clap::Parser;
 
@@ -31,7 +31,10 @@ mod score;
 mod sweep;
 
 #[derive(Parser)]
-#[command(name = "texsyn-bench", about = "Measure texsyn's speed goals (BENCHMARKS.md)")]
+#[command(
+    name = "texsyn-bench",
+    about = "Measure texsyn's speed goals (BENCHMARKS.md)"
+)]
 struct Args {
     /// Write the Markdown report here (its quality table, `texsyn score`'s, is kept).
     #[arg(short, long)]
@@ -80,7 +83,15 @@ fn texsyn_exe() -> Result<PathBuf> {
     if let Some(cargo) = std::env::var_os("CARGO") {
         let status = std::process::Command::new(cargo)
             .current_dir(repo())
-            .args(["build", "--release", "--quiet", "-p", "texsyn", "--bin", "texsyn"])
+            .args([
+                "build",
+                "--release",
+                "--quiet",
+                "-p",
+                "texsyn",
+                "--bin",
+                "texsyn",
+            ])
             .status()
             .context("running cargo to build the texsyn binary")?;
         anyhow::ensure!(status.success(), "building the texsyn binary failed");
@@ -580,7 +591,9 @@ fn density_rerun_row() -> Result<Row> {
 /// volumes of 800–1024: 10–25 min for a surface, 10–20 s for a new cut; dual-grid correction
 /// 4× faster with about 80% fewer dependent voxels). Runs on the demo's cow.
 fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
-    use texsyn::stages::analyse_exemplar::candidate_triples::{CandidateParams, analyse_transposed};
+    use texsyn::stages::analyse_exemplar::candidate_triples::{
+        CandidateParams, analyse_transposed,
+    };
     use texsyn::stages::field::quaternion_field::{FieldGrid, RotationField};
     use texsyn::stages::parameterize::volume_embedding::{
         embed, outside_voxels, section, section_voxels_inside, surface_voxels,

@@ -6,11 +6,11 @@
 //! `TEXSYN_BENCH_ONLY=scaling cargo run --release -p texsyn-bench` prints the section; `TEXSYN_BENCH_SCALING=solid,synth2d`
 //! measures only the methods named.
 
-use texsyn::geom::Mesh;
-use texsyn::pipeline::outputs::TempDir;
-use texsyn::ops::sweep::RunReport;
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
+use texsyn::geom::Mesh;
+use texsyn::ops::sweep::RunReport;
+use texsyn::pipeline::outputs::TempDir;
 
 /// The least-squares slope of log(value) against log(size): the exponent k of value ≈ c·size^k.
 /// None with fewer than two points, a size or value that is not positive and finite, or sizes

@@ -2,10 +2,10 @@
 //! against a 256² exemplar in under 30 s on 2 cores.
 
 use super::{Row, time, verdict_below};
+use anyhow::Result;
 use texsyn::image::Image;
 use texsyn::image::patch_score::{ScoreParams, patch_score};
 use texsyn::random::counter_unit;
-use anyhow::Result;
 
 /// Two rows: an output that is mostly the exemplar's own material (a 512² image against its
 /// top-left 256² quarter: the prunings work best), and seeded noise (nothing to prune with).

@@ -4,11 +4,11 @@
 //! folders.
 
 use super::{Row, median, verdict_below};
-use texsyn::pipeline::outputs::TempDir;
-use texsyn::ops::sweep::{RunReport, Sweep, SweepDir};
 use anyhow::{Context, Result, bail};
 use std::path::Path;
 use std::time::Instant;
+use texsyn::ops::sweep::{RunReport, Sweep, SweepDir};
+use texsyn::pipeline::outputs::TempDir;
 
 /// Writes a sweep of `base` with `axes` (TOML lines) into `dir`.
 fn write_sweep(dir: &Path, base: &Path, workers: usize, axes: &str) -> Result<std::path::PathBuf> {

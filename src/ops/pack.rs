@@ -70,8 +70,8 @@
 use crate::artifact::{Artifact, Backing, Bundle, ContentHash, Format};
 use crate::cache::{Cache, CacheError, Key, Lookup};
 use crate::config::{Config, ConfigError};
-use crate::ops::lockfile::{LockEntry, LockError, LockFile};
 use crate::methods::{self, MethodError, Plan};
+use crate::ops::lockfile::{LockEntry, LockError, LockFile};
 use crate::pipeline::executor::PipelineError;
 use crate::pipeline::outputs::TempDir;
 use crate::pipeline::{self, InputRef, ProgressMode, RunOptions, outputs};

@@ -135,14 +135,17 @@ pub fn thread_counts() -> &'static [usize] {
 /// every node's content hash is the same for all of them.
 pub fn assert_same_hashes_on_any_thread_count(run: impl Fn(&Path) -> RunResult + Sync) {
     let counts = thread_counts();
-    let hashes: Vec<_> = counts.iter().map(|&threads| {
-        let cache = tempfile::tempdir().unwrap();
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        node_hashes(&pool.install(|| run(cache.path())))
-    }).collect();
+    let hashes: Vec<_> = counts
+        .iter()
+        .map(|&threads| {
+            let cache = tempfile::tempdir().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            node_hashes(&pool.install(|| run(cache.path())))
+        })
+        .collect();
     for (threads, h) in counts.iter().zip(&hashes).skip(1) {
         assert_eq!(
             &hashes[0], h,
