@@ -15,6 +15,6 @@ pub mod score;
 // The core (meshes, images, solvers, randomness, rasterizer, writers) and the stage algorithms
 // are crates of their own (DESIGN.md, Layout); re-exported so `crate::geom::…`,
 // `texsyn::stages::…` keep their paths.
-pub use texsyn_core::{check, export, geom, image, linalg, memory, random, render};
+pub use texsyn_core::{check, export, geom, graph, image, linalg, memory, random, render};
 /// The stage algorithms, one file per algorithm (DESIGN.md, Layout).
 pub use texsyn_stages as stages;

@@ -22,6 +22,7 @@
 use super::{Item, Run, ScoreFailure};
 use crate::artifact::jump_maps::{JumpParameterization, TexelAddresses};
 use crate::geom::Mesh;
+use crate::graph::Csr;
 use crate::image::{Image, ImageView};
 use crate::pipeline::Handle;
 use crate::random::{counter_hash, counter_unit};
@@ -126,15 +127,16 @@ pub fn unfolded_discs(
 ) -> Charts {
     let param = offsets;
     let n = param.adj_offsets.len() - 1;
-    let mut faces_of: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for (f, t) in triangles.iter().enumerate() {
-        for &v in t {
-            faces_of[v as usize].push(f);
-        }
-    }
+    let faces_of: Csr<u32> = Csr::from_pairs(
+        n,
+        triangles
+            .iter()
+            .enumerate()
+            .flat_map(|(f, t)| t.iter().map(move |&v| (v as usize, f as u32))),
+    );
     // Centres: the vertices with the smallest seeded hashes among those with a face.
     let mut order: Vec<(u64, usize)> = (0..n)
-        .filter(|&v| !faces_of[v].is_empty())
+        .filter(|&v| !faces_of.row(v).is_empty())
         .map(|v| (counter_hash(seed, STREAM_DISC, v as u64), v))
         .collect();
     order.sort_unstable();
@@ -177,7 +179,7 @@ pub fn unfolded_discs(
         let (x0, y0) = ((k % per_row) * (tile + 1), (k / per_row) * (tile + 1));
         let mut faces: Vec<usize> = reached
             .iter()
-            .flat_map(|&v| faces_of[v].iter().copied())
+            .flat_map(|&v| faces_of.row(v).iter().map(|&f| f as usize))
             .collect();
         faces.sort_unstable();
         faces.dedup();

@@ -374,31 +374,14 @@ fn vertex_gradients(mesh: &Mesh, f: &[[f32; 2]]) -> Vec<[Vec3; 2]> {
             ([g(0), g(1)], 0.5 * two_a)
         })
         .collect();
-    // Vertex -> faces, in face order.
     let nv = mesh.positions.len();
-    let mut off = vec![0u32; nv + 1];
-    for t in &mesh.triangles {
-        for &v in t {
-            off[v as usize + 1] += 1;
-        }
-    }
-    for i in 0..nv {
-        off[i + 1] += off[i];
-    }
-    let mut fill = off.clone();
-    let mut faces = vec![0u32; off[nv] as usize];
-    for (fi, t) in mesh.triangles.iter().enumerate() {
-        for &v in t {
-            faces[fill[v as usize] as usize] = fi as u32;
-            fill[v as usize] += 1;
-        }
-    }
+    let faces = mesh.vertex_faces();
     (0..nv)
         .into_par_iter()
         .map(|v| {
             let mut g = [Vec3::ZERO; 2];
             let mut area = 0.0f32;
-            for &fi in &faces[off[v] as usize..off[v + 1] as usize] {
+            for &fi in faces.row(v) {
                 let (fg, a) = face_terms[fi as usize];
                 g[0] += fg[0];
                 g[1] += fg[1];

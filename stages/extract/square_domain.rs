@@ -12,6 +12,7 @@
 //!
 //! [`Locator`] then finds the triangle under each sample with a uniform bucket grid.
 
+use crate::graph::Csr;
 use glam::Vec2;
 use rayon::prelude::*;
 use texsyn_core::math::PureMath;
@@ -183,9 +184,8 @@ pub struct Locator<'a> {
     cell: f32,
     gx: usize,
     gy: usize,
-    /// Bucket b holds `items[offsets[b]..offsets[b + 1]]`, ascending triangle indices.
-    offsets: Vec<u32>,
-    items: Vec<u32>,
+    /// Per bucket, the triangles whose bounding box overlaps it, ascending.
+    buckets: Csr<u32>,
 }
 
 impl<'a> Locator<'a> {
@@ -220,29 +220,12 @@ impl<'a> Locator<'a> {
                 (thi.y.max(0.0) as usize).min(gy - 1),
             )
         };
-        let mut counts = vec![0u32; gx * gy + 1];
-        for t in triangles {
+        // (bucket, triangle) for every bucket a triangle's box overlaps, triangles in order.
+        let pairs = triangles.iter().enumerate().flat_map(|(f, t)| {
             let (x0, y0, x1, y1) = range(t);
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    counts[y * gx + x + 1] += 1;
-                }
-            }
-        }
-        for b in 0..gx * gy {
-            counts[b + 1] += counts[b];
-        }
-        let mut fill = counts.clone();
-        let mut items = vec![0u32; counts[gx * gy] as usize];
-        for (f, t) in triangles.iter().enumerate() {
-            let (x0, y0, x1, y1) = range(t);
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    items[fill[y * gx + x] as usize] = f as u32;
-                    fill[y * gx + x] += 1;
-                }
-            }
-        }
+            (y0..=y1).flat_map(move |y| (x0..=x1).map(move |x| (y * gx + x, f as u32)))
+        });
+        let buckets = Csr::from_pairs(gx * gy, pairs);
         Locator {
             uv,
             triangles,
@@ -250,14 +233,12 @@ impl<'a> Locator<'a> {
             cell,
             gx,
             gy,
-            offsets: counts,
-            items,
+            buckets,
         }
     }
 
     fn bucket(&self, bx: usize, by: usize) -> &[u32] {
-        let b = by * self.gx + bx;
-        &self.items[self.offsets[b] as usize..self.offsets[b + 1] as usize]
+        self.buckets.row(by * self.gx + bx)
     }
 
     fn bary(&self, f: u32, p: Vec2) -> Option<[f32; 3]> {

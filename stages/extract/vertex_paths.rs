@@ -15,10 +15,9 @@
 
 use super::crease_lines::Polyline;
 use crate::geom::Mesh;
+use crate::graph::Dijkstra;
 use crate::image::knn::KdTree;
 use glam::Vec3;
-use std::cmp::Ordering;
-use std::collections::BinaryHeap;
 
 /// Why a curve could not be snapped onto a mesh.
 #[derive(Debug, thiserror::Error)]
@@ -82,31 +81,10 @@ pub(crate) struct Snapper<'a> {
     tree: KdTree,
     /// Tree index -> vertex id (the tree holds only vertices that triangles use).
     ids: Vec<u32>,
-    dist: Vec<f64>,
-    prev: Vec<u32>,
-    touched: Vec<u32>,
+    /// Shortest-path search, predecessors by vertex.
+    search: Dijkstra,
     scratch: Vec<f32>,
 }
-
-/// A heap entry ordered so the max-heap pops the smallest distance, then the smallest id.
-#[derive(PartialEq)]
-struct Entry(f64, u32);
-
-impl Eq for Entry {}
-
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
-}
-
-impl Ord for Entry {
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
-    }
-}
-
-const NONE: u32 = u32::MAX;
 
 impl<'a> Snapper<'a> {
     pub(crate) fn new(mesh: &'a Mesh) -> Result<Self, SnapError> {
@@ -129,9 +107,7 @@ impl<'a> Snapper<'a> {
             mesh,
             tree: KdTree::build(&coords, 3),
             ids,
-            dist: vec![f64::INFINITY; n],
-            prev: vec![NONE; n],
-            touched: Vec::new(),
+            search: Dijkstra::new(n, u32::MAX),
             scratch: Vec::new(),
         })
     }
@@ -204,55 +180,20 @@ impl<'a> Snapper<'a> {
     /// The shortest edge path from `a` to `b` (both ends included), or None when `b` is not
     /// reachable. Stops when `b` is settled, so a short hop costs a few rings, not the mesh.
     fn shortest_path(&mut self, a: u32, b: u32) -> Option<Vec<u32>> {
-        for &v in &self.touched {
-            self.dist[v as usize] = f64::INFINITY;
-            self.prev[v as usize] = NONE;
-        }
-        self.touched.clear();
         let adj = self.mesh.adjacency();
         let pos = &self.mesh.positions;
-        let mut heap = BinaryHeap::new();
-        self.dist[a as usize] = 0.0;
-        self.touched.push(a);
-        heap.push(Entry(0.0, a));
-        let mut found = false;
-        while let Some(Entry(d, v)) = heap.pop() {
-            if d > self.dist[v as usize] {
-                continue;
-            }
-            if v == b {
-                found = true;
-                break;
-            }
+        let search = &mut self.search;
+        search.reset();
+        search.add_source(a);
+        let found = search.run(&[b], |search, v, d| {
             let pv = pos[v as usize];
             for &w in adj.neighbors(v as usize) {
-                let nd = d + pv.distance(pos[w as usize]) as f64;
-                let old = self.dist[w as usize];
                 // Equal distances keep the lower predecessor id: the path is a function of
                 // the mesh alone.
-                if nd < old || (nd == old && v < self.prev[w as usize]) {
-                    if old == f64::INFINITY {
-                        self.touched.push(w);
-                    }
-                    self.dist[w as usize] = nd;
-                    self.prev[w as usize] = v;
-                    if nd < old {
-                        heap.push(Entry(nd, w));
-                    }
-                }
+                search.relax_lowest_pred(w, d + pv.distance(pos[w as usize]) as f64, v);
             }
-        }
-        if !found {
-            return None;
-        }
-        let mut path = vec![b];
-        let mut v = b;
-        while v != a {
-            v = self.prev[v as usize];
-            path.push(v);
-        }
-        path.reverse();
-        Some(path)
+        });
+        found.then(|| search.path(a, b))
     }
 }
 

@@ -37,9 +37,8 @@
 
 use crate::extract::crease_lines::Polyline;
 use crate::geom::Mesh;
+use crate::graph::Dijkstra;
 use glam::Vec3;
-use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap};
 use texsyn_core::math::PureMath;
 
 /// Number of edges over which incoming/outgoing directions are measured (see module doc).
@@ -96,6 +95,7 @@ fn end_vertex(c: &Polyline, end: usize) -> u32 {
 /// Joins curve ends one pair at a time, smallest gap first, until no pair qualifies.
 fn join_all(mesh: &Mesh, curves: &mut Vec<Polyline>, join_distance: f32, cos_limit: f32) {
     let mean_edge = mesh.mean_edge_length();
+    let mut search = Dijkstra::new(mesh.vertex_count(), u32::MAX);
     loop {
         // (gap, curve i, end of i, curve j, end of j) with (i, ei) < (j, ej).
         let mut cand: Vec<(f32, usize, usize, usize, usize)> = Vec::new();
@@ -148,7 +148,7 @@ fn join_all(mesh: &Mesh, curves: &mut Vec<Polyline>, join_distance: f32, cos_lim
         for &(d, i, ei, j, ej) in &cand {
             let (a, b) = (end_vertex(&curves[i], ei), end_vertex(&curves[j], ej));
             let limit = 3.0 * d as f64 + 3.0 * mean_edge as f64;
-            let Some(path) = shortest_path(mesh, a, b, limit) else {
+            let Some(path) = shortest_path_in(mesh, &mut search, a, b, limit) else {
                 continue;
             };
             // Curve i oriented to end at a.
@@ -188,63 +188,42 @@ fn join_all(mesh: &Mesh, curves: &mut Vec<Polyline>, join_distance: f32, cos_lim
     }
 }
 
-#[derive(PartialEq)]
-struct Item(f64, u32);
-impl Eq for Item {}
-impl Ord for Item {
-    fn cmp(&self, o: &Self) -> Ordering {
-        // Min-heap on distance, ties by vertex: a total, deterministic order.
-        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
-    }
-}
-impl PartialOrd for Item {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
+/// Shortest edge path from `a` to `b` (both included), or None when it is longer than
+/// `limit` (object units).
+pub fn shortest_path(mesh: &Mesh, a: u32, b: u32, limit: f64) -> Option<Vec<u32>> {
+    shortest_path_in(
+        mesh,
+        &mut Dijkstra::new(mesh.vertex_count(), u32::MAX),
+        a,
+        b,
+        limit,
+    )
 }
 
-/// Shortest edge path from `a` to `b` (both included), or None when it is longer than
-/// `limit` (object units). The map is only looked up, never iterated, so its order cannot
-/// leak into the result.
-pub fn shortest_path(mesh: &Mesh, a: u32, b: u32, limit: f64) -> Option<Vec<u32>> {
+/// [`shortest_path`] with the search's arrays reused from earlier calls.
+fn shortest_path_in(
+    mesh: &Mesh,
+    search: &mut Dijkstra,
+    a: u32,
+    b: u32,
+    limit: f64,
+) -> Option<Vec<u32>> {
     if a == b {
         return Some(vec![a]);
     }
     let adj = mesh.adjacency();
-    let mut dist: HashMap<u32, (f64, u32)> = HashMap::new();
-    let mut heap = BinaryHeap::new();
-    dist.insert(a, (0.0, a));
-    heap.push(Item(0.0, a));
-    while let Some(Item(d, v)) = heap.pop() {
-        if d > dist[&v].0 {
-            continue;
-        }
-        if v == b {
-            let mut path = vec![b];
-            let mut cur = b;
-            while cur != a {
-                cur = dist[&cur].1;
-                path.push(cur);
-            }
-            path.reverse();
-            return Some(path);
-        }
+    search.reset();
+    search.add_source(a);
+    let found = search.run(&[b], |search, v, d| {
         for &w in adj.neighbors(v as usize) {
             let nd = d + pos(mesh, v).as_dvec3().distance(pos(mesh, w).as_dvec3());
             if nd > limit {
                 continue;
             }
-            let better = match dist.get(&w) {
-                Some(&(old, _)) => nd < old,
-                None => true,
-            };
-            if better {
-                dist.insert(w, (nd, v));
-                heap.push(Item(nd, w));
-            }
+            search.relax(w, nd, v);
         }
-    }
-    None
+    });
+    found.then(|| search.path(a, b))
 }
 
 /// Turning angle cosine at index i (see the module doc): between the chords over SPAN edges

@@ -39,6 +39,7 @@
 use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use crate::geom::poly_mesh::PolyMesh;
+use crate::graph::Csr;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -79,22 +80,16 @@ impl Edges {
         // order each short bucket by the upper vertex; the sort is stable, so corners of one
         // edge stay in ascending order.
         let n = mesh.vertex_count();
-        let mut bucket_start = vec![0u32; n + 1];
-        for c in 0..corner_count {
-            let (a, b) = ends(c);
-            bucket_start[a.min(b) as usize + 1] += 1;
-        }
-        for v in 0..n {
-            bucket_start[v + 1] += bucket_start[v];
-        }
-        let mut fill = bucket_start.clone();
-        let mut corners = vec![0u32; corner_count];
-        for c in 0..corner_count {
-            let (a, b) = ends(c);
-            let lo = a.min(b) as usize;
-            corners[fill[lo] as usize] = c as u32;
-            fill[lo] += 1;
-        }
+        let Csr {
+            offsets: bucket_start,
+            items: mut corners,
+        } = Csr::<u32>::from_pairs(
+            n,
+            (0..corner_count).map(|c| {
+                let (a, b) = ends(c);
+                (a.min(b) as usize, c as u32)
+            }),
+        );
         let mut edge_of = vec![0u32; corner_count];
         let mut start = vec![0u32];
         for v in 0..n {

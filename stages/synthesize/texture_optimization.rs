@@ -114,6 +114,7 @@
 
 use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
+use crate::graph::{Csr, Dijkstra};
 use crate::image::Image;
 use crate::image::knn::{KdTree, squared_distance};
 use crate::image::pca::{Pca, symmetric_eigen};
@@ -121,8 +122,7 @@ use crate::random::counter_hash;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::cmp::Ordering;
-use std::collections::{BinaryHeap, VecDeque};
+use std::collections::VecDeque;
 use texsyn_core::math::PureMath;
 
 /// The `texture_optimization` node's algorithm and version (part of its key; bump on any change of output).
@@ -753,10 +753,8 @@ struct Patches {
     start: Vec<usize>,
     vertex: Vec<u32>,
     offset: Vec<[f32; 2]>,
-    /// Per vertex, the range of its entries in `by_vertex`.
-    vstart: Vec<usize>,
-    /// Entry indices covering each vertex, in sample order.
-    by_vertex: Vec<u32>,
+    /// Per vertex, the indices of the entries covering it, in sample order.
+    by_vertex: Csr<u32, usize>,
     /// Sample of each entry.
     entry_sample: Vec<u32>,
 }
@@ -828,25 +826,17 @@ fn gather_patches(
         offset.extend(o);
         start.push(vertex.len());
     }
-    let mut count = vec![0usize; n + 1];
-    for &q in &vertex {
-        count[q as usize + 1] += 1;
-    }
-    for i in 0..n {
-        count[i + 1] += count[i];
-    }
-    let vstart = count.clone();
-    let mut fill = count;
-    let mut by_vertex = vec![0u32; total];
-    for (e, &q) in vertex.iter().enumerate() {
-        by_vertex[fill[q as usize]] = e as u32;
-        fill[q as usize] += 1;
-    }
+    let by_vertex = Csr::from_pairs(
+        n,
+        vertex
+            .iter()
+            .enumerate()
+            .map(|(e, &q)| (q as usize, e as u32)),
+    );
     Patches {
         start,
         vertex,
         offset,
-        vstart,
         by_vertex,
         entry_sample,
     }
@@ -1241,7 +1231,7 @@ fn solve_colours(
         .zip(source.par_iter_mut())
         .enumerate()
         .for_each(|(q, (col, src))| {
-            let list = &patches.by_vertex[patches.vstart[q]..patches.vstart[q + 1]];
+            let list = patches.by_vertex.row(q);
             if list.is_empty() {
                 return;
             }
@@ -1288,7 +1278,7 @@ fn paste_nearest(
         .zip(source.par_iter_mut())
         .enumerate()
         .for_each(|(q, (col, src))| {
-            let list = &patches.by_vertex[patches.vstart[q]..patches.vstart[q + 1]];
+            let list = patches.by_vertex.row(q);
             let nearest = list.iter().map(|&e| e as usize).min_by(|&a, &b| {
                 let (oa, ob) = (patches.offset[a], patches.offset[b]);
                 (oa[0] * oa[0] + oa[1] * oa[1]).total_cmp(&(ob[0] * ob[0] + ob[1] * ob[1]))
@@ -1485,91 +1475,52 @@ fn geodesic(mesh: &Mesh, sources: &[u32], through_triangles: bool) -> Vec<f32> {
     let n = mesh.vertex_count();
     let pos = &mesh.positions;
     let adj = mesh.adjacency();
-    // Vertex → triangles.
-    let mut tcount = vec![0usize; n + 1];
-    for t in &mesh.triangles {
-        for &v in t {
-            tcount[v as usize + 1] += 1;
-        }
-    }
-    for i in 0..n {
-        tcount[i + 1] += tcount[i];
-    }
-    let mut fill = tcount.clone();
-    let mut tris = vec![0u32; tcount[n]];
-    for (f, t) in mesh.triangles.iter().enumerate() {
-        for &v in t {
-            tris[fill[v as usize]] = f as u32;
-            fill[v as usize] += 1;
-        }
-    }
-
-    #[derive(PartialEq)]
-    struct Item(f64, u32);
-    impl Eq for Item {}
-    impl Ord for Item {
-        fn cmp(&self, o: &Self) -> Ordering {
-            o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
-        }
-    }
-    impl PartialOrd for Item {
-        fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-            Some(self.cmp(o))
-        }
-    }
-
-    let mut dist = vec![f64::INFINITY; n];
-    let mut done = vec![false; n];
-    let mut heap = BinaryHeap::new();
+    let tris = mesh.vertex_faces();
+    let mut search = Dijkstra::new(n, ());
     for &s in sources {
-        if (s as usize) < n && dist[s as usize] > 0.0 {
-            dist[s as usize] = 0.0;
-            heap.push(Item(0.0, s));
+        if (s as usize) < n {
+            search.add_source(s);
         }
     }
     let p64 = |v: usize| pos[v].as_dvec3();
-    while let Some(Item(d, v)) = heap.pop() {
-        let v = v as usize;
-        if done[v] || d > dist[v] {
-            continue;
-        }
-        done[v] = true;
-        let relax = |c: usize, nd: f64, dist: &mut Vec<f64>, heap: &mut BinaryHeap<Item>| {
-            if nd < dist[c] {
-                dist[c] = nd;
-                heap.push(Item(nd, c as u32));
-            }
-        };
-        for &c in adj.neighbors(v) {
-            let c = c as usize;
-            if !done[c] {
-                let nd = d + (p64(c) - p64(v)).length();
-                relax(c, nd, &mut dist, &mut heap);
+    search.run(&[], |search, v, d| {
+        // The triangle updates can offer a settled vertex less than it has: only unsettled
+        // vertices are relaxed.
+        for &c in adj.neighbors(v as usize) {
+            if !search.is_settled(c) {
+                let nd = d + (p64(c as usize) - p64(v as usize)).length();
+                search.relax(c, nd, ());
             }
         }
         if !through_triangles {
-            continue;
+            return;
         }
-        for &f in &tris[tcount[v]..tcount[v + 1]] {
+        for &f in tris.row(v as usize) {
             let t = mesh.triangles[f as usize];
             for k in 0..3 {
-                let a = t[k] as usize;
-                let c = t[(k + 1) % 3] as usize;
+                let a = t[k];
+                let c = t[(k + 1) % 3];
                 if a == v || c == v {
                     continue;
                 }
                 for (a, c) in [(a, c), (c, a)] {
-                    if done[a]
-                        && !done[c]
-                        && let Some(nd) = unfold(p64(v), d, p64(a), dist[a], p64(c))
+                    if search.is_settled(a)
+                        && !search.is_settled(c)
+                        && let Some(nd) = unfold(
+                            p64(v as usize),
+                            d,
+                            p64(a as usize),
+                            search.dist(a),
+                            p64(c as usize),
+                        )
                     {
-                        relax(c, nd, &mut dist, &mut heap);
+                        search.relax(c, nd, ());
                     }
                 }
             }
         }
-    }
-    dist.iter().map(|&d| d as f32).collect()
+    });
+    search.distances().iter().map(|&d| d as f32).collect()
 }
 
 /// Fast marching's update of corner `c` of a triangle from its corners `a`, `b` with distances

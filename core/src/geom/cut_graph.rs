@@ -25,9 +25,8 @@
 
 use super::Mesh;
 use super::half_edge::{HalfEdgeMesh, NONE, TopologyError};
+use crate::graph::{Csr, Dijkstra};
 use glam::Vec3;
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
 
 #[derive(Debug, thiserror::Error)]
 pub enum CutError {
@@ -92,9 +91,8 @@ struct Augmented {
     dual_count: usize,
     /// Whether the edge is a boundary edge of the input (its dual goes first into C).
     loop_edge: Vec<bool>,
-    adj_start: Vec<u32>,
-    /// (neighbour, edge) pairs.
-    adj: Vec<(u32, u32)>,
+    /// Per node, its (neighbour, edge) pairs.
+    adj: Csr<(u32, u32)>,
     real_edges: usize,
 }
 
@@ -148,22 +146,12 @@ impl Augmented {
             offset += n;
         }
         let node_count = nv + loops.len();
-        let mut adj_start = vec![0u32; node_count + 1];
-        for &(a, b) in &ends {
-            adj_start[a as usize + 1] += 1;
-            adj_start[b as usize + 1] += 1;
-        }
-        for i in 0..node_count {
-            adj_start[i + 1] += adj_start[i];
-        }
-        let mut fill = adj_start.clone();
-        let mut adj = vec![(0u32, 0u32); adj_start[node_count] as usize];
-        for (e, &(a, b)) in ends.iter().enumerate() {
-            adj[fill[a as usize] as usize] = (b, e as u32);
-            fill[a as usize] += 1;
-            adj[fill[b as usize] as usize] = (a, e as u32);
-            fill[b as usize] += 1;
-        }
+        let adj = Csr::from_pairs(
+            node_count,
+            ends.iter().enumerate().flat_map(|(e, &(a, b))| {
+                [(a as usize, (b, e as u32)), (b as usize, (a, e as u32))]
+            }),
+        );
         Augmented {
             node_count,
             ends,
@@ -171,46 +159,32 @@ impl Augmented {
             dual,
             dual_count: nf + offset as usize,
             loop_edge,
-            adj_start,
             adj,
             real_edges: ne,
         }
     }
 
     fn neighbors(&self, v: u32) -> &[(u32, u32)] {
-        &self.adj[self.adj_start[v as usize] as usize..self.adj_start[v as usize + 1] as usize]
+        self.adj.row(v as usize)
     }
 
     /// Multi-source Dijkstra. Returns (distance, parent edge) per node; unreached nodes have
     /// +inf and `NONE`. With `real_only`, spokes are not used. Ties go to the smaller node
-    /// index (the heap orders by (distance bits, node)).
+    /// index ([`Dijkstra`]'s order).
     fn dijkstra(&self, sources: &[u32], real_only: bool) -> (Vec<f64>, Vec<u32>) {
-        let mut dist = vec![f64::INFINITY; self.node_count];
-        let mut parent = vec![NONE; self.node_count];
-        let mut heap = BinaryHeap::new();
+        let mut search = Dijkstra::new(self.node_count, NONE);
         for &s in sources {
-            dist[s as usize] = 0.0;
-            heap.push(Reverse((0u64, s)));
+            search.add_source(s);
         }
-        while let Some(Reverse((bits, v))) = heap.pop() {
-            let d = f64::from_bits(bits);
-            if d > dist[v as usize] {
-                continue;
-            }
+        search.run(&[], |search, v, d| {
             for &(w, e) in self.neighbors(v) {
                 if real_only && e as usize >= self.real_edges {
                     continue;
                 }
-                let nd = d + self.len[e as usize];
-                if nd < dist[w as usize] {
-                    dist[w as usize] = nd;
-                    parent[w as usize] = e;
-                    // Non-negative f64 bit patterns order like the values.
-                    heap.push(Reverse((nd.to_bits(), w)));
-                }
+                search.relax(w, d + self.len[e as usize], e);
             }
-        }
-        (dist, parent)
+        });
+        search.into_parts()
     }
 
     fn other(&self, e: u32, v: u32) -> u32 {
@@ -739,12 +713,10 @@ fn straighten(he: &HalfEdgeMesh, len: &[f64], is_cut: &mut Vec<bool>, max_passes
     }
 }
 
-/// Scratch space for [`shortest_crossing`], reused across calls: per corner (face
-/// half-edge), the tentative distance and the parent (wedge, edge) of the wedge it names.
+/// Scratch space for [`shortest_crossing`], reused across calls: the search over corners
+/// (face half-edges), recording with each wedge the (wedge, edge) it was reached from.
 struct CrossingScratch {
-    dist: Vec<f64>,
-    parent: Vec<(u32, u32)>,
-    touched: Vec<u32>,
+    search: Dijkstra<(u32, u32)>,
     /// Per vertex, its smallest outgoing face half-edge (the name of an uncut ring's wedge).
     ring_min: Vec<u32>,
     /// Per vertex, whether its ring is split (by the cut or the boundary).
@@ -760,20 +732,10 @@ impl CrossingScratch {
             ring_min[v] = ring_min[v].min(h);
         }
         CrossingScratch {
-            dist: vec![f64::INFINITY; n],
-            parent: vec![(NONE, NONE); n],
-            touched: Vec::new(),
+            search: Dijkstra::new(n, (NONE, NONE)),
             ring_min,
             split: vec![false; he.vertex_count()],
         }
-    }
-
-    fn reset(&mut self) {
-        for &w in &self.touched {
-            self.dist[w as usize] = f64::INFINITY;
-            self.parent[w as usize] = (NONE, NONE);
-        }
-        self.touched.clear();
     }
 }
 
@@ -841,19 +803,13 @@ fn shortest_crossing(
         scratch.split = split;
         return None;
     }
-    scratch.reset();
-    scratch.dist[source as usize] = 0.0;
-    scratch.touched.push(source);
-    let mut heap = BinaryHeap::new();
-    heap.push(Reverse((0u64, source)));
+    let search = &mut scratch.search;
+    search.reset();
+    search.add_source(source);
     let mut found = false;
-    while let Some(Reverse((bits, w))) = heap.pop() {
-        let d = f64::from_bits(bits);
+    while let Some((w, d)) = search.pop() {
         if d >= bound {
             break;
-        }
-        if d > scratch.dist[w as usize] {
-            continue;
         }
         if w == target {
             found = true;
@@ -871,16 +827,7 @@ fn shortest_crossing(
                 } else {
                     len[e as usize]
                 };
-                let x = wedge(corner);
-                let nd = d + cost;
-                if nd < scratch.dist[x as usize] {
-                    if scratch.dist[x as usize] == f64::INFINITY {
-                        scratch.touched.push(x);
-                    }
-                    scratch.dist[x as usize] = nd;
-                    scratch.parent[x as usize] = (w, e);
-                    heap.push(Reverse((nd.to_bits(), x)));
-                }
+                search.relax(wedge(corner), d + cost, (w, e));
             }
             let n = he.twin(he.prev(h));
             if n == w || he.is_boundary_half_edge(n) || separates(n) {
@@ -897,7 +844,7 @@ fn shortest_crossing(
     let mut route = Vec::new();
     let mut w = target;
     while w != source {
-        let (p, e) = scratch.parent[w as usize];
+        let (p, e) = scratch.search.pred(w);
         route.push(e);
         w = p;
     }

@@ -12,6 +12,7 @@
 //! ignored: they have no half-edge and belong to no component.
 
 use super::Mesh;
+use crate::graph::Csr;
 
 /// "No element": the face of a boundary half-edge, the half-edge of an unused vertex.
 pub const NONE: u32 = u32::MAX;
@@ -185,26 +186,12 @@ impl HalfEdgeMesh {
             boundary_out_count[v] += 1;
         }
         // Fans: walk every vertex's corners. Corners per vertex in a compressed list.
-        let mut corner_start = vec![0u32; nv + 1];
-        for t in &mesh.triangles {
-            for &v in t {
-                corner_start[v as usize + 1] += 1;
-            }
-        }
-        for v in 0..nv {
-            corner_start[v + 1] += corner_start[v];
-        }
-        let mut fill = corner_start.clone();
-        let mut corners = vec![0u32; nh_faces];
-        for h in 0..nh_faces {
-            let v = origin_of(h) as usize;
-            corners[fill[v] as usize] = h as u32;
-            fill[v] += 1;
-        }
+        let corners =
+            Csr::<u32>::from_pairs(nv, (0..nh_faces).map(|h| (origin_of(h) as usize, h as u32)));
         let mut visited = vec![false; nh_faces];
         let mut vertex_he = vec![NONE; nv];
         for v in 0..nv {
-            let mine = &corners[corner_start[v] as usize..corner_start[v + 1] as usize];
+            let mine = corners.row(v);
             if mine.is_empty() {
                 continue;
             }
@@ -310,8 +297,8 @@ impl HalfEdgeMesh {
             components[face_component[h as usize / 3] as usize].edges += 1;
         }
         for v in 0..nv {
-            if corner_start[v + 1] > corner_start[v] {
-                let h = corners[corner_start[v] as usize] as usize;
+            if let Some(&h) = corners.row(v).first() {
+                let h = h as usize;
                 components[face_component[h / 3] as usize].vertices += 1;
             }
         }

@@ -6,6 +6,7 @@
 //! definiteness that the Cholesky solver needs.
 
 use super::Mesh;
+use crate::graph::{Csr, for_each_run};
 use crate::linalg::{IterativeParams, SolveError, solve_spd};
 use rayon::prelude::*;
 
@@ -36,24 +37,15 @@ pub fn cotan_weights(mesh: &Mesh) -> Vec<(u32, u32, f64)> {
         .collect();
     // Order by (i, j) as a stable sort would, in linear time: bucket by i (a counting sort
     // keeps the push order), then sort each short bucket stably by j (buckets in parallel).
-    let n = mesh.vertex_count();
-    let mut start = vec![0usize; n + 1];
-    for e in &w {
-        start[e.0 as usize + 1] += 1;
-    }
-    for i in 0..n {
-        start[i + 1] += start[i];
-    }
-    let mut sorted = vec![(0u32, 0u32, 0.0f64); w.len()];
-    let mut next = start.clone();
-    for e in w {
-        sorted[next[e.0 as usize]] = e;
-        next[e.0 as usize] += 1;
-    }
-    for_each_run(&mut sorted, &start, |bucket| bucket.sort_by_key(|x| x.1));
+    let mut sorted: Csr<(u32, u32, f64), usize> =
+        Csr::from_pairs(mesh.vertex_count(), w.iter().map(|&e| (e.0 as usize, e)));
+    drop(w);
+    for_each_run(&mut sorted.items, &sorted.offsets, |bucket| {
+        bucket.sort_by_key(|x| x.1)
+    });
     // Sum duplicates in sorted order: a fixed order, so the sums are deterministic.
-    let mut out: Vec<(u32, u32, f64)> = Vec::with_capacity(sorted.len() / 2 + 1);
-    for (i, j, x) in sorted {
+    let mut out: Vec<(u32, u32, f64)> = Vec::with_capacity(sorted.items.len() / 2 + 1);
+    for (i, j, x) in sorted.items {
         match out.last_mut() {
             Some(last) if last.0 == i && last.1 == j => last.2 += x,
             _ => out.push((i, j, x)),
@@ -151,38 +143,6 @@ pub fn harmonic_interpolate_with(
     Ok(out)
 }
 
-/// Calls `f` on each run `items[bounds[r]..bounds[r + 1]]`, runs in parallel in groups of
-/// consecutive runs (each run is handled alone, so the result is the same as in order).
-pub(crate) fn for_each_run<T: Send>(
-    items: &mut [T],
-    bounds: &[usize],
-    f: impl Fn(&mut [T]) + Sync,
-) {
-    const RUNS: usize = 4096;
-    debug_assert_eq!(
-        bounds.first().copied().unwrap_or(0),
-        0,
-        "runs start at item 0"
-    );
-    let mut groups: Vec<(usize, &mut [T])> = Vec::new();
-    let mut rest = items;
-    let mut at = 0;
-    for r in (0..bounds.len().saturating_sub(1)).step_by(RUNS) {
-        let end = bounds[(r + RUNS).min(bounds.len() - 1)];
-        let (group, tail) = std::mem::take(&mut rest).split_at_mut(end - at);
-        groups.push((r, group));
-        rest = tail;
-        at = end;
-    }
-    groups.into_par_iter().for_each(|(r0, group)| {
-        let base = bounds[r0];
-        let last = (r0 + RUNS).min(bounds.len() - 1);
-        for r in r0..last {
-            f(&mut group[bounds[r] - base..bounds[r + 1] - base]);
-        }
-    });
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -219,47 +179,5 @@ mod tests {
         let x = harmonic_interpolate(&m, &w, &[(0, vec![1.0]), (80, vec![-1.0])], 1).unwrap();
         assert!(x.iter().all(|&v| (-1.0 - 1e-9..=1.0 + 1e-9).contains(&v)));
         assert!(x[40].abs() < 1e-6, "centre should be midway: {}", x[40]);
-    }
-
-    #[test]
-    fn runs_are_sorted_alone_and_in_place_for_any_thread_count() {
-        // 10 000 runs (more than one group), some empty, of pseudo-random keys with
-        // duplicates: each run sorted stably on its own equals the serial result.
-        let mut bounds = vec![0usize];
-        let mut items = Vec::new();
-        let mut x = 12345u64;
-        for r in 0..10_000 {
-            let len = (r * 7919) % 9;
-            for k in 0..len {
-                x = x
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                items.push(((x >> 60) as u32, (r * 16 + k) as u32));
-            }
-            bounds.push(items.len());
-        }
-        let mut expected = items.clone();
-        for r in 0..bounds.len() - 1 {
-            expected[bounds[r]..bounds[r + 1]].sort_by_key(|p| p.0);
-        }
-        for threads in [1, 3] {
-            let mut got = items.clone();
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| for_each_run(&mut got, &bounds, |run| run.sort_by_key(|p| p.0)));
-            assert_eq!(got, expected);
-        }
-        assert_ne!(
-            items, expected,
-            "the runs were already sorted: the test checks nothing"
-        );
-        // No runs at all, and one empty run.
-        for bounds in [vec![], vec![0]] {
-            let mut none: Vec<(u32, u32)> = Vec::new();
-            for_each_run(&mut none, &bounds, |run| run.sort_by_key(|p| p.0));
-            assert!(none.is_empty());
-        }
     }
 }

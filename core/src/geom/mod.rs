@@ -1,8 +1,9 @@
 //! Triangle meshes and the quantities derived from them.
 //!
 //! Positions are `Vec<Vec3>`, triangles `Vec<[u32; 3]>` (DESIGN.md, Conventions). Derived
-//! quantities (adjacency, normals) are computed on first request and kept with the mesh, as
-//! geometry-central does, so an algorithm asks for what it needs and pays for it once.
+//! quantities (adjacency, vertex → faces, vertex → edges, normals) are computed on first
+//! request and kept with the mesh, as geometry-central does, so an algorithm asks for what it
+//! needs and pays for it once.
 
 pub mod chains;
 pub mod cut_graph;
@@ -18,6 +19,7 @@ pub mod primitives;
 pub mod subdivide;
 pub mod surface_distance;
 
+use crate::graph::Csr;
 use glam::{BVec3, Vec3};
 use std::sync::OnceLock;
 
@@ -31,6 +33,8 @@ pub struct Mesh {
     /// Optional per-vertex RGBA colours in [0, 1] (COFF, PLY with colour properties).
     pub colors: Option<Vec<[f32; 4]>>,
     adjacency: OnceLock<VertexAdjacency>,
+    vertex_faces: OnceLock<Csr<u32>>,
+    edges: OnceLock<MeshEdges>,
     vertex_normals: OnceLock<Vec<Vec3>>,
 }
 
@@ -59,6 +63,8 @@ impl Mesh {
             triangles,
             colors,
             adjacency: OnceLock::new(),
+            vertex_faces: OnceLock::new(),
+            edges: OnceLock::new(),
             vertex_normals: OnceLock::new(),
         }
     }
@@ -149,6 +155,27 @@ impl Mesh {
             .get_or_init(|| VertexAdjacency::build(self.positions.len(), &self.triangles))
     }
 
+    /// Vertex → triangles: row `v` lists the triangles with a corner at `v`, ascending, a
+    /// triangle once per such corner (twice when it names `v` twice). Built on first use.
+    pub fn vertex_faces(&self) -> &Csr<u32> {
+        self.vertex_faces.get_or_init(|| {
+            Csr::from_pairs(
+                self.positions.len(),
+                self.triangles
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(f, t)| t.iter().map(move |&v| (v as usize, f as u32))),
+            )
+        })
+    }
+
+    /// The undirected edges and vertex → edges, numbered from [`Self::adjacency`]; built on
+    /// first use.
+    pub fn edges(&self) -> &MeshEdges {
+        self.edges
+            .get_or_init(|| MeshEdges::build(self.adjacency()))
+    }
+
     /// Mean edge length over all triangle edges.
     pub fn mean_edge_length(&self) -> f32 {
         let mut sum = 0.0f64;
@@ -185,31 +212,19 @@ impl VertexAdjacency {
         // Bucket every corner's two other corners under it (a counting sort by vertex),
         // then sort and deduplicate each vertex's short list: linear work plus tiny sorts,
         // instead of one sort of all directed edges.
-        let mut counts = vec![0u32; vertex_count + 1];
-        for t in triangles {
-            for k in 0..3 {
-                if t[k] != t[(k + 1) % 3] {
-                    counts[t[k] as usize + 1] += 1;
-                    counts[t[(k + 1) % 3] as usize + 1] += 1;
-                }
-            }
-        }
-        for i in 0..vertex_count {
-            counts[i + 1] += counts[i];
-        }
-        let mut fill = counts.clone();
-        let mut raw = vec![0u32; counts[vertex_count] as usize];
-        for t in triangles {
-            for k in 0..3 {
+        let sides = triangles.iter().flat_map(|t| {
+            (0..3).flat_map(move |k| {
                 let (a, b) = (t[k], t[(k + 1) % 3]);
-                if a != b {
-                    raw[fill[a as usize] as usize] = b;
-                    fill[a as usize] += 1;
-                    raw[fill[b as usize] as usize] = a;
-                    fill[b as usize] += 1;
-                }
-            }
-        }
+                (a != b)
+                    .then_some([(a as usize, b), (b as usize, a)])
+                    .into_iter()
+                    .flatten()
+            })
+        });
+        let Csr {
+            offsets: counts,
+            items: mut raw,
+        } = Csr::<u32>::from_pairs(vertex_count, sides);
         let mut lists: Vec<&mut [u32]> = Vec::with_capacity(vertex_count);
         let mut rest = raw.as_mut_slice();
         for v in 0..vertex_count {
@@ -261,6 +276,53 @@ impl VertexAdjacency {
 
     pub fn vertex_count(&self) -> usize {
         self.offsets.len() - 1
+    }
+}
+
+/// The undirected edges of a mesh (pairs of distinct vertices that share a triangle side):
+/// edge `e` joins `ends[e] = [a, b]`, `a < b`, numbered by ascending `(a, b)`. Row `v` of
+/// `vertex_edges` is aligned with the vertex's one-ring: `vertex_edges.row(v)[i]` is the edge
+/// to `adjacency.neighbors(v)[i]` (the rows share the adjacency's offsets).
+#[derive(Debug, Clone)]
+pub struct MeshEdges {
+    pub ends: Vec<[u32; 2]>,
+    pub vertex_edges: Csr<u32>,
+}
+
+impl MeshEdges {
+    pub fn build(adj: &VertexAdjacency) -> Self {
+        let mut ids = vec![0u32; adj.neighbors.len()];
+        let mut ends = Vec::with_capacity(adj.neighbors.len() / 2);
+        for v in 0..adj.vertex_count() {
+            let start = adj.offsets[v] as usize;
+            for (i, &w) in adj.neighbors(v).iter().enumerate() {
+                ids[start + i] = if w as usize > v {
+                    ends.push([v as u32, w]);
+                    (ends.len() - 1) as u32
+                } else {
+                    // Numbered at w, which comes first.
+                    ids[adj
+                        .half_edge(w as usize, v as u32)
+                        .expect("adjacency is symmetric")]
+                };
+            }
+        }
+        MeshEdges {
+            ends,
+            vertex_edges: Csr {
+                offsets: adj.offsets.clone(),
+                items: ids,
+            },
+        }
+    }
+
+    pub fn count(&self) -> usize {
+        self.ends.len()
+    }
+
+    /// The edges at `v`, in the order of its neighbours.
+    pub fn of_vertex(&self, v: usize) -> &[u32] {
+        self.vertex_edges.row(v)
     }
 }
 
@@ -318,6 +380,38 @@ mod tests {
     }
 
     proptest::proptest! {
+        #[test]
+        fn vertex_faces_and_edges_match_lists_built_one_triangle_at_a_time(
+            tris in proptest::collection::vec((0u32..12, 0u32..12, 0u32..12), 0..40)
+        ) {
+            let tris: Vec<[u32; 3]> = tris.into_iter().map(|(a, b, c)| [a, b, c]).collect();
+            let m = Mesh::new(vec![Vec3::ZERO; 12], tris.clone());
+            let mut faces = vec![Vec::new(); 12];
+            let mut sides = std::collections::BTreeSet::new();
+            for (f, t) in tris.iter().enumerate() {
+                for k in 0..3 {
+                    faces[t[k] as usize].push(f as u32);
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    if a != b {
+                        sides.insert([a.min(b), a.max(b)]);
+                    }
+                }
+            }
+            let ends: Vec<[u32; 2]> = sides.into_iter().collect();
+            let e = m.edges();
+            proptest::prop_assert_eq!(&e.ends, &ends);
+            proptest::prop_assert_eq!(e.count(), ends.len());
+            let adj = m.adjacency();
+            for v in 0..12 {
+                proptest::prop_assert_eq!(m.vertex_faces().row(v), faces[v].as_slice());
+                proptest::prop_assert_eq!(e.of_vertex(v).len(), adj.degree(v));
+                for (&w, &id) in adj.neighbors(v).iter().zip(e.of_vertex(v)) {
+                    let (a, b) = (v as u32, w);
+                    proptest::prop_assert_eq!(e.ends[id as usize], [a.min(b), a.max(b)]);
+                }
+            }
+        }
+
         #[test]
         fn adjacency_matches_the_set_of_triangle_edges(
             tris in proptest::collection::vec((0u32..12, 0u32..12, 0u32..12), 0..40)

@@ -10,6 +10,7 @@
 //! hands on, and keeping it plain lets it derive `PartialEq` and `Default`.
 
 use super::Mesh;
+use crate::graph::Csr;
 use glam::{DVec3, Vec3};
 
 /// A polygon mesh: face `f` is `face_vertices[face_start[f]..face_start[f + 1]]`, its corners
@@ -134,7 +135,7 @@ impl PolyMesh {
     }
 
     /// The directed edges (corner to next corner) of every face, in face order.
-    fn directed_edges(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
+    fn directed_edges(&self) -> impl Iterator<Item = (u32, u32)> + Clone + '_ {
         (0..self.face_count()).flat_map(move |f| {
             let face = self.face(f);
             (0..face.len()).map(move |k| (face[k], face[(k + 1) % face.len()]))
@@ -145,32 +146,19 @@ impl PolyMesh {
     pub fn vertex_neighbours(&self) -> Adjacency {
         // Counting sort by vertex, then a short sort and dedup per vertex: linear work.
         let n = self.positions.len();
-        let mut start = vec![0u32; n + 1];
-        for (a, b) in self.directed_edges() {
-            if a != b {
-                start[a as usize + 1] += 1;
-                start[b as usize + 1] += 1;
-            }
-        }
-        for v in 0..n {
-            start[v + 1] += start[v];
-        }
-        let mut fill = start.clone();
-        let mut raw = vec![0u32; start[n] as usize];
-        for (a, b) in self.directed_edges() {
-            if a != b {
-                raw[fill[a as usize] as usize] = b;
-                fill[a as usize] += 1;
-                raw[fill[b as usize] as usize] = a;
-                fill[b as usize] += 1;
-            }
-        }
+        let sides = self.directed_edges().flat_map(|(a, b)| {
+            (a != b)
+                .then_some([(a as usize, b), (b as usize, a)])
+                .into_iter()
+                .flatten()
+        });
+        let mut raw = Csr::<u32>::from_pairs(n, sides);
         let mut out = Adjacency {
             start: vec![0; n + 1],
-            neighbours: Vec::with_capacity(raw.len() / 2),
+            neighbours: Vec::with_capacity(raw.items.len() / 2),
         };
         for v in 0..n {
-            let list = &mut raw[start[v] as usize..start[v + 1] as usize];
+            let list = raw.row_mut(v);
             list.sort_unstable();
             let mut last = None;
             for &w in list.iter() {

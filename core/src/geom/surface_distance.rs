@@ -9,6 +9,7 @@
 //! 2011, Fig. 15); written by hand because it is small and needs no more than this.
 
 use super::Mesh;
+use crate::graph::Csr;
 use glam::{IVec3, Vec3};
 
 /// The closest point to `p` on triangle `abc`.
@@ -62,9 +63,8 @@ pub struct SurfaceDistance<'a> {
     origin: Vec3,
     cell: f32,
     dims: IVec3,
-    /// Start of each cell's run in `items` (one more entry than cells).
-    starts: Vec<u32>,
-    items: Vec<u32>,
+    /// Per cell, the triangles whose bounding box overlaps it, ascending.
+    buckets: Csr<u32>,
 }
 
 impl<'a> SurfaceDistance<'a> {
@@ -79,7 +79,6 @@ impl<'a> SurfaceDistance<'a> {
         let cell = (area / n).sqrt().max(extent.max_element() / 128.0);
         let dims = ((extent / cell).ceil().as_ivec3()).max(IVec3::ONE);
         let cells = (dims.x * dims.y * dims.z) as usize;
-        let mut counts = vec![0u32; cells + 1];
         let range = |t: &[u32; 3]| {
             let p = t.map(|i| mesh.positions[i as usize]);
             let tlo = p[0].min(p[1]).min(p[2]);
@@ -95,40 +94,22 @@ impl<'a> SurfaceDistance<'a> {
             (c0, c1)
         };
         let index = |c: IVec3| (c.x + dims.x * (c.y + dims.y * c.z)) as usize;
-        for t in &mesh.triangles {
+        // (cell, triangle) for every cell a triangle's box overlaps, triangles in order.
+        let pairs = mesh.triangles.iter().enumerate().flat_map(|(ti, t)| {
             let (c0, c1) = range(t);
-            for z in c0.z..=c1.z {
-                for y in c0.y..=c1.y {
-                    for x in c0.x..=c1.x {
-                        counts[index(IVec3::new(x, y, z)) + 1] += 1;
-                    }
-                }
-            }
-        }
-        for i in 1..counts.len() {
-            counts[i] += counts[i - 1];
-        }
-        let mut fill = counts.clone();
-        let mut items = vec![0u32; counts[cells] as usize];
-        for (ti, t) in mesh.triangles.iter().enumerate() {
-            let (c0, c1) = range(t);
-            for z in c0.z..=c1.z {
-                for y in c0.y..=c1.y {
-                    for x in c0.x..=c1.x {
-                        let k = index(IVec3::new(x, y, z));
-                        items[fill[k] as usize] = ti as u32;
-                        fill[k] += 1;
-                    }
-                }
-            }
-        }
+            (c0.z..=c1.z).flat_map(move |z| {
+                (c0.y..=c1.y).flat_map(move |y| {
+                    (c0.x..=c1.x).map(move |x| (index(IVec3::new(x, y, z)), ti as u32))
+                })
+            })
+        });
+        let buckets = Csr::from_pairs(cells, pairs);
         SurfaceDistance {
             mesh,
             origin: lo,
             cell,
             dims,
-            starts: counts,
-            items,
+            buckets,
         }
     }
 
@@ -182,7 +163,7 @@ impl<'a> SurfaceDistance<'a> {
                         continue;
                     }
                     let k = (x + self.dims.x * (y + self.dims.y * z)) as usize;
-                    for &ti in &self.items[self.starts[k] as usize..self.starts[k + 1] as usize] {
+                    for &ti in self.buckets.row(k) {
                         f(ti);
                     }
                 }

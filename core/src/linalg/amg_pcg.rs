@@ -31,6 +31,7 @@
 //! bits do not depend on the thread count either.
 
 use super::{SolveError, SpdSolver};
+use crate::graph;
 use rayon::prelude::*;
 
 /// When the iteration stops, and when the iterative solver is used at all.
@@ -80,42 +81,30 @@ impl Csr {
     /// The full symmetric matrix from (row, col, value) triplets of which only row ≥ col is
     /// read (as [`SpdSolver::new`] does), duplicates summed in the order given.
     fn from_lower_triplets(n: usize, triplets: &[(usize, usize, f64)]) -> Result<Csr, SolveError> {
-        let mut count = vec![0usize; n + 1];
         for &(r, c, _) in triplets {
             if r >= n || c >= n {
                 return Err(SolveError::Build(format!(
                     "entry ({r}, {c}) is outside the {n}×{n} matrix"
                 )));
             }
-            if r > c {
-                count[r] += 1;
-                count[c] += 1;
-            } else if r == c {
-                count[r] += 1;
-            }
         }
-        let mut row_ptr = vec![0usize; n + 1];
-        for i in 0..n {
-            row_ptr[i + 1] = row_ptr[i] + count[i];
-        }
-        let mut next = row_ptr.clone();
+        // (column, value) per row: an entry below the diagonal goes to its row, then
+        // mirrored to its column's; one above is not read.
+        let entries = triplets.iter().flat_map(|&(r, c, v)| {
+            let mirror = (r > c).then_some((c, (r as u32, v)));
+            (r >= c)
+                .then_some((r, (c as u32, v)))
+                .into_iter()
+                .chain(mirror)
+        });
+        let graph::Csr {
+            offsets: row_ptr,
+            items: mut pairs,
+        } = graph::Csr::<(u32, f64), usize>::from_pairs(n, entries);
         let nnz = row_ptr[n];
-        let mut pairs = vec![(0u32, 0.0f64); nnz];
-        let mut put = |r: usize, c: usize, v: f64| {
-            pairs[next[r]] = (c as u32, v);
-            next[r] += 1;
-        };
-        for &(r, c, v) in triplets {
-            if r > c {
-                put(r, c, v);
-                put(c, r, v);
-            } else if r == c {
-                put(r, c, v);
-            }
-        }
         // Sort each row by column (stable: duplicates keep the triplet order; rows in
         // parallel), then sum duplicates in that order, compacting.
-        crate::geom::laplacian::for_each_run(&mut pairs, &row_ptr, |row| row.sort_by_key(|p| p.0));
+        graph::for_each_run(&mut pairs, &row_ptr, |row| row.sort_by_key(|p| p.0));
         let mut out_ptr = vec![0usize; n + 1];
         let (mut col, mut val) = (Vec::with_capacity(nnz), Vec::with_capacity(nnz));
         let mut w = 0usize;
@@ -194,26 +183,18 @@ impl Csr {
 
     /// The transpose, by a counting sort over columns (rows stay in increasing order).
     fn transpose(&self) -> Csr {
-        let mut count = vec![0usize; self.ncols + 1];
-        for &c in &self.col {
-            count[c as usize + 1] += 1;
-        }
-        for j in 0..self.ncols {
-            count[j + 1] += count[j];
-        }
-        let row_ptr = count.clone();
-        let mut next = count;
-        let mut col = vec![0u32; self.nnz()];
-        let mut val = vec![0.0; self.nnz()];
-        for i in 0..self.n {
-            let (c, v) = self.row(i);
-            for k in 0..c.len() {
-                let j = c[k] as usize;
-                col[next[j]] = i as u32;
-                val[next[j]] = v[k];
-                next[j] += 1;
-            }
-        }
+        let by_col = graph::Csr::<(u32, f64), usize>::from_pairs(
+            self.ncols,
+            (0..self.n).flat_map(|i| {
+                let (c, v) = self.row(i);
+                c.iter()
+                    .zip(v)
+                    .map(move |(&j, &x)| (j as usize, (i as u32, x)))
+            }),
+        );
+        let row_ptr = by_col.offsets;
+        let col = by_col.items.iter().map(|p| p.0).collect();
+        let val = by_col.items.iter().map(|p| p.1).collect();
         Csr {
             n: self.ncols,
             ncols: self.n,
