@@ -301,6 +301,7 @@ fn voxels_are_the_same_whatever_else_was_requested_and_on_any_thread_count() {
 /// values exceed the limit (unless one brick alone does).
 #[test]
 fn batches_bound_the_working_set_and_leave_every_brick_unchanged() {
+    crate::full_tier_only!("a volume big enough for several batches per level");
     let (_, a) = small();
     let vol = cube(64);
     let field = rotated_field(&vol, Quat::from_rotation_y(0.3));
