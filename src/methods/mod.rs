@@ -244,7 +244,7 @@ pub(crate) fn check_variant_memory(
 /// slim and cubic shapes alike.
 ///
 /// A surface request synthesizes each level in batches whose working set is bounded
-/// (`BatchLimits` in `solid_synthesis.rs`: about 1.2 GiB with the resident bricks of two
+/// (`BatchLimits` in `solid_synthesis/plan.rs`: about 1.2 GiB with the resident bricks of two
 /// levels) and keeps only the surface's bricks: the same 16 bytes per voxel while that is
 /// smaller, never more than the batch bound, plus half a byte per voxel for the volume's
 /// masks. Measured on the cow (issue 15): 529 MB at 512, and at 1024 2.77 GB before
