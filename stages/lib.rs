@@ -8,7 +8,7 @@
 #![allow(clippy::needless_range_loop)]
 
 // The core's modules under their usual names, so `crate::geom::…` reads as in the core.
-use texsyn_core::{check, export, geom, graph, image, linalg, random, render};
+use texsyn_core::{check, export, geom, graph, image, linalg, random, render, simd};
 
 pub mod analyse_exemplar;
 pub mod extract;

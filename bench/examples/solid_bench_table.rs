@@ -1,4 +1,4 @@
-//! Table 1/2-style numbers for solid synthesis (stages/synthesize/solid/solid_synthesis.rs,
+//! Table 1/2-style numbers for solid synthesis (stages/synthesize/solid/solid_synthesis/,
 //! candidate triples of Dong et al. 2008): the analysis time of an
 //! exemplar (128² marble1: 4 levels, N = 7 then 9, k = 4 candidates), then the middle z
 //! section of a 128³ volume synthesized from scratch with the dual-grid scheme and with the

@@ -1,5 +1,5 @@
 //! Sections through a synthesized solid texture (on-demand brick synthesis from the candidate
-//! triples of Dong et al. 2008, stages/synthesize/solid/solid_synthesis.rs), for looking at. Analyses an exemplar, synthesizes the middle z, x and y
+//! triples of Dong et al. 2008, stages/synthesize/solid/solid_synthesis/), for looking at. Analyses an exemplar, synthesizes the middle z, x and y
 //! sections of an n³ cube, prints the analysis time and per section its time and per-level
 //! report, and writes (tag = `<exemplar>_<config>_<angle>`):
 //!

@@ -1,7 +1,7 @@
 //! texsyn's core: meshes, images, graphs (compressed lists, shortest paths), solvers,
-//! max-flow, counter-based randomness, the software rasterizer and the mesh/image writers
-//! (DESIGN.md, Layout). It sits below everything: it knows nothing of stages, the pipeline,
-//! the cache, artifact formats, configs or methods.
+//! bit-reproducible f32 kernels, max-flow, counter-based randomness, the software rasterizer
+//! and the mesh/image writers (DESIGN.md, Layout). It sits below everything: it knows nothing
+//! of stages, the pipeline, the cache, artifact formats, configs or methods.
 
 // Numeric code indexes several parallel arrays by one vertex or corner index; iterator
 // chains over zips of them read worse than the index loop.
@@ -19,3 +19,4 @@ pub mod max_flow;
 pub mod memory;
 pub mod random;
 pub mod render;
+pub mod simd;

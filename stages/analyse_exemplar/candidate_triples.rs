@@ -62,7 +62,7 @@
 //! i.e. with the least crossbar error summed over the `D` layers (the best triple at the slab's
 //! middle layer alone would ignore how fast its yz and zx lines drift apart). The synthesis
 //! tiles space with slabs stacked along z, each shifted in xy by a counter-based random offset
-//! (see `stages/synthesize/solid/solid_synthesis.rs`).
+//! (see `stages/synthesize/solid/solid_synthesis/`).
 //!
 //! # Choosing exemplars
 //!

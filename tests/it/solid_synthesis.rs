@@ -1,6 +1,6 @@
 //! Solid synthesis on real exemplars: candidate triples and slabs
 //! (stages/analyse_exemplar/candidate_triples.rs), history windows, dependent sets and the
-//! on-demand brick synthesis (stages/synthesize/solid/solid_synthesis.rs).
+//! on-demand brick synthesis (stages/synthesize/solid/solid_synthesis/).
 
 use crate::common;
 use common::load_exemplar as load;

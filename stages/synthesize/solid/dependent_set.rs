@@ -444,7 +444,7 @@ impl ChunkedNeed {
     /// its part of the chunk-table index and its part of the offset in the chunk. A voxel's
     /// slot is [`ChunkedNeed::slot_of_parts`] of the sums of its three axes' parts. The
     /// correction kernel's gather computes the same parts inline from
-    /// [`ChunkedNeed::axis_multipliers`] (`solid_synthesis::axis_parts`), which must agree.
+    /// [`ChunkedNeed::axis_multipliers`] (`axis_parts` in `solid_synthesis/correction.rs`), which must agree.
     #[inline]
     pub fn axis_part(&self, axis: usize, x: i32) -> (usize, usize) {
         let (origin, table, local) = self.axis_multipliers(axis);

@@ -19,7 +19,7 @@
 //! samples are the centre-frame samples; the synthesis then keeps the straight gather (the
 //! same positions without rounding differences). A walk of `|i| + |j|` steps of at most
 //! `s_max` reaches at most `2 N_h s_max` voxels per axis, which is what the dependency stencil
-//! allows for (`widen_for_integration` in `solid_synthesis.rs`); positions are clamped to it.
+//! allows for (`widen_for_integration` in `solid_synthesis/plan.rs`); positions are clamped to it.
 
 use glam::{Mat3, Vec3};
 

@@ -20,7 +20,7 @@
 //!   run as a second stage that starts from the grid stage's final versions.
 //!
 //! So versions read are always either "latest" or "stage start" ([`Read`]); [`Step`] turns
-//! them into version numbers. The executor (`solid_synthesis.rs`) keeps one buffer per kind
+//! them into version numbers. The executor (`solid_synthesis/run.rs`) keeps one buffer per kind
 //! and the dependency analysis (`dependent_set.rs`) works backwards with the same numbers, so
 //! both follow this one representation.
 

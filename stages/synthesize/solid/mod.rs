@@ -18,7 +18,7 @@ pub const NODE: texsyn_core::algorithm::Algorithm =
 /// and cubic shapes alike.
 ///
 /// A surface request synthesizes each level in batches whose working set is bounded
-/// (`BatchLimits` in `solid_synthesis.rs`: about 1.2 GiB with the resident bricks of two
+/// (`BatchLimits` in `solid_synthesis/plan.rs`: about 1.2 GiB with the resident bricks of two
 /// levels) and keeps only the surface's bricks: the same 16 bytes per voxel while that is
 /// smaller, never more than the batch bound, plus half a byte per voxel for the volume's
 /// masks (measured on the cow: 529 MB at 512; BENCHMARKS.md has 1024).
