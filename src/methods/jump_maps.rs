@@ -12,25 +12,21 @@
 //! the automatic scale), so a new exemplar of the same size reruns it cheaply and, by early
 //! cutoff, nothing downstream on its account.
 
-use super::{Method, MethodError, Planned, import};
+use super::{Method, MethodError, Planned, import, input};
 use crate::artifact::Bundle;
 use crate::artifact::jump_maps::{OrientationField, TexelAddresses};
 use crate::config::Config;
 use crate::geom::Mesh;
-use crate::image::{Image, ImageView};
-use crate::pipeline::{Dag, FileInput, Handle, NodeError, NodeSpec, Stage};
+use crate::image::Image;
+use crate::pipeline::{Dag, Handle, NodeSpec, Stage};
 use crate::score::charts::JumpMapNodes;
 use crate::score::{Item, Run, ScoreFailure};
-use crate::stages::analyse_exemplar::jump_map::{
-    JumpMap, JumpMapParams, build_jump_map, check_exemplar_size,
-};
-use crate::stages::field::orientation_field::{FieldParams, orientation_field};
-use crate::stages::parameterize::jump_parameterization::{
-    ParameterizeError, ParameterizeParams, jump_parameterization,
-};
-use crate::stages::reconstruct::jump_export::{AlignedMap, JumpExportError, export_jump_textured};
+use crate::stages::analyse_exemplar::jump_map::{self, JumpMap, JumpMapParams};
+use crate::stages::field::orientation_field::{self, FieldParams};
+use crate::stages::parameterize::jump_parameterization::{self, ParameterizeParams};
+use crate::stages::reconstruct::jump_export::{self, JumpExportKey, MapFile, check_map_name};
 use crate::stages::reconstruct::textured_export::ExportParams;
-use crate::stages::synthesize::jump_walk::{WalkParams, jump_walk};
+use crate::stages::synthesize::jump_walk::{self, WalkParams};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -69,169 +65,87 @@ pub struct Inputs {
 /// The `jump_maps` method.
 pub struct JumpMaps;
 
-impl Method for JumpMaps {
-    fn name(&self) -> &'static str {
-        "jump_maps"
-    }
-
-    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
-        let (dag, nodes) = build(config)?;
-        Ok((dag, Box::new(nodes)))
-    }
-}
-
 impl Planned for JumpMapNodes {
     fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
         crate::score::charts::jump_maps(run, self)
     }
 }
 
-fn build(config: &Config) -> Result<(Dag, JumpMapNodes), MethodError> {
-    let c: JumpMapsConfig = config.parse()?;
-    config.check("analyse_exemplar", c.analyse_exemplar.validate())?;
-    config.check("field", c.field.validate())?;
-    config.check("parameterize", c.parameterize.validate())?;
-    config.check("synthesize", c.synthesize.validate())?;
-    config.check("reconstruct", c.reconstruct.validate())?;
-    // No up-front memory check on `reconstruct.atlas_size`: it caps a page's side, and pages
-    // are only as big as the charts they hold (the need follows the surface's area in texels).
-    for name in c.inputs.maps.keys() {
-        if name.is_empty()
-            || !name
-                .chars()
-                .all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-')
-        {
-            return Err(config
-                .invalid(
-                    &format!("inputs.maps.{name}"),
-                    "map names may use letters, digits, '_' and '-'",
-                )
-                .into());
+impl Method for JumpMaps {
+    fn name(&self) -> &'static str {
+        "jump_maps"
+    }
+
+    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
+        let c: JumpMapsConfig = config.parse()?;
+        config.check("analyse_exemplar", c.analyse_exemplar.validate())?;
+        config.check("field", c.field.validate())?;
+        config.check("parameterize", c.parameterize.validate())?;
+        config.check("synthesize", c.synthesize.validate())?;
+        config.check("reconstruct", c.reconstruct.validate())?;
+        // No up-front memory check on `reconstruct.atlas_size`: it caps a page's side, and
+        // pages are only as big as the charts they hold (the need follows the surface's area).
+        for name in c.inputs.maps.keys() {
+            config.check(&format!("inputs.maps.{name}"), check_map_name(name))?;
         }
+        let mut dag = Dag::default();
+        let mesh = input::<Mesh>(&mut dag, config, "mesh", &c.inputs.mesh)?;
+        let exemplar = input::<Image>(&mut dag, config, "exemplar", &c.inputs.exemplar)?;
+        let jump_map = add_jump_map(&mut dag, exemplar, c.analyse_exemplar.clone());
+        let field = dag.node(
+            NodeSpec::of(Stage::Field, orientation_field::NODE),
+            c.field.clone(),
+            mesh,
+            |_, p, mesh| Ok(OrientationField(orientation_field::node(&mesh, p)?)),
+        );
+        let parameterize = dag.node(
+            NodeSpec::of(Stage::Parameterize, jump_parameterization::NODE),
+            c.parameterize.clone(),
+            (mesh, field, exemplar),
+            |_, p, (mesh, up, e)| Ok(jump_parameterization::node(&mesh, up, e, p)?),
+        );
+        let synthesize = dag.node(
+            NodeSpec::of(Stage::Synthesize, jump_walk::NODE),
+            c.synthesize.clone(),
+            (parameterize, jump_map),
+            |ctx, p, (param, jm)| {
+                let walk = jump_walk::node(&param, jm, p, &|f| ctx.progress.set(f))?;
+                Ok(TexelAddresses::new(walk, (jm.width, jm.height)))
+            },
+        );
+        // The exemplar is exported as `basecolor`, the first of the maps the export copies.
+        let exemplar_path = config.resolve(&c.inputs.exemplar);
+        let mut maps = vec![(exemplar, dag.file(&exemplar_path, "inputs.exemplar")?)];
+        let mut key = JumpExportKey::new(&c.reconstruct, &exemplar_path);
+        for (name, path) in &c.inputs.maps {
+            let (path, role) = (config.resolve(path), format!("inputs.maps.{name}"));
+            let img = import::<Image>(&mut dag, &format!("import.map.{name}"), &path, &role)?;
+            maps.push((img, dag.file(&path, &role)?));
+            key.add_map(name, &path);
+        }
+        dag.node(
+            NodeSpec::of(Stage::Reconstruct, jump_export::NODE),
+            key,
+            (mesh, parameterize, synthesize, maps),
+            |ctx, p, (mesh, param, walk, maps)| {
+                let maps = maps
+                    .into_iter()
+                    .map(|(image, f)| MapFile::new(image, &f.path, &f.bytes));
+                let files =
+                    jump_export::node(p, &mesh, &param, walk.addresses, maps.collect(), &|f| {
+                        ctx.progress.set(f)
+                    })?;
+                Ok(Bundle::from(files))
+            },
+        );
+        let nodes = JumpMapNodes {
+            mesh,
+            parameterize,
+            synthesize,
+            exemplar,
+        };
+        Ok((dag, Box::new(nodes)))
     }
-
-    let mut dag = Dag::default();
-    let mesh = import::<Mesh>(
-        &mut dag,
-        "import.mesh",
-        &config.resolve(&c.inputs.mesh),
-        "inputs.mesh",
-    )?;
-    let exemplar_path = config.resolve(&c.inputs.exemplar);
-    let exemplar = import::<Image>(
-        &mut dag,
-        "import.exemplar",
-        &exemplar_path,
-        "inputs.exemplar",
-    )?;
-    let exemplar_file = dag.file(&exemplar_path, "inputs.exemplar")?;
-    let jump_map = add_jump_map(&mut dag, exemplar, c.analyse_exemplar.clone());
-
-    let field = dag.node(
-        NodeSpec::of(Stage::Field, crate::stages::field::orientation_field::NODE),
-        c.field.clone(),
-        mesh,
-        |_, p, mesh| {
-            if let Some(w) = crate::geom::mesh_check::mesh_health(&mesh).warning("jump_maps") {
-                tracing::warn!("{w}");
-            }
-            Ok(OrientationField(
-                orientation_field(&mesh, p).map_err(NodeError::input)?,
-            ))
-        },
-    );
-
-    let param = dag.node(
-        NodeSpec::of(
-            Stage::Parameterize,
-            crate::stages::parameterize::jump_parameterization::NODE,
-        ),
-        c.parameterize.clone(),
-        (mesh, field, exemplar),
-        |_, p, (mesh, up, img)| {
-            jump_parameterization(&mesh, up, (img.width, img.height), p)
-                .map_err(|e| NodeError::classify(e, ParameterizeError::is_internal))
-        },
-    );
-
-    let walk = dag.node(
-        NodeSpec::of(Stage::Synthesize, crate::stages::synthesize::jump_walk::NODE),
-        c.synthesize.clone(),
-        (param, jump_map),
-        |ctx, p, (param, jm)| {
-            if param.meta.exemplar != (jm.width, jm.height) {
-                return Err(NodeError::internal("parameterization and jump map disagree on the exemplar size"));
-            }
-            let walk = jump_walk(param.walk_input(), jm, p, &|f| ctx.progress.set(f));
-            tracing::info!(
-                "synthesize: {} vertices, {} jumps, {} random assignments",
-                param.order.len(),
-                walk.jumps,
-                walk.random_assignments
-            );
-            if walk.random_assignments > 0 {
-                tracing::warn!(
-                    "synthesize: {} of {} vertices had no valid continuation or jump and got a random address; \
-                     a smaller parameterize.scale or a larger exemplar avoids this",
-                    walk.random_assignments,
-                    param.order.len()
-                );
-            }
-            Ok(TexelAddresses::new(walk, (jm.width, jm.height)))
-        },
-    );
-
-    let mut maps = Vec::new();
-    let mut map_names = Vec::new();
-    for (name, path) in &c.inputs.maps {
-        let path = config.resolve(path);
-        let role = format!("inputs.maps.{name}");
-        let img = import::<Image>(&mut dag, &format!("import.map.{name}"), &path, &role)?;
-        maps.push((img, dag.file(&path, &role)?));
-        map_names.push((name.clone(), extension_of(&path)));
-    }
-
-    let params = ReconstructParams {
-        export: c.reconstruct.clone(),
-        maps: map_names,
-        exemplar_format: extension_of(&exemplar_path),
-    };
-    dag.node(
-        NodeSpec::of(
-            Stage::Reconstruct,
-            crate::stages::reconstruct::jump_export::NODE,
-        ),
-        params,
-        (mesh, param, walk, exemplar, exemplar_file, maps),
-        |ctx, p, (mesh, param, walk, exemplar, exemplar_file, maps)| {
-            let basecolor = ("basecolor".to_owned(), p.exemplar_format.clone());
-            let maps: Vec<AlignedMap> = p
-                .maps
-                .iter()
-                .zip(maps)
-                .map(|(m, (img, file))| aligned(m, img, file))
-                .collect();
-            let files = export_jump_textured(
-                &mesh,
-                &param,
-                walk.addresses,
-                &aligned(&basecolor, exemplar, exemplar_file),
-                &maps,
-                &p.export,
-                &|f| ctx.progress.set(f),
-            );
-            Ok(Bundle::from(files.map_err(|e| {
-                NodeError::classify(e, JumpExportError::is_internal)
-            })?))
-        },
-    );
-    let nodes = JumpMapNodes {
-        mesh,
-        parameterize: param,
-        synthesize: walk,
-        exemplar,
-    };
-    Ok((dag, nodes))
 }
 
 /// The jump map of an exemplar (analyse-exemplar, §2 of the 2002 paper); `synth2d` uses the
@@ -242,47 +156,9 @@ pub(crate) fn add_jump_map(
     params: JumpMapParams,
 ) -> Handle<JumpMap> {
     dag.node(
-        NodeSpec::of(
-            Stage::AnalyseExemplar,
-            crate::stages::analyse_exemplar::jump_map::NODE,
-        ),
+        NodeSpec::of(Stage::AnalyseExemplar, jump_map::NODE),
         params,
         exemplar,
-        |ctx, p, img| {
-            check_exemplar_size(img.width, img.height).map_err(NodeError::input)?;
-            Ok(build_jump_map(img, p, &|f| ctx.progress.set(f)))
-        },
+        |ctx, p, img| Ok(jump_map::node(img, p, &|f| ctx.progress.set(f))?),
     )
-}
-
-/// An image and the file it came from, textured under `name` in format `format`.
-fn aligned<'a>(
-    (name, format): &(String, String),
-    image: ImageView<'a>,
-    file: &'a FileInput,
-) -> AlignedMap<'a> {
-    AlignedMap {
-        name: name.clone(),
-        format: format.clone(),
-        image,
-        path: file.path.clone(),
-        bytes: &file.bytes,
-    }
-}
-
-/// What the reconstruct node's key holds: the export parameters, each extra map's name and
-/// file format, and the exemplar's format (the files are copied into the export as they are).
-#[derive(Serialize)]
-struct ReconstructParams {
-    export: ExportParams,
-    maps: Vec<(String, String)>,
-    exemplar_format: String,
-}
-
-/// A map's file format for the export: its extension, or PNG for a file without one.
-fn extension_of(p: &std::path::Path) -> String {
-    match super::extension(p) {
-        e if e.is_empty() => "png".into(),
-        e => e,
-    }
 }

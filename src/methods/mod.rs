@@ -250,6 +250,17 @@ pub fn import<F: Import>(
     ))
 }
 
+/// Imports `inputs.<key>`, a path `config` gives, as the node `import.<key>`.
+pub(crate) fn input<F: Import>(
+    dag: &mut Dag,
+    config: &Config,
+    key: &str,
+    path: &Path,
+) -> Result<Handle<F>, MethodError> {
+    let role = format!("inputs.{key}");
+    import(dag, &format!("import.{key}"), &config.resolve(path), &role)
+}
+
 /// Input files of one kind that several nodes use: each path is imported once, the first as
 /// `name`, the next ones as `name.1`, `name.2`, … (in the order they are first asked for).
 pub(crate) struct Imports<F> {

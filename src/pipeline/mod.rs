@@ -121,6 +121,15 @@ impl NodeError {
     }
 }
 
+impl From<texsyn_core::algorithm::Failure> for NodeError {
+    fn from(e: texsyn_core::algorithm::Failure) -> Self {
+        match e {
+            texsyn_core::algorithm::Failure::Input(e) => NodeError::Input(e),
+            texsyn_core::algorithm::Failure::Internal(m) => NodeError::Internal(m),
+        }
+    }
+}
+
 impl From<crate::artifact::ArtifactError> for NodeError {
     fn from(e: crate::artifact::ArtifactError) -> Self {
         NodeError::Internal(format!("reading an input artifact: {e}"))

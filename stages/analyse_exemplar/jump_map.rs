@@ -37,6 +37,7 @@ use crate::image::knn::KdTree;
 use crate::image::neighbourhood::{NeighbourhoodParams, Neighbourhoods};
 use crate::image::pca::{Pca, PcaParams};
 use rayon::prelude::*;
+use texsyn_core::algorithm::Failure;
 use texsyn_core::math::PureMath;
 
 /// The `jump_map` node's algorithm and version (part of its key; bump on any change of output).
@@ -442,6 +443,17 @@ fn find_jumps(
     }
     // Approximate searches may find, in a later block, a match closer than one found earlier.
     slots[..filled].sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+}
+
+/// The analyse-exemplar node (§2): the exemplar's jump map, for an exemplar big enough to
+/// have one.
+pub fn node(
+    img: ImageView,
+    params: &JumpMapParams,
+    progress: &dyn Fn(f32),
+) -> Result<JumpMap, Failure> {
+    check_exemplar_size(img.width, img.height).map_err(Failure::input)?;
+    Ok(build_jump_map(img, params, progress))
 }
 
 #[cfg(test)]

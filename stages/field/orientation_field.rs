@@ -29,6 +29,7 @@ use crate::geom::Mesh;
 use crate::geom::laplacian::{cotan_weights, harmonic_interpolate};
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 use texsyn_core::math::PureMath;
 
 /// The `orientation_field` node's algorithm and version (part of its key; bump on any change of output).
@@ -444,6 +445,12 @@ fn any_tangent(n: Vec3) -> Vec3 {
         return Vec3::X;
     }
     n.any_orthonormal_vector()
+}
+
+/// The field node (§3): the "up" direction at every vertex of the imported mesh.
+pub fn node(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>, Failure> {
+    texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, "jump_maps");
+    orientation_field(mesh, params).map_err(Failure::input)
 }
 
 #[cfg(test)]

@@ -17,6 +17,7 @@ use crate::parameterize::region_growing::region_growing_order;
 use crate::synthesize::jump_walk::WalkInput;
 use glam::Vec2;
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 use texsyn_core::math::PureMath;
 
 /// The `jump_offsets` node's algorithm and version (part of its key; bump on any change of output).
@@ -270,4 +271,16 @@ pub fn jump_parameterization(
         edge_offsets: offsets,
         boxes,
     })
+}
+
+/// The parameterize node (§4.1): the walk's order, edge offsets and validity boxes. It reads
+/// the exemplar only for its size.
+pub fn node(
+    mesh: &Mesh,
+    up: &[glam::Vec3],
+    exemplar: crate::image::ImageView,
+    p: &ParameterizeParams,
+) -> Result<JumpParameterization, Failure> {
+    jump_parameterization(mesh, up, (exemplar.width, exemplar.height), p)
+        .map_err(|e| Failure::classify(e, ParameterizeError::is_internal))
 }

@@ -12,6 +12,7 @@ use crate::reconstruct::textured_export::{
 };
 use glam::Vec2;
 use std::path::PathBuf;
+use texsyn_core::algorithm::Failure;
 
 /// The `jump_blend_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -183,4 +184,105 @@ fn colour_ramp(w: u32, h: u32) -> Image {
         }
     }
     img
+}
+
+/// A name an extra map may have: it names the map's exported file.
+pub fn check_map_name(name: &str) -> Result<(), &'static str> {
+    let allowed = |ch: char| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-';
+    if name.is_empty() || !name.chars().all(allowed) {
+        return Err("map names may use letters, digits, '_' and '-'");
+    }
+    Ok(())
+}
+
+/// What the reconstruct node's key holds besides its inputs: the export parameters, each extra
+/// map's name and file format, and the exemplar's format (the files are copied into the
+/// export as they are).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct JumpExportKey {
+    pub export: ExportParams,
+    pub maps: Vec<(String, String)>,
+    pub exemplar_format: String,
+}
+
+impl JumpExportKey {
+    /// The key for an export with no extra maps yet, of an exemplar read from `exemplar`.
+    pub fn new(export: &ExportParams, exemplar: &std::path::Path) -> Self {
+        JumpExportKey {
+            export: export.clone(),
+            maps: Vec::new(),
+            exemplar_format: file_format(exemplar),
+        }
+    }
+
+    /// Adds the extra map `name`, read from `path`.
+    pub fn add_map(&mut self, name: &str, path: &std::path::Path) {
+        self.maps.push((name.to_owned(), file_format(path)));
+    }
+}
+
+/// A map's file format for the export: its extension (lower case), or PNG for a file
+/// without one.
+fn file_format(path: &std::path::Path) -> String {
+    let e = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    e.filter(|e| !e.is_empty()).unwrap_or_else(|| "png".into())
+}
+
+/// An image aligned with the exemplar and the file it was read from.
+pub struct MapFile<'a> {
+    pub image: ImageView<'a>,
+    pub path: &'a std::path::Path,
+    pub bytes: &'a [u8],
+}
+
+impl<'a> MapFile<'a> {
+    pub fn new(image: ImageView<'a>, path: &'a std::path::Path, bytes: &'a [u8]) -> Self {
+        MapFile { image, path, bytes }
+    }
+}
+
+/// The reconstruct node: the textured mesh and its files. `files` are the exemplar, exported
+/// as `basecolor`, then each extra map of the key, exported under its config name.
+pub fn node(
+    key: &JumpExportKey,
+    mesh: &Mesh,
+    param: &ParamParts,
+    addresses: &[Vec2],
+    mut files: Vec<MapFile>,
+    progress: &dyn Fn(f32),
+) -> Result<Vec<(String, Vec<u8>)>, Failure> {
+    if files.len() != key.maps.len() + 1 {
+        return Err(Failure::internal("the export's maps and its key disagree"));
+    }
+    let exemplar = files.remove(0);
+    let maps = files;
+    fn aligned<'a>((name, format): &(String, String), f: MapFile<'a>) -> AlignedMap<'a> {
+        AlignedMap {
+            name: name.clone(),
+            format: format.clone(),
+            image: f.image,
+            path: f.path.to_owned(),
+            bytes: f.bytes,
+        }
+    }
+    let basecolor = ("basecolor".to_owned(), key.exemplar_format.clone());
+    let maps: Vec<AlignedMap> = key
+        .maps
+        .iter()
+        .zip(maps)
+        .map(|(m, f)| aligned(m, f))
+        .collect();
+    let exemplar = aligned(&basecolor, exemplar);
+    export_jump_textured(
+        mesh,
+        param,
+        addresses,
+        &exemplar,
+        &maps,
+        &key.export,
+        progress,
+    )
+    .map_err(|e| Failure::classify(e, JumpExportError::is_internal))
 }

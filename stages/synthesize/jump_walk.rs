@@ -21,6 +21,7 @@ use crate::check::{ParamError, check_range};
 use crate::parameterize::edge_offsets::OffsetBox;
 use crate::random::counter_unit;
 use glam::Vec2;
+use texsyn_core::algorithm::Failure;
 
 /// The `jump_walk` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -374,6 +375,36 @@ impl Table {
         }
         self.total = total;
     }
+}
+
+/// The synthesize node (§4.2): the walk over the parameterization with the jump map, logged
+/// with the random assignments a user can avoid.
+pub fn node(
+    param: &crate::parameterize::jump_parameterization::ParamParts,
+    jm: JumpMapRef,
+    params: &WalkParams,
+    progress: &dyn Fn(f32),
+) -> Result<Walk, Failure> {
+    if param.meta.exemplar != (jm.width, jm.height) {
+        return Err(Failure::internal(
+            "parameterization and jump map disagree on the exemplar size",
+        ));
+    }
+    let walk = jump_walk(param.walk_input(), jm, params, progress);
+    let n = param.order.len();
+    tracing::info!(
+        "synthesize: {n} vertices, {} jumps, {} random assignments",
+        walk.jumps,
+        walk.random_assignments
+    );
+    if walk.random_assignments > 0 {
+        tracing::warn!(
+            "synthesize: {} of {n} vertices had no valid continuation or jump and got a random \
+             address; a smaller parameterize.scale or a larger exemplar avoids this",
+            walk.random_assignments
+        );
+    }
+    Ok(walk)
 }
 
 #[cfg(test)]

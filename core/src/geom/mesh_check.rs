@@ -128,6 +128,13 @@ pub fn mesh_health(mesh: &Mesh) -> MeshHealth {
     h
 }
 
+/// Logs the warning a method gives for a mesh with defects it textures as they are.
+pub fn warn_if_unhealthy(mesh: &crate::geom::Mesh, method: &str) {
+    if let Some(w) = mesh_health(mesh).warning(method) {
+        tracing::warn!("{w}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
