@@ -24,6 +24,57 @@ pub const NODE: texsyn_core::algorithm::Algorithm =
 /// parameters: 1 (a 3×3 kernel, σ = 1). 0 leaves jagged seams; 2 visibly softens them.
 pub const DEFAULT_BLEND_RADIUS: u32 = 1;
 
+/// `[reconstruct]` of `synth2d`.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Blend2dParams {
+    /// Radius of the blend kernel, 0..=8 (0 copies pixels). Default: 1.
+    pub blend_radius: u32,
+}
+
+impl Default for Blend2dParams {
+    fn default() -> Self {
+        Blend2dParams {
+            blend_radius: DEFAULT_BLEND_RADIUS,
+        }
+    }
+}
+
+impl Blend2dParams {
+    pub fn validate(&self) -> Result<(), texsyn_core::check::ParamError> {
+        texsyn_core::check::check_range("reconstruct.blend_radius", self.blend_radius, 0, 8)
+    }
+}
+
+/// The reconstruct node: `synthesized.png`, rendered from the addresses, and
+/// `coordinates.png`, the addresses themselves (red = x, green = y, scaled to the exemplar),
+/// with which a user applies the same synthesis to other maps of the material.
+pub fn node(
+    exemplar: ImageView,
+    addresses: &[[u16; 2]],
+    (width, height): (u32, u32),
+    p: &Blend2dParams,
+) -> Vec<(String, Vec<u8>)> {
+    use crate::reconstruct::textured_export::encode_png;
+    let img = render_2d(exemplar, addresses, width, height, p.blend_radius);
+    let mut coords = Image::new(width, height);
+    for (px, a) in coords.pixels.iter_mut().zip(addresses) {
+        *px = [
+            a[0] as f32 / (exemplar.width.max(2) - 1) as f32,
+            a[1] as f32 / (exemplar.height.max(2) - 1) as f32,
+            0.0,
+            1.0,
+        ];
+    }
+    vec![
+        ("synthesized.png".into(), encode_png(&img.to_rgba8(), false)),
+        (
+            "coordinates.png".into(),
+            encode_png(&coords.to_rgba8(), false),
+        ),
+    ]
+}
+
 /// Renders `width × height` pixels from `addresses` (row-major `[x, y]` exemplar addresses).
 /// `blend_radius == 0` copies each pixel. All four channels are blended alike.
 ///

@@ -37,10 +37,16 @@ use crate::random::counter_unit;
 pub const NODE: texsyn_core::algorithm::Algorithm =
     texsyn_core::algorithm::Algorithm::new("jump_walk_2d", 1);
 
-/// Parameters of the 2D jump-map synthesis.
+/// Parameters of the 2D jump-map synthesis (`[synthesize]` of `synth2d`).
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct Synth2dParams {
+    /// Output size in pixels, 1..=16384 each (the node's; [`synthesize_2d`] takes its own).
+    /// Default: 256 × 256.
+    pub width: u32,
+    pub height: u32,
+    /// The node's seed ([`synthesize_2d`] takes its own). Default: 1.
+    pub seed: u64,
     /// Weight of "do not jump" per source neighbour, i.e. roughly the mean number of pixels
     /// between jumps (a pixel's jump weights sum to at most 1), 0..=1e9. Default: 300 (with the
     /// small exemplars used here, 10–50 gives patches of a few pixels and a noisy result; jumps
@@ -61,6 +67,9 @@ pub struct Synth2dParams {
 impl Default for Synth2dParams {
     fn default() -> Self {
         Synth2dParams {
+            width: 256,
+            height: 256,
+            seed: 1,
             continuation: 300.0,
             boundary_fraction: 0.1,
             combine_neighbours: true,
@@ -71,6 +80,8 @@ impl Default for Synth2dParams {
 impl Synth2dParams {
     /// Checks every field's range; the error names the field, its range and the value.
     pub fn validate(&self) -> Result<(), ParamError> {
+        check_range("synthesize.width", self.width, 1, 16384)?;
+        check_range("synthesize.height", self.height, 1, 16384)?;
         let c = self.continuation;
         if !(c.is_finite() && (0.0..=1e9).contains(&c)) {
             // The bound reads 1e9, not the 1000000000 check_range would print.
@@ -294,6 +305,12 @@ pub fn synthesize_2d(
         prev = Some(p);
     }
     addr
+}
+
+/// The synthesize node: `params.width × params.height` exemplar addresses from the jump map,
+/// drawn with `params.seed`.
+pub fn node(jm: JumpMapRef, params: &Synth2dParams) -> Vec<[u16; 2]> {
+    synthesize_2d(jm, params.width, params.height, params, params.seed)
 }
 
 #[cfg(test)]
