@@ -26,8 +26,8 @@ use crate::geom::Mesh;
 use crate::image::Image;
 use crate::pipeline::RunResult;
 use crate::pipeline::Stage::{AnalyseExemplar, Field, Parameterize, Reconstruct, Synthesize};
-use crate::pipeline::shard::{self, ShardMode};
-use crate::pipeline::{Dag, Handle, Keyed, NodeError, NodeSpec, PieceStore, WithTail};
+use crate::pipeline::shard;
+use crate::pipeline::{Dag, Handle, Keyed, NodeError, NodeSpec, WithTail};
 use crate::score::solid::{PlaneExemplar, SolidNodes, SolidSetup};
 use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::candidate_triples::{self as triples, SolidAnalysis};
@@ -35,12 +35,9 @@ use crate::stages::field::quaternion_field::{self as sketch, RotationField};
 use crate::stages::parameterize::volume_embedding as volume;
 use crate::stages::parameterize::volume_embedding::{RequestParams, RequestedVoxels as Request};
 use crate::stages::reconstruct::solid_colour::{self as colour, SolidExportParams};
-use crate::stages::synthesize::solid::solid_synthesis::{
-    self as synthesis, Brick, BrickStore, SolidError, VoxelRequest,
-};
+use crate::stages::synthesize::solid::solid_synthesis::{self as synthesis, Brick, SolidError};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
-use std::sync::Arc;
 
 /// A `solid` config. `[inputs]` and each of `[[regions]]` name an exemplar set: one image for
 /// all three planes (`exemplar`), or one per plane of the local frame (`xy`, `yz`, `zx`; any
@@ -196,31 +193,17 @@ fn build(config: &Config) -> Result<(Dag, SolidScore), MethodError> {
     let file = |f: &PathBuf| dag.file(&config.resolve(f), "field.curves_file");
     let curves_file = c.field.curves_file.as_ref().map(file).transpose()?;
     let field = dag.node(
-        NodeSpec::of(Field, crate::stages::field::quaternion_field::NODE),
+        NodeSpec::of(Field, sketch::NODE),
         c.field.solid_field(c.parameterize.margin),
         (mesh, curves_file),
-        |_, p, (mesh, file)| {
-            // A curves file's curves come after the config's, and are checked on reading.
-            let more = match file {
-                None => Vec::new(),
-                Some(f) => sketch::CurvesFile::read(&f.bytes, p.curves.len())
-                    .map_err(|e| NodeError::input(format!("{}: {e}", f.path.display())))?,
-            };
-            sketch::solid_rotation_field(&mesh, p, more).map_err(NodeError::input)
-        },
+        |_, p, (mesh, f)| Ok(sketch::node(&mesh, p, f.map(|f| (&*f.path, &*f.bytes)))?),
     );
     let regions = (!depths.is_empty()).then_some(depths);
     let request = dag.node(
-        NodeSpec::of(
-            Parameterize,
-            crate::stages::parameterize::volume_embedding::NODE,
-        ),
+        NodeSpec::of(Parameterize, volume::NODE),
         WithTail(c.parameterize.clone(), regions.clone()),
         mesh,
-        |_, WithTail(p, depths), mesh| {
-            let depths = depths.as_deref().unwrap_or_default();
-            volume::request_voxels(&mesh, p, depths).map_err(NodeError::input)
-        },
+        |_, WithTail(p, depths), mesh| Ok(volume::node(&mesh, p, depths.as_deref())?),
     );
     let synthesis = |dag: &mut Dag, name: String, analysis, region| {
         let params = WithTail(c.synthesize.clone(), region);
@@ -234,24 +217,26 @@ fn build(config: &Config) -> Result<(Dag, SolidScore), MethodError> {
         let name = format!("synthesize.region{}", k + 1);
         pairs.push((synthesis(&mut dag, name, a, Some(k as u8)), a));
     }
+    let key = colour::SolidColourKey {
+        export: c.reconstruct.clone(),
+        request: c.parameterize.request.clone(),
+    };
+    // The core's samples and analysis, the request and mesh, then each region's pair.
     let reconstruct = dag.node(
-        NodeSpec::of(Reconstruct, crate::stages::reconstruct::solid_colour::NODE),
-        ReconstructParams {
-            export: c.reconstruct.clone(),
-            request: c.parameterize.request.clone(),
-        },
-        // The core's samples and analysis, the request and mesh, then each region's pair.
+        NodeSpec::of(Reconstruct, colour::NODE),
+        key,
         (samples, core_analysis, request, mesh, pairs),
-        |ctx, ReconstructParams { export, request }, (samples, analysis, req, mesh, pairs)| {
-            let mut colours = colour::VoxelColours::default();
-            for (s, a) in std::iter::once((samples, analysis)).chain(pairs) {
-                colours.add(s.voxels, s.triples, &a);
-            }
-            let output = colour::SolidOutput::of(request, &mesh, req.section.as_ref(), req.voxels)
-                .ok_or_else(|| NodeError::internal("section request without its grid"))?;
-            let progress = |f| ctx.progress.set(f);
-            let files = colour::export_solid(output, &req.volume, &colours, export, &progress);
-            Ok(Bundle::from(files.map_err(NodeError::input)?))
+        |ctx, key, (samples, analysis, req, mesh, pairs)| {
+            let sets = std::iter::once((samples, analysis)).chain(pairs);
+            let sets = sets.map(|(s, a)| (s.voxels, s.triples, a));
+            let (volume, voxels, section) = (&req.volume, req.voxels, req.section.as_ref());
+            let request = colour::RequestView {
+                volume,
+                voxels,
+                section,
+            };
+            let files = colour::node(key, &mesh, request, sets, &|f| ctx.progress.set(f))?;
+            Ok(Bundle::from(files))
         },
     );
     let i = &c.inputs;
@@ -296,21 +281,14 @@ fn add_analysis(
     });
     let [xy, yz, zx] = planes;
     let [(xy, tx), (yz, ty), (zx, tz)] = [xy?, yz?, zx?];
-    Ok(dag.node(
-        NodeSpec::of(
-            AnalyseExemplar,
-            crate::stages::analyse_exemplar::candidate_triples::NODE,
-        )
-        .named(name),
-        AnalysisParams {
-            analysis: params,
-            transpose: [tx, ty, tz],
-        },
-        [xy, yz, zx],
-        |_, p, planes| {
-            triples::analyse_transposed(planes, p.transpose, &p.analysis).map_err(NodeError::input)
-        },
-    ))
+    let key = triples::AnalysisKey {
+        analysis: params,
+        transpose: [tx, ty, tz],
+    };
+    let spec = NodeSpec::of(AnalyseExemplar, triples::NODE).named(name);
+    Ok(dag.node(spec, key, [xy, yz, zx], |_, key, planes| {
+        Ok(triples::node(planes, key)?)
+    }))
 }
 
 /// The synthesis of one exemplar set's solid at the requested voxels that `region` owns
@@ -334,88 +312,14 @@ fn add_synthesis(
                 .ok_or_else(|| NodeError::internal("a region's synthesis without voxel regions"))?;
             let bricks = ctx.pieces::<(u32, [i32; 3]), Brick>(synth.pyramid())?;
             if let Some(mode) = ctx.shard() {
-                return Err(ctx.shard_done(&synthesize_share(&synth, &voxels, &bricks, mode)?));
+                let assign = |all: &[[i32; 3]]| shard::assign(all, mode.shard);
+                let share =
+                    synthesis::synthesize_share(&synth, &voxels, &bricks, &assign, mode.plan_only);
+                return Err(ctx.shard_done(&share?));
             }
             let run = synth.synthesize_voxels(&voxels, &bricks);
             let run = run.map_err(|e| NodeError::classify(e, SolidError::is_internal));
             Ok(SolidSamples::new(voxels, run?.0))
         },
     )
-}
-
-/// One shard's share of a solid synthesis (`texsyn run --shard`, `src/pipeline/shard.rs`).
-#[derive(Serialize)]
-struct BrickShare {
-    /// The finest bricks of the whole request, over all shards.
-    finest_bricks: usize,
-    /// This shard's finest bricks, sorted.
-    assigned: Vec<[i32; 3]>,
-    /// Bricks needed, computed and reused per level, coarsest first (planning: what a run
-    /// would compute with the cache as it is).
-    levels: Vec<synthesis::LevelReport>,
-    /// Planning only: the bricks per level the share depends on, all computed from an empty
-    /// cache (what a shard on its own machine, sharing nothing, computes).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    from_empty_cache: Option<Vec<usize>>,
-}
-
-/// Synthesizes (or, planning, plans) this shard's finest bricks among those `voxels` touch
-/// and the coarser bricks they depend on, into `store`.
-fn synthesize_share(
-    synth: &synthesis::SolidSynthesis,
-    voxels: &[[i32; 3]],
-    store: &dyn BrickStore,
-    mode: ShardMode,
-) -> Result<BrickShare, NodeError> {
-    let all = synth.request_bricks(&VoxelRequest::from_voxels(voxels));
-    let assigned = shard::assign(&all, mode.shard);
-    let mine: std::collections::HashSet<[i32; 3]> = assigned.iter().copied().collect();
-    let share: Vec<[i32; 3]> = voxels
-        .iter()
-        .filter(|v| mine.contains(&synth.brick_of(**v)))
-        .copied()
-        .collect();
-    let request = VoxelRequest::from_voxels(&share);
-    let (levels, from_empty_cache) = if mode.plan_only {
-        let fresh = synth.bricks_needed(&request).iter().map(Vec::len).collect();
-        (synth.plan_report(&request, store), Some(fresh))
-    } else {
-        let report = synth.synthesize(&request, store);
-        let report = report.map_err(|e| NodeError::classify(e, SolidError::is_internal))?;
-        (report.levels, None)
-    };
-    Ok(BrickShare {
-        finest_bricks: all.len(),
-        assigned,
-        levels,
-        from_empty_cache,
-    })
-}
-
-/// The synthesis' bricks are its node's pieces, by (level, brick coordinates).
-impl BrickStore for PieceStore<'_, (u32, [i32; 3]), Brick> {
-    fn get(&self, level: u32, brick: [i32; 3]) -> Option<Arc<Brick>> {
-        PieceStore::get(self, &(level, brick))
-    }
-    fn put(&self, level: u32, brick: [i32; 3], b: Arc<Brick>) {
-        PieceStore::put(self, &(level, brick), b)
-    }
-    /// The level's bricks are in the cache: only the copies in memory go.
-    fn release(&self, level: u32) {
-        self.forget(|(l, _)| *l == level)
-    }
-}
-
-/// The analysis node's key: its parameters and which planes' images are transposed.
-#[derive(Serialize)]
-struct AnalysisParams {
-    analysis: triples::CandidateParams,
-    transpose: [bool; 3],
-}
-
-/// The reconstruct node's key: the export settings and the kind of request it renders.
-#[derive(Serialize)]
-struct ReconstructParams {
-    export: SolidExportParams,
-    request: volume::Request,
 }

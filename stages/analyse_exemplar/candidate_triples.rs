@@ -92,6 +92,7 @@ use crate::image::{Image, ImageView};
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 
 /// The `candidate_triples` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -1244,6 +1245,18 @@ pub fn analyse(
         slabs,
         appearance: appearance_arr,
     })
+}
+
+/// The analysis node's key: its parameters and which planes' images are transposed.
+#[derive(Debug, Clone, Serialize)]
+pub struct AnalysisKey {
+    pub analysis: CandidateParams,
+    pub transpose: [bool; 3],
+}
+
+/// The analyse-exemplar node: [`analyse_transposed`] of the three planes' images.
+pub fn node(planes: [ImageView; 3], key: &AnalysisKey) -> Result<SolidAnalysis, Failure> {
+    analyse_transposed(planes, key.transpose, &key.analysis).map_err(Failure::input)
 }
 
 #[cfg(test)]

@@ -31,6 +31,7 @@ use crate::parameterize::volume_embedding::SolidBox;
 use glam::{DQuat, DVec3, Quat, Vec3};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
+use texsyn_core::algorithm::Failure;
 
 /// The `quaternion_field` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -571,6 +572,21 @@ fn normalize_or_neighbour(grid: &FieldGrid, q: Vec<DQuat>) -> Vec<Quat> {
     out.into_iter()
         .map(|q| q.unwrap_or(Quat::IDENTITY))
         .collect()
+}
+
+/// The field node for a solid: [`solid_rotation_field`] from the config's curves, then those
+/// of a curves file (`file`: its path, for errors, and its bytes), checked on reading.
+pub fn node(
+    mesh: &Mesh,
+    p: &SolidFieldParams,
+    file: Option<(&std::path::Path, &[u8])>,
+) -> Result<RotationField, Failure> {
+    let more = match file {
+        None => Vec::new(),
+        Some((path, bytes)) => CurvesFile::read(bytes, p.curves.len())
+            .map_err(|e| Failure::input(format!("{}: {e}", path.display())))?,
+    };
+    solid_rotation_field(mesh, p, more).map_err(Failure::input)
 }
 
 #[cfg(test)]

@@ -16,6 +16,7 @@ use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
 use glam::{IVec3, Vec3};
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 
 /// The `volume_request` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -564,6 +565,16 @@ pub fn voxel_depths(mesh: &Mesh, vol: &Volume, voxels: &[IVec3], outside: &[bool
             }
         })
         .collect()
+}
+
+/// The parameterize node: [`request_voxels`], with the region depths when the config has
+/// `[[regions]]`.
+pub fn node(
+    mesh: &Mesh,
+    p: &RequestParams,
+    region_depths: Option<&[f32]>,
+) -> Result<RequestedVoxels, Failure> {
+    request_voxels(mesh, p, region_depths.unwrap_or_default()).map_err(Failure::input)
 }
 
 #[cfg(test)]

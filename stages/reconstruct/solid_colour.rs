@@ -30,6 +30,7 @@ use crate::render::{AtlasError, MAX_ATLAS_SIZE};
 use glam::{IVec3, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
+use texsyn_core::algorithm::Failure;
 
 /// The `solid_colour` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -367,4 +368,37 @@ fn export_box(
         ("volume.exr".into(), exr),
         ("volume_middle_slice.png".into(), encode_png(&slice, false)),
     ])
+}
+
+/// The reconstruct node's key: the export settings and the kind of request it renders.
+#[derive(Debug, Clone, Serialize)]
+pub struct SolidColourKey {
+    pub export: SolidExportParams,
+    pub request: Request,
+}
+
+/// What the reconstruct node reads of the request: the volume, the voxels and a section's
+/// grid.
+pub struct RequestView<'a> {
+    pub volume: &'a Volume,
+    pub voxels: &'a [IVec3],
+    pub section: Option<&'a Section>,
+}
+
+/// The reconstruct node: the colours of every exemplar set's synthesized voxels (`sets`: the
+/// voxels, their triples and the set's analysis), exported as the request asks.
+pub fn node<'a>(
+    key: &SolidColourKey,
+    mesh: &Mesh,
+    request: RequestView,
+    sets: impl IntoIterator<Item = (&'a [[i32; 3]], &'a [Triple], SolidAnalysisRef<'a>)>,
+    progress: &dyn Fn(f32),
+) -> Result<Vec<(String, Vec<u8>)>, Failure> {
+    let mut colours = VoxelColours::default();
+    for (voxels, triples, analysis) in sets {
+        colours.add(voxels, triples, &analysis);
+    }
+    let output = SolidOutput::of(&key.request, mesh, request.section, request.voxels)
+        .ok_or_else(|| Failure::internal("section request without its grid"))?;
+    export_solid(output, request.volume, &colours, &key.export, progress).map_err(Failure::input)
 }

@@ -118,6 +118,7 @@ mod params;
 mod plan;
 mod request;
 mod run;
+mod shard;
 
 pub use bricks::{Brick, BrickMeta, BrickStore, MemoryBrickStore};
 pub use params::{
@@ -125,6 +126,7 @@ pub use params::{
 };
 pub use plan::{BatchLimits, LevelDependency, LevelReport, SynthesisReport};
 pub use request::VoxelRequest;
+pub use shard::{BrickShare, synthesize_share};
 
 use bricks::{brick_of, brick_origin};
 use plan::{stencil_reach, widen_for_integration};
