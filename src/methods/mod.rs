@@ -261,6 +261,31 @@ pub(crate) fn input<F: Import>(
     import(dag, &format!("import.{key}"), &config.resolve(path), &role)
 }
 
+/// The size of the exemplar `path` (as the config gives it) and its resolved path, read from
+/// the image header so parameters that must fit it are refused before any node runs. `None`
+/// when the header cannot be read: the import node then names the problem.
+pub(crate) fn exemplar_size(config: &Config, path: &Path) -> Option<((u32, u32), PathBuf)> {
+    let path = config.resolve(path);
+    let reader = image::ImageReader::open(&path)
+        .ok()?
+        .with_guessed_format()
+        .ok()?;
+    Some((reader.into_dimensions().ok()?, path))
+}
+
+/// Refuses a config without a positive `parameterize.scale` (`what`: what the scale means).
+pub(crate) fn require_scale(config: &Config, scale: f32, what: &str) -> Result<(), MethodError> {
+    if !config.gives("parameterize", "scale") {
+        let msg = format!("is required: {what}");
+        return Err(config.invalid("parameterize.scale", &msg).into());
+    }
+    if !(scale.is_finite() && scale > 0.0) {
+        let msg = format!("must be a positive number, got {scale}");
+        return Err(config.invalid("parameterize.scale", &msg).into());
+    }
+    Ok(())
+}
+
 /// Input files of one kind that several nodes use: each path is imported once, the first as
 /// `name`, the next ones as `name.1`, `name.2`, … (in the order they are first asked for).
 pub(crate) struct Imports<F> {

@@ -18,6 +18,7 @@
 use crate::check::{ParamError, check_range};
 use crate::image::ImageView;
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 
 /// The `gaussian_stack` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -214,6 +215,11 @@ impl<'a> GaussianStackRef<'a> {
 
 /// More levels than any exemplar can have (sides up to 2^30): a bound for damaged artifacts.
 const MAX_LEVELS: usize = 30;
+
+/// The analyse-exemplar node: the exemplar's Gaussian stack.
+pub fn node(exemplar: ImageView, p: &StackParams) -> Result<GaussianStack, Failure> {
+    build_stack(exemplar, p).map_err(Failure::input)
+}
 
 #[cfg(test)]
 mod tests {

@@ -34,6 +34,7 @@ use crate::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
+use texsyn_core::algorithm::Failure;
 
 /// The `sweep_field` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -377,6 +378,30 @@ pub fn sweep_order(mesh: &PolyMesh, sweep: &[f32]) -> Vec<u32> {
             .then(a.cmp(&b))
     });
     order
+}
+
+/// The `field.keys` node: the config's keys resolved on the input mesh, so a key on a vertex
+/// that does not exist is reported before the subdivision runs.
+pub fn keys_node(mesh: &Mesh, keys: &[Anchor]) -> Result<FieldKeys, Failure> {
+    let p = SweepFieldParams {
+        keys: keys.to_vec(),
+        ..Default::default()
+    };
+    resolve_keys(mesh, &p).map_err(Failure::input)
+}
+
+/// The field node: [`sweep_field`] on the hierarchy from the resolved keys.
+pub fn node(
+    h: &Sqrt2Hierarchy,
+    keys: &FieldKeys,
+    p: &SweepFieldParams,
+) -> Result<SweepField, Failure> {
+    if keys.vertices.iter().any(|&v| v >= h.level_vertices[0]) {
+        return Err(Failure::internal(
+            "a field key names a vertex level 0 lacks",
+        ));
+    }
+    sweep_field(h, keys, p).map_err(Failure::input)
 }
 
 #[cfg(test)]

@@ -42,6 +42,7 @@ use crate::geom::poly_mesh::PolyMesh;
 use crate::graph::Csr;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 
 /// The `sqrt2_hierarchy` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -719,6 +720,19 @@ fn check_mesh(mesh: &Mesh) -> Result<(), SubdivisionError> {
         return Err(SubdivisionError::BadTriangle { face, problem });
     }
     Ok(())
+}
+
+/// The parameterize node: the √2 hierarchy of the input mesh at `p.scale`.
+pub fn node(mesh: &Mesh, p: &SubdivisionParams) -> Result<Sqrt2Hierarchy, Failure> {
+    texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, "graph_matching");
+    let h = build_hierarchy(mesh, p.scale, p).map_err(Failure::input)?;
+    tracing::info!(
+        "parameterize: {} levels, {} → {} vertices",
+        h.levels(),
+        h.level_vertices[0],
+        h.level_vertices.last().copied().unwrap_or(0)
+    );
+    Ok(h)
 }
 
 #[cfg(test)]

@@ -23,6 +23,7 @@ use crate::geom::poly_mesh::PolyMesh;
 use crate::render::{ConstantShader, VertexColorShader, ViewOptions, render_views, srgb};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 
 /// The `vertex_colour_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -171,6 +172,30 @@ fn glb(mesh: &Mesh, colours: &[[f32; 4]]) -> Vec<u8> {
         ..Default::default()
     };
     crate::export::write_glb(&scene)
+}
+
+/// The reconstruct node: every level of the hierarchy with its colours (`level_colours`: all
+/// levels' vertices, coarsest first), exported.
+pub fn node(
+    h: &crate::parameterize::sqrt2_subdivision::Sqrt2Hierarchy,
+    level_colours: &[[f32; 3]],
+    p: &VertexColourExportParams,
+    progress: &dyn Fn(f32),
+) -> Result<Vec<(String, Vec<u8>)>, Failure> {
+    let mut start = 0;
+    let mut levels = Vec::new();
+    for l in 0..h.levels() {
+        let n = h.level_vertices[l] as usize;
+        let colours = level_colours
+            .get(start..start + n)
+            .ok_or_else(|| Failure::internal("colours and hierarchy disagree"))?;
+        levels.push(ColouredLevel {
+            mesh: h.level(l),
+            colours,
+        });
+        start += n;
+    }
+    Ok(export_vertex_colours(&levels, p, progress))
 }
 
 #[cfg(test)]

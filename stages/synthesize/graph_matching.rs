@@ -66,6 +66,7 @@ use crate::random::counter_hash;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 use texsyn_core::math::PureMath;
 use texsyn_core::max_flow::MaxFlow;
 
@@ -801,6 +802,69 @@ impl MatchCtx<'_, '_> {
 
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Whether an exemplar of `width × height` texels suits graph matching with `p`: the config
+/// key at fault and what is wrong with it, read from the image header before any node runs.
+pub fn check_exemplar_fits(
+    (w, h): (u32, u32),
+    path: &std::path::Path,
+    p: &MatchParams,
+) -> (&'static str, Result<(), String>) {
+    let path = path.display();
+    if w.min(h) < 8 {
+        let m = format!("{path} is {w}×{h} texels; graph matching needs at least 8×8");
+        return ("inputs.exemplar", Err(m));
+    }
+    let max = w.min(h) / 2;
+    if p.region > max {
+        let m = format!(
+            "{} texels does not fit the {w}×{h} exemplar {path}: use at most {max}, or a larger exemplar",
+            p.region
+        );
+        return ("synthesize.region", Err(m));
+    }
+    ("synthesize.region", Ok(()))
+}
+
+/// What the synthesize node reads besides its inputs: its own parameters and the texture
+/// scale (level-0 texels per object unit).
+#[derive(Debug, Clone, Serialize)]
+pub struct MatchKey {
+    pub scale: f32,
+    pub matching: MatchParams,
+}
+
+/// The synthesize node: [`graph_matching`] over the hierarchy, logged.
+pub fn node(
+    hierarchy: &Sqrt2Hierarchy,
+    field: &SweepField,
+    stack: GaussianStackRef,
+    key: &MatchKey,
+    progress: &dyn Fn(f32),
+) -> Result<GraphMatching, Failure> {
+    if field.orientation.len() != hierarchy.positions.len()
+        || field.sweep.len() != hierarchy.level_vertices[0] as usize
+    {
+        return Err(Failure::internal("the field and the hierarchy disagree"));
+    }
+    let input = MatchInput {
+        hierarchy,
+        field,
+        stack,
+        scale: key.scale,
+    };
+    let out = graph_matching(&input, &key.matching, progress).map_err(Failure::input)?;
+    let s = &out.stats;
+    tracing::info!(
+        "synthesize: {} matches, {} comparisons ({} without averaging), {} vertices transferred, {} random starts",
+        s.matches,
+        s.comparisons,
+        s.comparisons_without_averaging,
+        s.transferred,
+        s.random_starts
+    );
+    Ok(out)
 }
 
 #[cfg(test)]
