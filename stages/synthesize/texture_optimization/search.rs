@@ -1,0 +1,175 @@
+//! The nearest-neighbour step: every sample's best exemplar patch for the current colours,
+//! with the occurrence penalty that keeps rarely used exemplar blocks in play.
+
+use super::candidates::{Candidates, Level};
+use super::params::TextureOptimizationParams;
+use super::patches::{Patches, SampleInfo};
+use crate::image::knn::squared_distance;
+use rayon::prelude::*;
+
+/// Nearest candidates in PCA space re-ranked by the full distance; more for samples whose grid
+/// has empty cells (their query is partly the current match, which biases the tree search).
+const SEARCH_K: usize = 4;
+const SEARCH_K_PARTIAL: usize = 16;
+
+/// Side, in texels, of the exemplar blocks whose use is counted by [`occurrence_penalty`]:
+/// single positions are used too rarely (there are more candidates than samples) for a count
+/// to mean anything.
+pub(super) const HISTOGRAM_BLOCK: usize = 8;
+
+/// Per candidate, `1 + weight · max(0, use/fair − 1)`: how much more than its fair share the
+/// exemplar block around the candidate's centre is used by the current matches (Kopf et al.
+/// 2007 §3.3 re-weight by the same excess). Counts come from `z` alone, so the result does not
+/// depend on the thread count.
+pub(super) fn occurrence_penalty(z: &[u32], cands: &Candidates, weight: f32) -> Vec<f32> {
+    let n = cands.len();
+    if weight == 0.0 || n == 0 {
+        return vec![1.0; n];
+    }
+    let ny = n / cands.nx;
+    let (bx, by) = (
+        cands.nx.div_ceil(HISTOGRAM_BLOCK),
+        ny.div_ceil(HISTOGRAM_BLOCK),
+    );
+    let block = |c: usize| (c / cands.nx / HISTOGRAM_BLOCK) * bx + (c % cands.nx) / HISTOGRAM_BLOCK;
+    let mut used = vec![0u32; bx * by];
+    for &c in z {
+        used[block(c as usize)] += 1;
+    }
+    // A block's fair share is proportional to the candidates it holds.
+    let mut size = vec![0u32; bx * by];
+    for c in 0..n {
+        size[block(c)] += 1;
+    }
+    let per_candidate = z.len() as f32 / n as f32;
+    (0..n)
+        .map(|c| {
+            let b = block(c);
+            let fair = (size[b] as f32 * per_candidate).max(1.0);
+            1.0 + weight * (used[b] as f32 / fair - 1.0).max(0.0)
+        })
+        .collect()
+}
+
+/// The nearest-neighbour step: every sample's best exemplar patch for the current colours.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn search(
+    patches: &Patches,
+    info: &SampleInfo,
+    colours: &[[f32; 3]],
+    z: &[u32],
+    cands: &Candidates,
+    level: Level,
+    p: &TextureOptimizationParams,
+    penalty: &[f32],
+) -> Vec<u32> {
+    let dim = level.dim();
+    let cells_per = level.w * level.w;
+    let k = cands.pca.components();
+    let tree = cands.tree.as_ref();
+    (0..z.len())
+        .into_par_iter()
+        .map_init(
+            || (vec![0.0f32; dim], vec![0.0f32; cells_per], vec![0.0f32; k]),
+            |(query, weight, proj), i| {
+                let current = z[i] as usize;
+                let cur_vec = &cands.full[current * dim..(current + 1) * dim];
+                // Bilinear splat of the patch's vertices onto the grid: the tent filter the
+                // exemplar patches were sampled with.
+                query.fill(0.0);
+                weight.fill(0.0);
+                let centre = (level.w as f32 - 1.0) * 0.5;
+                for e in patches.start[i]..patches.start[i + 1] {
+                    let o = patches.offset[e];
+                    let fx = o[0] / level.step + centre;
+                    let fy = o[1] / level.step + centre;
+                    let (x0, y0) = (fx.floor(), fy.floor());
+                    let (tx, ty) = (fx - x0, fy - y0);
+                    let col = colours[patches.vertex[e] as usize];
+                    for (dx, dy, wgt) in [
+                        (0, 0, (1.0 - tx) * (1.0 - ty)),
+                        (1, 0, tx * (1.0 - ty)),
+                        (0, 1, (1.0 - tx) * ty),
+                        (1, 1, tx * ty),
+                    ] {
+                        let (cx, cy) = (x0 as i64 + dx, y0 as i64 + dy);
+                        if wgt <= 0.0
+                            || cx < 0
+                            || cy < 0
+                            || cx >= level.w as i64
+                            || cy >= level.w as i64
+                        {
+                            continue;
+                        }
+                        let c = cy as usize * level.w + cx as usize;
+                        weight[c] += wgt;
+                        for t in 0..3 {
+                            query[c * 3 + t] += wgt * col[t];
+                        }
+                    }
+                }
+                let mut missing = 0usize;
+                for c in 0..cells_per {
+                    if weight[c] > 1e-4 {
+                        for t in 0..3 {
+                            query[c * 3 + t] /= weight[c];
+                        }
+                    } else {
+                        weight[c] = 0.0;
+                        missing += 1;
+                        query[c * 3..c * 3 + 3].copy_from_slice(&cur_vec[c * 3..c * 3 + 3]);
+                    }
+                }
+                // The occurrence penalty needs alternatives to choose from.
+                let search_k = if missing * 10 > cells_per || p.histogram > 0.0 {
+                    SEARCH_K_PARTIAL
+                } else {
+                    SEARCH_K
+                };
+                // Distance over the grid cells the patch's vertices reach.
+                let masked = |cand: &[f32]| -> f32 {
+                    if missing == 0 {
+                        return squared_distance(query, cand);
+                    }
+                    let mut acc = 0.0f32;
+                    for c in 0..cells_per {
+                        if weight[c] > 0.0 {
+                            for t in 0..3 {
+                                let d = query[c * 3 + t] - cand[c * 3 + t];
+                                acc += d * d;
+                            }
+                        }
+                    }
+                    acc
+                };
+                cands.pca.project(query, proj);
+                let found = match (info.constraint[i], &cands.distance) {
+                    (Some(d), Some((dist, _))) => {
+                        let tol = p.feature_tolerance;
+                        tree.nearest_approx(proj, search_k, p.search_eps, |c| {
+                            (dist[c as usize] - d).abs() <= tol
+                        })
+                    }
+                    _ => tree.nearest_approx(proj, search_k, p.search_eps, |_| true),
+                };
+                // The current match competes too, if it satisfies the constraint.
+                let current_allowed = match (info.constraint[i], &cands.distance) {
+                    (Some(d), Some((dist, _))) => (dist[current] - d).abs() <= p.feature_tolerance,
+                    _ => true,
+                };
+                let mut best = (f32::INFINITY, u32::MAX);
+                if current_allowed {
+                    best = (masked(cur_vec) * penalty[current], current as u32);
+                }
+                for (c, _) in found {
+                    let cu = c as usize;
+                    let d = masked(&cands.full[cu * dim..(cu + 1) * dim]) * penalty[cu];
+                    if d < best.0 || (d == best.0 && c < best.1) {
+                        best = (d, c);
+                    }
+                }
+                if best.1 == u32::MAX { z[i] } else { best.1 }
+            },
+        )
+        .collect()
+}
