@@ -148,12 +148,7 @@ impl Format for TextureFeatures {
     }
 }
 
-/// The field of §4 with what the run reports about it: singularities of the greedy
-/// orientation and of one arbitrary orientation of the same curves (Fig. 3, Fig. 6).
-pub struct OrientedField {
-    pub field: FeatureField,
-    pub arbitrary_singularities: u32,
-}
+pub use crate::stages::field::feature_field::OrientedField;
 
 #[derive(Serialize, Deserialize)]
 struct FieldMeta {

@@ -82,6 +82,7 @@
 use crate::check::{ParamError, check_range};
 use crate::image::Image;
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 use texsyn_core::math::PureMath;
 
 /// The `texture_feature_lines` node's algorithm and version (part of its key; bump on any change of output).
@@ -999,6 +1000,26 @@ fn principal_line(lines: &[Vec<[f32; 2]>]) -> (usize, f32) {
     }
     let angle = 0.5 * (2.0 * cxy).atan2_pure(cxx - cyy);
     (principal, fold_angle(angle as f32))
+}
+
+/// The analyse-exemplar node: the exemplar's feature lines, drawn by hand in `mask` or
+/// detected.
+pub fn node(
+    exemplar: &Image,
+    mask: Option<&Image>,
+    p: &TextureFeatureParams,
+) -> Result<TextureFeatures, Failure> {
+    let f = match mask {
+        Some(m) => features_from_mask(exemplar, m, p),
+        None => detect_texture_features(exemplar, p),
+    }
+    .map_err(Failure::input)?;
+    tracing::info!(
+        "analyse_exemplar: {} texture feature lines, principal at {:.1}°",
+        f.lines.len(),
+        f.principal_angle.to_degrees()
+    );
+    Ok(f)
 }
 
 #[cfg(test)]

@@ -23,6 +23,7 @@ use crate::geom::Mesh;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
+use texsyn_core::algorithm::Failure;
 
 /// The `shape_features` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -364,6 +365,56 @@ pub fn shape_features(
         kinds,
         source,
     })
+}
+
+/// What the shape-feature node reads besides its inputs. The curves file's path is not a
+/// parameter (its bytes are the input), but its format is: the same bytes read as OBJ or TOML
+/// mean different curves.
+#[derive(Debug, Clone, Serialize)]
+pub struct ShapeFeatureKey {
+    pub features: ShapeFeatureParams,
+    pub curves_format: Option<String>,
+}
+
+impl ShapeFeatureKey {
+    pub fn new(p: &ShapeFeatureParams) -> Self {
+        let format = p.curves_file.as_deref().map(|f| {
+            let e = f
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase());
+            e.unwrap_or_default()
+        });
+        ShapeFeatureKey {
+            features: ShapeFeatureParams {
+                curves_file: None,
+                ..p.clone()
+            },
+            curves_format: format,
+        }
+    }
+}
+
+/// The extract node: the shape's feature curves, with those of a curves file (`file`: its
+/// path, for errors, and its bytes).
+pub fn node(
+    mesh: &Mesh,
+    key: &ShapeFeatureKey,
+    file: Option<(&std::path::Path, &[u8])>,
+) -> Result<ShapeFeatures, Failure> {
+    texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, "feature_aligned");
+    let more = match file {
+        Some((path, bytes)) => {
+            read_curves_file(&path.display().to_string(), bytes).map_err(Failure::input)?
+        }
+        None => Vec::new(),
+    };
+    let s = shape_features(mesh, &key.features, &more).map_err(Failure::input)?;
+    tracing::info!(
+        "extract: {} feature curves ({:?})",
+        s.curves.len(),
+        s.source
+    );
+    Ok(s)
 }
 
 #[cfg(test)]

@@ -71,6 +71,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::time::Instant;
+use texsyn_core::algorithm::Failure;
 use texsyn_core::math::PureMath;
 
 /// The `feature_field` node's algorithm and version (part of its key; bump on any change of output).
@@ -637,6 +638,71 @@ pub fn singularity_indices(mesh: &Mesh, field: &[Vec3]) -> (u32, i32) {
         idx.iter().filter(|&&i| i != 0).count() as u32,
         idx.iter().sum(),
     )
+}
+
+/// The field of §4 with what the run reports about it: singularities of the greedy
+/// orientation and of one arbitrary orientation of the same curves (Fig. 3, Fig. 6).
+pub struct OrientedField {
+    pub field: FeatureField,
+    pub arbitrary_singularities: u32,
+}
+
+/// The field node: the field of §4, and for the log and the report the paper's comparison
+/// (Fig. 3, Fig. 6), the singularities of the same curves arbitrarily oriented.
+pub fn node(
+    mesh: &Mesh,
+    curves: &[Polyline],
+    p: &FeatureFieldParams,
+) -> Result<OrientedField, Failure> {
+    let (field, t) = feature_field(mesh, curves, p).map_err(Failure::input)?;
+    let mut steps = t.step_secs.clone();
+    steps.sort_by(f64::total_cmp);
+    let median = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
+    let other = match p.orientation {
+        Orientation::Arbitrary => field.singularities,
+        Orientation::Greedy => {
+            let arbitrary = FeatureFieldParams {
+                orientation: Orientation::Arbitrary,
+                ..p.clone()
+            };
+            let (f, _) = feature_field(mesh, curves, &arbitrary).map_err(Failure::input)?;
+            f.singularities
+        }
+    };
+    tracing::info!(
+        "field: {} curves oriented ({:?}); setup (Laplacian, symbolic analysis) {:.2} s, first factorization {:.2} s, {} steps, median {:.3} s; \
+         {} singular triangles ({} with arbitrary orientation)",
+        field.curves.len(),
+        p.orientation,
+        t.setup_secs,
+        t.factorization_secs,
+        t.step_secs.len(),
+        median,
+        field.singularities,
+        other
+    );
+    Ok(OrientedField {
+        field,
+        arbitrary_singularities: other,
+    })
+}
+
+/// The input mesh's field on the refined mesh: each new vertex the mean of its parents',
+/// then projected to its tangent plane and normalized (zero stays zero).
+pub fn carry_field(
+    refined: &crate::geom::edge_refine::Refined,
+    vectors: &[Vec3],
+) -> Result<Vec<Vec3>, Failure> {
+    if vectors.len() != refined.input_vertices as usize {
+        return Err(Failure::internal("the field and the mesh disagree"));
+    }
+    let carried = refined.carry(vectors, |a, b| (a + b) * 0.5);
+    let normals = refined.mesh.vertex_normals();
+    Ok(carried
+        .iter()
+        .zip(normals)
+        .map(|(v, n)| (*v - *n * v.dot(*n)).normalize_or_zero())
+        .collect())
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! Stage: parameterize.
 pub mod edge_offsets;
+pub mod edge_refinement;
 pub mod geometry_image;
 pub mod jump_parameterization;
 pub mod region_growing;

@@ -2,6 +2,7 @@
 pub mod blend2d;
 pub mod displacement;
 pub mod feature_aligned_export;
+pub mod feature_aligned_report;
 pub mod jump_blend;
 pub mod jump_export;
 pub mod relief_export;

@@ -114,6 +114,7 @@
 
 mod candidates;
 mod geodesic;
+mod node;
 mod params;
 mod patches;
 mod pca;
@@ -121,6 +122,7 @@ mod run;
 mod search;
 
 pub use geodesic::curve_distance;
+pub use node::{SynthesisKey, check_patch_fits, node};
 pub use params::{
     FeatureConstraint, SurfaceSynthesis, SurfaceSynthesisInput, SynthesisError, SynthesisStats,
     TextureOptimizationParams, memory_estimate,
