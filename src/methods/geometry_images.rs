@@ -14,29 +14,26 @@
 //!
 //! The geometry image's cut-nodes sit on the grid of the coarsest synthesis level (§4.2.2), so
 //! the parameterization's `coarse_levels` is `analyse_exemplar.levels`, not a setting of its
-//! own.
+//! own ([`GeometryImageParams::with_levels`]).
 
-use super::{Method, MethodError, Planned, import};
+use super::{Method, MethodError, Planned, import, input};
 use crate::artifact::Bundle;
-use crate::check::ParamError;
 use crate::config::{Config, check_range};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::TexelImage;
 use crate::image::Image;
-use crate::pipeline::{Dag, Handle, NodeError, NodeSpec, Stage};
+use crate::pipeline::{Dag, Handle, NodeSpec, Stage};
 use crate::score::geometry::GeometryImageNodes;
 use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::texel_variants::{
-    TexelVariantParams, build_texel_variants_with, check_sample_size,
+    self as variants, TexelVariantParams, VariantsKey, check_sample_size,
 };
-use crate::stages::extract::height_field::{height_field_image, is_image_path};
-use crate::stages::extract::{ExtractMethod, ExtractParams, extract_mesh_texture};
-use crate::stages::field::param_field::{ParamFieldParams, param_field};
-use crate::stages::parameterize::geometry_image::{GeometryImageParams, build_geometry_image};
-use crate::stages::reconstruct::relief_export::{ReliefExportParams, export_relief};
-use crate::stages::synthesize::geometry_texture::{
-    GeometrySynthParams, Search, synthesize_geometry_texture,
-};
+use crate::stages::extract::height_field::{self, HeightFieldKey, is_image_path};
+use crate::stages::extract::{self, ExtractMethod, ExtractParams};
+use crate::stages::field::param_field::{self, ParamFieldParams};
+use crate::stages::parameterize::geometry_image::{self, GeometryImageParams};
+use crate::stages::reconstruct::relief_export::{self, ReliefExportParams};
+use crate::stages::synthesize::geometry_texture::{self, GeometrySynthParams, Search};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -46,7 +43,7 @@ pub struct GeometryImagesConfig {
     pub method: String,
     pub inputs: Inputs,
     #[serde(default)]
-    pub parameterize: ParameterizeSection,
+    pub parameterize: GeometryImageParams,
     #[serde(default)]
     pub extract: ExtractParams,
     #[serde(default)]
@@ -69,146 +66,47 @@ pub struct Inputs {
     pub sample: PathBuf,
 }
 
-/// `[parameterize]`: the choices of [`GeometryImageParams`] (see there) except
-/// `coarse_levels`, which is `analyse_exemplar.levels`.
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ParameterizeSection {
-    pub size: u32,
-    pub extremity_cuts: u32,
-    pub stretch_cuts: u32,
-    pub stretch_iterations: u32,
-}
-
-impl Default for ParameterizeSection {
-    fn default() -> Self {
-        let d = GeometryImageParams::default();
-        ParameterizeSection {
-            size: d.size,
-            extremity_cuts: d.extremity_cuts,
-            stretch_cuts: d.stretch_cuts,
-            stretch_iterations: d.stretch_iterations,
-        }
-    }
-}
-
-impl ParameterizeSection {
-    /// The parameterize node's parameters, with cut-nodes on the grid of synthesis level
-    /// `levels − 1`.
-    fn params(&self, levels: u32) -> GeometryImageParams {
-        GeometryImageParams {
-            size: self.size,
-            extremity_cuts: self.extremity_cuts,
-            stretch_cuts: self.stretch_cuts,
-            stretch_iterations: self.stretch_iterations,
-            coarse_levels: levels,
-        }
-    }
-}
-
-/// The analysis node's parameters: `[analyse_exemplar]`, and whether synthesis searches per
-/// texel (`synthesize.search = "per_texel"`), which alone needs the per-texel search
-/// structures (nearly all of the variant set's size and build time).
-#[derive(Serialize)]
-struct VariantsNodeParams {
-    variants: TexelVariantParams,
-    per_texel: bool,
-}
-
-/// The key of an image sample's extraction: its height scale alone (the other `[extract]`
-/// keys are for mesh samples).
-#[derive(Serialize)]
-struct HeightFieldImageParams {
-    height_scale: f32,
-    /// Left out when false: configs that do not set it keep their keys.
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
-    strict_grey: bool,
-}
-
 /// Parses the config and checks every value, and the values that must agree with each other,
-/// naming the keys.
-fn checked(config: &Config) -> Result<GeometryImagesConfig, MethodError> {
-    if let Some(toml::Value::Table(t)) = config.table.get("parameterize")
-        && t.contains_key("coarse_levels")
-    {
-        return Err(config
-            .invalid(
-                "parameterize.coarse_levels",
-                "is no longer a setting: the cut-nodes sit on the grid of the coarsest synthesis \
-                 level (§4.2.2), so it follows analyse_exemplar.levels; remove it and set \
-                 analyse_exemplar.levels instead",
-            )
-            .into());
-    }
+/// naming the keys; returns it with the parameterize node's parameters.
+fn checked(config: &Config) -> Result<(GeometryImagesConfig, GeometryImageParams), MethodError> {
     let c: GeometryImagesConfig = config.parse()?;
-    let check = |key: &str, r: Result<(), ParamError>| config.check(key, r);
-    check("analyse_exemplar", c.analyse_exemplar.validate())?;
-    check("parameterize", c.parameterize.params(1).validate())?;
-    // Both are valid on their own now: what is left to fail is the levels against the size.
+    config.check("analyse_exemplar", c.analyse_exemplar.validate())?;
+    config.check("parameterize", c.parameterize.with_levels(1).map(drop))?;
     let levels = c.analyse_exemplar.levels;
-    if c.parameterize.params(levels).validate().is_err() {
-        return Err(config
-            .invalid(
-                "analyse_exemplar.levels",
-                &format!(
-                    "{levels} levels need parameterize.size >= {} (2^levels + 1, so that the \
-                     coarsest synthesis grid, where the cut-nodes sit (§4.2.2), has 3 samples \
-                     per side), got size {}",
-                    (1u32 << levels) + 1,
-                    c.parameterize.size
-                ),
-            )
-            .into());
-    }
-    check("extract", c.extract.validate())?;
-    check("field", c.field.validate())?;
-    check("synthesize", c.synthesize.validate())?;
-    check("reconstruct", c.reconstruct.displacement().validate())?;
+    let gp = c
+        .parameterize
+        .with_levels(levels)
+        .map_err(|e| config.param(e))?;
+    config.check("extract", c.extract.validate())?;
+    config.check("field", c.field.validate())?;
+    config.check("synthesize", c.synthesize.validate())?;
+    config.check("reconstruct", c.reconstruct.displacement().validate())?;
     let preview = c.reconstruct.preview_size;
-    check(
-        "reconstruct.preview_size",
-        check_range("reconstruct.preview_size", preview, 16, 4096),
-    )?;
+    let range = check_range("reconstruct.preview_size", preview, 16, 4096);
+    config.check("reconstruct.preview_size", range)?;
     if is_image_path(&c.inputs.sample) {
         if c.extract.method != ExtractMethod::HeightField {
-            return Err(config
-                .invalid(
-                    "extract.method",
-                    "an image sample is read as a height field: set method = \"height_field\" (or give a mesh sample)",
-                )
-                .into());
+            let m = "an image sample is read as a height field: set method = \"height_field\" (or give a mesh sample)";
+            return Err(config.invalid("extract.method", m).into());
         }
     } else {
         // A mesh sample gives extract.size² texels: check them against the variants now.
         let size = c.extract.size;
         check_sample_size(size, size, &c.analyse_exemplar).map_err(|e| {
-            config.invalid(
-                "extract.size",
-                &format!(
-                    "{e} (extract.size = {size}: raise it, or lower analyse_exemplar.scales, \
-                     .levels, .template or .boundary_template)"
-                ),
-            )
+            let m = format!(
+                "{e} (extract.size = {size}: raise it, or lower analyse_exemplar.scales, \
+                 .levels, .template or .boundary_template)"
+            );
+            config.invalid("extract.size", &m)
         })?;
         let per_texel = c.synthesize.search == Search::PerTexel;
         super::check_variant_memory(config, size, &c.analyse_exemplar, per_texel)?;
     }
-    Ok(c)
+    Ok((c, gp))
 }
 
 /// The `geometry_images` method.
 pub struct GeometryImages;
-
-impl Method for GeometryImages {
-    fn name(&self) -> &'static str {
-        "geometry_images"
-    }
-
-    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
-        let (dag, planned) = build(config)?;
-        Ok((dag, Box::new(planned)))
-    }
-}
 
 /// What the geometry-image score reads: its nodes, the synthesis parameters and the field's
 /// density offset.
@@ -220,123 +118,97 @@ struct GeometryImagesScore {
 
 impl Planned for GeometryImagesScore {
     fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
-        crate::score::geometry::geometry_images(
-            run,
-            &self.nodes,
-            &self.synthesize,
-            self.density_offset,
-        )
+        let (nodes, offset) = (&self.nodes, self.density_offset);
+        crate::score::geometry::geometry_images(run, nodes, &self.synthesize, offset)
     }
 }
 
-fn build(config: &Config) -> Result<(Dag, GeometryImagesScore), MethodError> {
-    let c = checked(config)?;
-    let mut dag = Dag::default();
-    let mesh = import::<Mesh>(
-        &mut dag,
-        "import.mesh",
-        &config.resolve(&c.inputs.mesh),
-        "inputs.mesh",
-    )?;
-    let gi = dag.node(
-        NodeSpec::of(
-            Stage::Parameterize,
-            crate::stages::parameterize::geometry_image::NODE,
-        ),
-        c.parameterize.params(c.analyse_exemplar.levels),
-        mesh,
-        |ctx, p, mesh| {
-            let build = build_geometry_image(&mesh, p, &|f| ctx.progress.set(f))
-                .map_err(NodeError::input)?;
-            Ok(build.image)
-        },
-    );
+impl Method for GeometryImages {
+    fn name(&self) -> &'static str {
+        "geometry_images"
+    }
 
-    let sample_path = config.resolve(&c.inputs.sample);
-    let texels = if is_image_path(&sample_path) {
-        image_sample(&mut dag, &sample_path, &c)?
-    } else {
-        let sample = import::<Mesh>(&mut dag, "import.sample", &sample_path, "inputs.sample")?;
-        dag.node(
-            NodeSpec::of(Stage::Extract, crate::stages::extract::MESH_TEXTURE_NODE),
-            c.extract.clone(),
-            sample,
-            |ctx, p, mesh| {
-                let e = extract_mesh_texture(&mesh, p, &|f| ctx.progress.set(f))
-                    .map_err(NodeError::input)?;
-                Ok(e.texels_in_spacing_units())
-            },
-        )
-    };
-
-    let variants = dag.node(
-        NodeSpec::of(
-            Stage::AnalyseExemplar,
-            crate::stages::analyse_exemplar::texel_variants::NODE,
-        ),
-        VariantsNodeParams {
+    fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
+        let (c, gp) = checked(config)?;
+        let mut dag = Dag::default();
+        let mesh = input::<Mesh>(&mut dag, config, "mesh", &c.inputs.mesh)?;
+        let gi = dag.node(
+            NodeSpec::of(Stage::Parameterize, geometry_image::NODE),
+            gp,
+            mesh,
+            |ctx, p, mesh| Ok(geometry_image::node(&mesh, p, &|f| ctx.progress.set(f))?),
+        );
+        let sample_path = config.resolve(&c.inputs.sample);
+        let texels = if is_image_path(&sample_path) {
+            image_sample(&mut dag, &sample_path, &c)?
+        } else {
+            let sample = input::<Mesh>(&mut dag, config, "sample", &c.inputs.sample)?;
+            dag.node(
+                NodeSpec::of(Stage::Extract, extract::MESH_TEXTURE_NODE),
+                c.extract.clone(),
+                sample,
+                |ctx, p, mesh| {
+                    Ok(extract::mesh_texture_node(&mesh, p, &|f| {
+                        ctx.progress.set(f)
+                    })?)
+                },
+            )
+        };
+        let key = VariantsKey {
             variants: c.analyse_exemplar.clone(),
             per_texel: c.synthesize.search == Search::PerTexel,
-        },
-        texels,
-        |ctx, p, sample| {
-            build_texel_variants_with(&sample, &p.variants, p.per_texel, &|f| ctx.progress.set(f))
-                .map_err(NodeError::input)
-        },
-    );
-    let field = dag.node(
-        NodeSpec::of(Stage::Field, crate::stages::field::param_field::NODE),
-        c.field.clone(),
-        gi,
-        |_, p, gi| param_field(&gi, p).map_err(NodeError::input),
-    );
-    let synthesized = dag.node(
-        NodeSpec::of(
-            Stage::Synthesize,
-            crate::stages::synthesize::geometry_texture::NODE,
-        ),
-        c.synthesize.clone(),
-        (gi, field, variants),
-        |ctx, p, (gi, field, variants)| {
-            if field.dir.len() != gi.positions.len() {
-                return Err(NodeError::internal(
-                    "field and geometry image disagree on the sample count",
-                ));
-            }
-            synthesize_geometry_texture(&gi, &field, &variants, p, &|f| ctx.progress.set(f))
-                .map_err(NodeError::input)
-        },
-    );
-    let reconstruct = dag.node(
-        NodeSpec::of(
-            Stage::Reconstruct,
-            crate::stages::reconstruct::relief_export::NODE,
-        ),
-        c.reconstruct.clone(),
-        (gi, synthesized, texels),
-        |ctx, p, (gi, texels, sample)| {
-            let files = export_relief(&gi, &texels, &sample, p, &|f| ctx.progress.set(f))
-                .map_err(NodeError::input)?;
-            Ok(Bundle::from(files))
-        },
-    );
-    let score = GeometryImagesScore {
-        nodes: GeometryImageNodes {
+        };
+        let variants = dag.node(
+            NodeSpec::of(Stage::AnalyseExemplar, variants::NODE),
+            key,
+            texels,
+            |ctx, key, sample| Ok(variants::node(&sample, key, &|f| ctx.progress.set(f))?),
+        );
+        let field = dag.node(
+            NodeSpec::of(Stage::Field, param_field::NODE),
+            c.field.clone(),
+            gi,
+            |_, p, gi| Ok(param_field::node(&gi, p)?),
+        );
+        let synthesize = dag.node(
+            NodeSpec::of(Stage::Synthesize, geometry_texture::NODE),
+            c.synthesize.clone(),
+            (gi, field, variants),
+            |ctx, p, (gi, field, v)| {
+                Ok(geometry_texture::node(&gi, &field, &v, p, &|f| {
+                    ctx.progress.set(f)
+                })?)
+            },
+        );
+        let reconstruct = dag.node(
+            NodeSpec::of(Stage::Reconstruct, relief_export::NODE),
+            c.reconstruct.clone(),
+            (gi, synthesize, texels),
+            |ctx, p, (gi, texels, sample)| {
+                let progress = |f| ctx.progress.set(f);
+                Ok(Bundle::from(relief_export::node(
+                    &gi, &texels, &sample, p, &progress,
+                )?))
+            },
+        );
+        let nodes = GeometryImageNodes {
             parameterize: gi,
             analyse_exemplar: variants,
             field,
-            synthesize: synthesized,
+            synthesize,
             reconstruct,
-        },
-        synthesize: c.synthesize.clone(),
-        density_offset: c.field.density_offset,
-    };
-    Ok((dag, score))
+        };
+        let (synthesize, density_offset) = (c.synthesize.clone(), c.field.density_offset);
+        let score = GeometryImagesScore {
+            nodes,
+            synthesize,
+            density_offset,
+        };
+        Ok((dag, Box::new(score)))
+    }
 }
 
-/// An image sample read as a height field (§5; a colour image by its luma, with a warning,
-/// unless `extract.strict_grey`). Its size is only known once it is
-/// read, so it is checked against the variants here, where the error can name the sample.
+/// An image sample read as a height field (§5), checked against the variants once read.
 fn image_sample(
     dag: &mut Dag,
     path: &Path,
@@ -344,25 +216,17 @@ fn image_sample(
 ) -> Result<Handle<TexelImage>, MethodError> {
     let img = import::<Image>(dag, "import.sample", path, "inputs.sample")?;
     let (path, variants) = (path.to_owned(), c.analyse_exemplar.clone());
-    let params = HeightFieldImageParams {
+    let key = HeightFieldKey {
         height_scale: c.extract.height_scale,
         strict_grey: c.extract.strict_grey,
     };
     Ok(dag.node(
-        NodeSpec::of(Stage::Extract, crate::stages::extract::height_field::NODE),
-        params,
+        NodeSpec::of(Stage::Extract, height_field::NODE),
+        key,
         img,
-        move |_, p, img| {
-            // Image heights are in units of the texel spacing (one pixel).
-            let h = height_field_image(&path, img, p.height_scale, 1, p.strict_grey)
-                .map_err(NodeError::input)?;
-            if let Some(w) = &h.warning {
-                tracing::warn!("{w}");
-            }
-            let t = h.texels;
-            check_sample_size(t.width, t.height, &variants)
-                .map_err(|e| NodeError::input(format!("the sample: {e}")))?;
-            Ok(t)
+        move |_, key, img| {
+            let fits = |w, h| check_sample_size(w, h, &variants).map_err(|e| e.to_string());
+            Ok(height_field::node(&path, img, key, fits)?)
         },
     ))
 }

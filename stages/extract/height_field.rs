@@ -22,6 +22,7 @@ use crate::geom::geometry_image::TexelImage;
 use crate::image::ImageView;
 use glam::Vec2;
 use std::path::Path;
+use texsyn_core::algorithm::Failure;
 
 /// The `height_field_image` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -207,4 +208,34 @@ pub fn height_field_image(
         t[2] = ((grey(p) - mean) * height_scale as f64) as f32;
     }
     Ok(HeightFieldImage { texels, warning })
+}
+
+/// The key of an image sample's extraction: its height scale alone (the other `[extract]`
+/// keys are for mesh samples).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct HeightFieldKey {
+    pub height_scale: f32,
+    /// Left out when false: configs that do not set it keep their keys.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub strict_grey: bool,
+}
+
+/// The extract node of an image sample (§5; a colour image by its luma, with a warning,
+/// unless `strict_grey`), heights in units of the texel spacing (one pixel). Its size is only
+/// known once it is read, so `fits` checks it against the analysis here, where the error can
+/// name the sample.
+pub fn node(
+    path: &Path,
+    img: ImageView,
+    key: &HeightFieldKey,
+    fits: impl Fn(u32, u32) -> Result<(), String>,
+) -> Result<TexelImage, Failure> {
+    let h = height_field_image(path, img, key.height_scale, 1, key.strict_grey)
+        .map_err(Failure::input)?;
+    if let Some(w) = &h.warning {
+        tracing::warn!("{w}");
+    }
+    let t = h.texels;
+    fits(t.width, t.height).map_err(|e| Failure::input(format!("the sample: {e}")))?;
+    Ok(t)
 }

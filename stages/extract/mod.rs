@@ -33,6 +33,7 @@ use glam::Vec3;
 use sample_region::Region;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
+use texsyn_core::algorithm::Failure;
 
 /// The `geometric_texture` node's algorithm and version (part of its key; bump on any change of output).
 pub const MESH_TEXTURE_NODE: texsyn_core::algorithm::Algorithm =
@@ -422,4 +423,14 @@ pub fn extract_mesh_texture(
             })
         }
     }
+}
+
+/// The extract node of a mesh sample: its relief as texels, in units of the texel spacing.
+pub fn mesh_texture_node(
+    mesh: &Mesh,
+    params: &ExtractParams,
+    progress: &(dyn Fn(f32) + Sync),
+) -> Result<TexelImage, Failure> {
+    let e = extract_mesh_texture(mesh, params, progress).map_err(Failure::input)?;
+    Ok(e.texels_in_spacing_units())
 }

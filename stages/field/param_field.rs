@@ -20,6 +20,7 @@ use crate::geom::geometry_image::GeometryImage;
 use crate::linalg::{SolveError, SpdSolver};
 use glam::{DVec3, Vec2, Vec3};
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 use texsyn_core::math::PureMath;
 
 /// The `param_field` node's algorithm and version (part of its key; bump on any change of output).
@@ -300,6 +301,11 @@ fn to_parameter_domain(gi: &GeometryImage, k: usize, v: Vec3) -> Option<Vec2> {
     let y = (a * r2 - b * r1) / det;
     let out = Vec2::new(x as f32, y as f32);
     (out.length() > 0.0).then(|| out.normalize())
+}
+
+/// The field node: the direction field over the geometry image.
+pub fn node(gi: &GeometryImage, p: &ParamFieldParams) -> Result<ParamField, Failure> {
+    param_field(gi, p).map_err(Failure::input)
 }
 
 #[cfg(test)]

@@ -87,6 +87,7 @@ use crate::geom::mean_value::{
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use std::cmp::Reverse;
 use std::collections::HashMap;
+use texsyn_core::algorithm::Failure;
 use texsyn_core::math::PureMath;
 
 /// The `geometry_image` node's algorithm and version (part of its key; bump on any change of output).
@@ -122,7 +123,8 @@ pub struct GeometryImageParams {
     /// level, spacing 2^(coarse_levels − 1) samples (§4.2.2, boundary-fixing pyramid).
     /// Range 1 to k where size = 2^k + 1. Default: 3 (the paper's three-level pyramid).
     /// The geometry-image method sets it to the synthesis's levels (`analyse_exemplar.levels`);
-    /// it is not a key of its `[parameterize]`.
+    /// a config that gives it is refused.
+    #[serde(deserialize_with = "set_by_levels")]
     pub coarse_levels: u32,
 }
 
@@ -1066,6 +1068,54 @@ impl Editable {
         }
         Ok(m)
     }
+}
+
+impl GeometryImageParams {
+    /// These parameters with cut-nodes on the grid of synthesis level `levels − 1`: valid
+    /// parameters of their own (checked with one level) whose size must also fit `levels`.
+    pub fn with_levels(&self, levels: u32) -> Result<GeometryImageParams, ParamError> {
+        GeometryImageParams {
+            coarse_levels: 1,
+            ..self.clone()
+        }
+        .validate()?;
+        let p = GeometryImageParams {
+            coarse_levels: levels,
+            ..self.clone()
+        };
+        if p.validate().is_err() {
+            let message = format!(
+                "{levels} levels need parameterize.size >= {} (2^levels + 1, so that the \
+                 coarsest synthesis grid, where the cut-nodes sit (§4.2.2), has 3 samples per \
+                 side), got size {}",
+                (1u32 << levels) + 1,
+                self.size
+            );
+            return Err(ParamError::invalid("analyse_exemplar.levels", message));
+        }
+        Ok(p)
+    }
+}
+
+/// The parameterize node: the geometry image of the mesh.
+pub fn node(
+    mesh: &Mesh,
+    p: &GeometryImageParams,
+    progress: &dyn Fn(f32),
+) -> Result<GeometryImage, Failure> {
+    Ok(build_geometry_image(mesh, p, progress)
+        .map_err(Failure::input)?
+        .image)
+}
+
+/// `coarse_levels` is no key of a config's `[parameterize]`: the cut-nodes sit on the grid of
+/// the coarsest synthesis level (§4.2.2), so it follows `analyse_exemplar.levels`.
+fn set_by_levels<'de, D: serde::Deserializer<'de>>(_: D) -> Result<u32, D::Error> {
+    Err(serde::de::Error::custom(
+        "is not a setting: the cut-nodes sit on the grid of the coarsest synthesis level \
+         (§4.2.2), so it follows analyse_exemplar.levels; remove it and set \
+         analyse_exemplar.levels instead",
+    ))
 }
 
 #[cfg(test)]

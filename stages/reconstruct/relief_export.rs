@@ -23,6 +23,7 @@ use crate::geom::Mesh;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
+use texsyn_core::algorithm::Failure;
 
 /// The `displacement` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -228,4 +229,15 @@ pub fn glb_of(mesh: &Mesh) -> crate::export::GlbMesh {
         },
         ..Default::default()
     }
+}
+
+/// The reconstruct node: the relief's files.
+pub fn node(
+    gi: &GeometryImage,
+    texels: &TexelImage,
+    sample: &TexelImage,
+    p: &ReliefExportParams,
+    progress: &dyn Fn(f32),
+) -> Result<Vec<(String, Vec<u8>)>, Failure> {
+    export_relief(gi, texels, sample, p, progress).map_err(Failure::input)
 }

@@ -76,6 +76,25 @@ pub use templates::{Template, coarse_taps, coarse_window, feature_dim, template_
 pub const NODE: texsyn_core::algorithm::Algorithm =
     texsyn_core::algorithm::Algorithm::new("texel_variants", 2);
 
+/// The analysis node's key: `[analyse_exemplar]`, and whether synthesis searches per texel
+/// (`synthesize.search = "per_texel"`), which alone needs the per-texel search structures
+/// (nearly all of the variant set's size and build time).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct VariantsKey {
+    pub variants: TexelVariantParams,
+    pub per_texel: bool,
+}
+
+/// The analyse-exemplar node: the sample's texel variants.
+pub fn node(
+    sample: &crate::geom::geometry_image::TexelImage,
+    key: &VariantsKey,
+    progress: &dyn Fn(f32),
+) -> Result<TexelVariants, texsyn_core::algorithm::Failure> {
+    build_texel_variants_with(sample, &key.variants, key.per_texel, progress)
+        .map_err(texsyn_core::algorithm::Failure::input)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

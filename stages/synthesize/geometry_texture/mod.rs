@@ -106,3 +106,20 @@ pub const NODE: texsyn_core::algorithm::Algorithm =
 
 /// The per-sample controls of synthesis (§4.3), computed by the field stage.
 pub use crate::field::param_field::ParamField;
+
+/// The synthesize node: the geometric texture over the geometry image.
+pub fn node(
+    gi: &crate::geom::geometry_image::GeometryImage,
+    field: &ParamField,
+    variants: &crate::analyse_exemplar::texel_variants::TexelVariantsRef<'_>,
+    p: &GeometrySynthParams,
+    progress: &dyn Fn(f32),
+) -> Result<crate::geom::geometry_image::TexelImage, texsyn_core::algorithm::Failure> {
+    use texsyn_core::algorithm::Failure;
+    if field.dir.len() != gi.positions.len() {
+        return Err(Failure::internal(
+            "field and geometry image disagree on the sample count",
+        ));
+    }
+    synthesize_geometry_texture(gi, field, variants, p, progress).map_err(Failure::input)
+}
