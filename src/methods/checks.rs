@@ -1,0 +1,92 @@
+//! Checks made when a method plans, before any node runs: parameters that must fit an input
+//! (read from its header) or the memory budget, and required keys.
+
+use super::MethodError;
+use crate::config::Config;
+use std::path::{Path, PathBuf};
+
+/// The size of the exemplar `path` (as the config gives it) and its resolved path, read from
+/// the image header so parameters that must fit it are refused before any node runs. `None`
+/// when the header cannot be read: the import node then names the problem.
+pub(crate) fn exemplar_size(config: &Config, path: &Path) -> Option<((u32, u32), PathBuf)> {
+    let path = config.resolve(path);
+    let reader = image::ImageReader::open(&path)
+        .ok()?
+        .with_guessed_format()
+        .ok()?;
+    Some((reader.into_dimensions().ok()?, path))
+}
+
+/// Refuses a config without a positive `parameterize.scale` (`what`: what the scale means).
+pub(crate) fn require_scale(config: &Config, scale: f32, what: &str) -> Result<(), MethodError> {
+    if !config.gives("parameterize", "scale") {
+        let msg = format!("is required: {what}");
+        return Err(config.invalid("parameterize.scale", &msg).into());
+    }
+    if !(scale.is_finite() && scale > 0.0) {
+        let msg = format!("must be a positive number, got {scale}");
+        return Err(config.invalid("parameterize.scale", &msg).into());
+    }
+    Ok(())
+}
+
+/// Refuses, before any work, a parameter whose estimated memory is over the budget
+/// (`--max-memory`), naming a value that fits. `estimate` gives bytes for a value; it must
+/// grow with the value.
+pub(crate) fn check_memory(
+    config: &Config,
+    key: &str,
+    value: u64,
+    estimate: impl Fn(u64) -> u64,
+    show: impl Fn(u64) -> String,
+) -> Result<(), MethodError> {
+    crate::memory::check_budget(key, value, estimate, show)
+        .map_err(|e| MethodError::Config(config.invalid(key, &e.to_string())))
+}
+
+/// The texel variants of a geometry-image sample of `extract.size`² texels
+/// ([`TexelVariantParams::memory_estimate`]).
+///
+/// [`TexelVariantParams::memory_estimate`]: crate::stages::analyse_exemplar::texel_variants::TexelVariantParams::memory_estimate
+pub(crate) fn check_variant_memory(
+    config: &Config,
+    size: u32,
+    p: &crate::stages::analyse_exemplar::texel_variants::TexelVariantParams,
+    per_texel: bool,
+) -> Result<(), MethodError> {
+    check_memory(
+        config,
+        "extract.size",
+        size as u64,
+        |s| p.memory_estimate(s, per_texel),
+        |s| s.to_string(),
+    )
+}
+
+/// A solid of `parameterize.resolution` voxels on its longest side
+/// ([`crate::stages::synthesize::solid::memory_estimate`]).
+pub(crate) fn check_solid_memory(
+    config: &Config,
+    resolution: u32,
+    request: &crate::stages::parameterize::volume_embedding::Request,
+) -> Result<(), MethodError> {
+    check_memory(
+        config,
+        "parameterize.resolution",
+        resolution as u64,
+        |r| crate::stages::synthesize::solid::memory_estimate(request, r),
+        |r| r.to_string(),
+    )
+}
+
+/// The baked atlas of `reconstruct.atlas_size` texels per side
+/// ([`crate::stages::reconstruct::textured_export::atlas_memory_estimate`]).
+pub(crate) fn check_atlas_memory(config: &Config, side: u32) -> Result<(), MethodError> {
+    check_memory(
+        config,
+        "reconstruct.atlas_size",
+        side as u64,
+        crate::stages::reconstruct::textured_export::atlas_memory_estimate,
+        |a| a.to_string(),
+    )
+}
