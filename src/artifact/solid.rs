@@ -178,6 +178,22 @@ impl ReadOwned for Brick {
     }
 }
 
+/// A synthesis' bricks are its node's pieces, by (level, brick coordinates).
+impl crate::stages::synthesize::solid::solid_synthesis::BrickStore
+    for crate::pipeline::PieceStore<'_, (u32, [i32; 3]), Brick>
+{
+    fn get(&self, level: u32, brick: [i32; 3]) -> Option<std::sync::Arc<Brick>> {
+        crate::pipeline::PieceStore::get(self, &(level, brick))
+    }
+    fn put(&self, level: u32, brick: [i32; 3], b: std::sync::Arc<Brick>) {
+        crate::pipeline::PieceStore::put(self, &(level, brick), b)
+    }
+    /// The level's bricks are in the cache: only the copies in memory go.
+    fn release(&self, level: u32) {
+        self.forget(|(l, _)| *l == level)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -228,21 +244,5 @@ mod tests {
                 r.regions.as_deref()
             )
         );
-    }
-}
-
-/// A synthesis' bricks are its node's pieces, by (level, brick coordinates).
-impl crate::stages::synthesize::solid::solid_synthesis::BrickStore
-    for crate::pipeline::PieceStore<'_, (u32, [i32; 3]), Brick>
-{
-    fn get(&self, level: u32, brick: [i32; 3]) -> Option<std::sync::Arc<Brick>> {
-        crate::pipeline::PieceStore::get(self, &(level, brick))
-    }
-    fn put(&self, level: u32, brick: [i32; 3], b: std::sync::Arc<Brick>) {
-        crate::pipeline::PieceStore::put(self, &(level, brick), b)
-    }
-    /// The level's bricks are in the cache: only the copies in memory go.
-    fn release(&self, level: u32) {
-        self.forget(|(l, _)| *l == level)
     }
 }

@@ -9,6 +9,9 @@ use serde::Serialize;
 use std::collections::HashSet;
 use texsyn_core::algorithm::Failure;
 
+/// Picks a shard's part of all finest bricks (sorted).
+pub type Assign<'a> = &'a dyn Fn(&[[i32; 3]]) -> Vec<[i32; 3]>;
+
 /// What a shard did (or, planning, would do).
 #[derive(Debug, Serialize)]
 pub struct BrickShare {
@@ -32,7 +35,7 @@ pub fn synthesize_share(
     synth: &SolidSynthesis,
     voxels: &[[i32; 3]],
     store: &dyn BrickStore,
-    assign: &dyn Fn(&[[i32; 3]]) -> Vec<[i32; 3]>,
+    assign: Assign,
     plan_only: bool,
 ) -> Result<BrickShare, Failure> {
     let all = synth.request_bricks(&VoxelRequest::from_voxels(voxels));
