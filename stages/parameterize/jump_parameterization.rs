@@ -14,7 +14,6 @@ use crate::parameterize::edge_offsets::{
     OffsetBox, edge_offsets, largest_fitting_scale, validity_boxes,
 };
 use crate::parameterize::region_growing::region_growing_order;
-use crate::synthesize::jump_walk::WalkInput;
 use glam::Vec2;
 use serde::{Deserialize, Serialize};
 use texsyn_core::algorithm::Failure;
@@ -134,6 +133,19 @@ pub struct ParamMeta {
     pub exemplar: (u32, u32),
     /// Connected components (= seeds of the order).
     pub components: u32,
+}
+
+/// What the jump-map walk (`synthesize::jump_walk`) reads of a parameterization: the mesh's
+/// connectivity, the edge offsets, the validity boxes and the visiting order.
+#[derive(Clone, Copy)]
+pub struct WalkInput<'a> {
+    /// One-ring in compressed-row form (as [`crate::geom::VertexAdjacency`]).
+    pub adj_offsets: &'a [u32],
+    pub neighbors: &'a [u32],
+    /// Texture-space offset of each half-edge `v → neighbors[h]`.
+    pub edge_offsets: &'a [Vec2],
+    pub boxes: &'a [OffsetBox],
+    pub order: &'a [u32],
 }
 
 /// A parameterization as the walk and the blend read it: the order, the edge offsets in

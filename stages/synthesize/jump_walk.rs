@@ -18,7 +18,7 @@
 
 use crate::analyse_exemplar::jump_map::JumpMapRef;
 use crate::check::{ParamError, check_range};
-use crate::parameterize::edge_offsets::OffsetBox;
+use crate::parameterize::jump_parameterization::WalkInput;
 use crate::random::counter_unit;
 use glam::Vec2;
 use texsyn_core::algorithm::Failure;
@@ -62,18 +62,6 @@ impl WalkParams {
             0.5,
         )
     }
-}
-
-/// What the walk reads: the mesh's connectivity and the parameterization.
-#[derive(Clone, Copy)]
-pub struct WalkInput<'a> {
-    /// One-ring in compressed-row form (as [`crate::geom::VertexAdjacency`]).
-    pub adj_offsets: &'a [u32],
-    pub neighbors: &'a [u32],
-    /// Texture-space offset of each half-edge `v → neighbors[h]`.
-    pub edge_offsets: &'a [Vec2],
-    pub boxes: &'a [OffsetBox],
-    pub order: &'a [u32],
 }
 
 /// The walk's result: a texel address per vertex, and for each vertex the vertex where its
@@ -412,6 +400,7 @@ mod tests {
     use super::*;
     use crate::analyse_exemplar::jump_map::Jump;
     use crate::geom::Mesh;
+    use crate::parameterize::edge_offsets::OffsetBox;
     use crate::parameterize::edge_offsets::{edge_offsets, validity_boxes};
     use crate::parameterize::region_growing::region_growing_order;
     use glam::Vec3;
