@@ -1187,7 +1187,7 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), PackError> {
     Ok(())
 }
 
-/// A temporary file beside its destination (`.NAME.tmp-PID`), removed on drop unless
+/// A temporary file beside its destination (`.NAME.tmp-OWNER`, [`crate::owner`]), removed on drop unless
 /// disarmed (after it was renamed into place).
 struct TempFile(PathBuf, std::cell::Cell<bool>);
 
@@ -1197,7 +1197,7 @@ impl TempFile {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let tmp = dest.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
+        let tmp = dest.with_file_name(format!(".{name}.tmp-{}", crate::owner::Owner::this_tag()));
         TempFile(tmp, std::cell::Cell::new(true))
     }
     fn path(&self) -> &Path {
