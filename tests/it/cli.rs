@@ -450,3 +450,71 @@ fn run_json_reports_each_nodes_own_peak_memory() {
         "{peaks:?}"
     );
 }
+
+/// `texsyn ARGS` in `cwd`, killed if it has not finished after `secs` seconds: `None` then.
+fn texsyn_within(args: &[&str], cwd: &Path, secs: u64) -> Option<Output> {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_texsyn"))
+        .args(args)
+        .current_dir(cwd)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("texsyn runs");
+    let start = std::time::Instant::now();
+    while start.elapsed() < std::time::Duration::from_secs(secs) {
+        if child.try_wait().unwrap().is_some() {
+            return Some(child.wait_with_output().unwrap());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    None
+}
+
+#[test]
+fn a_fifo_device_or_huge_file_as_config_or_sweep_is_refused_at_once() {
+    let dir = scratch();
+    let fifo = dir.path().join("config.toml");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo is needed");
+    // Over the size limit: a valid TOML comment of 5 MiB.
+    let huge = dir.path().join("huge.toml");
+    std::fs::write(&huge, format!("#{}\n", "x".repeat(5 << 20))).unwrap();
+    let cache = dir.path().join("cache");
+    let cache = cache.to_str().unwrap();
+    let out = dir.path().join("out");
+    let out = out.to_str().unwrap();
+    let lock = repo().join("configs/synth2d.lock");
+    let lock = lock.to_str().unwrap();
+    for (file, why) in [
+        (fifo.to_str().unwrap(), "not a regular file"),
+        ("/dev/zero", "not a regular file"),
+        (huge.to_str().unwrap(), "over the limit"),
+    ] {
+        let commands: [Vec<&str>; 6] = [
+            vec!["run", file, "--out", out],
+            vec!["status", file],
+            vec!["hashes", file],
+            vec!["verify", file, lock],
+            vec!["score", file],
+            vec!["sweep", file, "--out", out],
+        ];
+        for mut args in commands {
+            args.extend(["--cache", cache]);
+            let shown = args.join(" ");
+            let Some(o) = texsyn_within(&args, &repo(), 20) else {
+                panic!("texsyn {shown}: still running after 20 s");
+            };
+            assert!(!o.status.success(), "texsyn {shown}: must fail");
+            let err = stderr(&o);
+            assert!(
+                err.contains(file) && err.contains(why) && !err.contains("panicked"),
+                "texsyn {shown}: the message must name the file and say {why:?}: {err}"
+            );
+        }
+    }
+    assert_eq!(object_count(Path::new(cache)), 0);
+}

@@ -177,7 +177,7 @@ impl Sweep {
     /// length) and every point's config (an unknown key or a value of the wrong type is an
     /// error naming the point), before anything runs.
     pub fn load(path: &Path) -> Result<Sweep, SweepError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SweepError::Io {
+        let text = crate::config::read_text_file(path).map_err(|source| SweepError::Io {
             path: path.to_owned(),
             source,
         })?;
@@ -191,7 +191,7 @@ impl Sweep {
     /// Whether a TOML file is a sweep rather than a run config: it has `base` and `axes`
     /// and no `method`.
     pub fn is_sweep_file(path: &Path) -> bool {
-        std::fs::read_to_string(path)
+        crate::config::read_text_file(path)
             .ok()
             .and_then(|t| toml::from_str::<toml::Table>(&t).ok())
             .is_some_and(|t| {
