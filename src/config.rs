@@ -37,6 +37,25 @@ pub struct Config {
     pub table: toml::Table,
 }
 
+/// The output folder a run of the file `path` (a config or a sweep) writes without `--out`:
+/// `out/<stem>`. A stem that is not one plain folder name (`..` of `...toml`, `.` of
+/// `..toml`) would put the outputs outside `out/<stem>`, so it is an error naming the file.
+pub fn default_out(path: &Path, stem: &str) -> Result<PathBuf, ConfigError> {
+    use std::path::Component;
+    let mut parts = Path::new(stem).components();
+    match (parts.next(), parts.next()) {
+        (Some(Component::Normal(_)), None) => Ok(Path::new("out").join(stem)),
+        _ => Err(ConfigError::Invalid {
+            path: path.to_owned(),
+            key: "file name".into(),
+            message: format!(
+                "its stem {stem:?} cannot name an output folder (out/{stem} is not a folder \
+                 inside out/); rename the file or give --out"
+            ),
+        }),
+    }
+}
+
 /// The largest config or sweep file texsyn reads (the shipped ones are a few KiB).
 pub const TEXT_FILE_CAP: u64 = 4 << 20;
 

@@ -172,6 +172,45 @@ pub fn may_remove(owner: Option<&Owner>, path: &Path, own_is_dead: bool) -> bool
     older_than(path, STALE_AGE)
 }
 
+/// The temporary name of a file written beside its destination `dest` and renamed over it:
+/// `.NAME.tmp-OWNER` in the same folder.
+pub fn temporary_beside(dest: &Path) -> std::path::PathBuf {
+    let name = dest
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    dest.with_file_name(format!(".{name}.tmp-{}", Owner::this_tag()))
+}
+
+/// Removes the temporaries that killed writers of `dest` left beside it (`.NAME.tmp-OWNER`,
+/// see [`temporary_beside`]) when [`may_remove`] allows; never a live or unknown writer's
+/// young one. Best effort: what cannot be removed stays.
+pub fn remove_stale_beside(dest: &Path) {
+    let Some(name) = dest.file_name().map(|n| n.to_string_lossy().into_owned()) else {
+        return;
+    };
+    let dir = match dest.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let prefix = format!(".{name}.tmp-");
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let file = e.file_name();
+        let Some(rest) = file.to_str().and_then(|f| f.strip_prefix(&prefix)) else {
+            continue;
+        };
+        let path = e.path();
+        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file())
+            && may_remove(Owner::parse(rest).as_ref(), &path, false)
+        {
+            let _ = std::fs::remove_file(&path);
+        }
+    }
+}
+
 /// Whether `path`'s modification time is more than `age` ago (false if it cannot be read).
 pub fn older_than(path: &Path, age: Duration) -> bool {
     std::fs::symlink_metadata(path)

@@ -66,6 +66,47 @@ pub struct Inputs {
     pub maps: BTreeMap<String, PathBuf>,
 }
 
+/// The export's own file names a map's name must not produce: a map `N` exports `N.EXT` and
+/// `baked_N.png` (or `baked_N_K.png`, one per page), beside `texture.EXT` (the exemplar),
+/// `baked_basecolor*.png`, `textured.*`, `baked.*`, `preview.png` and `patches.png`.
+const RESERVED_MAP_NAMES: [&str; 6] = [
+    "basecolor",
+    "texture",
+    "textured",
+    "baked",
+    "preview",
+    "patches",
+];
+
+/// Why the map name `name` could export a file of the same name as another export file (a
+/// reserved name, a `baked_` prefix, or `M_K` beside a map `M`, whose pages are
+/// `baked_M_K.png`); `None` when every name it produces is its own.
+fn map_name_clash<'a>(name: &str, all: impl Iterator<Item = &'a String>) -> Option<String> {
+    if RESERVED_MAP_NAMES.contains(&name) {
+        return Some(format!(
+            "the name {name:?} is the export's own (reserved: {}); choose another",
+            RESERVED_MAP_NAMES.join(", ")
+        ));
+    }
+    if name.starts_with("baked_") {
+        return Some("names starting with `baked_` are the baked pages'; choose another".into());
+    }
+    for other in all {
+        if let Some(k) = name
+            .strip_prefix(other.as_str())
+            .and_then(|r| r.strip_prefix('_'))
+            && !k.is_empty()
+            && k.bytes().all(|b| b.is_ascii_digit())
+        {
+            return Some(format!(
+                "map {other:?}'s baked pages are named baked_{other}_K.png, so {name:?} \
+                 could export the same file name; choose another"
+            ));
+        }
+    }
+    None
+}
+
 /// The `jump_maps` method.
 pub struct JumpMaps;
 
@@ -107,6 +148,9 @@ fn build(config: &Config) -> Result<(Dag, JumpMapNodes), MethodError> {
                     "map names may use letters, digits, '_' and '-'",
                 )
                 .into());
+        }
+        if let Some(why) = map_name_clash(name, c.inputs.maps.keys()) {
+            return Err(config.invalid(&format!("inputs.maps.{name}"), &why).into());
         }
     }
 
@@ -220,9 +264,17 @@ fn build(config: &Config) -> Result<(Dag, JumpMapNodes), MethodError> {
                 &p.export,
                 &|f| ctx.progress.set(f),
             );
-            Ok(Bundle::from(files.map_err(|e| {
-                NodeError::classify(e, JumpExportError::is_internal)
-            })?))
+            let files = files.map_err(|e| NodeError::classify(e, JumpExportError::is_internal))?;
+            let mut names: Vec<&str> = files.iter().map(|(n, _)| n.as_str()).collect();
+            names.sort_unstable();
+            if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+                return Err(NodeError::input(format!(
+                    "two exported files would be named {:?}: rename the map in inputs.maps \
+                     whose file names collide",
+                    w[0]
+                )));
+            }
+            Ok(Bundle::from(files))
         },
     );
     let nodes = JumpMapNodes {
