@@ -37,9 +37,43 @@ pub struct Config {
     pub table: toml::Table,
 }
 
+/// The output folder a run of the file `path` (a config or a sweep) writes without `--out`:
+/// `out/<stem>`. A stem that is not one plain folder name (`..` of `...toml`, `.` of
+/// `..toml`) would put the outputs outside `out/<stem>`, so it is an error naming the file.
+pub fn default_out(path: &Path, stem: &str) -> Result<PathBuf, ConfigError> {
+    use std::path::Component;
+    let mut parts = Path::new(stem).components();
+    match (parts.next(), parts.next()) {
+        (Some(Component::Normal(_)), None) => Ok(Path::new("out").join(stem)),
+        _ => Err(ConfigError::Invalid {
+            path: path.to_owned(),
+            key: "file name".into(),
+            message: format!(
+                "its stem {stem:?} cannot name an output folder (out/{stem} is not a folder \
+                 inside out/); rename the file or give --out"
+            ),
+        }),
+    }
+}
+
+/// The largest config or sweep file texsyn reads (the shipped ones are a few KiB).
+pub const TEXT_FILE_CAP: u64 = 4 << 20;
+
+/// Reads a config or sweep file: a regular file (a FIFO or a device such as `/dev/zero` is
+/// refused before it is opened for reading) of at most [`TEXT_FILE_CAP`] bytes of UTF-8.
+pub fn read_text_file(path: &Path) -> std::io::Result<String> {
+    let bytes = crate::geom::io::read_regular_file_capped(path, TEXT_FILE_CAP)?;
+    String::from_utf8(bytes).map_err(|e| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
+        )
+    })
+}
+
 impl Config {
     pub fn load(path: &Path, sets: &[String]) -> Result<Config, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        let text = read_text_file(path).map_err(|source| ConfigError::Io {
             path: path.to_owned(),
             source,
         })?;

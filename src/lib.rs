@@ -9,6 +9,7 @@ pub mod cache;
 pub mod config;
 pub mod methods;
 pub mod ops;
+pub mod owner;
 pub mod pipeline;
 pub mod score;
 

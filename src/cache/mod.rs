@@ -25,14 +25,13 @@ use crate::artifact::{Artifact, ArtifactError, Backing, ContentHash, HEADER_LEN,
 use std::fs::{self, File};
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, SystemTime};
+use std::time::SystemTime;
 
 /// The format version is in the directory name, so a future layout change starts a fresh
 /// store beside the old one instead of misreading it.
 const OBJECTS_DIR: &str = "objects-v1";
+/// Temporary objects are named `.tmp-OWNER-N` (OWNER: [`crate::owner::Owner::tag`]).
 const TMP_PREFIX: &str = ".tmp-";
-/// Temporary files older than this are left over from a crashed process.
-const STALE_TMP_AGE: Duration = Duration::from_secs(3600);
 
 /// A node key: the blake3 hash naming a cache object.
 pub type Key = ContentHash;
@@ -201,7 +200,7 @@ impl Cache {
         fs::create_dir_all(dir).map_err(io_err(dir))?;
         let tmp = dir.join(format!(
             "{TMP_PREFIX}{}-{}",
-            std::process::id(),
+            crate::owner::Owner::this_tag(),
             unique_suffix()
         ));
         let write = || -> std::io::Result<()> {
@@ -299,8 +298,10 @@ impl Cache {
         })
     }
 
+    /// Removes temporary objects whose writer is provably dead, or that are older than
+    /// [`crate::owner::STALE_AGE`] (a writer on another host or in another PID namespace);
+    /// never this process's own.
     fn remove_stale_temporaries(&self) {
-        let now = SystemTime::now();
         let Ok(shards) = fs::read_dir(self.root.join(OBJECTS_DIR)) else {
             return;
         };
@@ -309,26 +310,15 @@ impl Cache {
                 continue;
             };
             for f in files.flatten() {
-                if !f.file_name().to_string_lossy().starts_with(TMP_PREFIX) {
+                let name = f.file_name();
+                let name = name.to_string_lossy();
+                let Some(rest) = name.strip_prefix(TMP_PREFIX) else {
                     continue;
-                }
-                let old = f
-                    .metadata()
-                    .and_then(|m| m.modified())
-                    .map(|t| now.duration_since(t).unwrap_or_default() > STALE_TMP_AGE)
-                    .unwrap_or(false);
-                // `.tmp-<pid>-<n>`: a writer that was killed is known dead at once on Linux,
-                // without waiting for the age limit (never this process's own files).
-                let owner = f.file_name().to_string_lossy()[TMP_PREFIX.len()..]
-                    .split('-')
-                    .next()
-                    .and_then(|p| p.parse::<u32>().ok());
-                let dead = owner.is_some_and(|pid| {
-                    pid != std::process::id()
-                        && cfg!(target_os = "linux")
-                        && !Path::new("/proc").join(pid.to_string()).exists()
-                });
-                if old || dead {
+                };
+                let owner = rest
+                    .split_once('-')
+                    .and_then(|(tag, _)| crate::owner::Owner::parse(tag));
+                if crate::owner::may_remove(owner.as_ref(), &f.path(), false) {
                     let _ = fs::remove_file(f.path());
                 }
             }
@@ -417,6 +407,7 @@ pub fn parse_size(s: &str) -> Result<u64, SizeError> {
 mod tests {
     use super::*;
     use crate::artifact::{ArtifactWriter, Kind};
+    use std::time::Duration;
 
     fn art(v: f32) -> Vec<u8> {
         ArtifactWriter::new(Kind::Image, &1u8)
@@ -514,6 +505,49 @@ mod tests {
     }
 
     /// `gc` and `verify` do not create a cache that is not there.
+    #[test]
+    fn only_temporaries_of_provably_dead_writers_or_past_the_age_limit_are_removed() {
+        use crate::owner::{Owner, STALE_AGE};
+        let dir = tempfile::tempdir().unwrap();
+        let shard = dir.path().join(OBJECTS_DIR).join("ab");
+        fs::create_dir_all(&shard).unwrap();
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead_pid = child.id();
+        child.wait().unwrap();
+        let dead = format!("{TMP_PREFIX}{}-1", Owner::with_pid(dead_pid).tag());
+        let mine = format!("{TMP_PREFIX}{}-2", Owner::this().tag());
+        // Another PID namespace (a container, another host over NFS): not checkable here.
+        let mut parts: Vec<String> = Owner::this().tag().split('_').map(String::from).collect();
+        parts[2] = "1".into();
+        parts[3] = dead_pid.to_string();
+        let foreign = parts.join("_");
+        let foreign_young = format!("{TMP_PREFIX}{foreign}-3");
+        let foreign_old = format!("{TMP_PREFIX}{foreign}-4");
+        let bare_pid = format!("{TMP_PREFIX}{dead_pid}-5");
+        for n in [&dead, &mine, &foreign_young, &foreign_old, &bare_pid] {
+            fs::write(shard.join(n), b"half").unwrap();
+        }
+        let past = SystemTime::now() - STALE_AGE - std::time::Duration::from_secs(60);
+        File::options()
+            .write(true)
+            .open(shard.join(&foreign_old))
+            .unwrap()
+            .set_modified(past)
+            .unwrap();
+        Cache::open(dir.path()).unwrap();
+        let mut left: Vec<String> = fs::read_dir(&shard)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        left.sort();
+        let mut expected = vec![mine, foreign_young, bare_pid];
+        if !cfg!(target_os = "linux") {
+            expected.push(dead);
+        }
+        expected.sort();
+        assert_eq!(left, expected);
+    }
+
     #[test]
     fn open_existing_refuses_a_missing_cache_and_creates_nothing() {
         let dir = tempfile::tempdir().unwrap();

@@ -148,20 +148,16 @@ pub fn print_shard(result: &pipeline::ShardResult, config: &Path, planning: bool
 }
 
 /// Writes `bytes` to `path` through a temporary file beside it and a rename, creating the
-/// folder: a reader sees the old file or the new one, never part of one.
+/// folder: a reader sees the old file or the new one, never part of one. The temporaries
+/// killed writers of `path` left are removed first ([`texsyn::owner::remove_stale_beside`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}",
-        path.file_name()
-            .map(|n| n.to_string_lossy())
-            .unwrap_or_default(),
-        std::process::id()
-    ));
+    texsyn::owner::remove_stale_beside(path);
+    let tmp = texsyn::owner::temporary_beside(path);
     let written = std::fs::write(&tmp, bytes)
         .with_context(|| format!("writing {}", tmp.display()))
         .and_then(|()| {

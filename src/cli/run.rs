@@ -75,7 +75,10 @@ fn run_whole(args: &RunArgs, g: &Globals) -> Result<i32> {
     } = args;
     let start = Instant::now();
     let plan = load_plan(config, sets)?;
-    let out_dir = out.clone().unwrap_or(plan.default_out.clone());
+    let out_dir = match out {
+        Some(out) => out.clone(),
+        None => plan.default_out()?,
+    };
     // A swap a killed run left half done is finished (or undone) before anything else.
     outputs::recover(&out_dir).context("recovering the output directory")?;
     let result = run_plan(&plan, &g.cache_dir, g.progress)?;

@@ -76,8 +76,12 @@ pub fn sweep(args: &SweepArgs, g: &Globals) -> Result<i32> {
     if !matches!(executor, "local" | "slurm") {
         bail!("--executor {executor:?}: expected `local` or `slurm`");
     }
-    let sweep = Sweep::load(&args.sweep)?;
-    let dir = SweepDir::new(&args.out.clone().unwrap_or_else(|| sweep.default_out()));
+    let sweep = Sweep::load_saying(&args.sweep, g.quiet || g.json)?;
+    let out = match &args.out {
+        Some(out) => out.clone(),
+        None => sweep.default_out()?,
+    };
+    let dir = SweepDir::new(&out);
     let cache = Cache::open(&g.cache_dir)?;
     let mut states = Vec::new();
     for p in &sweep.points {

@@ -86,7 +86,8 @@ impl Method for JumpMaps {
         // No up-front memory check on `reconstruct.atlas_size`: it caps a page's side, and
         // pages are only as big as the charts they hold (the need follows the surface's area).
         for name in c.inputs.maps.keys() {
-            config.check(&format!("inputs.maps.{name}"), check_map_name(name))?;
+            let verdict = check_map_name(name, c.inputs.maps.keys());
+            config.check(&format!("inputs.maps.{name}"), verdict)?;
         }
         let mut dag = Dag::default();
         let mesh = input::<Mesh>(&mut dag, config, "mesh", &c.inputs.mesh)?;

@@ -4,7 +4,7 @@ use super::{MethodError, Planned, find, names};
 use crate::config::Config;
 use crate::pipeline::{Dag, RunResult};
 use crate::score::{Report, ScoreFailure, ScoreSection};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// A config turned into work: the DAG, and what the method keeps for after the run.
 pub struct Plan {
@@ -13,14 +13,18 @@ pub struct Plan {
     pub method: String,
     /// The config's `[score]` section, when it has one (validated).
     pub score: Option<ScoreSection>,
-    /// Default output directory (`out/<config stem>`), used unless `--out` is given.
-    pub default_out: PathBuf,
     /// The config the method planned from (without `[score]`).
     config: Config,
     planned: Box<dyn Planned>,
 }
 
 impl Plan {
+    /// Default output directory (`out/<config stem>`), used unless `--out` is given; an error
+    /// naming the config when its stem is not a plain folder name ([`crate::config::default_out`]).
+    pub fn default_out(&self) -> Result<PathBuf, crate::config::ConfigError> {
+        crate::config::default_out(&self.config.path, &self.config.stem)
+    }
+
     /// Scores a run of this plan (its `result`) with `section`'s parameters.
     pub fn score_run(
         &self,
@@ -65,7 +69,6 @@ pub fn plan(config: &Config) -> Result<Plan, MethodError> {
         dag,
         method: name,
         score,
-        default_out: Path::new("out").join(&config.stem),
         config: without_score,
         planned,
     })

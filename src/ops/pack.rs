@@ -991,7 +991,11 @@ pub fn unpack(
             .map(|(rel, src)| (out.join(rel), Some(src)))
             .collect();
         planned.push((out.join(&lock_rel), None));
+        // The outputs folder itself included: its files are written inside it.
+        no_link_below(out, &out.join(checked.plan.default_out()?).join("outputs"))
+            .map_err(nothing)?;
         for (dest, src) in planned {
+            no_link_below(out, &dest).map_err(nothing)?;
             let bytes = match src {
                 Some(src) => fs::read(&src).map_err(io_at(&src))?,
                 None => checked.lock_bytes.clone(),
@@ -1074,7 +1078,7 @@ pub fn unpack(
         for (dest, bytes) in &writes {
             write_atomic(dest, bytes)?;
         }
-        let out_dir = out.join(&checked.plan.default_out);
+        let out_dir = out.join(checked.plan.default_out()?);
         outputs::recover(&out_dir)?;
         let bundles: Vec<&Artifact> = checked
             .plan
@@ -1171,6 +1175,34 @@ fn common_dir(dirs: &[&Path]) -> PathBuf {
     common.iter().collect()
 }
 
+/// Refuses a symbolic link at any folder between `root` (itself allowed to be one) and
+/// `path`: writing through it would put files outside `root`.
+fn no_link_below(root: &Path, path: &Path) -> Result<(), PackError> {
+    let Ok(rel) = path.strip_prefix(root) else {
+        return Ok(());
+    };
+    let mut at = root.to_owned();
+    for part in rel.parent().into_iter().flat_map(Path::components) {
+        at.push(part);
+        match fs::symlink_metadata(&at) {
+            Ok(m) if m.file_type().is_symlink() => {
+                return Err(PackError::Destination {
+                    path: at,
+                    why: format!(
+                        "is a symbolic link; unpack writes only inside {} and follows no link \
+                         there (remove it, or unpack into an empty folder)",
+                        root.display()
+                    ),
+                });
+            }
+            Ok(_) => {}
+            Err(e) if e.kind() == io::ErrorKind::NotFound => break,
+            Err(e) => return Err(io_at(&at)(e)),
+        }
+    }
+    Ok(())
+}
+
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), PackError> {
     if let Some(dir) = path.parent() {
         fs::create_dir_all(dir).map_err(io_at(dir))?;
@@ -1187,18 +1219,19 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), PackError> {
     Ok(())
 }
 
-/// A temporary file beside its destination (`.NAME.tmp-PID`), removed on drop unless
+/// A temporary file beside its destination (`.NAME.tmp-OWNER`, [`crate::owner`]), removed on drop unless
 /// disarmed (after it was renamed into place).
 struct TempFile(PathBuf, std::cell::Cell<bool>);
 
 impl TempFile {
+    /// Also removes the temporaries killed writers of `dest` left
+    /// ([`crate::owner::remove_stale_beside`]).
     fn beside(dest: &Path) -> TempFile {
-        let name = dest
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let tmp = dest.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-        TempFile(tmp, std::cell::Cell::new(true))
+        crate::owner::remove_stale_beside(dest);
+        TempFile(
+            crate::owner::temporary_beside(dest),
+            std::cell::Cell::new(true),
+        )
     }
     fn path(&self) -> &Path {
         &self.0

@@ -7,7 +7,8 @@
 //!
 //! # Protocol
 //!
-//! With `P` the writing process's id, everything below happens inside the output directory
+//! With `P` the writing process's owner tag ([`crate::owner`]: host, boot, PID namespace and
+//! process id), everything below happens inside the output directory
 //! `D` (one filesystem, so renames are atomic). Writers take turns: within one process through
 //! a mutex, across processes through an exclusive advisory lock on `D` itself
 //! ([`std::fs::File::lock`], `flock` on Unix), held from recovery to cleanup, so the second of two runs writing one folder finds the first's set complete and
@@ -40,18 +41,21 @@
 //! copy aside), the swap is completed forward; otherwise it is rolled back (old copies renamed
 //! back, files added by the swap removed). Then step 6.
 //!
-//! An owner is dead when no process has its id (`/proc/Q` is missing on Linux; elsewhere, when
-//! the leftover is more than a day old). Leftovers with this process's own id are stale too,
-//! since writers within one process are serialized and a writer cleans up before returning.
+//! An owner is dead when it is provably gone (same host, boot and PID namespace, and `/proc/Q`
+//! missing), or when its leftover is older than [`crate::owner::STALE_AGE`] (an owner on another
+//! host or in another namespace, or a system without `/proc`). Leftovers with this process's own
+//! tag are stale too, since writers within one process are serialized and a writer cleans up
+//! before returning.
 
 use crate::artifact::Artifact;
 use crate::artifact::ContentHash;
 use crate::artifact::{Bundle, Format};
+use crate::owner::Owner;
 use crate::pipeline::Dag;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::time::{Duration, SystemTime};
+use std::time::SystemTime;
 
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
@@ -77,10 +81,7 @@ const STAGING: &str = ".texsyn-staging-";
 const OLD: &str = ".texsyn-old-";
 const JOURNAL: &str = ".texsyn-swap-";
 const JOURNAL_HEAD: &str = "texsyn output swap 1";
-/// On systems without /proc, how old a leftover must be before its owner counts as dead.
-const STALE_AGE: Duration = Duration::from_secs(24 * 3600);
-
-/// Serializes the writers of one process (the leftovers of this process's id are then stale).
+/// Serializes the writers of one process (the leftovers of this process's tag are then stale).
 static WRITER: Mutex<()> = Mutex::new(());
 
 /// Takes `dir`'s writer lock, waiting for another process that holds it: an exclusive
@@ -195,8 +196,8 @@ pub fn materialize_all(
     }
 
     // Stage.
-    let pid = std::process::id();
-    let staging = dir.join(format!("{STAGING}{pid}"));
+    let me = Owner::this_tag();
+    let staging = dir.join(format!("{STAGING}{me}"));
     let stage = || -> Result<(), OutputError> {
         fs::create_dir(&staging).map_err(io(&staging))?;
         // In parallel: one file's reading (decompression, or hashing in place) and writing overlap another's wait for the disk
@@ -221,8 +222,8 @@ pub fn materialize_all(
     }
 
     // Journal (the commit point), then the swap.
-    let old = dir.join(format!("{OLD}{pid}"));
-    let journal = dir.join(format!("{JOURNAL}{pid}"));
+    let old = dir.join(format!("{OLD}{me}"));
+    let journal = dir.join(format!("{JOURNAL}{me}"));
     let plan: Vec<Planned> = changed
         .iter()
         .map(|&(v, e, had_old)| Planned {
@@ -233,7 +234,7 @@ pub fn materialize_all(
     if let Err(e) = write_journal(dir, &journal, &old, &plan) {
         let _ = fs::remove_dir_all(&staging);
         let _ = fs::remove_dir(&old);
-        let _ = fs::remove_file(journal.with_extension("tmp"));
+        let _ = fs::remove_file(unfinished(&journal));
         let _ = fs::remove_file(&journal);
         return Err(e);
     }
@@ -281,16 +282,19 @@ fn recover_locked(dir: &Path) -> Result<(), OutputError> {
     };
     // Journals first: they decide what the staging and old folders hold.
     for name in names()? {
-        let Some(pid) = name.strip_prefix(JOURNAL).and_then(parse_pid) else {
+        let Some(tag) = name
+            .strip_prefix(JOURNAL)
+            .filter(|t| Owner::parse(t).is_some())
+        else {
             continue;
         };
         let journal = dir.join(&name);
-        if !owner_is_dead(pid, &journal) {
+        if !owner_is_dead(tag, &journal) {
             continue;
         }
         let plan = read_journal(&journal)?;
-        let staging = dir.join(format!("{STAGING}{pid}"));
-        let old = dir.join(format!("{OLD}{pid}"));
+        let staging = dir.join(format!("{STAGING}{tag}"));
+        let old = dir.join(format!("{OLD}{tag}"));
         let complete = plan.iter().all(|p| {
             staging.join(&p.name).is_file()
                 || (dir.join(&p.name).exists() && (!p.had_old || old.join(&p.name).exists()))
@@ -319,31 +323,33 @@ fn recover_locked(dir: &Path) -> Result<(), OutputError> {
     }
     // Leftovers of dead owners without a journal (or whose journal was just finished).
     for name in names()? {
-        let pid = if let Some(rest) = name
+        let tag = if let Some(rest) = name
             .strip_prefix(STAGING)
             .or_else(|| name.strip_prefix(OLD))
         {
-            parse_pid(rest)
+            Some(rest)
         } else if let Some(rest) = name.strip_prefix(JOURNAL) {
-            rest.strip_suffix(".tmp").and_then(parse_pid)
+            rest.strip_suffix(".tmp")
         } else if let Some((_, rest)) = name.rsplit_once(".tmp-")
             && name.starts_with('.')
         {
-            parse_pid(rest)
+            Some(rest)
         } else {
             None
         };
-        let Some(pid) = pid else { continue };
+        let Some(tag) = tag.filter(|t| Owner::parse(t).is_some()) else {
+            continue;
+        };
         let path = dir.join(&name);
         if name.starts_with(STAGING) || name.starts_with(OLD) {
-            if dir.join(format!("{JOURNAL}{pid}")).exists() {
+            if dir.join(format!("{JOURNAL}{tag}")).exists() {
                 continue; // a live owner's swap
             }
-            if owner_is_dead(pid, &path) {
+            if owner_is_dead(tag, &path) {
                 let _ = fs::remove_dir_all(&path);
             }
         } else if fs::symlink_metadata(&path).is_ok_and(|m| m.is_file())
-            && owner_is_dead(pid, &path)
+            && owner_is_dead(tag, &path)
         {
             let _ = fs::remove_file(&path);
         }
@@ -371,7 +377,7 @@ fn write_journal(
         text += "\n";
     }
     text += "end\n";
-    let tmp = journal.with_extension("tmp");
+    let tmp = unfinished(journal);
     write_synced(&tmp, text.as_bytes()).map_err(io(&tmp))?;
     fs::rename(&tmp, journal).map_err(io(journal))?;
     sync_dir(dir).map_err(io(dir))
@@ -450,31 +456,19 @@ fn check_name(name: &str) -> Result<(), OutputError> {
     }
 }
 
-/// A process id as written after a leftover's prefix.
-fn parse_pid(s: &str) -> Option<u32> {
-    if s.is_empty() || !s.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    s.parse().ok()
+/// Where a journal is written before its rename: `.texsyn-swap-OWNER.tmp`.
+fn unfinished(journal: &Path) -> PathBuf {
+    let mut name = journal.as_os_str().to_owned();
+    name.push(".tmp");
+    PathBuf::from(name)
 }
 
-/// Whether the process `pid` that left `path` behind is gone, so the leftover may be removed.
-/// This process's own id counts as dead: its writers are serialized and clean up after
-/// themselves, so what carries its id was left by an earlier process that had the same id.
-pub fn owner_is_dead(pid: u32, path: &Path) -> bool {
-    if pid == std::process::id() {
-        return true;
-    }
-    if cfg!(target_os = "linux") {
-        return !Path::new("/proc").join(pid.to_string()).exists();
-    }
-    fs::symlink_metadata(path)
-        .and_then(|m| m.modified())
-        .is_ok_and(|t| {
-            SystemTime::now()
-                .duration_since(t)
-                .is_ok_and(|age| age > STALE_AGE)
-        })
+/// Whether the process whose owner tag (`crate::owner`) `tag` is left `path` behind is gone,
+/// or the leftover is older than [`crate::owner::STALE_AGE`], so it may be removed. This
+/// process's own tag counts as dead: its writers are serialized and clean up after
+/// themselves, so what carries its tag was left by an earlier process that had the same id.
+pub fn owner_is_dead(tag: &str, path: &Path) -> bool {
+    crate::owner::may_remove(Owner::parse(tag).as_ref(), path, true)
 }
 
 fn write_synced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
@@ -505,17 +499,17 @@ impl TempDir {
         if let Ok(entries) = fs::read_dir(&base) {
             for e in entries.flatten() {
                 let name = e.file_name();
-                let Some(pid) = name
+                let Some(owner) = name
                     .to_str()
                     .and_then(|n| n.strip_prefix(prefix)?.strip_prefix('-')?.split_once('-'))
-                    .and_then(|(pid, nanos)| {
-                        nanos.bytes().all(|b| b.is_ascii_digit()).then_some(pid)
+                    .and_then(|(tag, nanos)| {
+                        nanos.bytes().all(|b| b.is_ascii_digit()).then_some(tag)
                     })
-                    .and_then(|pid| pid.parse::<u32>().ok())
+                    .and_then(Owner::parse)
                 else {
                     continue;
                 };
-                if pid != std::process::id() && owner_is_dead(pid, &e.path()) {
+                if crate::owner::may_remove(Some(&owner), &e.path(), false) {
                     let _ = fs::remove_dir_all(e.path());
                 }
             }
@@ -524,7 +518,7 @@ impl TempDir {
             .duration_since(SystemTime::UNIX_EPOCH)
             .map(|d| d.as_nanos())
             .unwrap_or(0);
-        TempDir(base.join(format!("{prefix}-{}-{nanos}", std::process::id())))
+        TempDir(base.join(format!("{prefix}-{}-{nanos}", Owner::this_tag())))
     }
 
     /// As [`TempDir::new`], and created (an existing folder of that name is an error).

@@ -186,13 +186,55 @@ fn colour_ramp(w: u32, h: u32) -> Image {
     img
 }
 
-/// A name an extra map may have: it names the map's exported file.
-pub fn check_map_name(name: &str) -> Result<(), &'static str> {
+/// The export's own file names a map's name must not produce: a map `N` exports `N.EXT` and
+/// `baked_N.png` (or `baked_N_K.png`, one per page), beside `texture.EXT` (the exemplar),
+/// `baked_basecolor*.png`, `textured.*`, `baked.*`, `preview.png` and `patches.png`.
+const RESERVED_MAP_NAMES: [&str; 6] = [
+    "basecolor",
+    "texture",
+    "textured",
+    "baked",
+    "preview",
+    "patches",
+];
+
+/// Why the map name `name` could export a file of the same name as another export file (a
+/// reserved name, a `baked_` prefix, or `M_K` beside a map `M`, whose pages are
+/// `baked_M_K.png`); `None` when every name it produces is its own.
+fn map_name_clash<'a>(name: &str, all: impl Iterator<Item = &'a String>) -> Option<String> {
+    if RESERVED_MAP_NAMES.contains(&name) {
+        return Some(format!(
+            "the name {name:?} is the export's own (reserved: {}); choose another",
+            RESERVED_MAP_NAMES.join(", ")
+        ));
+    }
+    if name.starts_with("baked_") {
+        return Some("names starting with `baked_` are the baked pages'; choose another".into());
+    }
+    for other in all {
+        if let Some(k) = name
+            .strip_prefix(other.as_str())
+            .and_then(|r| r.strip_prefix('_'))
+            && !k.is_empty()
+            && k.bytes().all(|b| b.is_ascii_digit())
+        {
+            return Some(format!(
+                "map {other:?}'s baked pages are named baked_{other}_K.png, so {name:?} \
+                 could export the same file name; choose another"
+            ));
+        }
+    }
+    None
+}
+
+/// A name an extra map may have: letters, digits, '_' and '-', and no file name it exports
+/// is another export's (`all`: every map's name).
+pub fn check_map_name<'a>(name: &str, all: impl Iterator<Item = &'a String>) -> Result<(), String> {
     let allowed = |ch: char| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-';
     if name.is_empty() || !name.chars().all(allowed) {
-        return Err("map names may use letters, digits, '_' and '-'");
+        return Err("map names may use letters, digits, '_' and '-'".into());
     }
-    Ok(())
+    map_name_clash(name, all).map_or(Ok(()), Err)
 }
 
 /// What the reconstruct node's key holds besides its inputs: the export parameters, each extra

@@ -380,3 +380,88 @@ fn gc_on_a_cache_it_cannot_write_is_an_error() {
         "the error names no object: {err}"
     );
 }
+
+/// A writer and a reader in another PID namespace share one cache (as on NFS between hosts,
+/// or between containers): the reader, which cannot see the writer's process, must leave its
+/// half-written objects alone, so every run of the writer succeeds. 20 rounds, each from an
+/// empty store, while the reader opens the cache (`status`) in a loop under
+/// `unshare --pid --fork --mount-proc` (root).
+#[test]
+fn a_reader_in_another_pid_namespace_never_removes_a_writers_temporaries() {
+    crate::full_tier_only!("root, unshare, 20 demo runs");
+    let probe = Command::new("unshare")
+        .args(["--pid", "--fork", "--mount-proc", "true"])
+        .output();
+    match probe {
+        Ok(o) if o.status.success() => {}
+        other => {
+            use std::io::Write;
+            let why = match other {
+                Ok(o) => text(&o.stderr),
+                Err(e) => e.to_string(),
+            };
+            let _ = writeln!(
+                std::io::stderr().lock(),
+                "SKIPPED a_reader_in_another_pid_namespace_never_removes_a_writers_temporaries: \
+                 `unshare --pid --fork --mount-proc` is refused here ({}); it needs root. \
+                 THE SHARED-CACHE CHECK DID NOT RUN",
+                why.trim()
+            );
+            return;
+        }
+    }
+    let root = tempfile::tempdir().unwrap();
+    let cache = root.path().join("cache");
+    std::fs::create_dir(&cache).unwrap();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let opened = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let reader = {
+        let (stop, opened, cache) = (stop.clone(), opened.clone(), cache.clone());
+        std::thread::spawn(move || {
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                let o = Command::new("unshare")
+                    .args(["--pid", "--fork", "--mount-proc"])
+                    .arg(env!("CARGO_BIN_EXE_texsyn"))
+                    .args(["status", CONFIG, "-q", "--cache", s(&cache)])
+                    .current_dir(repo())
+                    .output()
+                    .expect("unshare runs");
+                if o.status.success() {
+                    opened.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
+            }
+        })
+    };
+    let mut failures = Vec::new();
+    for round in 0..20 {
+        let _ = std::fs::remove_dir_all(cache.join("objects-v1"));
+        let out = root.path().join(format!("out{round}"));
+        let o = texsyn(&[
+            "run",
+            "configs/demo.toml",
+            "-q",
+            "-j1",
+            "--cache",
+            s(&cache),
+            "--out",
+            s(&out),
+        ]);
+        if !o.status.success() {
+            failures.push(format!("round {round}: {}", text(&o.stderr).trim()));
+        }
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    reader.join().unwrap();
+    let opened = opened.load(std::sync::atomic::Ordering::Relaxed);
+    assert!(
+        opened > 20,
+        "the reader opened the cache only {opened} times"
+    );
+    assert!(
+        failures.is_empty(),
+        "{} of 20 runs failed while a reader in another PID namespace opened the cache \
+         ({opened} times):\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}

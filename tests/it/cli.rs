@@ -450,3 +450,219 @@ fn run_json_reports_each_nodes_own_peak_memory() {
         "{peaks:?}"
     );
 }
+
+/// `texsyn ARGS` in `cwd`, killed if it has not finished after `secs` seconds: `None` then.
+fn texsyn_within(args: &[&str], cwd: &Path, secs: u64) -> Option<Output> {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_texsyn"))
+        .args(args)
+        .current_dir(cwd)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("texsyn runs");
+    let start = std::time::Instant::now();
+    while start.elapsed() < std::time::Duration::from_secs(secs) {
+        if child.try_wait().unwrap().is_some() {
+            return Some(child.wait_with_output().unwrap());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    None
+}
+
+#[test]
+fn a_fifo_device_or_huge_file_as_config_or_sweep_is_refused_at_once() {
+    let dir = scratch();
+    let fifo = dir.path().join("config.toml");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo is needed");
+    // Over the size limit: a valid TOML comment of 5 MiB.
+    let huge = dir.path().join("huge.toml");
+    std::fs::write(&huge, format!("#{}\n", "x".repeat(5 << 20))).unwrap();
+    let cache = dir.path().join("cache");
+    let cache = cache.to_str().unwrap();
+    let out = dir.path().join("out");
+    let out = out.to_str().unwrap();
+    let lock = repo().join("configs/synth2d.lock");
+    let lock = lock.to_str().unwrap();
+    for (file, why) in [
+        (fifo.to_str().unwrap(), "not a regular file"),
+        ("/dev/zero", "not a regular file"),
+        (huge.to_str().unwrap(), "over the limit"),
+    ] {
+        let commands: [Vec<&str>; 6] = [
+            vec!["run", file, "--out", out],
+            vec!["status", file],
+            vec!["hashes", file],
+            vec!["verify", file, lock],
+            vec!["score", file],
+            vec!["sweep", file, "--out", out],
+        ];
+        for mut args in commands {
+            args.extend(["--cache", cache]);
+            let shown = args.join(" ");
+            let Some(o) = texsyn_within(&args, &repo(), 20) else {
+                panic!("texsyn {shown}: still running after 20 s");
+            };
+            assert!(!o.status.success(), "texsyn {shown}: must fail");
+            let err = stderr(&o);
+            assert!(
+                err.contains(file) && err.contains(why) && !err.contains("panicked"),
+                "texsyn {shown}: the message must name the file and say {why:?}: {err}"
+            );
+        }
+    }
+    assert_eq!(object_count(Path::new(cache)), 0);
+}
+
+#[test]
+fn a_config_whose_stem_is_dot_or_dot_dot_writes_nothing_outside_out() {
+    // work/cfg/ holds the configs, run from work/: `...toml` has the stem `..` (out/.. is
+    // work/ itself), `..toml` the stem `.` (out/ itself).
+    let t = tempfile::tempdir().unwrap();
+    let work = t.path().join("work");
+    std::fs::create_dir_all(work.join("cfg/assets")).unwrap();
+    std::fs::copy(
+        repo().join("configs/assets/leopard.png"),
+        work.join("cfg/assets/leopard.png"),
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(repo().join("configs/synth2d.toml")).unwrap();
+    for name in ["...toml", "..toml"] {
+        std::fs::write(work.join("cfg").join(name), &text).unwrap();
+        let config = format!("cfg/{name}");
+        let o = texsyn(&["run", &config, "-q", "--cache", "c"], &work);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{name}: must fail");
+        assert!(
+            err.contains(name) && err.contains("--out"),
+            "{name}: the message must name the file and say what to do: {err}"
+        );
+        let mut left: Vec<String> = std::fs::read_dir(&work)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        left.sort();
+        assert!(
+            left.iter().all(|n| n == "cfg" || n == "c"),
+            "{name}: wrote into the working folder: {left:?}"
+        );
+        // With --out it runs.
+        succeeded(texsyn(
+            &["run", &config, "-q", "--cache", "c", "--out", "o"],
+            &work,
+        ));
+        assert!(work.join("o").is_dir());
+        std::fs::remove_dir_all(work.join("o")).unwrap();
+        std::fs::remove_file(work.join("cfg").join(name)).unwrap();
+    }
+}
+
+#[test]
+fn temporaries_of_killed_pack_hashes_and_render_writers_go_with_the_next_write() {
+    use texsyn::owner::Owner;
+    let t = tempfile::tempdir().unwrap();
+    let d = t.path();
+    let mut child = std::process::Command::new("true").spawn().unwrap();
+    let dead = Owner::with_pid(child.id()).tag();
+    child.wait().unwrap();
+    let live = Owner::this().tag(); // this test process, running
+    let config = repo().join("configs/synth2d.toml");
+    let config = config.to_str().unwrap();
+    let mesh = repo().join("configs/assets/cow.obj");
+    let writes: [(&str, Vec<&str>); 3] = [
+        ("r.tar.zst", vec!["pack", config, "-o", "r.tar.zst"]),
+        ("h.lock", vec!["hashes", config, "-o", "h.lock"]),
+        (
+            "v.png",
+            vec![
+                "render",
+                mesh.to_str().unwrap(),
+                "-o",
+                "v.png",
+                "--size",
+                "32",
+            ],
+        ),
+    ];
+    for (name, mut args) in writes {
+        let stale = d.join(format!(".{name}.tmp-{dead}"));
+        let young = d.join(format!(".{name}.tmp-{live}"));
+        std::fs::write(&stale, b"left by a killed writer").unwrap();
+        std::fs::write(&young, b"being written").unwrap();
+        args.extend(["-q", "--cache", "c"]);
+        succeeded(texsyn(&args, d));
+        assert!(d.join(name).is_file(), "{name} written");
+        assert!(
+            !stale.exists(),
+            "{name}: the killed writer's temporary stays"
+        );
+        assert!(
+            young.exists(),
+            "{name}: a live writer's temporary was removed"
+        );
+    }
+}
+
+#[test]
+fn a_map_whose_file_names_clash_with_the_exports_is_refused_by_run_hashes_and_verify() {
+    let dir = scratch();
+    let d = dir.path();
+    for name in ["basecolor", "preview", "texture", "baked_basecolor"] {
+        let set = format!("inputs.maps={{ {name} = \"assets/wood1.png\" }}");
+        let key = format!("inputs.maps.{name}");
+        for args in [
+            vec!["run", "demo.toml", "--out", "o"],
+            vec!["hashes", "demo.toml", "-o", "h.lock"],
+            vec!["status", "demo.toml"],
+        ] {
+            let mut args = args.clone();
+            args.extend(["--cache", "c", "-q", "--set", &set]);
+            let o = texsyn(&args, d);
+            let err = stderr(&o);
+            assert!(!o.status.success(), "{name}: {args:?} must fail");
+            assert!(
+                err.contains("demo.toml") && err.contains(&key) && !err.contains("panicked"),
+                "{name}: {args:?}: the message must name the file and the key: {err}"
+            );
+            assert!(!d.join("h.lock").exists(), "{name}: a lock was written");
+        }
+        // A lock made without the map cannot be verified with it either.
+        if !d.join("good.lock").exists() {
+            succeeded(texsyn(
+                &[
+                    "hashes",
+                    "demo.toml",
+                    "--cache",
+                    "c",
+                    "-q",
+                    "-o",
+                    "good.lock",
+                ],
+                d,
+            ));
+        }
+        let o = texsyn(
+            &[
+                "verify",
+                "demo.toml",
+                "good.lock",
+                "--cache",
+                "c",
+                "-q",
+                "--set",
+                &set,
+            ],
+            d,
+        );
+        assert!(
+            !o.status.success(),
+            "{name}: verify must fail: {}",
+            stdout(&o)
+        );
+    }
+}

@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
+use texsyn::owner::Owner;
 
 const CONFIG: &str = "configs/synth2d.toml";
 /// synth2d's exports.
@@ -97,12 +98,33 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
     all
 }
 
-/// The id of a process that has exited (a finished child).
-fn dead_pid() -> u32 {
+/// The owner tag of a process that has exited (a finished child).
+fn dead_pid() -> String {
     let mut child = Command::new("true").spawn().unwrap();
     let pid = child.id();
     child.wait().unwrap();
-    pid
+    Owner::with_pid(pid).tag()
+}
+
+/// The owner tag of a process in another PID namespace (or on another host): its liveness
+/// cannot be checked from here.
+fn foreign_owner() -> String {
+    let mut parts: Vec<String> = Owner::this().tag().split('_').map(String::from).collect();
+    parts[2] = "1".into();
+    parts[3] = "7".into();
+    parts.join("_")
+}
+
+/// Sets `path`'s modification time `secs` seconds into the past.
+fn age(path: &Path, secs: u64) {
+    let t = std::time::SystemTime::now() - std::time::Duration::from_secs(secs);
+    std::fs::File::options()
+        .write(true)
+        .open(path)
+        .or_else(|_| std::fs::File::open(path))
+        .unwrap()
+        .set_modified(t)
+        .unwrap();
 }
 
 /// The outputs of seed 1 and of seed 2, each written by a run into its own folder.
@@ -225,7 +247,7 @@ fn stale_temporaries_of_dead_processes_are_removed_and_nothing_else() {
     let out = root.path().join("out");
     run_ok(&cache, &out, 1);
     let dead = dead_pid();
-    let alive = std::process::id(); // this test process, running
+    let alive = Owner::this().tag(); // this test process, running
     let stale = [
         format!(".{}.tmp-{dead}", OUTPUTS[0]),
         format!(".{}.tmp-{dead}", OUTPUTS[1]),
@@ -239,6 +261,20 @@ fn stale_temporaries_of_dead_processes_are_removed_and_nothing_else() {
     std::fs::write(out.join(&live), b"being written").unwrap();
     std::fs::write(out.join("notes.txt"), b"mine").unwrap();
     std::fs::write(out.join(".notes.tmp-x"), b"mine too").unwrap();
+    // A writer in another PID namespace (or on another host), whose liveness cannot be
+    // checked from here: its young files stay, its files past the age limit go. A bare
+    // process id says nothing of the namespace: such a file stays too while young.
+    let foreign = foreign_owner();
+    let foreign_young = format!(".{}.tmp-{foreign}", OUTPUTS[0]);
+    let foreign_staging = format!(".texsyn-staging-{foreign}");
+    std::fs::write(out.join(&foreign_young), b"being written elsewhere").unwrap();
+    std::fs::create_dir(out.join(&foreign_staging)).unwrap();
+    std::fs::write(out.join(&foreign_staging).join("x.png"), b"x").unwrap();
+    let foreign_old = format!(".{}.tmp-{foreign}", OUTPUTS[1]);
+    std::fs::write(out.join(&foreign_old), b"left a day ago").unwrap();
+    age(&out.join(&foreign_old), 25 * 3600);
+    let bare = format!(".{}.tmp-{}", OUTPUTS[1], dead.rsplit('_').next().unwrap());
+    std::fs::write(out.join(&bare), b"no namespace said").unwrap();
 
     run_ok(&cache, &out, 2);
     let names: Vec<String> = snapshot(&out)
@@ -246,7 +282,15 @@ fn stale_temporaries_of_dead_processes_are_removed_and_nothing_else() {
         .map(|k| k.to_string_lossy().into_owned())
         .collect();
     let mut expected: Vec<String> = OUTPUTS.iter().map(|s| s.to_string()).collect();
-    expected.extend([live, "notes.txt".into(), ".notes.tmp-x".into()]);
+    expected.extend([
+        live,
+        "notes.txt".into(),
+        ".notes.tmp-x".into(),
+        foreign_young,
+        foreign_staging.clone(),
+        format!("{foreign_staging}/x.png"),
+        bare,
+    ]);
     expected.sort();
     assert_eq!(names, expected);
     assert_eq!(std::fs::read(out.join("notes.txt")).unwrap(), b"mine");
@@ -258,7 +302,7 @@ fn verify_fresh_removes_the_temporary_caches_of_killed_runs() {
     let dead = tmp.path().join(format!("texsyn-verify-{}-123", dead_pid()));
     let live = tmp
         .path()
-        .join(format!("texsyn-verify-{}-456", std::process::id()));
+        .join(format!("texsyn-verify-{}-456", Owner::this().tag()));
     for d in [&dead, &live] {
         std::fs::create_dir(d).unwrap();
         std::fs::write(d.join("object"), b"cached").unwrap();

@@ -579,3 +579,35 @@ fn unpack_never_replaces_a_cached_object_with_other_content() {
     );
     assert_eq!(object_count(&d.join("mine")), 1, "objects were imported");
 }
+
+#[test]
+fn unpack_follows_no_symlinked_folder_inside_its_destination() {
+    let dir = scratch();
+    let d = dir.path();
+    pack(d);
+    for link in ["assets", "out", "out/synth2d"] {
+        let u = d.join("u");
+        let elsewhere = d.join("elsewhere");
+        let _ = std::fs::remove_dir_all(&u);
+        let _ = std::fs::remove_dir_all(&elsewhere);
+        std::fs::create_dir_all(&elsewhere).unwrap();
+        let at = u.join(link);
+        std::fs::create_dir_all(at.parent().unwrap()).unwrap();
+        std::os::unix::fs::symlink(&elsewhere, &at).unwrap();
+        let o = texsyn(&["unpack", "r.tar.zst", "--cache", "c2", "-o", "u"], d);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{link}: {e}");
+        assert!(
+            e.contains(&format!("u/{link}")) && e.contains("symbolic link"),
+            "{link}: names the link: {e}"
+        );
+        assert!(e.contains("nothing was imported"), "{link}: {e}");
+        assert!(!e.contains("panicked"), "{e}");
+        assert_eq!(
+            std::fs::read_dir(&elsewhere).unwrap().count(),
+            0,
+            "{link}: wrote through the link"
+        );
+        assert_eq!(object_count(&d.join("c2")), 0, "{link}: imported");
+    }
+}

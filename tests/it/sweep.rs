@@ -385,3 +385,51 @@ fn an_edited_base_reruns_its_points_and_a_failed_rerun_leaves_no_lock() {
             .all(|r| r["state"] == "failed")
     );
 }
+
+#[test]
+fn a_sweep_past_the_point_limit_is_refused_before_allocating_and_a_big_one_says_what_it_does() {
+    let t = tempfile::tempdir().unwrap();
+    let base = repo().join("configs/synth2d.toml");
+    let range = "{ from = 1, to = 100000, steps = 100000 }";
+    std::fs::write(
+        t.path().join("huge.toml"),
+        format!(
+            "base = {:?}\n[axes]\n\"synthesize.seed\" = {range}\n\"synthesize.width\" = {range}\n",
+            base.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let start = std::time::Instant::now();
+    let o = texsyn(&["sweep", "huge.toml", "--cache", "c"], t.path());
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    for word in [
+        "huge.toml",
+        "10000000000 points",
+        "synthesize.seed",
+        "over the limit of 100000",
+    ] {
+        assert!(err.contains(word), "expected {word:?} in: {err}");
+    }
+    assert!(start.elapsed().as_secs() < 10, "took {:?}", start.elapsed());
+    assert!(!t.path().join("c").exists(), "something ran");
+
+    let path = write_sweep(t.path(), "", "{ from = 1, to = 2000, steps = 2000 }");
+    let o = succeeded(texsyn(
+        &[
+            "sweep",
+            path.to_str().unwrap(),
+            "--status",
+            "--cache",
+            "c",
+            "--out",
+            "out",
+        ],
+        t.path(),
+    ));
+    let err = stderr(&o);
+    assert!(
+        err.contains("checking the configs of 2000 points") && err.contains("1000 of 2000"),
+        "a sweep of 2000 points must say what it is doing: {err}"
+    );
+}

@@ -172,18 +172,39 @@ impl Point {
     }
 }
 
+/// The most points one sweep may have: the axes' product (or, zipped, their length) is
+/// checked against it before any point is made.
+pub const MAX_POINTS: usize = 100_000;
+
+/// A sweep of more points than this says how its checking of the points goes.
+pub const SAY_PROGRESS_FROM: usize = 1000;
+
 impl Sweep {
     /// Reads and checks a sweep file: the syntax, every axis (non-empty, zipped axes of one
     /// length) and every point's config (an unknown key or a value of the wrong type is an
     /// error naming the point), before anything runs.
     pub fn load(path: &Path) -> Result<Sweep, SweepError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SweepError::Io {
+        Self::load_saying(path, false)
+    }
+
+    /// As [`Sweep::load`]; unless `quiet`, a sweep of more than [`SAY_PROGRESS_FROM`] points
+    /// says on stderr how many points it checks, and how far it got every tenth of them.
+    pub fn load_saying(path: &Path, quiet: bool) -> Result<Sweep, SweepError> {
+        let text = crate::config::read_text_file(path).map_err(|source| SweepError::Io {
             path: path.to_owned(),
             source,
         })?;
         let sweep = Self::parse(path, &text)?;
-        for point in &sweep.points {
+        let n = sweep.points.len();
+        let say = !quiet && n > SAY_PROGRESS_FROM;
+        if say {
+            eprintln!("{}: checking the configs of {n} points", path.display());
+        }
+        for (i, point) in sweep.points.iter().enumerate() {
             sweep.check_point(point)?;
+            if say && (i + 1) % n.div_ceil(10) == 0 && i + 1 < n {
+                eprintln!("{}: {} of {n} points checked", path.display(), i + 1);
+            }
         }
         Ok(sweep)
     }
@@ -191,7 +212,7 @@ impl Sweep {
     /// Whether a TOML file is a sweep rather than a run config: it has `base` and `axes`
     /// and no `method`.
     pub fn is_sweep_file(path: &Path) -> bool {
-        std::fs::read_to_string(path)
+        crate::config::read_text_file(path)
             .ok()
             .and_then(|t| toml::from_str::<toml::Table>(&t).ok())
             .is_some_and(|t| {
@@ -282,6 +303,24 @@ impl Sweep {
             Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
             _ => PathBuf::from("."),
         };
+        let count = match file.combine {
+            Combine::Zip => Some(axes[0].values.len()),
+            Combine::Product => axes
+                .iter()
+                .try_fold(1usize, |n, a| n.checked_mul(a.values.len())),
+        };
+        if count.is_none_or(|n| n > MAX_POINTS) {
+            let sizes: Vec<String> = axes
+                .iter()
+                .map(|a| format!("\"{}\" {}", a.key, a.values.len()))
+                .collect();
+            let total = count.map_or("more than 2^64".into(), |n| n.to_string());
+            return Err(invalid(format!(
+                "axes: {total} points ({}), over the limit of {MAX_POINTS} points per sweep; \
+                 split it into several sweeps or use fewer values",
+                sizes.join(" × ")
+            )));
+        }
         let combos = combinations(&axes, file.combine);
         let points = combos
             .into_iter()
@@ -347,9 +386,9 @@ impl Sweep {
         Ok(())
     }
 
-    /// The default output folder: `out/<sweep name>`.
-    pub fn default_out(&self) -> PathBuf {
-        Path::new("out").join(&self.stem)
+    /// The default output folder: `out/<sweep name>` ([`crate::config::default_out`]).
+    pub fn default_out(&self) -> Result<PathBuf, ConfigError> {
+        crate::config::default_out(&self.path, &self.stem)
     }
 }
 

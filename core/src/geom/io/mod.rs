@@ -72,7 +72,19 @@ impl fmt::Display for Location {
 /// forever, a device such as `/dev/zero` never ends) before reading from it. The error's
 /// message says what the path is instead.
 pub fn read_regular_file(path: &Path) -> std::io::Result<Vec<u8>> {
+    read_regular_file_capped(path, u64::MAX)
+}
+
+/// As [`read_regular_file`], and a file longer than `cap` bytes is an error saying so, found
+/// before its bytes are read (a file that grows while it is read stops at `cap + 1` bytes).
+pub fn read_regular_file_capped(path: &Path, cap: u64) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
+    let too_big = |len: u64| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{len} bytes or more, over the limit of {cap} bytes for this file"),
+        )
+    };
     let not_regular = |ty: std::fs::FileType| {
         std::io::Error::new(
             std::io::ErrorKind::InvalidInput,
@@ -85,13 +97,19 @@ pub fn read_regular_file(path: &Path) -> std::io::Result<Vec<u8>> {
     if !ty.is_file() {
         return Err(not_regular(ty));
     }
-    let mut file = std::fs::File::open(path)?;
+    let file = std::fs::File::open(path)?;
     let meta = file.metadata()?;
     if !meta.is_file() {
         return Err(not_regular(meta.file_type()));
     }
+    if meta.len() > cap {
+        return Err(too_big(meta.len()));
+    }
     let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
-    file.read_to_end(&mut bytes)?;
+    file.take(cap.saturating_add(1)).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > cap {
+        return Err(too_big(bytes.len() as u64));
+    }
     Ok(bytes)
 }
 
