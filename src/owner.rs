@@ -167,6 +167,10 @@ pub fn may_remove(owner: Option<&Owner>, path: &Path, own_is_dead: bool) -> bool
     match owner.map(Owner::liveness) {
         Some(Liveness::Dead) => return true,
         Some(Liveness::ThisProcess) => return own_is_dead,
+        // A live owner may be in the middle of a long run (a `verify --fresh` cache is
+        // written once and then only read): its files stay, whatever their age. A reused
+        // pid leaves a leftover behind, which is the safer mistake.
+        Some(Liveness::Alive) => return false,
         _ => {}
     }
     older_than(path, STALE_AGE)

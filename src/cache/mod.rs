@@ -504,7 +504,8 @@ mod tests {
         assert!(!cache.object_path(&key).exists());
     }
 
-    /// `gc` and `verify` do not create a cache that is not there.
+    /// A live writer's temporaries stay whatever their age; others of this host, boot and
+    /// namespace go once their writer is dead; the rest only past the age limit.
     #[test]
     fn only_temporaries_of_provably_dead_writers_or_past_the_age_limit_are_removed() {
         use crate::owner::{Owner, STALE_AGE};
@@ -524,16 +525,23 @@ mod tests {
         let foreign_young = format!("{TMP_PREFIX}{foreign}-3");
         let foreign_old = format!("{TMP_PREFIX}{foreign}-4");
         let bare_pid = format!("{TMP_PREFIX}{dead_pid}-5");
-        for n in [&dead, &mine, &foreign_young, &foreign_old, &bare_pid] {
+        // A long-lived writer of this namespace (init is alive while the test runs).
+        let alive_old = format!("{TMP_PREFIX}{}-6", Owner::with_pid(1).tag());
+        for n in [
+            &dead,
+            &mine,
+            &foreign_young,
+            &foreign_old,
+            &bare_pid,
+            &alive_old,
+        ] {
             fs::write(shard.join(n), b"half").unwrap();
         }
         let past = SystemTime::now() - STALE_AGE - std::time::Duration::from_secs(60);
-        File::options()
-            .write(true)
-            .open(shard.join(&foreign_old))
-            .unwrap()
-            .set_modified(past)
-            .unwrap();
+        for n in [&foreign_old, &alive_old] {
+            let f = File::options().write(true).open(shard.join(n)).unwrap();
+            f.set_modified(past).unwrap();
+        }
         Cache::open(dir.path()).unwrap();
         let mut left: Vec<String> = fs::read_dir(&shard)
             .unwrap()
@@ -541,13 +549,16 @@ mod tests {
             .collect();
         left.sort();
         let mut expected = vec![mine, foreign_young, bare_pid];
-        if !cfg!(target_os = "linux") {
+        if cfg!(target_os = "linux") {
+            expected.push(alive_old);
+        } else {
             expected.push(dead);
         }
         expected.sort();
         assert_eq!(left, expected);
     }
 
+    /// `gc` and `verify` do not create a cache that is not there.
     #[test]
     fn open_existing_refuses_a_missing_cache_and_creates_nothing() {
         let dir = tempfile::tempdir().unwrap();

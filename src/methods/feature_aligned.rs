@@ -124,7 +124,9 @@ impl Method for FeatureAligned {
             super::check_atlas_memory(config, c.reconstruct.atlas_size)?;
         }
         let mask = c.inputs.feature_mask.as_ref();
-        let mask = mask.map(|m| input::<Image>(&mut dag, config, "feature_mask", m));
+        let mask = mask
+            .map(|m| input::<Image>(&mut dag, config, "feature_mask", m))
+            .transpose()?;
         let file = |f: &PathBuf| dag.file(&config.resolve(f), "extract.curves_file");
         let curves_file = c.extract.curves_file.as_ref().map(file).transpose()?;
         let shape = dag.node(
@@ -136,13 +138,14 @@ impl Method for FeatureAligned {
                     &mesh,
                     p,
                     f.map(|f| (&*f.path, &*f.bytes)),
+                    "feature_aligned",
                 )?)
             },
         );
         let features = dag.node(
             NodeSpec::of(Stage::AnalyseExemplar, texture_feature_lines::NODE),
             c.analyse_exemplar.clone(),
-            (exemplar, mask.transpose()?),
+            (exemplar, mask),
             |_, p, (img, mask)| {
                 let mask = mask.map(|m| m.to_owned());
                 Ok(texture_feature_lines::node(

@@ -110,7 +110,7 @@ impl Method for GraphMatchingMethod {
             NodeSpec::of(Stage::Parameterize, sqrt2_subdivision::NODE),
             c.parameterize.clone(),
             mesh,
-            |_, p, mesh| Ok(sqrt2_subdivision::node(&mesh, p)?),
+            |_, p, mesh| Ok(sqrt2_subdivision::node(&mesh, p, "graph_matching")?),
         );
         let field = dag.node(
             NodeSpec::of(Stage::Field, sweep_field::NODE),

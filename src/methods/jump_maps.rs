@@ -97,7 +97,13 @@ impl Method for JumpMaps {
             NodeSpec::of(Stage::Field, orientation_field::NODE),
             c.field.clone(),
             mesh,
-            |_, p, mesh| Ok(OrientationField(orientation_field::node(&mesh, p)?)),
+            |_, p, mesh| {
+                Ok(OrientationField(orientation_field::node(
+                    &mesh,
+                    p,
+                    "jump_maps",
+                )?))
+            },
         );
         let parameterize = dag.node(
             NodeSpec::of(Stage::Parameterize, jump_parameterization::NODE),

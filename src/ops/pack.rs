@@ -992,8 +992,10 @@ pub fn unpack(
             .collect();
         planned.push((out.join(&lock_rel), None));
         // The outputs folder itself included: its files are written inside it.
-        no_link_below(out, &out.join(checked.plan.default_out()?).join("outputs"))
-            .map_err(nothing)?;
+        // `outputs` stands for any file in the run's output folder, so that the folder itself
+        // is checked too.
+        let outputs = checked.plan.default_out().map_err(|e| nothing(e.into()))?;
+        no_link_below(out, &out.join(outputs).join("outputs")).map_err(nothing)?;
         for (dest, src) in planned {
             no_link_below(out, &dest).map_err(nothing)?;
             let bytes = match src {

@@ -395,13 +395,14 @@ impl ShapeFeatureKey {
 }
 
 /// The extract node: the shape's feature curves, with those of a curves file (`file`: its
-/// path, for errors, and its bytes).
+/// path, for errors, and its bytes). `method` names the method in the mesh-health warning.
 pub fn node(
     mesh: &Mesh,
     key: &ShapeFeatureKey,
     file: Option<(&std::path::Path, &[u8])>,
+    method: &str,
 ) -> Result<ShapeFeatures, Failure> {
-    texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, "feature_aligned");
+    texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, method);
     let more = match file {
         Some((path, bytes)) => {
             read_curves_file(&path.display().to_string(), bytes).map_err(Failure::input)?

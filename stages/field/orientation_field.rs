@@ -447,9 +447,10 @@ fn any_tangent(n: Vec3) -> Vec3 {
     n.any_orthonormal_vector()
 }
 
-/// The field node (§3): the "up" direction at every vertex of the imported mesh.
-pub fn node(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>, Failure> {
-    texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, "jump_maps");
+/// The field node (§3): the "up" direction at every vertex of the imported mesh. `method`
+/// names the method in the mesh-health warning.
+pub fn node(mesh: &Mesh, params: &FieldParams, method: &str) -> Result<Vec<Vec3>, Failure> {
+    texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, method);
     orientation_field(mesh, params).map_err(Failure::input)
 }
 

@@ -722,9 +722,10 @@ fn check_mesh(mesh: &Mesh) -> Result<(), SubdivisionError> {
     Ok(())
 }
 
-/// The parameterize node: the √2 hierarchy of the input mesh at `p.scale`.
-pub fn node(mesh: &Mesh, p: &SubdivisionParams) -> Result<Sqrt2Hierarchy, Failure> {
-    texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, "graph_matching");
+/// The parameterize node: the √2 hierarchy of the input mesh at `p.scale`. `method` names
+/// the method in the mesh-health warning.
+pub fn node(mesh: &Mesh, p: &SubdivisionParams, method: &str) -> Result<Sqrt2Hierarchy, Failure> {
+    texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, method);
     let h = build_hierarchy(mesh, p.scale, p).map_err(Failure::input)?;
     tracing::info!(
         "parameterize: {} levels, {} → {} vertices",

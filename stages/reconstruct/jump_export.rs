@@ -317,7 +317,7 @@ pub fn node(
         .map(|(m, f)| aligned(m, f))
         .collect();
     let exemplar = aligned(&basecolor, exemplar);
-    export_jump_textured(
+    let files = export_jump_textured(
         mesh,
         param,
         addresses,
@@ -326,5 +326,17 @@ pub fn node(
         &key.export,
         progress,
     )
-    .map_err(|e| Failure::classify(e, JumpExportError::is_internal))
+    .map_err(|e| Failure::classify(e, JumpExportError::is_internal))?;
+    // Map names are checked when the config is planned ([`check_map_name`]); a bundle with
+    // two files of one name would still overwrite one with the other, so it is refused.
+    let mut names: Vec<&str> = files.iter().map(|(n, _)| n.as_str()).collect();
+    names.sort_unstable();
+    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+        return Err(Failure::input(format!(
+            "two exported files would be named {:?}: rename the map in inputs.maps whose \
+             file names collide",
+            w[0]
+        )));
+    }
+    Ok(files)
 }

@@ -4,7 +4,6 @@
 //! the trivial field and the per-correction caches.
 
 use super::SolidSynthesis;
-use super::run::{States, VoxelState};
 use crate::analyse_exemplar::candidate_triples::{SolidAnalysisRef, Triple, wrap};
 use crate::simd::{
     Avx2, Kernels, Portable, prefetch_slice, project, project_avx2, project_avx512,
@@ -149,6 +148,37 @@ fn round_i(x: f32) -> i32 {
     let t = x + 0.5;
     let i = t as i32;
     if (i as f32) > t { i - 1 } else { i }
+}
+
+/// A voxel's working value: triple and its colour at the level.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub(super) struct VoxelState {
+    pub(super) t: Triple,
+    pub(super) c: [f32; 3],
+}
+
+/// Working values of one batch of a level, slot for slot with the kept chunks of its
+/// [`ChunkedNeed`]; `start` is the snapshot at the start of a stage with barriers.
+pub(super) struct States<'n> {
+    pub(super) need: &'n ChunkedNeed,
+    pub(super) cur: Vec<VoxelState>,
+    pub(super) start: Vec<VoxelState>,
+}
+
+impl<'n> States<'n> {
+    pub(super) fn new(need: &'n ChunkedNeed) -> States<'n> {
+        States {
+            need,
+            cur: vec![VoxelState::default(); need.chunk_voxels() as usize],
+            start: Vec::new(),
+        }
+    }
+
+    #[inline]
+    pub(super) fn slot(&self, p: IVec3) -> usize {
+        self.need.slot_in_set(p)
+    }
 }
 
 #[inline]

@@ -3,7 +3,7 @@
 
 use super::SolidSynthesis;
 use super::bricks::{Brick, BrickStore, Parents, brick_of, brick_origin};
-use super::correction::round_v;
+use super::correction::{States, VoxelState, round_v};
 use super::params::SolidError;
 use super::plan::{LevelReport, SynthesisReport};
 use super::request::VoxelRequest;
@@ -20,37 +20,6 @@ use std::time::Instant;
 /// jitter (one stream per axis from this one).
 const STREAM_SLAB: u64 = 0x51AB;
 const STREAM_JITTER: u64 = 0x7177;
-
-/// A voxel's working value: triple and its colour at the level.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub(super) struct VoxelState {
-    pub(super) t: Triple,
-    pub(super) c: [f32; 3],
-}
-
-/// Working values of one batch of a level, slot for slot with the kept chunks of its
-/// [`ChunkedNeed`]; `start` is the snapshot at the start of a stage with barriers.
-pub(super) struct States<'n> {
-    pub(super) need: &'n ChunkedNeed,
-    pub(super) cur: Vec<VoxelState>,
-    pub(super) start: Vec<VoxelState>,
-}
-
-impl<'n> States<'n> {
-    fn new(need: &'n ChunkedNeed) -> States<'n> {
-        States {
-            need,
-            cur: vec![VoxelState::default(); need.chunk_voxels() as usize],
-            start: Vec::new(),
-        }
-    }
-
-    #[inline]
-    pub(super) fn slot(&self, p: IVec3) -> usize {
-        self.need.slot_in_set(p)
-    }
-}
 
 /// A 64-bit key of a voxel of a level, for counter-based randomness.
 fn voxel_key(level: u32, v: IVec3) -> u64 {
