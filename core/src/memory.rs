@@ -78,7 +78,7 @@ pub fn human(bytes: u64) -> String {
 /// A parameter whose value would need more memory than the budget.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error(
-    "{key} = {value} would need about {need} of memory, over the budget of {budget} (--max-memory); {key} = {fits} fits",
+    "{key} = {value} would need about {need} of memory, over the budget of {budget} (--max-memory); {advice}",
     need = human(*need),
     budget = human(*budget)
 )]
@@ -87,8 +87,8 @@ pub struct OverBudget {
     pub value: String,
     pub need: u64,
     pub budget: u64,
-    /// A value of the parameter that fits the budget.
-    pub fits: String,
+    /// What fits: `KEY = VALUE fits`, or, when no value does, that the budget must grow.
+    pub advice: String,
 }
 
 /// Checks `estimate(value)` against the budget. If it is over, finds the largest value in
@@ -118,7 +118,11 @@ pub fn check_budget(
         value: show(value),
         need,
         budget,
-        fits: if lo == 0 { "no value".into() } else { show(lo) },
+        advice: if lo == 0 {
+            format!("no value of {key} fits: raise --max-memory")
+        } else {
+            format!("{key} = {} fits", show(lo))
+        },
     })
 }
 
@@ -179,13 +183,21 @@ mod tests {
     fn over_budget_names_the_key_and_a_value_that_fits() {
         set_budget(1 << 20);
         let e = check_budget("synthesize.width", 4096, |w| w * w, |w| w.to_string()).unwrap_err();
-        assert_eq!(e.fits, "1024");
+        assert_eq!(e.advice, "synthesize.width = 1024 fits");
         let msg = e.to_string();
         assert!(
             msg.contains("synthesize.width = 4096") && msg.contains("16.0 MiB"),
             "{msg}"
         );
         assert!(check_budget("k", 1024, |w| w * w, |w| w.to_string()).is_ok());
+        // Under a budget nothing fits, the message says what to change instead of a value.
+        let e = check_budget("k", 8, |w| (1 << 21) + w, |w| w.to_string()).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.ends_with("no value of k fits: raise --max-memory")
+                && !msg.contains("k = no value"),
+            "{msg}"
+        );
         set_budget(0);
         assert!(budget() > 0);
         assert_eq!(human(1536), "1.5 KiB");

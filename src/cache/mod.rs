@@ -43,7 +43,10 @@ pub enum CacheError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("cache {path} does not exist (or is not a directory)")]
+    #[error(
+        "there is no cache folder {path}: run the config first (`texsyn run`), name another \
+         cache with --cache, or check it from scratch with `verify --fresh`"
+    )]
     Missing { path: PathBuf },
     #[error("cache {path}: cannot replace what is there with the new object: {source}")]
     Replace {
@@ -563,10 +566,14 @@ mod tests {
     fn open_existing_refuses_a_missing_cache_and_creates_nothing() {
         let dir = tempfile::tempdir().unwrap();
         let missing = dir.path().join("typo");
-        assert!(matches!(
-            Cache::open_existing(&missing),
-            Err(CacheError::Missing { .. })
-        ));
+        let e = Cache::open_existing(&missing).err();
+        assert!(matches!(e, Some(CacheError::Missing { .. })));
+        // The message names the folder it looked for and what to do.
+        let msg = e.unwrap().to_string();
+        assert!(
+            msg.contains(&missing.display().to_string()) && msg.contains("--fresh"),
+            "{msg}"
+        );
         assert!(!missing.exists());
     }
 

@@ -189,6 +189,14 @@ fn read_with(path: &Path, bytes: &[u8], reference: bool) -> Result<Mesh, MeshErr
         path: path.to_path_buf(),
         message,
     };
+    // A text file saved with a UTF-8 byte-order mark (some Windows editors do) reads as
+    // without it: the mark would otherwise spoil its first line. Binary STL headers are
+    // arbitrary bytes, so STL keeps them.
+    const BOM: &[u8] = b"\xEF\xBB\xBF";
+    let bytes = match ext.as_deref() {
+        Some("obj" | "off" | "ply") => bytes.strip_prefix(BOM).unwrap_or(bytes),
+        _ => bytes,
+    };
     if bytes.iter().all(u8::is_ascii_whitespace) {
         return Err(invalid("file is empty".into()));
     }
@@ -314,6 +322,19 @@ fn out_of_range(index: impl fmt::Display, vertex_count: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_byte_order_mark_before_an_obj_or_off_changes_nothing() {
+        let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n";
+        let off = "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 2 3\n";
+        for (name, text) in [("m.obj", obj), ("m.off", off)] {
+            let plain = read_mesh_bytes(Path::new(name), text.as_bytes()).unwrap();
+            let marked = [b"\xEF\xBB\xBF".as_slice(), text.as_bytes()].concat();
+            let marked = read_mesh_bytes(Path::new(name), &marked).unwrap();
+            assert_eq!(marked.positions, plain.positions, "{name}");
+            assert_eq!(marked.triangles, plain.triangles, "{name}");
+        }
+    }
 
     #[test]
     fn locations_read_as_a_user_would_look_them_up() {
