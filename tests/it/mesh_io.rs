@@ -585,6 +585,20 @@ fn text_files_ending_before_their_counts_are_rejected() {
 }
 
 #[test]
+fn ascii_stl_facets_are_triangles_inside_an_outer_loop() {
+    let facet = |corners: &str, outer: &str| {
+        format!("solid s\nfacet normal 0 0 1\n{outer}\n{corners}endloop\nendfacet\nendsolid s\n")
+    };
+    let three = "vertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n";
+    let four = "vertex 0 0 0\nvertex 1 0 0\nvertex 1 1 0\nvertex 0 1 0\n";
+    assert!(parse("ok.stl", facet(three, "outer loop").as_bytes()).is_ok());
+    let m = error("q.stl", facet(four, "outer loop").as_bytes());
+    assert_mentions(&m, &["line 9", "4 vertices", "exactly 3"]);
+    let m = error("o.stl", facet(three, "outer lop").as_bytes());
+    assert_mentions(&m, &["line 3", "outer loop"]);
+}
+
+#[test]
 fn empty_files_are_rejected_for_every_format() {
     for name in ["e.obj", "e.off", "e.ply", "e.stl"] {
         assert_mentions(&error(name, b""), &["empty"]);

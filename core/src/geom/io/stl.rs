@@ -7,7 +7,8 @@
 //! first appearance, so the result is deterministic. Normals and attribute bytes are ignored.
 //! Rejected: a truncated binary file (naming the first incomplete triangle and its byte offset),
 //! a NaN or infinite coordinate, an unparsable number or unknown keyword (ASCII, naming the
-//! line), a facet of fewer than 3 vertices and a facet left open at the end of the file.
+//! line), `outer` not followed by `loop`, a facet of other than 3 vertices and a facet left
+//! open at the end of the file.
 
 use super::{Fault, Location, capacity, coord, fan, lines, show, tokens};
 use crate::geom::Mesh;
@@ -143,7 +144,12 @@ fn read_ascii(bytes: &[u8]) -> Result<Mesh, Fault> {
         let mut t = tokens(line);
         let Some(keyword) = t.next() else { continue };
         match keyword {
-            b"solid" | b"endsolid" | b"outer" | b"endloop" => {}
+            b"solid" | b"endsolid" | b"endloop" => {}
+            b"outer" => {
+                if t.next() != Some(b"loop".as_slice()) {
+                    return Err(Fault::line(no, "expected 'outer loop'"));
+                }
+            }
             b"facet" => {
                 if open.is_some() {
                     return Err(Fault::line(no, "'facet' before the previous 'endfacet'"));
@@ -168,8 +174,12 @@ fn read_ascii(bytes: &[u8]) -> Result<Mesh, Fault> {
                 if open.take().is_none() {
                     return Err(Fault::line(no, "'endfacet' without 'facet'"));
                 }
-                if corners.len() < 3 {
-                    return Err(Fault::line(no, super::unsupported_face_size(corners.len())));
+                // An STL facet is a triangle; more corners mean a damaged or foreign file,
+                // whose polygon would otherwise be guessed at.
+                if corners.len() != 3 {
+                    let n = corners.len();
+                    let m = format!("this facet has {n} vertices: an STL facet has exactly 3");
+                    return Err(Fault::line(no, m));
                 }
                 fan(&corners, &mut triangles);
             }
