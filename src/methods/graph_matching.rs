@@ -21,7 +21,6 @@ use crate::geom::Mesh;
 use crate::image::Image;
 use crate::pipeline::{Dag, NodeSpec, Stage};
 use crate::score::surface::GraphMatchingNodes;
-use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::gaussian_stack::{self, StackParams};
 use crate::stages::field::sweep_field::{self, SweepFieldParams};
 use crate::stages::parameterize::sqrt2_subdivision::{self, SubdivisionParams};
@@ -59,19 +58,6 @@ pub struct Inputs {
 
 /// The `graph_matching` method.
 pub struct GraphMatchingMethod;
-
-/// What graph matching's score reads: its nodes and the texture scale.
-struct GraphMatchingScore {
-    nodes: GraphMatchingNodes,
-    scale: f32,
-}
-
-impl Planned for GraphMatchingScore {
-    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
-        let item = crate::score::surface::graph_matching(run, &self.nodes, self.scale)?;
-        Ok(vec![item])
-    }
-}
 
 impl Method for GraphMatchingMethod {
     fn name(&self) -> &'static str {
@@ -147,8 +133,8 @@ impl Method for GraphMatchingMethod {
             field,
             synthesize: colours,
             exemplar,
+            scale: c.parameterize.scale,
         };
-        let scale = c.parameterize.scale;
-        Ok((dag, Box::new(GraphMatchingScore { nodes, scale })))
+        Ok((dag, Box::new(nodes)))
     }
 }

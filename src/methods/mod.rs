@@ -18,6 +18,7 @@ mod checks;
 mod import;
 mod plan;
 
+pub use crate::score::Planned;
 pub(crate) use checks::{
     check_atlas_memory, check_memory, check_solid_memory, check_variant_memory, exemplar_size,
     require_scale,
@@ -27,8 +28,7 @@ pub(crate) use import::{Imports, input};
 pub use plan::{Plan, plan};
 
 use crate::config::{Config, ConfigError};
-use crate::pipeline::{Dag, RunResult};
-use crate::score::{Item, ScoreFailure};
+use crate::pipeline::Dag;
 use std::path::PathBuf;
 use std::sync::RwLock;
 
@@ -39,24 +39,6 @@ pub trait Method: Send + Sync + 'static {
     /// Parses and validates the config's sections (the config comes without `[score]`),
     /// refuses parameters over the memory budget, and wires the DAG.
     fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError>;
-}
-
-/// What a planned method keeps for after its run.
-pub trait Planned: Send + Sync {
-    /// Scores the run's results against their exemplars (README, "Scoring"), reading the
-    /// nodes it kept handles to. An output with no exemplar-aligned image goes to
-    /// `not_scored` with the reason.
-    fn score(
-        &self,
-        run: &crate::score::Run<'_>,
-        not_scored: &mut Vec<String>,
-    ) -> Result<Vec<Item>, ScoreFailure>;
-
-    /// For a run with nothing to score as it is (a solid's surface request): the `--set`
-    /// that asks for a scoreable variant, which `texsyn score` runs and scores instead.
-    fn score_substitute(&self, _result: &RunResult) -> Option<String> {
-        None
-    }
 }
 
 /// The methods texsyn ships.

@@ -12,8 +12,8 @@ use crate::artifact::Bundle;
 use crate::artifact::jump_maps::AddressImage;
 use crate::config::Config;
 use crate::image::Image;
-use crate::pipeline::{Dag, Handle, NodeSpec, Stage};
-use crate::score::{Item, Run, ScoreFailure};
+use crate::pipeline::{Dag, NodeSpec, Stage};
+use crate::score::Synth2dNodes;
 use crate::stages::analyse_exemplar::jump_map::JumpMapParams;
 use crate::stages::reconstruct::blend2d::{self, Blend2dParams};
 use crate::stages::synthesize::synth2d::{self, Synth2dParams};
@@ -41,19 +41,6 @@ pub struct Inputs {
 
 /// The `synth2d` method.
 pub struct Synth2d;
-
-/// The nodes `synth2d`'s score reads.
-struct Synth2dNodes {
-    reconstruct: Handle<Bundle>,
-    exemplar: Handle<Image>,
-}
-
-impl Planned for Synth2dNodes {
-    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
-        let item = crate::score::synth2d(run, self.reconstruct, self.exemplar)?;
-        Ok(vec![item])
-    }
-}
 
 impl Method for Synth2d {
     fn name(&self) -> &'static str {

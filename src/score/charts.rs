@@ -51,6 +51,12 @@ pub struct JumpMapNodes {
     pub exemplar: Handle<Image>,
 }
 
+impl super::Planned for JumpMapNodes {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        jump_maps(run, self)
+    }
+}
+
 pub fn jump_maps(run: &Run, nodes: &JumpMapNodes) -> Result<Vec<Item>, ScoreFailure> {
     let mesh = run.view(nodes.mesh)?;
     let param = run.view(nodes.parameterize)?;

@@ -38,23 +38,28 @@ use texsyn_core::math::PureMath;
 const HEIGHT: usize = 2;
 
 /// The nodes of a geometry-image run that its score reads.
-#[derive(Clone, Copy)]
+#[derive(Clone)]
 pub struct GeometryImageNodes {
     pub parameterize: Handle<GeometryImage>,
     pub analyse_exemplar: Handle<TexelVariants>,
     pub field: Handle<ParamField>,
     pub synthesize: Handle<TexelImage>,
     pub reconstruct: Handle<Bundle>,
+    /// The run's `[synthesize]`.
+    pub synthesize_params: GeometrySynthParams,
+    /// The run's `field.density_offset`.
+    pub density_offset: f32,
 }
 
-/// Scores the relief and the mesh; `synth` is the run's synthesis parameters and
-/// `density_offset` its field's (`field.density_offset`).
-pub fn geometry_images(
-    run: &Run,
-    nodes: &GeometryImageNodes,
-    synth: &GeometrySynthParams,
-    density_offset: f32,
-) -> Result<Vec<Item>, ScoreFailure> {
+impl super::Planned for GeometryImageNodes {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        geometry_images(run, self)
+    }
+}
+
+/// Scores the relief and the mesh.
+pub fn geometry_images(run: &Run, nodes: &GeometryImageNodes) -> Result<Vec<Item>, ScoreFailure> {
+    let (synth, density_offset) = (&nodes.synthesize_params, nodes.density_offset);
     let texels = run.view(nodes.synthesize)?;
     let variants = run.view(nodes.analyse_exemplar)?;
     let v = variants.variant(variants.params().middle_scale(), 0);

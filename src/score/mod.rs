@@ -12,7 +12,7 @@
 //! unfolded along the field). Outputs with no exemplar-aligned image (a solid's surface
 //! request) are listed with the reason in [`Report::not_scored`].
 //!
-//! Each method's score hook (`methods::Planned::score`) calls the function for its outputs
+//! Each method's score hook ([`Planned::score`]) calls the function for its outputs
 //! here with the typed handles of the nodes it reads; this floor knows no method.
 //!
 //! `[score]` never reaches a node: it is taken out of the config before the method builds
@@ -32,6 +32,21 @@ use crate::image::{Image, ImageView};
 use crate::pipeline::{Handle, RunResult};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+/// What a planned method keeps for after its run.
+pub trait Planned: Send + Sync {
+    /// Scores the run's results against their exemplars (README, "Scoring"), reading the
+    /// nodes it kept handles to. An output with no exemplar-aligned image goes to
+    /// `not_scored` with the reason.
+    fn score(&self, run: &Run<'_>, not_scored: &mut Vec<String>)
+    -> Result<Vec<Item>, ScoreFailure>;
+
+    /// For a run with nothing to score as it is (a solid's surface request): the `--set`
+    /// that asks for a scoreable variant, which `texsyn score` runs and scores instead.
+    fn score_substitute(&self, _result: &RunResult) -> Option<String> {
+        None
+    }
+}
 
 /// `[score]` of any config.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -262,6 +277,18 @@ impl<'a> Run<'a> {
             }
         }
         Ok(())
+    }
+}
+
+/// The nodes `synth2d`'s score reads.
+pub struct Synth2dNodes {
+    pub reconstruct: Handle<Bundle>,
+    pub exemplar: Handle<Image>,
+}
+
+impl Planned for Synth2dNodes {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        Ok(vec![synth2d(run, self.reconstruct, self.exemplar)?])
     }
 }
 

@@ -20,8 +20,9 @@ use crate::artifact::Bundle;
 use crate::geom::Mesh;
 use crate::image::Image;
 use crate::pipeline::Handle;
+use crate::stages::analyse_exemplar::candidate_triples::ExemplarSpec;
 use crate::stages::parameterize::volume_embedding::Request;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// `section.png`'s colour where no voxel was synthesized (solid_colour.rs).
 const BACKGROUND: [u8; 3] = [235, 236, 240];
@@ -33,26 +34,39 @@ pub struct SolidNodes {
     pub reconstruct: Handle<Bundle>,
 }
 
-/// An exemplar image of a plane, as the config names it (relative to the config).
-#[derive(Clone, Debug)]
-pub struct PlaneExemplar {
-    pub path: PathBuf,
-    pub transpose: bool,
-}
-
 /// What of a solid run's config its score reads.
 #[derive(Clone, Debug)]
 pub struct SolidSetup {
     pub request: Request,
     /// `inputs.xy`, `inputs.yz`, `inputs.zx`; `inputs.exemplar` stands in for a missing one.
-    pub xy: Option<PlaneExemplar>,
-    pub yz: Option<PlaneExemplar>,
-    pub zx: Option<PlaneExemplar>,
-    pub exemplar: Option<PlaneExemplar>,
+    pub xy: Option<ExemplarSpec>,
+    pub yz: Option<ExemplarSpec>,
+    pub zx: Option<ExemplarSpec>,
+    pub exemplar: Option<ExemplarSpec>,
     /// How many `[[regions]]` the config has.
     pub regions: usize,
     /// Whether the rotation field follows sketched curves.
     pub sketched: bool,
+}
+
+/// A solid run's score hook: its nodes and what of its config the score reads.
+pub struct SolidScore {
+    pub nodes: SolidNodes,
+    pub setup: SolidSetup,
+}
+
+impl super::Planned for SolidScore {
+    fn score(
+        &self,
+        run: &Run<'_>,
+        not_scored: &mut Vec<String>,
+    ) -> Result<Vec<Item>, ScoreFailure> {
+        solid(run, &self.nodes, &self.setup, not_scored)
+    }
+
+    fn score_substitute(&self, result: &crate::pipeline::RunResult) -> Option<String> {
+        substitute_section(result, &self.nodes, &self.setup.request)
+    }
 }
 
 pub fn solid(
@@ -203,9 +217,9 @@ pub fn substitute_section(
 }
 
 /// The exemplar image a spec names, transposed when it says so.
-fn load_exemplar(run: &Run, spec: &PlaneExemplar, key: &str) -> Result<Image, ScoreFailure> {
-    let transpose = spec.transpose;
-    let path = run.config.resolve(&spec.path);
+fn load_exemplar(run: &Run, spec: &ExemplarSpec, key: &str) -> Result<Image, ScoreFailure> {
+    let transpose = spec.transpose();
+    let path = run.config.resolve(spec.path());
     let bytes = std::fs::read(&path)
         .map_err(|e| ScoreFailure::new(format!("{} ({key}): {e}", path.display())))?;
     let img = crate::image::decode_image(Path::new(&path), &bytes)

@@ -30,6 +30,7 @@ use crate::geom::edge_refine::Refined;
 use crate::image::Image;
 use crate::pipeline::Handle;
 use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
+use crate::stages::field::feature_field::carry_field;
 use crate::stages::field::sweep_field::SweepField;
 use crate::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
 use crate::stages::synthesize::graph_matching::GraphMatching;
@@ -44,14 +45,19 @@ pub struct GraphMatchingNodes {
     pub field: Handle<SweepField>,
     pub synthesize: Handle<GraphMatching>,
     pub exemplar: Handle<Image>,
+    /// `parameterize.scale`: exemplar texels per object unit.
+    pub scale: f32,
 }
 
-/// Graph matching at `scale` texels per unit (`parameterize.scale`).
-pub fn graph_matching(
-    run: &Run,
-    nodes: &GraphMatchingNodes,
-    scale: f32,
-) -> Result<Item, ScoreFailure> {
+impl super::Planned for GraphMatchingNodes {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        Ok(vec![graph_matching(run, self)?])
+    }
+}
+
+/// Graph matching at `nodes.scale` texels per unit.
+pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Item, ScoreFailure> {
+    let scale = nodes.scale;
     let h = run.view(nodes.parameterize)?;
     let field = run.view(nodes.field)?;
     let out = run.view(nodes.synthesize)?;
@@ -95,6 +101,14 @@ pub struct FeatureAlignedNodes {
     pub exemplar: Handle<Image>,
     /// Each synthesis scored, with what it is.
     pub synthesize: Vec<(Handle<SurfaceSynthesis>, &'static str)>,
+    /// `parameterize.scale`: exemplar texels per object unit.
+    pub scale: f32,
+}
+
+impl super::Planned for FeatureAlignedNodes {
+    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
+        feature_aligned(run, self)
+    }
 }
 
 /// Feature-aligned texturing (Xu et al.): the refined mesh's colours, unfolded with the
@@ -103,19 +117,16 @@ pub struct FeatureAlignedNodes {
 /// `parameterize.scale` object units per texel), for the aligned result and, with `compare`,
 /// the unaligned one.
 ///
-/// `scale` is `parameterize.scale`; `carry` brings the field's vectors from the input mesh
-/// onto the refined one, as synthesis did.
-pub fn feature_aligned(
-    run: &Run,
-    nodes: &FeatureAlignedNodes,
-    scale: f32,
-    carry: impl Fn(&Refined, &[Vec3]) -> Result<Vec<Vec3>, String>,
-) -> Result<Vec<Item>, ScoreFailure> {
+/// The field's vectors are carried from the input mesh onto the refined one, as synthesis
+/// carried them.
+pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Item>, ScoreFailure> {
+    let scale = nodes.scale;
     let refined = run.view(nodes.parameterize)?;
     let field = run.view(nodes.field)?;
     let tf = run.view(nodes.analyse_exemplar)?;
     let ex = run.view(nodes.exemplar)?;
-    let vectors = carry(&refined, &field.field.vectors).map_err(ScoreFailure::new)?;
+    let vectors = carry_field(&refined, &field.field.vectors);
+    let vectors = vectors.map_err(|e| ScoreFailure::new(e.to_string()))?;
     let mesh = &refined.mesh;
     let normals: Vec<Vec3> = mesh.vertex_normals().to_vec();
     // `frames` gives (u, n × u)… as (up, right) = (u, u × n); texture optimization's second

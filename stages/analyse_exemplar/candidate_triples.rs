@@ -1247,6 +1247,39 @@ pub fn analyse(
     })
 }
 
+/// An exemplar image of a plane as a config names it, optionally transposed (so one image
+/// can show the same layers in two planes whose axes run the other way round).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum ExemplarSpec {
+    Path(std::path::PathBuf),
+    Spec {
+        path: std::path::PathBuf,
+        #[serde(default)]
+        transpose: bool,
+    },
+}
+
+impl ExemplarSpec {
+    /// The image's path, as the config gives it.
+    pub fn path(&self) -> &std::path::Path {
+        match self {
+            ExemplarSpec::Path(path) | ExemplarSpec::Spec { path, .. } => path,
+        }
+    }
+
+    /// Whether the image is read transposed.
+    pub fn transpose(&self) -> bool {
+        matches!(
+            self,
+            ExemplarSpec::Spec {
+                transpose: true,
+                ..
+            }
+        )
+    }
+}
+
 /// The analysis node's key: its parameters and which planes' images are transposed.
 #[derive(Debug, Clone, Serialize)]
 pub struct AnalysisKey {

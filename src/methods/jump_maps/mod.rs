@@ -12,6 +12,10 @@
 //! the automatic scale), so a new exemplar of the same size reruns it cheaply and, by early
 //! cutoff, nothing downstream on its account.
 
+mod config;
+
+pub use config::{Inputs, JumpMapsConfig};
+
 use super::{Method, MethodError, Planned, import, input};
 use crate::artifact::Bundle;
 use crate::artifact::jump_maps::{OrientationField, TexelAddresses};
@@ -20,56 +24,14 @@ use crate::geom::Mesh;
 use crate::image::Image;
 use crate::pipeline::{Dag, Handle, NodeSpec, Stage};
 use crate::score::charts::JumpMapNodes;
-use crate::score::{Item, Run, ScoreFailure};
 use crate::stages::analyse_exemplar::jump_map::{self, JumpMap, JumpMapParams};
-use crate::stages::field::orientation_field::{self, FieldParams};
-use crate::stages::parameterize::jump_parameterization::{self, ParameterizeParams};
-use crate::stages::reconstruct::jump_export::{self, JumpExportKey, MapFile, check_map_name};
-use crate::stages::reconstruct::textured_export::ExportParams;
-use crate::stages::synthesize::jump_walk::{self, WalkParams};
-use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
-use std::path::PathBuf;
-
-/// A `jump_maps` config.
-#[derive(Debug, Clone, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct JumpMapsConfig {
-    pub method: String,
-    pub inputs: Inputs,
-    #[serde(default)]
-    pub analyse_exemplar: JumpMapParams,
-    #[serde(default)]
-    pub field: FieldParams,
-    #[serde(default)]
-    pub parameterize: ParameterizeParams,
-    #[serde(default)]
-    pub synthesize: WalkParams,
-    #[serde(default)]
-    pub reconstruct: ExportParams,
-}
-
-#[derive(Debug, Clone, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct Inputs {
-    /// The mesh to texture (.obj, .off, .ply, .stl).
-    pub mesh: PathBuf,
-    /// The exemplar image (.png, .jpg, .exr).
-    pub exemplar: PathBuf,
-    /// Further maps aligned with the exemplar (same size), textured with the same
-    /// coordinates: `normal`, `roughness`, `height`, or any other name. Default: none.
-    #[serde(default)]
-    pub maps: BTreeMap<String, PathBuf>,
-}
+use crate::stages::field::orientation_field::{self};
+use crate::stages::parameterize::jump_parameterization::{self};
+use crate::stages::reconstruct::jump_export::{self, JumpExportKey, MapFile};
+use crate::stages::synthesize::jump_walk::{self};
 
 /// The `jump_maps` method.
 pub struct JumpMaps;
-
-impl Planned for JumpMapNodes {
-    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
-        crate::score::charts::jump_maps(run, self)
-    }
-}
 
 impl Method for JumpMaps {
     fn name(&self) -> &'static str {
@@ -77,18 +39,7 @@ impl Method for JumpMaps {
     }
 
     fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
-        let c: JumpMapsConfig = config.parse()?;
-        config.check("analyse_exemplar", c.analyse_exemplar.validate())?;
-        config.check("field", c.field.validate())?;
-        config.check("parameterize", c.parameterize.validate())?;
-        config.check("synthesize", c.synthesize.validate())?;
-        config.check("reconstruct", c.reconstruct.validate())?;
-        // No up-front memory check on `reconstruct.atlas_size`: it caps a page's side, and
-        // pages are only as big as the charts they hold (the need follows the surface's area).
-        for name in c.inputs.maps.keys() {
-            let verdict = check_map_name(name, c.inputs.maps.keys());
-            config.check(&format!("inputs.maps.{name}"), verdict)?;
-        }
+        let c = config::checked(config)?;
         let mut dag = Dag::default();
         let mesh = input::<Mesh>(&mut dag, config, "mesh", &c.inputs.mesh)?;
         let exemplar = input::<Image>(&mut dag, config, "exemplar", &c.inputs.exemplar)?;

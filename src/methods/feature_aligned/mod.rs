@@ -17,6 +17,10 @@
 //! default) also synthesizes without the feature constraint on the same field, the middle
 //! column of the paper's Fig. 7.
 
+mod config;
+
+pub use config::{FeatureAlignedConfig, Inputs};
+
 use super::{Method, MethodError, Planned, input};
 use crate::artifact::Bundle;
 use crate::config::Config;
@@ -24,75 +28,20 @@ use crate::geom::Mesh;
 use crate::image::Image;
 use crate::pipeline::{Dag, Handle, NodeSpec, Stage};
 use crate::score::surface::FeatureAlignedNodes;
-use crate::score::{Item, Run, ScoreFailure};
-use crate::stages::analyse_exemplar::texture_feature_lines::{self, TextureFeatureParams};
-use crate::stages::extract::shape_features::{self, ShapeFeatureKey, ShapeFeatureParams};
-use crate::stages::field::feature_field::{self, FeatureFieldParams, carry_field};
-use crate::stages::parameterize::edge_refinement::{self, RefineParams};
-use crate::stages::reconstruct::feature_aligned_export::{self, FeatureAlignedExportParams};
+use crate::stages::analyse_exemplar::texture_feature_lines;
+use crate::stages::extract::shape_features::{self, ShapeFeatureKey};
+use crate::stages::field::feature_field;
+use crate::stages::parameterize::edge_refinement;
+use crate::stages::reconstruct::feature_aligned_export;
 use crate::stages::reconstruct::feature_aligned_report as report;
-use crate::stages::synthesize::texture_optimization::{
-    self as opt, SurfaceSynthesis, TextureOptimizationParams,
-};
-use serde::{Deserialize, Serialize};
+use crate::stages::synthesize::texture_optimization::{self as opt, SurfaceSynthesis};
 use std::path::PathBuf;
 
-/// A `feature_aligned` config.
-#[derive(Debug, Clone, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct FeatureAlignedConfig {
-    pub method: String,
-    pub inputs: Inputs,
-    /// Also synthesize without the feature constraint, for comparison. Default: true.
-    #[serde(default = "yes")]
-    pub compare: bool,
-    #[serde(default)]
-    pub extract: ShapeFeatureParams,
-    #[serde(default)]
-    pub analyse_exemplar: TextureFeatureParams,
-    #[serde(default)]
-    pub field: FeatureFieldParams,
-    #[serde(default)]
-    pub parameterize: RefineParams,
-    #[serde(default)]
-    pub synthesize: TextureOptimizationParams,
-    #[serde(default)]
-    pub reconstruct: FeatureAlignedExportParams,
-}
-
-fn yes() -> bool {
-    true
-}
-
-#[derive(Debug, Clone, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct Inputs {
-    /// The mesh to texture (.obj, .off, .ply, .stl).
-    pub mesh: PathBuf,
-    /// The exemplar (.png, .jpg, .exr), with feature lines of its own.
-    pub exemplar: PathBuf,
-    /// Optional: the exemplar's feature lines drawn by hand (white on black, the exemplar's
-    /// size); replaces detection.
-    #[serde(default)]
-    pub feature_mask: Option<PathBuf>,
-}
+/// The node of the comparison synthesized without the feature constraint.
+const UNALIGNED_NODE: &str = "synthesize.unaligned";
 
 /// The `feature_aligned` method.
 pub struct FeatureAligned;
-
-/// What the feature-aligned score reads: its nodes and the texture scale.
-struct FeatureAlignedScore {
-    nodes: FeatureAlignedNodes,
-    scale: f32,
-}
-
-impl Planned for FeatureAlignedScore {
-    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
-        crate::score::surface::feature_aligned(run, &self.nodes, self.scale, |r, v| {
-            carry_field(r, v).map_err(|e| e.to_string())
-        })
-    }
-}
 
 impl Method for FeatureAligned {
     fn name(&self) -> &'static str {
@@ -100,29 +49,11 @@ impl Method for FeatureAligned {
     }
 
     fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
-        let c: FeatureAlignedConfig = config.parse()?;
-        let what = "exemplar texels per object unit (the texture's size on the mesh)";
-        super::require_scale(config, c.parameterize.scale, what)?;
-        c.parameterize.validate().map_err(|e| config.param(e))?;
-        c.extract.validate().map_err(|e| config.param(e))?;
-        c.analyse_exemplar.validate().map_err(|e| config.param(e))?;
-        c.field.validate().map_err(|e| config.param(e))?;
-        c.synthesize.validate().map_err(|e| config.param(e))?;
-        c.reconstruct.validate().map_err(|e| config.param(e))?;
+        let c = config::checked(config)?;
         let mut dag = Dag::default();
         let mesh = input::<Mesh>(&mut dag, config, "mesh", &c.inputs.mesh)?;
         let exemplar = input::<Image>(&mut dag, config, "exemplar", &c.inputs.exemplar)?;
-        if let Some((size, path)) = super::exemplar_size(config, &c.inputs.exemplar) {
-            let p = &c.synthesize;
-            config.check("synthesize.patch", opt::check_patch_fits(size, &path, p))?;
-            let texels = size.0 as u64 * size.1 as u64;
-            let estimate = |w| opt::memory_estimate(texels, w, p.levels as u64);
-            let show = |w: u64| w.to_string();
-            super::check_memory(config, "synthesize.patch", p.patch as u64, estimate, show)?;
-        }
-        if c.reconstruct.atlas_size > 0 {
-            super::check_atlas_memory(config, c.reconstruct.atlas_size)?;
-        }
+        config::check_exemplar_fits(config, &c)?;
         let mask = c.inputs.feature_mask.as_ref();
         let mask = mask
             .map(|m| input::<Image>(&mut dag, config, "feature_mask", m))
@@ -134,12 +65,8 @@ impl Method for FeatureAligned {
             ShapeFeatureKey::new(&c.extract),
             (mesh, curves_file),
             |_, p, (mesh, f)| {
-                Ok(shape_features::node(
-                    &mesh,
-                    p,
-                    f.map(|f| (&*f.path, &*f.bytes)),
-                    "feature_aligned",
-                )?)
+                let curves = f.map(|f| (&*f.path, &*f.bytes));
+                Ok(shape_features::node(&mesh, p, curves, "feature_aligned")?)
             },
         );
         let features = dag.node(
@@ -147,12 +74,8 @@ impl Method for FeatureAligned {
             c.analyse_exemplar.clone(),
             (exemplar, mask),
             |_, p, (img, mask)| {
-                let mask = mask.map(|m| m.to_owned());
-                Ok(texture_feature_lines::node(
-                    &img.to_owned(),
-                    mask.as_ref(),
-                    p,
-                )?)
+                let (img, mask) = (img.to_owned(), mask.map(|m| m.to_owned()));
+                Ok(texture_feature_lines::node(&img, mask.as_ref(), p)?)
             },
         );
         let field = dag.node(
@@ -168,11 +91,7 @@ impl Method for FeatureAligned {
             |_, p, mesh| Ok(edge_refinement::node(&mesh, p)?),
         );
         let mut synthesis = |aligned: bool| {
-            let name = if aligned {
-                "synthesize"
-            } else {
-                "synthesize.unaligned"
-            };
+            let name = [UNALIGNED_NODE, "synthesize"][aligned as usize];
             let (scale, optimization) = (c.parameterize.scale, c.synthesize.clone());
             let key = opt::SynthesisKey {
                 scale,
@@ -184,15 +103,8 @@ impl Method for FeatureAligned {
                 key,
                 (refined, field, exemplar, features),
                 |ctx, key, (refined, field, img, tf)| {
-                    let progress = |f| ctx.progress.set(f);
-                    Ok(opt::node(
-                        &refined,
-                        &field,
-                        &img.to_owned(),
-                        &tf,
-                        key,
-                        &progress,
-                    )?)
+                    let (img, progress) = (img.to_owned(), |f| ctx.progress.set(f));
+                    Ok(opt::node(&refined, &field, &img, &tf, key, &progress)?)
                 },
             )
         };
@@ -218,9 +130,8 @@ impl Method for FeatureAligned {
                     exemplar,
                     features: &features,
                 };
-                Ok(Bundle::from(report::node(&run, p, &|f| {
-                    ctx.progress.set(f)
-                })?))
+                let files = report::node(&run, p, &|f| ctx.progress.set(f))?;
+                Ok(Bundle::from(files))
             },
         );
         let mut synthesize = vec![(aligned, "the refined mesh's colours")];
@@ -231,8 +142,8 @@ impl Method for FeatureAligned {
             analyse_exemplar: features,
             exemplar,
             synthesize,
+            scale: c.parameterize.scale,
         };
-        let scale = c.parameterize.scale;
-        Ok((dag, Box::new(FeatureAlignedScore { nodes, scale })))
+        Ok((dag, Box::new(nodes)))
     }
 }

@@ -1,0 +1,88 @@
+//! The `feature_aligned` method's config schema and the checks made on it before any node
+//! runs.
+
+use crate::config::Config;
+use crate::methods::MethodError;
+use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatureParams;
+use crate::stages::extract::shape_features::ShapeFeatureParams;
+use crate::stages::field::feature_field::FeatureFieldParams;
+use crate::stages::parameterize::edge_refinement::RefineParams;
+use crate::stages::reconstruct::feature_aligned_export::FeatureAlignedExportParams;
+use crate::stages::synthesize::texture_optimization::{self as opt, TextureOptimizationParams};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// A `feature_aligned` config.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FeatureAlignedConfig {
+    pub method: String,
+    pub inputs: Inputs,
+    /// Also synthesize without the feature constraint, for comparison. Default: true.
+    #[serde(default = "yes")]
+    pub compare: bool,
+    #[serde(default)]
+    pub extract: ShapeFeatureParams,
+    #[serde(default)]
+    pub analyse_exemplar: TextureFeatureParams,
+    #[serde(default)]
+    pub field: FeatureFieldParams,
+    #[serde(default)]
+    pub parameterize: RefineParams,
+    #[serde(default)]
+    pub synthesize: TextureOptimizationParams,
+    #[serde(default)]
+    pub reconstruct: FeatureAlignedExportParams,
+}
+
+fn yes() -> bool {
+    true
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Inputs {
+    /// The mesh to texture (.obj, .off, .ply, .stl).
+    pub mesh: PathBuf,
+    /// The exemplar (.png, .jpg, .exr), with feature lines of its own.
+    pub exemplar: PathBuf,
+    /// Optional: the exemplar's feature lines drawn by hand (white on black, the exemplar's
+    /// size); replaces detection.
+    #[serde(default)]
+    pub feature_mask: Option<PathBuf>,
+}
+
+/// Parses the config and checks every section, naming the keys.
+pub(super) fn checked(config: &Config) -> Result<FeatureAlignedConfig, MethodError> {
+    let c: FeatureAlignedConfig = config.parse()?;
+    let what = "exemplar texels per object unit (the texture's size on the mesh)";
+    crate::methods::require_scale(config, c.parameterize.scale, what)?;
+    c.parameterize.validate().map_err(|e| config.param(e))?;
+    c.extract.validate().map_err(|e| config.param(e))?;
+    c.analyse_exemplar.validate().map_err(|e| config.param(e))?;
+    c.field.validate().map_err(|e| config.param(e))?;
+    c.synthesize.validate().map_err(|e| config.param(e))?;
+    c.reconstruct.validate().map_err(|e| config.param(e))?;
+    Ok(c)
+}
+
+/// Refuses a synthesis patch that does not fit the exemplar (read from its header; an
+/// unreadable one is left to its import node to name), and a patch or atlas over the memory
+/// budget.
+pub(super) fn check_exemplar_fits(
+    config: &Config,
+    c: &FeatureAlignedConfig,
+) -> Result<(), MethodError> {
+    if let Some((size, path)) = crate::methods::exemplar_size(config, &c.inputs.exemplar) {
+        let p = &c.synthesize;
+        config.check("synthesize.patch", opt::check_patch_fits(size, &path, p))?;
+        let texels = size.0 as u64 * size.1 as u64;
+        let estimate = |w| opt::memory_estimate(texels, w, p.levels as u64);
+        let show = |w: u64| w.to_string();
+        crate::methods::check_memory(config, "synthesize.patch", p.patch as u64, estimate, show)?;
+    }
+    if c.reconstruct.atlas_size > 0 {
+        crate::methods::check_atlas_memory(config, c.reconstruct.atlas_size)?;
+    }
+    Ok(())
+}
