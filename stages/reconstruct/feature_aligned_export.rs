@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 
 /// The `feature_aligned_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 3);
+    texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 4);
 
 /// `[reconstruct]` of the feature-aligned method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -93,6 +93,9 @@ pub struct FeatureAlignedResult<'a> {
     pub refined: &'a Refined,
     /// Per refined vertex.
     pub colours: &'a [[f32; 3]],
+    /// Per refined vertex: the exemplar address its colour came from (`[-1, -1]`: none).
+    pub source: &'a [[f32; 2]],
+    pub exemplar: &'a crate::image::Image,
     pub unaligned: Option<&'a [[f32; 3]]>,
     /// Per refined vertex, unit tangent (or zero).
     pub field: &'a [Vec3],
@@ -131,7 +134,8 @@ pub fn export_feature_aligned(
         "textured.ply".to_string(),
         crate::geom::io::write_ply(mesh, Some(&colours)),
     )];
-    let (glb, atlas_png) = glb(r.input, r.refined, &colours, p.atlas_size)?;
+    let lookup = ExemplarLookup::new(r.refined, r.source, r.exemplar);
+    let (glb, atlas_png) = glb(r.input, r.refined, &colours, lookup, p.atlas_size)?;
     files.push(("textured.glb".into(), glb));
     if let Some(png) = atlas_png {
         files.push(("textured_atlas.png".into(), png));
@@ -323,6 +327,7 @@ fn glb(
     input: &Mesh,
     refined: &Refined,
     colours: &[[f32; 4]],
+    lookup: ExemplarLookup,
     atlas_size: u32,
 ) -> Result<(Vec<u8>, Option<Vec<u8>>), crate::render::AtlasError> {
     let atlas = match atlas_size {
@@ -350,7 +355,7 @@ fn glb(
             crate::export::GlbMesh::vertex_coloured("feature_aligned", &refined.mesh, colours);
         return Ok((crate::export::write_glb(&scene), None));
     };
-    let shader = RefinedColours::new(input, refined, colours);
+    let shader = RefinedColours::new(input, refined, colours, lookup);
     let baked = crate::render::bake(&atlas, input, &shader);
     let png = encode_png(&baked, false);
     scene.material.base_color_png = Some(png.clone());
@@ -367,13 +372,110 @@ fn glb(
     Ok((crate::export::write_glb(&scene), Some(png)))
 }
 
-/// The refined mesh's vertex colours seen from the input mesh: a point of input triangle `f`,
-/// given by its barycentrics, is looked up among the refined triangles that lie in `f`
-/// (`Refined::face_origin`) through a grid over `f`'s barycentric domain, and takes the colours
-/// interpolated there.
+/// Where the atlas looks the exemplar up instead of interpolating vertex colours: the refined
+/// triangles whose three corners copied their colours from one exemplar patch. Such corners'
+/// addresses are one similarity map of their positions (the patch's frame, §5.1), so the
+/// addresses interpolated across the triangle are the patch's own texels, finer than the
+/// vertex spacing. A triangle counts as one patch's when each of its edges is as long in the
+/// exemplar as on the surface, at the run's texel scale (the median ratio over all edges,
+/// which lie inside patches far more often than across seams), within 25 % and 0.1 texel:
+/// two patches' addresses differ by whole texels, while one patch's frame only foreshortens
+/// edges a little where the surface bends away from the patch's tangent plane.
+pub struct ExemplarLookup<'a> {
+    source: &'a [[f32; 2]],
+    exemplar: Option<&'a crate::image::Image>,
+    /// Per refined triangle: its corners copied one patch.
+    one_patch: Vec<bool>,
+}
+
+impl<'a> ExemplarLookup<'a> {
+    pub fn new(
+        refined: &Refined,
+        source: &'a [[f32; 2]],
+        exemplar: &'a crate::image::Image,
+    ) -> Self {
+        let m = &refined.mesh;
+        let none = ExemplarLookup {
+            source,
+            exemplar: None,
+            one_patch: Vec::new(),
+        };
+        if source.len() != m.positions.len() {
+            return none;
+        }
+        let valid = |v: u32| source[v as usize][0] > -0.5;
+        let edge = |a: u32, b: u32| {
+            let (sa, sb) = (source[a as usize], source[b as usize]);
+            let texels = glam::Vec2::new(sa[0] - sb[0], sa[1] - sb[1]).length();
+            (
+                texels,
+                m.positions[a as usize].distance(m.positions[b as usize]),
+            )
+        };
+        let mut ratios: Vec<f32> = m
+            .triangles
+            .iter()
+            .filter(|t| t.iter().all(|&v| valid(v)))
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .map(|(a, b)| edge(a, b))
+            .filter(|&(_, len)| len > 0.0)
+            .map(|(texels, len)| texels / len)
+            .collect();
+        if ratios.is_empty() {
+            return none;
+        }
+        let mid = ratios.len() / 2;
+        let scale = *ratios.select_nth_unstable_by(mid, f32::total_cmp).1;
+        let fits =
+            |(texels, len): (f32, f32)| (texels - len * scale).abs() <= 0.1 + 0.25 * len * scale;
+        let one_patch = m
+            .triangles
+            .iter()
+            .map(|t| {
+                t.iter().all(|&v| valid(v))
+                    && [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]
+                        .into_iter()
+                        .all(|(a, b)| fits(edge(a, b)))
+            })
+            .collect::<Vec<bool>>();
+        let looked_up = one_patch.iter().filter(|&&b| b).count();
+        tracing::info!(
+            "atlas: {:.1} % of the refined triangles lie in one exemplar patch and are looked up in the exemplar; the rest copy their nearest corner's colour",
+            100.0 * looked_up as f64 / one_patch.len().max(1) as f64
+        );
+        ExemplarLookup {
+            source,
+            exemplar: Some(exemplar),
+            one_patch,
+        }
+    }
+
+    /// The colour at barycentrics `l` of refined triangle `t` (corners `tri`) when its corners
+    /// copied one patch.
+    fn colour(&self, t: usize, tri: [u32; 3], l: [f32; 3]) -> Option<Vec3> {
+        let exemplar = self.exemplar?;
+        if !self.one_patch[t] {
+            return None;
+        }
+        let mut at = glam::Vec2::ZERO;
+        for k in 0..3 {
+            at += glam::Vec2::from(self.source[tri[k] as usize]) * l[k];
+        }
+        let c = exemplar.view().sample(at);
+        Some(Vec3::new(c[0], c[1], c[2]))
+    }
+}
+
+/// The refined mesh's colours seen from the input mesh: a point of input triangle `f`, given by
+/// its barycentrics, is looked up among the refined triangles that lie in `f`
+/// (`Refined::face_origin`) through a grid over `f`'s barycentric domain. Inside a refined
+/// triangle whose corners copied one exemplar patch it takes the exemplar at the interpolated
+/// address ([`ExemplarLookup`]); elsewhere (a seam between patches) the colour of the nearest
+/// corner, so a seam stays a sharp line and is not blended.
 struct RefinedColours<'a> {
     refined: &'a Refined,
     colours: &'a [[f32; 4]],
+    lookup: ExemplarLookup<'a>,
     /// Per input face: its first cell in `cell_start`, and the grid's side.
     face_cells: Vec<(u32, u32)>,
     cell_start: Vec<u32>,
@@ -387,7 +489,12 @@ struct RefinedColours<'a> {
 }
 
 impl<'a> RefinedColours<'a> {
-    fn new(input: &Mesh, refined: &'a Refined, colours: &'a [[f32; 4]]) -> Self {
+    fn new(
+        input: &Mesh,
+        refined: &'a Refined,
+        colours: &'a [[f32; 4]],
+        lookup: ExemplarLookup<'a>,
+    ) -> Self {
         use glam::Vec2;
         let m = &refined.mesh;
         let faces = input.triangles.len();
@@ -437,6 +544,7 @@ impl<'a> RefinedColours<'a> {
         RefinedColours {
             refined,
             colours,
+            lookup,
             face_cells,
             cell_start,
             items,
@@ -498,13 +606,14 @@ impl crate::render::SurfaceShader for RefinedColours<'_> {
         };
         let l = l.map(|x| x.max(0.0));
         let sum = (l[0] + l[1] + l[2]).max(1e-12);
+        let l = l.map(|x| x / sum);
         let tri = self.refined.mesh.triangles[t as usize];
-        let mut out = Vec3::ZERO;
-        for k in 0..3 {
-            let c = self.colours[tri[k] as usize];
-            out += Vec3::new(c[0], c[1], c[2]) * (l[k] / sum);
+        if let Some(c) = self.lookup.colour(t as usize, tri, l) {
+            return c;
         }
-        out
+        let nearest = (0..3).max_by(|&a, &b| l[a].total_cmp(&l[b]).then(b.cmp(&a)));
+        let c = self.colours[tri[nearest.unwrap_or(0)] as usize];
+        Vec3::new(c[0], c[1], c[2])
     }
 }
 
@@ -532,11 +641,9 @@ mod tests {
         assert!(along * 3.0 < across, "along {along}, across {across}");
     }
 
-    #[test]
-    fn the_input_mesh_sees_the_refined_colours_where_they_are() {
-        // Colours linear in position are reproduced exactly by linear interpolation on the
-        // refined triangles, so the shader must return them at any point of the input mesh.
-        use crate::render::SurfaceShader;
+    /// A planar input mesh (z = 0.3 y), refined to edges of at most 0.07, and `shift(x)` texels
+    /// added to the exemplar address of each refined vertex of the patch map `address`.
+    fn two_triangles() -> (Mesh, Refined) {
         let input = Mesh::new(
             vec![
                 Vec3::ZERO,
@@ -547,28 +654,114 @@ mod tests {
             vec![[0, 1, 2], [0, 2, 3]],
         );
         let refined = crate::geom::edge_refine::refine_edges(&input, 0.07, 100_000).unwrap();
-        let colour = |p: Vec3| [p.x, p.y, 0.5, 1.0];
-        let colours: Vec<[f32; 4]> = refined.mesh.positions.iter().map(|&p| colour(p)).collect();
-        let shader = RefinedColours::new(&input, &refined, &colours);
-        for i in 0..400u64 {
-            let (u, v) = (
-                crate::random::counter_unit(3, 0, i),
-                crate::random::counter_unit(3, 1, i),
-            );
-            let (u, v) = if u + v > 1.0 {
-                (1.0 - u, 1.0 - v)
-            } else {
-                (u, v)
-            };
-            let bary = Vec3::new(1.0 - u - v, u, v);
-            let f = (i % 2) as usize;
-            let t = input.triangles[f].map(|k| input.positions[k as usize]);
-            let p = t[0] * bary.x + t[1] * bary.y + t[2] * bary.z;
-            let got = shader.albedo(f, bary);
-            let want = colour(p);
+        (input, refined)
+    }
+
+    /// One patch's similarity map of the plane z = 0.3 y: arc length along x and along the
+    /// slope, at 14 texels per unit, 2 texels in from the exemplar's corner.
+    fn address(p: Vec3) -> glam::Vec2 {
+        glam::Vec2::new(p.x, p.y * (1.0f32 + 0.09).sqrt()) * 14.0 + 2.0
+    }
+
+    /// An exemplar whose red and green are its texel address / 64 (bilinear lookups of it give
+    /// the address back) and whose blue is a one-texel checkerboard, detail that colours
+    /// interpolated between vertices about a texel apart cannot hold.
+    fn ramp() -> crate::image::Image {
+        let mut pixels = Vec::new();
+        for y in 0..64 {
+            for x in 0..64 {
+                let checker = ((x + y) % 2) as f32;
+                pixels.push([x as f32 / 64.0, y as f32 / 64.0, checker, 1.0]);
+            }
+        }
+        crate::image::Image {
+            width: 64,
+            height: 64,
+            pixels,
+        }
+    }
+
+    /// The atlas shader's colours at 400 random points of the input mesh, with the point.
+    fn shade_points(shader: &RefinedColours, input: &Mesh) -> Vec<(Vec3, Vec3)> {
+        use crate::render::SurfaceShader;
+        (0..400u64)
+            .map(|i| {
+                let (u, v) = (
+                    crate::random::counter_unit(3, 0, i),
+                    crate::random::counter_unit(3, 1, i),
+                );
+                let (u, v) = if u + v > 1.0 {
+                    (1.0 - u, 1.0 - v)
+                } else {
+                    (u, v)
+                };
+                let bary = Vec3::new(1.0 - u - v, u, v);
+                let f = (i % 2) as usize;
+                let t = input.triangles[f].map(|k| input.positions[k as usize]);
+                let p = t[0] * bary.x + t[1] * bary.y + t[2] * bary.z;
+                (p, shader.albedo(f, bary))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn inside_one_patch_the_atlas_holds_the_exemplar_at_the_interpolated_address() {
+        // Every refined vertex copied one patch: the shader must return the exemplar at the
+        // point's own address, finer than the vertex spacing, at any point of the input mesh.
+        let (input, refined) = two_triangles();
+        let exemplar = ramp();
+        let source: Vec<[f32; 2]> = refined
+            .mesh
+            .positions
+            .iter()
+            .map(|&p| address(p).into())
+            .collect();
+        let colours: Vec<[f32; 4]> = source
+            .iter()
+            .map(|&s| exemplar.view().sample(s.into()))
+            .collect();
+        let lookup = ExemplarLookup::new(&refined, &source, &exemplar);
+        assert!(
+            lookup.one_patch.iter().all(|&b| b),
+            "every triangle lies in the one patch"
+        );
+        let shader = RefinedColours::new(&input, &refined, &colours, lookup);
+        for (p, got) in shade_points(&shader, &input) {
+            let want = Vec3::from_slice(&exemplar.view().sample(address(p))[..3]);
             assert!(
-                (got.x - want[0]).abs() < 1e-4 && (got.y - want[1]).abs() < 1e-4,
-                "face {f} at {bary}: {got} instead of {want:?}"
+                (got - want).abs().max_element() < 1e-4,
+                "at {p}: {got} instead of {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn across_a_seam_between_patches_the_atlas_copies_a_corner_and_never_blends() {
+        // Vertices right of x = 0.5 copied another patch, 20 texels further in the exemplar.
+        // A point takes one patch's address (within a texel: the nearest corner's), never a
+        // mix of the two (about 10 texels off both).
+        let (input, refined) = two_triangles();
+        let exemplar = ramp();
+        let shift = |p: Vec3| if p.x > 0.5 { 20.0 } else { 0.0 };
+        let source: Vec<[f32; 2]> = (refined.mesh.positions.iter())
+            .map(|&p| (address(p) + glam::Vec2::new(shift(p), 0.0)).into())
+            .collect();
+        let colours: Vec<[f32; 4]> = source
+            .iter()
+            .map(|&s| exemplar.view().sample(s.into()))
+            .collect();
+        let lookup = ExemplarLookup::new(&refined, &source, &exemplar);
+        let seams = lookup.one_patch.iter().filter(|&&b| !b).count();
+        assert!(
+            seams > 0,
+            "the triangles across x = 0.5 are not one patch's"
+        );
+        let shader = RefinedColours::new(&input, &refined, &colours, lookup);
+        for (p, got) in shade_points(&shader, &input) {
+            let x = got.x * 64.0 - address(p).x;
+            assert!(
+                x.abs() < 1.0 || (x - 20.0).abs() < 1.0,
+                "at {p}: address {x} texels off the left patch's (0) and the right's (20)"
             );
         }
     }

@@ -50,6 +50,8 @@ pub fn node(
         input: mesh,
         refined,
         colours: &run.aligned.colours,
+        source: &run.aligned.source,
+        exemplar: run.exemplar,
         unaligned: run.unaligned.map(|u| u.colours.as_slice()),
         field: &vectors,
         curves: drawn_curves(run.shape, &run.field.field),

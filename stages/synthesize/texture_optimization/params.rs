@@ -54,6 +54,24 @@ pub struct TextureOptimizationParams {
     /// module doc: without it the optimization settles on the exemplar's most common content
     /// and drops its rarer features, the mortar of a brick wall).
     pub histogram: f32,
+    /// How the finest level's final colours are made from the patches that cover each vertex.
+    /// Default: `discrete`.
+    pub solver: Solver,
+}
+
+/// The colour solve of each iteration (see the module doc, "Discrete solve").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Solver {
+    /// The iterations as `average`, then one discrete pass: each vertex copies the exemplar
+    /// texel that its best-matching covering patch (largest `λ_p ω_p`) gives it, so colours
+    /// stay the exemplar's own and each vertex keeps the exemplar address it came from.
+    #[default]
+    Discrete,
+    /// Kwatra et al. 2005's continuous solve to the end: each vertex the weighted mean of the
+    /// patches that cover it (about 16 at the default spacing), which blurs what they
+    /// disagree on.
+    Average,
 }
 
 impl Default for TextureOptimizationParams {
@@ -70,6 +88,7 @@ impl Default for TextureOptimizationParams {
             search_eps: 1.0,
             min_curve_distance: 1.0,
             histogram: 1.0,
+            solver: Solver::Discrete,
         }
     }
 }
@@ -132,8 +151,9 @@ pub struct SurfaceSynthesis {
     /// Per vertex RGB, in the exemplar's encoding.
     pub colours: Vec<[f32; 3]>,
     /// Per vertex: the exemplar texel address (pixel centres at integers, x right, y down) its
-    /// colour came from, taken from the covering patch of largest weight; `[-1, -1]` for
-    /// vertices used by no triangle.
+    /// colour came from: with the discrete solver, exactly the address whose bilinear lookup is
+    /// its colour; with the average, the address in the covering patch of largest weight.
+    /// `[-1, -1]` for vertices used by no triangle.
     pub source: Vec<[f32; 2]>,
     pub stats: SynthesisStats,
 }

@@ -4,7 +4,7 @@
 
 use super::candidates::{Candidates, Level, Rgb, Rot, build_candidates, margin};
 use super::params::{
-    SurfaceSynthesis, SurfaceSynthesisInput, SynthesisError, SynthesisStats,
+    Solver, SurfaceSynthesis, SurfaceSynthesisInput, SynthesisError, SynthesisStats,
     TextureOptimizationParams,
 };
 use super::patches::{
@@ -250,19 +250,7 @@ pub fn texture_optimization(
             }
             z = new_z;
             refresh_lookups(&mut lookups, &patches, &z, &cands, &rgb, rot);
-            // Kopf et al. §3.3: samples matched to over-used exemplar content count less in
-            // the colour solve.
-            let penalty = occurrence_penalty(&z, &cands, p.histogram);
-            let omega: Vec<f32> = patch_errors(&patches, &colours, &lookups)
-                .iter()
-                .zip(&z)
-                .map(|(&e, &zi)| {
-                    (e.sqrt() as f32)
-                        .max(MIN_PATCH_DISTANCE)
-                        .powf_pure(p.robust_exponent - 2.0)
-                        / penalty[zi as usize]
-                })
-                .collect();
+            let omega = robust_weights(&patches, &colours, &lookups, &z, &cands, p);
             solve_colours(
                 &patches,
                 &info,
@@ -271,6 +259,7 @@ pub fn texture_optimization(
                 &cands,
                 &z,
                 rot,
+                Solver::Average,
                 &mut colours,
                 &mut source,
             );
@@ -279,6 +268,14 @@ pub fn texture_optimization(
             stats.iterations_run += 1;
             done_iterations += 1;
             progress((done_iterations as f32 / total_iterations).min(1.0));
+        }
+        if p.solver == Solver::Discrete && li + 1 == levels.len() {
+            // The final discrete pass: each vertex copies its best-matching covering patch.
+            let omega = robust_weights(&patches, &colours, &lookups, &z, &cands, p);
+            let (c, s) = (&mut colours, &mut source);
+            solve_colours(
+                &patches, &info, &omega, &lookups, &cands, &z, rot, p.solver, c, s,
+            );
         }
         tracing::debug!(
             "texture optimization level {li}: {} candidates in {:?}, {ns} samples and patches in \
@@ -337,6 +334,29 @@ pub(super) fn refresh_lookups(
         });
 }
 
+/// Kwatra's `ω_p = |x_p − z_p|^(r−2)` per sample, divided by the occurrence penalty of its
+/// match: Kopf et al. §3.3, samples matched to over-used exemplar content count less.
+fn robust_weights(
+    patches: &Patches,
+    colours: &[[f32; 3]],
+    lookups: &[[f32; 3]],
+    z: &[u32],
+    cands: &Candidates,
+    p: &TextureOptimizationParams,
+) -> Vec<f32> {
+    let penalty = occurrence_penalty(z, cands, p.histogram);
+    patch_errors(patches, colours, lookups)
+        .iter()
+        .zip(z)
+        .map(|(&e, &zi)| {
+            (e.sqrt() as f32)
+                .max(MIN_PATCH_DISTANCE)
+                .powf_pure(p.robust_exponent - 2.0)
+                / penalty[zi as usize]
+        })
+        .collect()
+}
+
 /// `|x_p − z_p|²` per sample: squared RGB differences summed over the patch's vertices.
 pub(super) fn patch_errors(
     patches: &Patches,
@@ -370,8 +390,9 @@ pub(super) fn total_energy(
         .sum()
 }
 
-/// The least-squares step: each covered vertex takes the `λω`-weighted mean of its patches'
-/// lookups, and the source of the heaviest.
+/// The colour step: each covered vertex takes the lookup and source of its heaviest covering
+/// patch, the one of largest `λω` (`Solver::Discrete`), or the `λω`-weighted mean of its
+/// patches' lookups and the heaviest one's source (`Solver::Average`).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn solve_colours(
     patches: &Patches,
@@ -381,6 +402,7 @@ pub(super) fn solve_colours(
     cands: &Candidates,
     z: &[u32],
     rot: Rot,
+    solver: Solver,
     colours: &mut [[f32; 3]],
     source: &mut [[f32; 2]],
 ) {
@@ -408,7 +430,7 @@ pub(super) fn solve_colours(
                     best = (wgt, e);
                 }
             }
-            if wsum > 0.0 && wsum.is_finite() {
+            if solver == Solver::Average && wsum > 0.0 && wsum.is_finite() {
                 *col = acc.map(|a| a / wsum);
             } else {
                 *col = lookups[best.1];
