@@ -33,6 +33,7 @@ use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
 use crate::stages::field::feature_field::carry_field;
 use crate::stages::field::sweep_field::SweepField;
 use crate::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
+use crate::stages::reconstruct::feature_aligned_export::{ExemplarLookup, nearest_corner};
 use crate::stages::synthesize::graph_matching::GraphMatching;
 use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
 use glam::{Vec2, Vec3};
@@ -111,7 +112,8 @@ impl super::Planned for FeatureAlignedNodes {
     }
 }
 
-/// Feature-aligned texturing (Xu et al.): the refined mesh's colours, unfolded with the
+/// Feature-aligned texturing (Xu et al.): the refined mesh's texture as textured.glb's atlas
+/// holds it (the exemplar looked up inside each copied patch), unfolded with the
 /// frame texture optimization matches in (§5: `u` the field projected on the tangent plane,
 /// `v = n × u`, turned by the texture's principal angle onto exemplar pixel axes, 1 /
 /// `parameterize.scale` object units per texel), for the aligned result and, with `compare`,
@@ -125,6 +127,7 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
     let field = run.view(nodes.field)?;
     let tf = run.view(nodes.analyse_exemplar)?;
     let ex = run.view(nodes.exemplar)?;
+    let exemplar = ex.to_owned();
     let vectors = carry_field(&refined, &field.field.vectors);
     let vectors = vectors.map_err(|e| ScoreFailure::new(e.to_string()))?;
     let mesh = &refined.mesh;
@@ -148,8 +151,19 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
                 "internal error: colours and refined mesh disagree on the vertex count",
             ));
         }
+        // What textured.glb's atlas holds: the exemplar looked up inside each patch, the
+        // nearest corner's colour across seams.
+        let lookup = ExemplarLookup::new(&refined, &out.source, &exemplar);
+        let colours = &out.colours;
+        let shade = |f: usize, b: Vec3| {
+            let (tri, l) = (mesh.triangles[f], b.to_array());
+            let c = lookup
+                .colour(f, tri, l)
+                .unwrap_or_else(|| Vec3::from(colours[tri[nearest_corner(l)] as usize]));
+            [c.x, c.y, c.z, 1.0]
+        };
         let mut item = Item::new(format!("{what}, {DISCS_NOTE}"), "inputs.exemplar");
-        score_vertex_colours(run, &mut item, mesh, &out.colours, step, ex)?;
+        score_surface(run, &mut item, mesh, shade, step, ex)?;
         items.push(item);
     }
     Ok(items)
@@ -180,12 +194,35 @@ fn at_length(o: Vec2, len: f32) -> Vec2 {
 }
 
 /// Unfolds discs of `mesh` with the texel offset `step(from, to)` of each edge, fills their
-/// triangles with the interpolated vertex `colours` and scores them into `item`.
+/// triangles with the vertex `colours` interpolated, and scores them into `item`.
 fn score_vertex_colours(
     run: &Run,
     item: &mut Item,
     mesh: &crate::geom::Mesh,
     colours: &[[f32; 3]],
+    step: impl Fn(usize, usize) -> Vec2,
+    ex: crate::image::ImageView,
+) -> Result<(), ScoreFailure> {
+    let shade = |f: usize, b: Vec3| {
+        let t = mesh.triangles[f];
+        let mut c = [0.0f32, 0.0, 0.0, 1.0];
+        for (k, w) in b.to_array().into_iter().enumerate() {
+            for ch in 0..3 {
+                c[ch] += w * colours[t[k] as usize][ch];
+            }
+        }
+        c
+    };
+    score_surface(run, item, mesh, shade, step, ex)
+}
+
+/// Unfolds discs of `mesh` with the texel offset `step(from, to)` of each edge, fills their
+/// triangles with `shade(triangle, barycentrics)` and scores them into `item`.
+fn score_surface(
+    run: &Run,
+    item: &mut Item,
+    mesh: &crate::geom::Mesh,
+    shade: impl Fn(usize, Vec3) -> [f32; 4] + Sync,
     step: impl Fn(usize, usize) -> Vec2,
     ex: crate::image::ImageView,
 ) -> Result<(), ScoreFailure> {
@@ -213,16 +250,7 @@ fn score_vertex_colours(
         neighbors: &neighbors,
         edge_offsets: &offsets,
     };
-    let charts = unfolded_discs(&mesh.triangles, &edges, run.params.seed, |f, b| {
-        let t = mesh.triangles[f];
-        let mut c = [0.0f32, 0.0, 0.0, 1.0];
-        for (k, w) in b.to_array().into_iter().enumerate() {
-            for ch in 0..3 {
-                c[ch] += w * colours[t[k] as usize][ch];
-            }
-        }
-        c
-    });
+    let charts = unfolded_discs(&mesh.triangles, &edges, run.params.seed, shade);
     item.extra
         .insert("discs".into(), serde_json::json!(charts.discs));
     run.score_into(item, charts.image.view(), Some(&charts.mask), ex)

@@ -450,9 +450,9 @@ impl<'a> ExemplarLookup<'a> {
         }
     }
 
-    /// The colour at barycentrics `l` of refined triangle `t` (corners `tri`) when its corners
-    /// copied one patch.
-    fn colour(&self, t: usize, tri: [u32; 3], l: [f32; 3]) -> Option<Vec3> {
+    /// The colour at barycentrics `l` (summing to 1) of refined triangle `t` (corners `tri`)
+    /// when its corners copied one patch; `None` across a seam.
+    pub fn colour(&self, t: usize, tri: [u32; 3], l: [f32; 3]) -> Option<Vec3> {
         let exemplar = self.exemplar?;
         if !self.one_patch[t] {
             return None;
@@ -464,6 +464,13 @@ impl<'a> ExemplarLookup<'a> {
         let c = exemplar.view().sample(at);
         Some(Vec3::new(c[0], c[1], c[2]))
     }
+}
+
+/// The corner of largest barycentric weight (the first of equals).
+pub fn nearest_corner(l: [f32; 3]) -> usize {
+    (0..3)
+        .max_by(|&a, &b| l[a].total_cmp(&l[b]).then(b.cmp(&a)))
+        .unwrap_or(0)
 }
 
 /// The refined mesh's colours seen from the input mesh: a point of input triangle `f`, given by
@@ -611,8 +618,7 @@ impl crate::render::SurfaceShader for RefinedColours<'_> {
         if let Some(c) = self.lookup.colour(t as usize, tri, l) {
             return c;
         }
-        let nearest = (0..3).max_by(|&a, &b| l[a].total_cmp(&l[b]).then(b.cmp(&a)));
-        let c = self.colours[tri[nearest.unwrap_or(0)] as usize];
+        let c = self.colours[tri[nearest_corner(l)] as usize];
         Vec3::new(c[0], c[1], c[2])
     }
 }

@@ -134,8 +134,8 @@ impl Method for FeatureAligned {
                 Ok(Bundle::from(files))
             },
         );
-        let mut synthesize = vec![(aligned, "the refined mesh's colours")];
-        synthesize.extend(unaligned.map(|u| (u, "the unaligned comparison's colours")));
+        let mut synthesize = vec![(aligned, "the aligned texture as the atlas holds it")];
+        synthesize.extend(unaligned.map(|u| (u, "the unaligned comparison's texture")));
         let nodes = FeatureAlignedNodes {
             parameterize: refined,
             field,
