@@ -17,16 +17,36 @@ pub(crate) fn exemplar_size(config: &Config, path: &Path) -> Option<((u32, u32),
     Some((reader.into_dimensions().ok()?, path))
 }
 
-/// Refuses a config without a positive `parameterize.scale` (`what`: what the scale means).
-pub(crate) fn require_scale(config: &Config, scale: f32, what: &str) -> Result<(), MethodError> {
-    if !config.gives("parameterize", "scale") {
-        let msg = format!("is required: {what}");
-        return Err(config.invalid("parameterize.scale", &msg).into());
+/// Resolves `parameterize.scale = "auto"` (read as 0, also when not given) from the mesh's
+/// bounding box and the exemplar's width ([`automatic_scale`]), before any node is keyed, so
+/// a key holds the number used and a given number keys as before. When the mesh or the
+/// exemplar cannot be read, the scale is left at 0: their import nodes fail first and name
+/// the problem.
+///
+/// [`automatic_scale`]: crate::stages::parameterize::automatic_scale
+pub(crate) fn resolve_scale(
+    config: &Config,
+    scale: &mut f32,
+    mesh: &Path,
+    exemplar: &Path,
+) -> Result<(), MethodError> {
+    if *scale > 0.0 {
+        return Ok(());
     }
-    if !(scale.is_finite() && scale > 0.0) {
-        let msg = format!("must be a positive number, got {scale}");
-        return Err(config.invalid("parameterize.scale", &msg).into());
-    }
+    let Some(((width, _), _)) = exemplar_size(config, exemplar) else {
+        return Ok(());
+    };
+    let path = config.resolve(mesh);
+    let read = texsyn_core::geom::io::read_regular_file(&path).ok();
+    let Some(mesh) = read.and_then(|b| crate::geom::io::read_mesh_bytes(&path, &b).ok()) else {
+        return Ok(());
+    };
+    *scale = crate::stages::parameterize::automatic_scale(&mesh, width);
+    tracing::info!(
+        "parameterize.scale = \"auto\": {:.4} exemplar texels per unit (the exemplar's {width} texels span a quarter of {}'s bounding-box diagonal)",
+        *scale,
+        path.display()
+    );
     Ok(())
 }
 

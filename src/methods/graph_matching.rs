@@ -65,10 +65,9 @@ impl Method for GraphMatchingMethod {
     }
 
     fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
-        let c: GraphMatchingConfig = config.parse()?;
-        let what =
-            "level-0 exemplar texels per object unit (it sets how far the mesh is subdivided)";
-        super::require_scale(config, c.parameterize.scale, what)?;
+        let mut c: GraphMatchingConfig = config.parse()?;
+        let (mesh, exemplar) = (&c.inputs.mesh, &c.inputs.exemplar);
+        super::resolve_scale(config, &mut c.parameterize.scale, mesh, exemplar)?;
         c.analyse_exemplar.validate().map_err(|e| config.param(e))?;
         c.parameterize.validate().map_err(|e| config.param(e))?;
         c.field.validate().map_err(|e| config.param(e))?;

@@ -21,7 +21,7 @@ mod plan;
 pub use crate::score::Planned;
 pub(crate) use checks::{
     check_atlas_memory, check_memory, check_solid_memory, check_variant_memory, exemplar_size,
-    require_scale,
+    resolve_scale,
 };
 pub use import::{Import, import};
 pub(crate) use import::{Imports, input};

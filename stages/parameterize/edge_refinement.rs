@@ -15,7 +15,10 @@ pub use texsyn_core::geom::edge_refine::NODE;
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RefineParams {
-    /// Exemplar texels per object unit (required): sets the texture's size on the mesh.
+    /// Exemplar texels per object unit: sets the texture's size on the mesh. Default:
+    /// `"auto"` (read as 0 and resolved by the method: the exemplar's width spans a quarter
+    /// of the mesh's bounding-box diagonal).
+    #[serde(deserialize_with = "crate::parameterize::texels_or_auto")]
     pub scale: f32,
     /// Longest edge after refinement, in exemplar texels, 0.25..=8. Default: 1 (a vertex per
     /// texel, what §5's per-vertex optimization needs to show the texture's detail).

@@ -182,18 +182,6 @@ impl ParamParts<'_> {
     }
 }
 
-/// The texels-per-unit scale at which the exemplar's width spans a quarter of the bounding
-/// box diagonal.
-fn automatic_scale(mesh: &Mesh, width: u32) -> f32 {
-    let (lo, hi) = mesh.bounds();
-    let diag = (hi - lo).length();
-    if diag > 0.0 && diag.is_finite() {
-        width as f32 / (0.25 * diag)
-    } else {
-        1.0
-    }
-}
-
 pub fn jump_parameterization(
     mesh: &Mesh,
     up: &[glam::Vec3],
@@ -222,7 +210,7 @@ pub fn jump_parameterization(
     let adj = mesh.adjacency();
     let mut scale = match p.scale {
         Scale::Texels(s) => s,
-        Scale::Auto(_) => automatic_scale(mesh, w),
+        Scale::Auto(_) => crate::parameterize::automatic_scale(mesh, w),
     };
     let offsets_at = |scale: f32| {
         let mut o = edge_offsets(mesh, adj, up, scale);

@@ -328,7 +328,10 @@ pub fn adaptive_presubdivision(
 #[serde(deny_unknown_fields, default)]
 pub struct SubdivisionParams {
     /// Level-0 exemplar texels per object unit (the paper's r_scale, §3.3.2): the hierarchy is
-    /// refined until an edge spans about one texel. The method requires it (0 = not given).
+    /// refined until an edge spans about one texel. Default: `"auto"` (read as 0 and resolved
+    /// by the method: the exemplar's width spans a quarter of the mesh's bounding-box
+    /// diagonal).
+    #[serde(deserialize_with = "crate::parameterize::texels_or_auto")]
     pub scale: f32,
     /// The threshold factor f of §3.2.2: faces with area > f × mean are refined. 0 turns
     /// adaptive pre-subdivision off; otherwise 1 to 100. Default: 1.5 (the paper's choice for

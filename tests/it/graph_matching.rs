@@ -167,19 +167,69 @@ fn bad_inputs_are_named_before_synthesis() {
     // The cache's objects (its lock files, left by the imports, are not objects).
     let objects = common::cli::object_count(cache.path());
     assert!(objects <= 2, "{objects} objects stored before the error");
-    // The scale is required: it decides how far the mesh is subdivided.
-    let text = std::fs::read_to_string(repo().join("configs/graph_matching.toml")).unwrap();
+}
+
+/// `parameterize.scale = "auto"` (and no scale at all) follows jump maps' rule for graph
+/// matching and feature-aligned texturing: the exemplar's width spans a quarter of the mesh's
+/// bounding-box diagonal, so a mesh 1000× larger gets a scale 1000× smaller.
+#[test]
+fn auto_scale_spans_a_quarter_of_the_bounding_box_diagonal_at_any_size() {
     let dir = tempfile::tempdir().unwrap();
-    let cfg = dir.path().join("c.toml");
-    std::fs::write(
-        &cfg,
-        text.replace("scale = 120.0", "")
-            .replace("assets/", &format!("{}/configs/assets/", repo().display())),
-    )
-    .unwrap();
-    let e = common::plan_config(&cfg, &[], &[]).err().unwrap();
-    assert!(
-        e.contains("parameterize.scale") && e.contains("required"),
-        "{e}"
-    );
+    for (config, mesh, exemplar) in [
+        ("graph_matching.toml", "cow.obj", "wood1.png"),
+        ("feature_aligned.toml", "fandisk.off", "brick.png"),
+    ] {
+        let assets = repo().join("configs/assets");
+        let mesh = texsyn::geom::io::read_mesh(&assets.join(mesh)).unwrap();
+        let (width, _) = image::image_dimensions(assets.join(exemplar)).unwrap();
+        let mut scales = Vec::new();
+        for (factor, given) in [(1.0f32, "\"auto\""), (1000.0, "")] {
+            let mut big = mesh.clone();
+            big.positions.iter_mut().for_each(|p| *p *= factor);
+            let path = dir.path().join(format!("m{factor}.ply"));
+            std::fs::write(&path, texsyn::geom::io::write_ply(&big, None)).unwrap();
+            let mesh_set = format!("inputs.mesh={:?}", path.display().to_string());
+            let scale_set = format!("parameterize.scale={given}");
+            let sets: Vec<&str> = if given.is_empty() {
+                vec![&mesh_set]
+            } else {
+                vec![&mesh_set, &scale_set]
+            };
+            let cfg = repo().join("configs").join(config);
+            let plan = if given.is_empty() {
+                // Without the key at all: the config's own scale line removed.
+                let text = std::fs::read_to_string(&cfg).unwrap();
+                let text: String = (text.lines())
+                    .filter(|l| !l.trim_start().starts_with("scale"))
+                    .map(|l| format!("{l}\n"))
+                    .collect();
+                let copy = dir.path().join(config);
+                std::fs::write(
+                    &copy,
+                    text.replace("assets/", &format!("{}/", assets.display())),
+                )
+                .unwrap();
+                common::plan_config(&copy, &[], &sets)
+            } else {
+                common::plan_config(&cfg, &[], &sets)
+            };
+            let plan = plan.unwrap();
+            let node = plan
+                .dag
+                .nodes
+                .iter()
+                .find(|n| n.name == "parameterize")
+                .unwrap();
+            let scale = node.params_json["scale"].as_f64().unwrap() as f32;
+            let (lo, hi) = big.bounds();
+            let want = width as f32 / (0.25 * (hi - lo).length());
+            assert!(
+                (scale - want).abs() <= 1e-4 * want,
+                "{config} at {factor}×: scale {scale}, want {want}"
+            );
+            scales.push(scale);
+        }
+        let ratio = scales[0] / scales[1];
+        assert!((ratio - 1000.0).abs() < 0.1, "{config}: scales {scales:?}");
+    }
 }

@@ -54,9 +54,9 @@ pub struct Inputs {
 
 /// Parses the config and checks every section, naming the keys.
 pub(super) fn checked(config: &Config) -> Result<FeatureAlignedConfig, MethodError> {
-    let c: FeatureAlignedConfig = config.parse()?;
-    let what = "exemplar texels per object unit (the texture's size on the mesh)";
-    crate::methods::require_scale(config, c.parameterize.scale, what)?;
+    let mut c: FeatureAlignedConfig = config.parse()?;
+    let (mesh, exemplar) = (&c.inputs.mesh, &c.inputs.exemplar);
+    crate::methods::resolve_scale(config, &mut c.parameterize.scale, mesh, exemplar)?;
     c.parameterize.validate().map_err(|e| config.param(e))?;
     c.extract.validate().map_err(|e| config.param(e))?;
     c.analyse_exemplar.validate().map_err(|e| config.param(e))?;
