@@ -73,6 +73,9 @@ impl Method for GraphMatchingMethod {
         c.field.validate().map_err(|e| config.param(e))?;
         c.synthesize.validate().map_err(|e| config.param(e))?;
         c.reconstruct.validate().map_err(|e| config.param(e))?;
+        if c.reconstruct.atlas_size > 0 {
+            super::check_atlas_memory(config, c.reconstruct.atlas_size)?;
+        }
 
         let mut dag = Dag::default();
         let mesh = input::<Mesh>(&mut dag, config, "mesh", &c.inputs.mesh)?;
@@ -120,10 +123,11 @@ impl Method for GraphMatchingMethod {
         dag.node(
             NodeSpec::of(Stage::Reconstruct, vertex_colour_export::NODE),
             c.reconstruct.clone(),
-            (hierarchy, colours),
-            |ctx, p, (h, out)| {
+            (mesh, hierarchy, colours),
+            |ctx, p, (mesh, h, out)| {
                 let progress = |f| ctx.progress.set(f);
-                let files = vertex_colour_export::node(&h, &out.level_colours, p, &progress)?;
+                let colours = &out.level_colours;
+                let files = vertex_colour_export::node(&mesh, &h, colours, p, &progress)?;
                 Ok(Bundle::from(files))
             },
         );

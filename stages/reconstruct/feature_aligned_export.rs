@@ -342,34 +342,16 @@ fn glb(
             }
         },
     };
-    let mut scene = crate::export::GlbMesh {
-        name: "feature_aligned".into(),
-        material: crate::export::GlbMaterial {
-            double_sided: true,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
     let Some(atlas) = atlas else {
         let scene =
             crate::export::GlbMesh::vertex_coloured("feature_aligned", &refined.mesh, colours);
         return Ok((crate::export::write_glb(&scene), None));
     };
     let shader = RefinedColours::new(input, refined, colours, lookup);
-    let baked = crate::render::bake(&atlas, input, &shader);
-    let png = encode_png(&baked, false);
-    scene.material.base_color_png = Some(png.clone());
-    // One region per triangle: corners are unshared.
-    let normals = input.vertex_normals();
-    for t in &input.triangles {
-        for &v in t {
-            scene.positions.push(input.positions[v as usize]);
-            scene.normals.push(normals[v as usize]);
-            scene.indices.push(scene.indices.len() as u32);
-        }
-    }
-    scene.texcoords = vec![atlas.corner_uv.iter().flatten().copied().collect()];
-    Ok((crate::export::write_glb(&scene), Some(png)))
+    let png = encode_png(&crate::render::bake(&atlas, input, &shader), false);
+    let glb =
+        super::textured_export::per_triangle_atlas_glb("feature_aligned", input, &atlas, &png);
+    Ok((glb, Some(png)))
 }
 
 /// Where the atlas looks the exemplar up instead of interpolating vertex colours: the refined

@@ -3,6 +3,7 @@ pub mod blend2d;
 pub mod displacement;
 pub mod feature_aligned_export;
 pub mod feature_aligned_report;
+pub mod finest_level_bake;
 pub mod jump_blend;
 pub mod jump_export;
 pub mod relief_export;

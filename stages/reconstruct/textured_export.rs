@@ -134,6 +134,35 @@ impl ExportError {
     }
 }
 
+/// A glTF of `mesh` textured by a baked atlas of one region per triangle
+/// ([`crate::render::build_atlas`]; corners are unshared), the atlas `png` as base colour.
+pub fn per_triangle_atlas_glb(
+    name: &str,
+    mesh: &Mesh,
+    atlas: &crate::render::Atlas,
+    png: &[u8],
+) -> Vec<u8> {
+    let mut scene = GlbMesh {
+        name: name.into(),
+        material: GlbMaterial {
+            double_sided: true,
+            base_color_png: Some(png.to_vec()),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let normals = mesh.vertex_normals();
+    for t in &mesh.triangles {
+        for &v in t {
+            scene.positions.push(mesh.positions[v as usize]);
+            scene.normals.push(normals[v as usize]);
+            scene.indices.push(scene.indices.len() as u32);
+        }
+    }
+    scene.texcoords = vec![atlas.corner_uv.iter().flatten().copied().collect()];
+    write_glb(&scene)
+}
+
 /// Estimated peak memory, in bytes, of a baked atlas of `side` texels per side: about 9
 /// bytes per texel (the float image, its 8-bit copy and the PNG) and the mesh besides
 /// (measured: 152 MB at 4096², 547 MB at 8192² for the demo).

@@ -6,8 +6,11 @@
 //! - `textured.ply`: the finest level, triangulated (quads split along their shorter diagonal),
 //!   with a colour per vertex; vertex ids are the hierarchy's, so the input's vertices keep
 //!   theirs.
-//! - `textured.glb`: the same mesh with `COLOR_0` (converted to linear, as glTF wants). No atlas
-//!   is baked: vertex colours are what the method makes, and viewers show them directly.
+//! - `textured.glb`, `textured.obj` + `textured.mtl` and `textured_atlas.png`: the user's own
+//!   mesh (the input, before any subdivision) with the finest level's colours baked into an
+//!   atlas of its triangles ([`super::finest_level_bake`]), what a user opens in any viewer or
+//!   DCC tool. With `atlas_size = 0`: `textured.glb` is the finest level with `COLOR_0`
+//!   (converted to linear, as glTF wants) and no atlas or OBJ is written.
 //! - `preview.png`: three views, drawn by texsyn's rasterizer.
 //! - with `displacement > 0`: `displaced.obj` and `displaced.ply`, the finest mesh moved along
 //!   its normals by `displacement · (value − 0.5)`, value = the mean of R, G and B (a grey
@@ -27,7 +30,7 @@ use texsyn_core::algorithm::Failure;
 
 /// The `vertex_colour_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("vertex_colour_export", 1);
+    texsyn_core::algorithm::Algorithm::new("vertex_colour_export", 2);
 
 /// `[reconstruct]` of the graph-matching method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -42,6 +45,10 @@ pub struct VertexColourExportParams {
     pub displacement: f32,
     /// Also render every level (`level_NN.png`). Default: false.
     pub level_previews: bool,
+    /// Side of the atlas the finest level's colours are baked into for the input mesh,
+    /// 64..=8192; 0 bakes none (`textured.glb` is then the vertex-coloured finest level).
+    /// Default: 2048.
+    pub atlas_size: u32,
 }
 
 impl Default for VertexColourExportParams {
@@ -51,6 +58,7 @@ impl Default for VertexColourExportParams {
             up: [0.0, 1.0, 0.0],
             displacement: 0.0,
             level_previews: false,
+            atlas_size: 2048,
         }
     }
 }
@@ -59,6 +67,10 @@ impl VertexColourExportParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
         check_range("reconstruct.displacement", self.displacement, 0.0, 1e6)?;
+        if self.atlas_size != 0 {
+            let most = crate::render::MAX_ATLAS_SIZE;
+            check_range("reconstruct.atlas_size", self.atlas_size, 64, most)?;
+        }
         if !self.up.iter().all(|x| x.is_finite()) || Vec3::from(self.up).length() < 1e-12 {
             return Err(ParamError::invalid(
                 "reconstruct.up",
@@ -79,8 +91,10 @@ fn rgba(c: &[[f32; 3]]) -> Vec<[f32; 4]> {
     c.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect()
 }
 
-/// The output files (see the module doc). `levels` runs coarse to fine; the last is the result.
+/// The output files (see the module doc). `levels` runs coarse to fine; the last is the result;
+/// `input` is the user's mesh, which gets the baked atlas.
 pub fn export_vertex_colours(
+    input: &Mesh,
     levels: &[ColouredLevel],
     p: &VertexColourExportParams,
     progress: &dyn Fn(f32),
@@ -93,13 +107,48 @@ pub fn export_vertex_colours(
         up: Vec3::from(p.up),
         ..Default::default()
     };
-    let mut files = vec![
-        (
-            "textured.ply".to_string(),
-            crate::geom::io::write_ply(&tri, Some(&colours)),
-        ),
-        ("textured.glb".to_string(), glb(&tri, &colours)),
-    ];
+    let mut files = vec![(
+        "textured.ply".to_string(),
+        crate::geom::io::write_ply(&tri, Some(&colours)),
+    )];
+    let atlas = match p.atlas_size {
+        0 => None,
+        size => crate::render::build_atlas(input, size)
+            .inspect_err(|e| {
+                tracing::warn!(
+                    "reconstruct.atlas_size: {e}; textured.glb carries the finest level's vertex colours (COLOR_0) instead of a baked atlas of the input mesh"
+                )
+            })
+            .ok(),
+    };
+    match atlas {
+        Some(atlas) => {
+            let shader = super::finest_level_bake::FinestColours::new(input, &tri, finest.colours);
+            let png = encode_png(&crate::render::bake(&atlas, input, &shader), false);
+            let glb = super::textured_export::per_triangle_atlas_glb(
+                "graph_matching",
+                input,
+                &atlas,
+                &png,
+            );
+            let uv: Vec<[glam::Vec2; 3]> = (atlas.corner_uv.iter())
+                .map(|t| t.map(|q| glam::Vec2::new(q.x, 1.0 - q.y)))
+                .collect();
+            let obj = crate::export::write_obj(input, Some(&uv), Some("textured.mtl"), "texsyn");
+            let maps = crate::export::obj::MtlMaps {
+                diffuse: Some("textured_atlas.png".into()),
+                ..Default::default()
+            };
+            files.push(("textured.glb".into(), glb));
+            files.push(("textured.obj".into(), obj.into_bytes()));
+            files.push((
+                "textured.mtl".into(),
+                crate::export::obj::write_mtl("texsyn", &maps).into_bytes(),
+            ));
+            files.push(("textured_atlas.png".into(), png));
+        }
+        None => files.push(("textured.glb".to_string(), glb(&tri, &colours))),
+    }
     progress(0.2);
     let preview = render_views(
         &tri,
@@ -175,8 +224,9 @@ fn glb(mesh: &Mesh, colours: &[[f32; 4]]) -> Vec<u8> {
 }
 
 /// The reconstruct node: every level of the hierarchy with its colours (`level_colours`: all
-/// levels' vertices, coarsest first), exported.
+/// levels' vertices, coarsest first), exported, and the finest baked onto `input`.
 pub fn node(
+    input: &Mesh,
     h: &crate::parameterize::sqrt2_subdivision::Sqrt2Hierarchy,
     level_colours: &[[f32; 3]],
     p: &VertexColourExportParams,
@@ -195,7 +245,7 @@ pub fn node(
         });
         start += n;
     }
-    Ok(export_vertex_colours(&levels, p, progress))
+    Ok(export_vertex_colours(input, &levels, p, progress))
 }
 
 #[cfg(test)]

@@ -18,6 +18,7 @@ const SMALL: &[&str] = &[
     "parameterize.area_factor=0",
     "synthesize.region=3",
     "reconstruct.preview_size=48",
+    "reconstruct.atlas_size=1024",
 ];
 
 fn run(config: &str, sets: &[&str], cache: &std::path::Path) -> Result<RunResult, String> {
@@ -57,9 +58,21 @@ fn outputs_are_the_finest_level_coloured_and_the_same_for_any_thread_count() {
         header.contains(&format!("element vertex {finest}\n")),
         "{header}"
     );
-    for f in ["textured.glb", "preview.png"] {
+    for f in ["textured.glb", "preview.png", "textured_atlas.png", "textured.mtl"] {
         assert!(out.path().join(f).is_file(), "{f}");
     }
+    // The user's own mesh gets the baked atlas: the OBJ has the input's vertices, in order.
+    let input = texsyn::geom::io::read_mesh(&repo().join("configs/assets/cow.obj")).unwrap();
+    let obj = texsyn::geom::io::read_mesh(&out.path().join("textured.obj")).unwrap();
+    assert_eq!(obj.positions, input.positions);
+    assert_eq!(obj.triangles.len(), input.triangles.len());
+    let mtl = std::fs::read_to_string(out.path().join("textured.mtl")).unwrap();
+    assert!(mtl.contains("map_Kd textured_atlas.png"), "{mtl}");
+    // Without an atlas, textured.glb is the vertex-coloured finest level and no OBJ is written.
+    let r0 = run("graph_matching.toml", &["reconstruct.atlas_size=0"], cache.path()).unwrap();
+    let out0 = materialized(&r0, "reconstruct");
+    assert!(!out0.path().join("textured.obj").exists());
+    assert!(out0.path().join("textured.glb").is_file());
     for l in 0..h.levels() {
         assert!(out.path().join(format!("level_{l:02}.png")).is_file());
     }

@@ -222,7 +222,8 @@ fn a_killed_sweep_resumed_runs_only_its_missing_points() {
         match old {
             // A point done before the kill was not run again: its report is the same.
             Some(old) => assert_eq!(old, now, "point {i} ran again"),
-            // A missing point ran now, and computed its synthesis.
+            // A missing point ran now. Its synthesis ran now, or, when the kill came after
+            // that node was stored but before the point's report, was found in the cache.
             None => {
                 let r: serde_json::Value = serde_json::from_slice(&now).unwrap();
                 let synth = r["nodes"]
@@ -231,7 +232,8 @@ fn a_killed_sweep_resumed_runs_only_its_missing_points() {
                     .iter()
                     .find(|n| n["node"] == "synthesize")
                     .unwrap();
-                assert_eq!(synth["status"], "ran", "point {i}");
+                let status = synth["status"].as_str().unwrap_or("");
+                assert!(["ran", "cached"].contains(&status), "point {i}: {status}");
             }
         }
     }
