@@ -16,6 +16,7 @@ use crate::geom::Mesh;
 use crate::graph::Csr;
 use crate::render::shader::SurfaceShader;
 use glam::{IVec3, Vec3};
+use texsyn_core::math::PureMath;
 
 /// The finest level's colours seen from the input mesh, for baking.
 pub struct FinestColours<'a> {
@@ -80,7 +81,7 @@ impl TriangleGrid {
         let total = cells.x as f64 * cells.y as f64 * cells.z as f64;
         let most = 4.0 * tris as f64;
         if total > most {
-            cell *= (total / most).cbrt() as f32;
+            cell *= (total / most).cbrt_pure() as f32;
         }
         let dims = count(cell).as_ivec3();
         let mut grid = TriangleGrid {
