@@ -10,7 +10,8 @@
 //! surface, so the nearest point is the point itself and the atlas shows exactly what the
 //! vertex-coloured finest mesh shows; with smoothing it is the point's projection onto the
 //! smoothed surface. The nearest triangle is found through a uniform grid of cells about two
-//! finest edges wide, searched ring by ring until no nearer triangle can remain.
+//! finest edges wide, searched ring by ring until the block searched holds the nearest point
+//! found: a point on the finest surface ends in its own cell.
 
 use crate::geom::Mesh;
 use crate::graph::Csr;
@@ -126,11 +127,16 @@ impl TriangleGrid {
         let mut best: Option<(f32, u32, [f32; 3])> = None;
         let reach = self.dims.max_element();
         for ring in 0..=reach {
-            // Every triangle not yet seen is in a cell at least `ring - 1` cells away.
-            if let Some((d, _, _)) = best
-                && d.sqrt() < (ring - 1) as f32 * self.cell
-            {
-                break;
+            // Every triangle not yet seen lies outside the block of cells searched so far
+            // (rings below `ring`), so at least as far from `p` as that block's boundary. A
+            // point on the surface (distance 0) stops after its own cell.
+            if let Some((d, _, _)) = best {
+                let lo = self.origin + (centre - IVec3::splat(ring - 1)).as_vec3() * self.cell;
+                let hi = self.origin + (centre + IVec3::splat(ring)).as_vec3() * self.cell;
+                let gap = (p - lo).min(hi - p).min_element().max(0.0);
+                if d <= gap * gap {
+                    break;
+                }
             }
             for z in -ring..=ring {
                 for y in -ring..=ring {

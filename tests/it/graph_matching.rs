@@ -58,7 +58,12 @@ fn outputs_are_the_finest_level_coloured_and_the_same_for_any_thread_count() {
         header.contains(&format!("element vertex {finest}\n")),
         "{header}"
     );
-    for f in ["textured.glb", "preview.png", "textured_atlas.png", "textured.mtl"] {
+    for f in [
+        "textured.glb",
+        "preview.png",
+        "textured_atlas.png",
+        "textured.mtl",
+    ] {
         assert!(out.path().join(f).is_file(), "{f}");
     }
     // The user's own mesh gets the baked atlas: the OBJ has the input's vertices, in order.
@@ -69,7 +74,12 @@ fn outputs_are_the_finest_level_coloured_and_the_same_for_any_thread_count() {
     let mtl = std::fs::read_to_string(out.path().join("textured.mtl")).unwrap();
     assert!(mtl.contains("map_Kd textured_atlas.png"), "{mtl}");
     // Without an atlas, textured.glb is the vertex-coloured finest level and no OBJ is written.
-    let r0 = run("graph_matching.toml", &["reconstruct.atlas_size=0"], cache.path()).unwrap();
+    let r0 = run(
+        "graph_matching.toml",
+        &["reconstruct.atlas_size=0"],
+        cache.path(),
+    )
+    .unwrap();
     let out0 = materialized(&r0, "reconstruct");
     assert!(!out0.path().join("textured.obj").exists());
     assert!(out0.path().join("textured.glb").is_file());
