@@ -18,6 +18,7 @@
 //! `[score]` never reaches a node: it is taken out of the config before the method builds
 //! its DAG, so adding it changes no key and no lock file.
 
+pub mod alignment;
 pub mod charts;
 pub mod geometry;
 pub mod relief_frame;

@@ -163,7 +163,10 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
             [c.x, c.y, c.z, 1.0]
         };
         let mut item = Item::new(format!("{what}, {DISCS_NOTE}"), "inputs.exemplar");
-        score_surface(run, &mut item, mesh, shade, step, ex)?;
+        // The exemplar's principal line runs at `principal_angle` in its pixel axes, which the
+        // discs are unfolded onto.
+        let lines = Some(tf.principal_angle);
+        score_surface(run, &mut item, mesh, shade, step, ex, lines)?;
         items.push(item);
     }
     Ok(items)
@@ -213,11 +216,13 @@ fn score_vertex_colours(
         }
         c
     };
-    score_surface(run, item, mesh, shade, step, ex)
+    score_surface(run, item, mesh, shade, step, ex, None)
 }
 
 /// Unfolds discs of `mesh` with the texel offset `step(from, to)` of each edge, fills their
-/// triangles with `shade(triangle, barycentrics)` and scores them into `item`.
+/// triangles with `shade(triangle, barycentrics)` and scores them into `item`; with `lines`,
+/// also how well their lines follow that direction (radians in the discs' pixel axes,
+/// [`super::alignment`]), beside the exemplar's own measure as a reference.
 fn score_surface(
     run: &Run,
     item: &mut Item,
@@ -225,6 +230,7 @@ fn score_surface(
     shade: impl Fn(usize, Vec3) -> [f32; 4] + Sync,
     step: impl Fn(usize, usize) -> Vec2,
     ex: crate::image::ImageView,
+    lines: Option<f32>,
 ) -> Result<(), ScoreFailure> {
     let n = mesh.positions.len();
     let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -253,5 +259,17 @@ fn score_surface(
     let charts = unfolded_discs(&mesh.triangles, &edges, run.params.seed, shade);
     item.extra
         .insert("discs".into(), serde_json::json!(charts.discs));
+    if let Some(direction) = lines {
+        let measure = |a: Option<super::alignment::Alignment>| {
+            a.map(|a| serde_json::json!((a.median_degrees * 10.0).round() / 10.0))
+                .unwrap_or(serde_json::Value::Null)
+        };
+        let on_discs =
+            super::alignment::alignment(charts.image.view(), Some(&charts.mask), direction);
+        let exemplar = super::alignment::alignment(ex, None, direction);
+        item.extra.insert("alignment_deg".into(), measure(on_discs));
+        item.extra
+            .insert("exemplar_alignment_deg".into(), measure(exemplar));
+    }
     run.score_into(item, charts.image.view(), Some(&charts.mask), ex)
 }

@@ -302,3 +302,34 @@ fn an_atlas_that_cannot_be_built_names_a_value_that_works() {
     )
     .unwrap_or_else(|e| panic!("the value the message named fails: {e}"));
 }
+
+/// Graph matching's texture baked onto the user's mesh opens in glTF tools: the validator
+/// (full tier) finds no error, and the file holds the input's triangles, each corner with
+/// texture coordinates, and one base-colour texture.
+#[test]
+fn graph_matchings_baked_atlas_is_valid_gltf() {
+    let cache = tempfile::tempdir().unwrap();
+    let sets = [
+        "parameterize.scale=30",
+        "reconstruct.preview_size=48",
+        "reconstruct.atlas_size=1024",
+    ];
+    let config = repo().join("configs/graph_matching.toml");
+    let r = run_config(&config, &[], &sets, cache.path()).unwrap();
+    let out = materialized(&r, "reconstruct");
+    let glb_path = out.path().join("textured.glb");
+    if let Some(report) = validate(&glb_path) {
+        assert_eq!(report["numErrors"], 0, "{report}");
+    }
+    let json = glb_json(&std::fs::read(&glb_path).unwrap());
+    let prim = &json["meshes"][0]["primitives"][0];
+    let input = texsyn::geom::io::read_mesh(&repo().join("configs/assets/cow.obj")).unwrap();
+    let positions = prim["attributes"]["POSITION"].as_u64().unwrap() as usize;
+    assert_eq!(
+        json["accessors"][positions]["count"],
+        3 * input.triangles.len()
+    );
+    let uv = prim["attributes"]["TEXCOORD_0"].as_u64().unwrap() as usize;
+    assert_eq!(json["accessors"][uv]["count"], 3 * input.triangles.len());
+    assert_eq!(json["images"].as_array().unwrap().len(), 1);
+}
