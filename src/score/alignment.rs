@@ -47,9 +47,8 @@ pub fn alignment(image: ImageView, mask: Option<&[bool]>, direction: f32) -> Opt
             let mut whole = true;
             for y in y0..y0 + WINDOW {
                 for x in x0..x0 + WINDOW {
-                    if !(inside(x, y) && inside(x - 1, y) && inside(x + 1, y))
-                        || !(inside(x, y - 1) && inside(x, y + 1))
-                    {
+                    let neighbours = [(x, y), (x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)];
+                    if !neighbours.iter().all(|&(x, y)| inside(x, y)) {
                         whole = false;
                         continue;
                     }
