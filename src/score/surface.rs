@@ -127,7 +127,6 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
     let field = run.view(nodes.field)?;
     let tf = run.view(nodes.analyse_exemplar)?;
     let ex = run.view(nodes.exemplar)?;
-    let exemplar = ex.to_owned();
     let vectors = carry_field(&refined, &field.field.vectors);
     let vectors = vectors.map_err(|e| ScoreFailure::new(e.to_string()))?;
     let mesh = &refined.mesh;
@@ -153,7 +152,7 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
         }
         // What textured.glb's atlas holds: the exemplar looked up inside each patch, the
         // nearest corner's colour across seams.
-        let lookup = ExemplarLookup::new(&refined, &out.source, &exemplar);
+        let lookup = ExemplarLookup::new(&refined, &out.source, ex);
         let colours = &out.colours;
         let shade = |f: usize, b: Vec3| {
             let (tri, l) = (mesh.triangles[f], b.to_array());

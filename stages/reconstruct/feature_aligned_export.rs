@@ -134,7 +134,11 @@ pub fn export_feature_aligned(
         "textured.ply".to_string(),
         crate::geom::io::write_ply(mesh, Some(&colours)),
     )];
-    let lookup = ExemplarLookup::new(r.refined, r.source, r.exemplar);
+    let lookup = ExemplarLookup::new(r.refined, r.source, r.exemplar.view());
+    tracing::info!(
+        "atlas: {:.1} % of the refined triangles lie in one exemplar patch and are looked up in the exemplar; the rest copy their nearest corner's colour",
+        100.0 * lookup.looked_up_share()
+    );
     let (glb, atlas_png) = glb(r.input, r.refined, &colours, lookup, p.atlas_size)?;
     files.push(("textured.glb".into(), glb));
     if let Some(png) = atlas_png {
@@ -365,7 +369,7 @@ fn glb(
 /// edges a little where the surface bends away from the patch's tangent plane.
 pub struct ExemplarLookup<'a> {
     source: &'a [[f32; 2]],
-    exemplar: Option<&'a crate::image::Image>,
+    exemplar: Option<crate::image::ImageView<'a>>,
     /// Per refined triangle: its corners copied one patch.
     one_patch: Vec<bool>,
 }
@@ -374,7 +378,7 @@ impl<'a> ExemplarLookup<'a> {
     pub fn new(
         refined: &Refined,
         source: &'a [[f32; 2]],
-        exemplar: &'a crate::image::Image,
+        exemplar: crate::image::ImageView<'a>,
     ) -> Self {
         let m = &refined.mesh;
         let none = ExemplarLookup {
@@ -420,16 +424,17 @@ impl<'a> ExemplarLookup<'a> {
                         .all(|(a, b)| fits(edge(a, b)))
             })
             .collect::<Vec<bool>>();
-        let looked_up = one_patch.iter().filter(|&&b| b).count();
-        tracing::info!(
-            "atlas: {:.1} % of the refined triangles lie in one exemplar patch and are looked up in the exemplar; the rest copy their nearest corner's colour",
-            100.0 * looked_up as f64 / one_patch.len().max(1) as f64
-        );
         ExemplarLookup {
             source,
             exemplar: Some(exemplar),
             one_patch,
         }
+    }
+
+    /// The share of refined triangles looked up in the exemplar.
+    pub fn looked_up_share(&self) -> f64 {
+        let n = self.one_patch.iter().filter(|&&b| b).count();
+        n as f64 / self.one_patch.len().max(1) as f64
     }
 
     /// The colour at barycentrics `l` (summing to 1) of refined triangle `t` (corners `tri`)
@@ -443,7 +448,7 @@ impl<'a> ExemplarLookup<'a> {
         for k in 0..3 {
             at += glam::Vec2::from(self.source[tri[k] as usize]) * l[k];
         }
-        let c = exemplar.view().sample(at);
+        let c = exemplar.sample(at);
         Some(Vec3::new(c[0], c[1], c[2]))
     }
 }
@@ -669,6 +674,13 @@ mod tests {
         }
     }
 
+    /// The exemplar's colour at each address: what a vertex that copied it holds.
+    fn looked_up(source: &[[f32; 2]], exemplar: &crate::image::Image) -> Vec<[f32; 4]> {
+        (source.iter())
+            .map(|&s| exemplar.view().sample(s.into()))
+            .collect()
+    }
+
     /// The atlas shader's colours at 400 random points of the input mesh, with the point.
     fn shade_points(shader: &RefinedColours, input: &Mesh) -> Vec<(Vec3, Vec3)> {
         use crate::render::SurfaceShader;
@@ -704,11 +716,8 @@ mod tests {
             .iter()
             .map(|&p| address(p).into())
             .collect();
-        let colours: Vec<[f32; 4]> = source
-            .iter()
-            .map(|&s| exemplar.view().sample(s.into()))
-            .collect();
-        let lookup = ExemplarLookup::new(&refined, &source, &exemplar);
+        let colours = looked_up(&source, &exemplar);
+        let lookup = ExemplarLookup::new(&refined, &source, exemplar.view());
         assert!(
             lookup.one_patch.iter().all(|&b| b),
             "every triangle lies in the one patch"
@@ -734,11 +743,8 @@ mod tests {
         let source: Vec<[f32; 2]> = (refined.mesh.positions.iter())
             .map(|&p| (address(p) + glam::Vec2::new(shift(p), 0.0)).into())
             .collect();
-        let colours: Vec<[f32; 4]> = source
-            .iter()
-            .map(|&s| exemplar.view().sample(s.into()))
-            .collect();
-        let lookup = ExemplarLookup::new(&refined, &source, &exemplar);
+        let colours = looked_up(&source, &exemplar);
+        let lookup = ExemplarLookup::new(&refined, &source, exemplar.view());
         let seams = lookup.one_patch.iter().filter(|&&b| !b).count();
         assert!(
             seams > 0,

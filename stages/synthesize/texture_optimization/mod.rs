@@ -100,7 +100,7 @@
 //!   least-squares colours): Kwatra's M-step makes each vertex the weighted mean of the ~16
 //!   lookups that cover it. On a surface the overlapping patches' grids differ by sub-texel
 //!   shifts and rotations, so the mean is a blur even where they agree on content: kept to the
-//!   end, the average kept 17–19 % of the exemplar's gradient energy on fandisk (brick), a
+//!   end, the average kept 17–18 % of the exemplar's gradient energy on fandisk (brick), a
 //!   cactus (bark) and a mushroom (parquet). After the finest level's iterations each vertex
 //!   instead copies the lookup of its heaviest covering patch, the one of largest `λ_p ω_p`
 //!   (the sample whose exemplar patch matches best, weighted toward the curves): a real
@@ -373,7 +373,7 @@ mod tests {
             detail(&mesh, &average.colours),
             detail(&mesh, &discrete.colours),
         );
-        // Measured 1.36× here (on curved meshes with photographed exemplars, 2.2–2.5×).
+        // Measured 1.36× here (on curved meshes with photographed exemplars, 2.1–2.5×).
         assert!(
             d > 1.2 * a,
             "edge differences: discrete {d:.5}, average {a:.5}"
