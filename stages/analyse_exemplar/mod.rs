@@ -1,4 +1,5 @@
 //! Stage: analyse_exemplar.
+pub mod appearance_space;
 pub mod candidate_triples;
 pub mod feature_mask;
 pub mod gaussian_stack;

@@ -2,6 +2,7 @@
 //! cuts, where a tap outside the square is read (across a cut or mirrored), the quarter turn
 //! between two sides' axes, and the boundary strip the resynthesis passes visit.
 
+use crate::geom::geometry_image::GeometryImage;
 use crate::image::neighbourhood::mirror;
 
 /// Quarter turns of the tangent of each side (top, right, bottom, left) in `(x, y)` axes.
@@ -88,6 +89,52 @@ impl LevelGrid {
             }
         }
         false
+    }
+
+    /// The grid of pyramid level `l` of `gi`: its mates are those of the level-0 samples
+    /// `(i · 2^l, j · 2^l)` restricted to that lattice.
+    pub(super) fn of_level(gi: &GeometryImage, l: usize, strip_width: u32) -> LevelGrid {
+        let n0 = gi.n as usize;
+        let n = (n0 - 1) / (1 << l) + 1;
+        let mut first: Vec<u32> = vec![u32::MAX; n0 * n0];
+        let mut rep = vec![0u32; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                let key = gi.mate_rep[(i << l) * n0 + (j << l)] as usize;
+                if first[key] == u32::MAX {
+                    first[key] = (i * n + j) as u32;
+                }
+                rep[i * n + j] = first[key];
+            }
+        }
+        LevelGrid::build(n, rep, strip_width)
+    }
+
+    /// The texel at `(i, j)` as a neighbour of a texel inside: itself when inside, the texel
+    /// across the cut when `(i, j)` lies beyond one side sample that has a confirmed mate, and
+    /// `None` otherwise (beyond a corner, or an open side: there is no surface there).
+    pub(super) fn neighbour(&self, i: i64, j: i64) -> Option<usize> {
+        if self.inside(i, j) {
+            return Some(self.idx(i, j));
+        }
+        let n = self.n as i64;
+        let within = |v: i64| (0..n).contains(&v);
+        let (side, pos, b) = if i < 0 && within(j) {
+            (SIDE_TOP, j, -i)
+        } else if j >= n && within(i) {
+            (SIDE_RIGHT, i, j - (n - 1))
+        } else if i >= n && within(j) {
+            (SIDE_BOTTOM, j, i - (n - 1))
+        } else if j < 0 && within(i) {
+            (SIDE_LEFT, i, -j)
+        } else {
+            return None;
+        };
+        let (q, sq) = self.across[side as usize * self.n + pos as usize]?;
+        let (qi, qj) = self.coords(q);
+        let m = NORMAL[sq as usize];
+        let (ti, tj) = (qi + b * m.0, qj + b * m.1);
+        self.inside(ti, tj).then(|| self.idx(ti, tj))
     }
 
     pub(super) fn build(n: usize, rep: Vec<u32>, strip_width: u32) -> LevelGrid {

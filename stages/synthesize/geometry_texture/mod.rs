@@ -89,6 +89,7 @@
 //!
 //! [`SurfaceMetric`]: crate::synthesize::surface_metric::SurfaceMetric
 
+mod appearance_synthesis;
 mod controls;
 mod grid;
 mod level;
@@ -96,8 +97,11 @@ mod matching;
 mod params;
 mod run;
 
+pub use appearance_synthesis::synthesize_appearance;
 pub use controls::{TexelControls, sample_frame_maps, texel_controls};
-pub use params::{GeometrySynthParams, GeometryTextureError, ScaleChoice, Search, Taps};
+pub use params::{
+    GeometrySynthParams, GeometryTextureError, ScaleChoice, Search, SynthAlgorithm, Taps,
+};
 pub use run::synthesize_geometry_texture;
 
 /// The `geometry_texture` node's algorithm and version (part of its key; bump on any change of output).
@@ -121,5 +125,9 @@ pub fn node(
             "field and geometry image disagree on the sample count",
         ));
     }
-    synthesize_geometry_texture(gi, field, variants, p, progress).map_err(Failure::input)
+    match p.algorithm {
+        SynthAlgorithm::Template => synthesize_geometry_texture(gi, field, variants, p, progress),
+        SynthAlgorithm::Appearance => synthesize_appearance(gi, field, variants, p, progress),
+    }
+    .map_err(Failure::input)
 }

@@ -143,20 +143,9 @@ pub(super) fn synthesize_impl(
     // Level grids: mates from the level-0 samples on each level's lattice.
     let mut levels: Vec<Level> = Vec::with_capacity(nl);
     for l in 0..nl {
-        let n = (n0 - 1) / (1 << l) + 1;
+        let grid = LevelGrid::of_level(gi, l, p.boundary_strip);
+        let n = grid.n;
         let fine = |i: usize, j: usize| (i << l) * n0 + (j << l);
-        let mut first: Vec<u32> = vec![u32::MAX; n0 * n0];
-        let mut rep = vec![0u32; n * n];
-        for i in 0..n {
-            for j in 0..n {
-                let k = i * n + j;
-                let key = gi.mate_rep[fine(i, j)] as usize;
-                if first[key] == u32::MAX {
-                    first[key] = k as u32;
-                }
-                rep[k] = first[key];
-            }
-        }
         let mut orient = vec![0.0f32; n * n];
         let mut scale = vec![0.0f32; n * n];
         for i in 0..n {
@@ -172,7 +161,7 @@ pub(super) fn synthesize_impl(
             (0..n * n).map(|k| metric0[fine(k / n, k % n)]).collect()
         };
         levels.push(Level {
-            grid: LevelGrid::build(n, rep, p.boundary_strip),
+            grid,
             data: Vec::new(),
             init: Vec::new(),
             orient,

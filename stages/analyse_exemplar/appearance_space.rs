@@ -1,0 +1,345 @@
+//! A sample's appearance space, prepared for parallel synthesis of exemplar coordinates.
+//!
+//! Implements the exemplar side of S. Lefebvre and H. Hoppe, "Appearance-space texture
+//! synthesis" (SIGGRAPH 2006) §3 (the appearance-space transform: each texel's 5×5 neighbourhood
+//! reduced by PCA to a short appearance vector) on the Gaussian stack of S. Lefebvre and
+//! H. Hoppe, "Parallel controllable texture synthesis" (SIGGRAPH 2005) §3.1, with the
+//! k-coherence candidate sets of X. Tong et al. 2002 that their correction step (§3.2) draws
+//! from. Per stack level `ℓ` (spacing `h = 2^ℓ` finest texels):
+//! - the stack level: level `ℓ − 1` blurred by the 5-tap binomial with its taps `2^(ℓ−1)`
+//!   texels apart (à trous), borders clamped (samples are not assumed to tile);
+//! - appearance vectors: the 5×5 taps `h` apart around each texel (mirrored at the borders),
+//!   channels weighted by the variants' channel weights, reduced by PCA to
+//!   [`APPEARANCE_DIMS`];
+//! - neighbourhood vectors: the 3×3 appearance vectors `h` apart around each texel
+//!   ([`NEIGHBOURHOOD_DIMS`] numbers), which synthesis compares;
+//! - k-coherence sets: per texel, itself followed by the `k − 1` texels whose neighbourhood
+//!   vectors are nearest, among those at least `2h` texels away in either axis and at least
+//!   `h` inside the borders ([`interior_margin`]): synthesis steers coordinates into that
+//!   interior, so a coherent run that reaches a border restarts instead of repeating the
+//!   border texel into a streak.
+//!
+//! Departures: the paper builds its appearance vectors from the finest exemplar and a stack of
+//! them; here each level has its own basis, fitted to that level's (coarser, more blurred)
+//! neighbourhoods, as its Gaussian stack matches at that level. The candidate sets are searched
+//! in the first [`SEARCH_DIMS`] principal components of the neighbourhood vectors (a shortlist
+//! of `4k`), then ranked by the full vectors. The analysis runs inside the synthesis node:
+//! it takes about a tenth of a second for a 128² sample.
+
+use crate::geom::geometry_image::TexelImage;
+use crate::image::knn::{KdTree, squared_distance};
+use crate::image::neighbourhood::mirror;
+use crate::image::pca::{Pca, PcaParams};
+use rayon::prelude::*;
+
+/// Length of an appearance vector.
+pub const APPEARANCE_DIMS: usize = 8;
+/// Length of a neighbourhood vector: 3×3 appearance vectors.
+pub const NEIGHBOURHOOD_DIMS: usize = 9 * APPEARANCE_DIMS;
+/// Principal components of the neighbourhood vectors the candidate search runs in.
+pub const SEARCH_DIMS: usize = 8;
+/// At most this many vectors (a regular subsample) fit each PCA basis.
+const PCA_FIT_SAMPLES: usize = 16384;
+
+/// One stack level of the appearance space.
+pub struct AppearanceLevel {
+    /// Tap spacing in finest texels, `2^ℓ`.
+    pub spacing: u32,
+    /// Per texel (row by row), its [`NEIGHBOURHOOD_DIMS`] neighbourhood vector.
+    pub neighbourhoods: Vec<f32>,
+    /// Per texel, its k-coherence set: `k` texel indices, the texel itself first.
+    pub candidates: Vec<u32>,
+}
+
+/// A sample's appearance space: its size, its Gaussian stack, and one [`AppearanceLevel`] per
+/// stack level from `first` on.
+pub struct AppearanceSpace {
+    pub width: u32,
+    pub height: u32,
+    pub channels: usize,
+    /// Entries of each k-coherence set.
+    pub k: usize,
+    /// The first analysed stack level.
+    pub first: usize,
+    /// The Gaussian stack, unweighted: level `ℓ`'s texels row by row.
+    pub stack: Vec<Vec<f32>>,
+    /// Stack levels `first..`, analysed.
+    pub levels: Vec<AppearanceLevel>,
+}
+
+impl AppearanceSpace {
+    /// The appearance space of `sample`: `levels` stack levels, levels `first..levels`
+    /// analysed with channels weighted by `weights` and k-coherence sets of `k` (at least 1).
+    pub fn build(
+        sample: &TexelImage,
+        weights: &[f32],
+        levels: usize,
+        first: usize,
+        k: usize,
+    ) -> Self {
+        let (w, h) = (sample.width as usize, sample.height as usize);
+        let c = sample.channels as usize;
+        let k = k.max(1);
+        let mut stack: Vec<Vec<f32>> = vec![sample.data.clone()];
+        for l in 1..levels {
+            stack.push(blur_dilated(&stack[l - 1], w, h, c, 1i64 << (l - 1)));
+        }
+        let analysed = (first..levels)
+            .map(|l| {
+                let weighted: Vec<f32> = stack[l]
+                    .chunks_exact(c)
+                    .flat_map(|t| t.iter().zip(weights).map(|(v, wt)| v * wt))
+                    .collect();
+                let spacing = 1u32 << l;
+                let appearance = appearance_vectors(&weighted, w, h, c, spacing as i64);
+                let neighbourhoods = neighbourhood_vectors(&appearance, w, h, spacing as i64);
+                let candidates = coherence_sets(&neighbourhoods, w, h, spacing as i64, k);
+                AppearanceLevel {
+                    spacing,
+                    neighbourhoods,
+                    candidates,
+                }
+            })
+            .collect();
+        AppearanceSpace {
+            width: w as u32,
+            height: h as u32,
+            channels: c,
+            k,
+            first,
+            stack,
+            levels: analysed,
+        }
+    }
+
+    /// Analysed stack level `l` (at least `first`).
+    pub fn level(&self, l: usize) -> &AppearanceLevel {
+        &self.levels[l - self.first]
+    }
+}
+
+/// The binomial 1-4-6-4-1 blur along rows then columns with taps `step` texels apart, borders
+/// clamped.
+fn blur_dilated(src: &[f32], w: usize, h: usize, c: usize, step: i64) -> Vec<f32> {
+    const TAPS: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+    let pass = |src: &[f32], along_x: bool| -> Vec<f32> {
+        let mut dst = vec![0.0f32; src.len()];
+        dst.par_chunks_mut(w * c).enumerate().for_each(|(y, row)| {
+            for x in 0..w {
+                for (t, &wt) in TAPS.iter().enumerate() {
+                    let d = (t as i64 - 2) * step;
+                    let (sx, sy) = if along_x {
+                        ((x as i64 + d).clamp(0, w as i64 - 1) as usize, y)
+                    } else {
+                        (x, (y as i64 + d).clamp(0, h as i64 - 1) as usize)
+                    };
+                    let s = (sy * w + sx) * c;
+                    for ch in 0..c {
+                        row[x * c + ch] += wt * src[s + ch];
+                    }
+                }
+            }
+        });
+        dst
+    };
+    pass(&pass(src, true), false)
+}
+
+/// A regular subsample of at most [`PCA_FIT_SAMPLES`] of the `dim`-vectors in `data`.
+fn fit_subsample(data: &[f32], dim: usize) -> Vec<f32> {
+    let n = data.len() / dim;
+    let stride = n.div_ceil(PCA_FIT_SAMPLES).max(1);
+    data.chunks_exact(dim)
+        .step_by(stride)
+        .flatten()
+        .copied()
+        .collect()
+}
+
+fn pca_of(data: &[f32], dim: usize, components: usize) -> Pca {
+    let params = PcaParams {
+        components: components as u32,
+        ..Default::default()
+    };
+    Pca::fit(&fit_subsample(data, dim), dim, &params)
+}
+
+/// Each texel's 5×5 neighbourhood, taps `step` apart (mirrored at the borders), reduced to
+/// [`APPEARANCE_DIMS`] by PCA.
+fn appearance_vectors(stack: &[f32], w: usize, h: usize, c: usize, step: i64) -> Vec<f32> {
+    let dim = 25 * c;
+    let mut raw = vec![0.0f32; w * h * dim];
+    raw.par_chunks_mut(dim).enumerate().for_each(|(t, v)| {
+        let (x, y) = ((t % w) as i64, (t / w) as i64);
+        let mut o = 0;
+        for dy in -2..=2i64 {
+            for dx in -2..=2i64 {
+                let sx = mirror(x + dx * step, w as i64) as usize;
+                let sy = mirror(y + dy * step, h as i64) as usize;
+                let s = (sy * w + sx) * c;
+                v[o..o + c].copy_from_slice(&stack[s..s + c]);
+                o += c;
+            }
+        }
+    });
+    let pca = pca_of(&raw, dim, APPEARANCE_DIMS);
+    let mut out = pca.project_all(&raw);
+    // Fewer components than asked (a sample with few channels): pad with zeros.
+    let got = pca.components();
+    if got < APPEARANCE_DIMS {
+        out = out
+            .chunks_exact(got.max(1))
+            .flat_map(|a| {
+                let mut v = [0.0f32; APPEARANCE_DIMS];
+                v[..got].copy_from_slice(&a[..got]);
+                v
+            })
+            .collect();
+        if got == 0 {
+            out = vec![0.0; w * h * APPEARANCE_DIMS];
+        }
+    }
+    out
+}
+
+/// The 3×3 appearance vectors `step` apart around each texel (mirrored at the borders).
+fn neighbourhood_vectors(appearance: &[f32], w: usize, h: usize, step: i64) -> Vec<f32> {
+    let mut out = vec![0.0f32; w * h * NEIGHBOURHOOD_DIMS];
+    out.par_chunks_mut(NEIGHBOURHOOD_DIMS)
+        .enumerate()
+        .for_each(|(t, v)| {
+            let (x, y) = ((t % w) as i64, (t / w) as i64);
+            for (o, (dx, dy)) in TAPS_3X3.iter().enumerate() {
+                let sx = mirror(x + dx * step, w as i64) as usize;
+                let sy = mirror(y + dy * step, h as i64) as usize;
+                let s = (sy * w + sx) * APPEARANCE_DIMS;
+                v[o * APPEARANCE_DIMS..(o + 1) * APPEARANCE_DIMS]
+                    .copy_from_slice(&appearance[s..s + APPEARANCE_DIMS]);
+            }
+        });
+    out
+}
+
+/// The margin, in texels, of the interior a level's candidates come from: the spacing `h` of
+/// its 3×3 taps (so a candidate's neighbourhood reads no mirrored tap but those of the
+/// appearance vectors' outer ring), at most a quarter of the smaller side.
+pub fn interior_margin(w: u32, h: u32, spacing: u32) -> u32 {
+    spacing.min(w.min(h) / 4)
+}
+
+/// The 3×3 taps in row order, `(dx, dy)`.
+pub const TAPS_3X3: [(i64, i64); 9] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (0, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+
+/// Per texel, itself and the `k − 1` texels of the interior ([`interior_margin`]; at least
+/// `2 step` away in x or y) with the
+/// nearest neighbourhood vectors: a shortlist of `4k` from the first [`SEARCH_DIMS`]
+/// components, ranked by the full vectors (ties by index).
+fn coherence_sets(neigh: &[f32], w: usize, h: usize, step: i64, k: usize) -> Vec<u32> {
+    let n = w * h;
+    if k == 1 {
+        return (0..n as u32).collect();
+    }
+    let pca = pca_of(neigh, NEIGHBOURHOOD_DIMS, SEARCH_DIMS);
+    let dims = pca.components().max(1);
+    let reduced = if pca.components() == 0 {
+        vec![0.0; n]
+    } else {
+        pca.project_all(neigh)
+    };
+    let tree = KdTree::build(&reduced, dims);
+    let tree = tree.as_ref();
+    let mut out = vec![0u32; n * k];
+    out.par_chunks_mut(k).enumerate().for_each(|(t, set)| {
+        let (x, y) = ((t % w) as i64, (t / w) as i64);
+        let far = |u: u32| {
+            let (ux, uy) = ((u as usize % w) as i64, (u as usize / w) as i64);
+            let m = interior_margin(w as u32, h as u32, step as u32) as i64;
+            let inside = (m..w as i64 - m).contains(&ux) && (m..h as i64 - m).contains(&uy);
+            inside && ((ux - x).abs() >= 2 * step || (uy - y).abs() >= 2 * step)
+        };
+        let shortlist = tree.nearest(&reduced[t * dims..(t + 1) * dims], 4 * k, far);
+        let me = &neigh[t * NEIGHBOURHOOD_DIMS..(t + 1) * NEIGHBOURHOOD_DIMS];
+        let mut ranked: Vec<(f32, u32)> = shortlist
+            .iter()
+            .map(|&(u, _)| {
+                let u0 = u as usize * NEIGHBOURHOOD_DIMS;
+                (squared_distance(me, &neigh[u0..u0 + NEIGHBOURHOOD_DIMS]), u)
+            })
+            .collect();
+        ranked.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        set[0] = t as u32;
+        for (s, slot) in set[1..].iter_mut().enumerate() {
+            // Too few far texels (a tiny sample): repeat the texel itself.
+            *slot = ranked.get(s).map_or(t as u32, |r| r.1);
+        }
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stripes(w: u32, h: u32, period: u32) -> TexelImage {
+        let mut s = TexelImage::new(w, h, 3);
+        for y in 0..h {
+            for x in 0..w {
+                s.texel_mut(x, y)[2] = if (x / (period / 2)) % 2 == 0 {
+                    1.0
+                } else {
+                    0.0
+                };
+            }
+        }
+        s
+    }
+
+    #[test]
+    fn candidates_of_vertical_stripes_share_the_phase_and_keep_their_distance() {
+        let s = stripes(48, 48, 8);
+        let space = AppearanceSpace::build(&s, &[1.0, 1.0, 1.0], 2, 0, 4);
+        let lv = &space.levels[0];
+        for y in (6..42).step_by(5) {
+            for x in (6..42).step_by(5) {
+                let t = y * 48 + x;
+                let set = &lv.candidates[t * 4..t * 4 + 4];
+                assert_eq!(set[0], t as u32, "the texel itself first");
+                for &u in &set[1..] {
+                    let (ux, uy) = (u as usize % 48, u as usize / 48);
+                    let far = ux.abs_diff(x) >= 2 || uy.abs_diff(y) >= 2;
+                    assert!(far, "candidate {ux},{uy} of {x},{y} is too close");
+                    // Away from the borders, the best matches sit at the same stripe phase.
+                    if (6..42).contains(&ux) && (6..42).contains(&uy) {
+                        assert_eq!(ux % 8, x % 8, "candidate {ux},{uy} of {x},{y}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn coarser_levels_are_blurred_and_their_taps_spread() {
+        let s = stripes(64, 64, 4);
+        let space = AppearanceSpace::build(&s, &[1.0, 1.0, 1.0], 3, 0, 2);
+        assert_eq!(space.levels.len(), 3);
+        assert_eq!(space.levels[2].spacing, 4);
+        // Period-4 stripes vanish from level 2 on (a blur across 2 periods): its
+        // neighbourhoods nearly agree away from the borders, level 0's do not.
+        let spread = |lv: &AppearanceLevel| {
+            let a = &lv.neighbourhoods[(32 * 64 + 30) * NEIGHBOURHOOD_DIMS..][..NEIGHBOURHOOD_DIMS];
+            let b = &lv.neighbourhoods[(32 * 64 + 32) * NEIGHBOURHOOD_DIMS..][..NEIGHBOURHOOD_DIMS];
+            squared_distance(a, b)
+        };
+        assert!(spread(&space.levels[0]) > 100.0 * spread(&space.levels[2]));
+    }
+}

@@ -1,0 +1,418 @@
+//! Parallel synthesis of sample coordinates over a geometry image, in appearance space.
+//!
+//! Implements S. Lefebvre and H. Hoppe, "Parallel controllable texture synthesis" (SIGGRAPH
+//! 2005) §3 (coordinate upsampling, jitter, correction in sub-passes) with the appearance
+//! vectors and anisometric synthesis of S. Lefebvre and H. Hoppe, "Appearance-space texture
+//! synthesis" (SIGGRAPH 2006) §3 and §6, on the geometry images of Lai et al. (SPM 2005).
+//! Every output texel is a coordinate in the sample, so a structure that is connected in the
+//! sample stays connected wherever a coherent run copies it; the relief is gathered from the
+//! sample at the end.
+//!
+//! The Jacobian field is [`sample_frame_maps`]: per sample, the map `M` from grid offsets to
+//! sample offsets, which holds the field's orientation and scale (Lai et al. §4.3, continuous
+//! here instead of their 8 × 3 variants) and the geometry image's surface metric (its
+//! anisometry). At pyramid level `l` (grid side `(n − 1)/2^l + 1`, stack spacing `h = 2^l`):
+//! 1. **Upsampling** (2005 §3.1): texel `(i, j)` takes its parent `(i/2, j/2)`'s coordinate plus
+//!    `h · M (j mod 2, i mod 2)`, rounded; the coarsest level starts from coordinates drawn at
+//!    random.
+//! 2. **Jitter** (2005 §3.1): each coordinate moves by `h · jitter · ζ`, `ζ` uniform in
+//!    `[−1, 1]²` from a counter-based hash, rounded.
+//! 3. **Correction** (2005 §3.2, 2006 §6): `appearance_passes` passes (twice as many at the
+//!    coarsest level), each of 4 sub-passes over the texels of one parity class `(i mod 2,
+//!    j mod 2)`. A texel's neighbourhood is the appearance vectors at the 3×3 sample offsets
+//!    `h Δ`: tap `Δ` is predicted from the grid neighbour `g = round(M⁻¹ Δ)` as its coordinate
+//!    `− h M g + h Δ` (anisometric: 2006 §6); the candidates are the k-coherence sets of the
+//!    coordinates the neighbours imply for the texel (`− h M g`). The nearest candidate
+//!    neighbourhood wins (the texel's current coordinate on ties).
+//!
+//! Geometry-image cuts (Lai et al. §4.2.2): a neighbour beyond a side sample with a confirmed
+//! mate is read across the cut ([`LevelGrid::neighbour`]); coordinates are frame-free, so
+//! nothing turns. Every mate group takes one member's coordinate (chosen by hash) after the
+//! upsampling and after every sub-pass, so the cut is synthesized as one surface and mated
+//! texels end bit-identical. Lai et al.'s separate boundary resynthesis is not needed: the
+//! correction passes already see both sides of every cut.
+//!
+//! Departures: coordinates are clamped inside the sample (samples are not assumed to tile);
+//! beyond an open side or a corner a tap is predicted from the texel itself; the appearance
+//! space is built per run ([`AppearanceSpace`]) from the sample at the variants' middle scale.
+//! Thread count does not change the result: each sub-pass reads only the coordinates the
+//! previous one left.
+
+use super::ParamField;
+use super::controls::{sample_frame_maps, texel_controls};
+use super::grid::LevelGrid;
+use super::params::{GeometrySynthParams, GeometryTextureError, check_inputs};
+use crate::analyse_exemplar::appearance_space::{
+    APPEARANCE_DIMS, AppearanceLevel, AppearanceSpace, NEIGHBOURHOOD_DIMS, TAPS_3X3,
+    interior_margin,
+};
+use crate::analyse_exemplar::texel_variants::TexelVariantsRef;
+use crate::geom::geometry_image::{GeometryImage, TexelImage};
+use crate::image::knn::squared_distance;
+use crate::random::{counter_hash, counter_unit};
+use rayon::prelude::*;
+use texsyn_core::math::PureMath;
+
+const STREAM_START: u64 = 0x6173_0001;
+const STREAM_JITTER: u64 = 0x6173_0002;
+const STREAM_MATE: u64 = 0x6173_0003;
+
+/// The parity classes of the 4 sub-passes, `(i mod 2, j mod 2)`.
+const SUB_PASSES: [(usize, usize); 4] = [(0, 0), (1, 1), (0, 1), (1, 0)];
+
+/// The smallest grid side the coarsest level may have.
+const MIN_SIDE: usize = 5;
+
+/// The stack levels a sample of `w × h` has: spacings up to `min(w, h) / 8`, so the coarsest
+/// level's 5×5 × 3×3 footprint (`± 3 h`) stays within the sample.
+fn stack_levels(w: u32, h: u32) -> usize {
+    let mut stack = 1;
+    while (1u32 << stack) * 8 <= w.min(h) {
+        stack += 1;
+    }
+    stack
+}
+
+/// The grid levels a geometry image of side `n` can halve into, down to [`MIN_SIDE`].
+fn grid_levels(n: usize) -> usize {
+    let mut levels = 1;
+    while (n - 1).is_multiple_of(1 << levels) && (n - 1) / (1 << levels) + 1 >= MIN_SIDE {
+        levels += 1;
+    }
+    levels
+}
+
+/// The stack level whose spacing is nearest the footprint `√|det M|` of a grid step, in
+/// `0..levels`.
+fn footprint_level(m: &[f32; 4], levels: usize) -> usize {
+    let det = (m[0] as f64 * m[3] as f64 - m[1] as f64 * m[2] as f64).abs();
+    if det <= 0.0 {
+        return 0;
+    }
+    (0.5 * det.log2_pure())
+        .round()
+        .clamp(0.0, (levels - 1) as f64) as usize
+}
+
+/// One level's state: its grid, each texel's map `M` (from level-0 grid steps) and its
+/// sample coordinate.
+struct Level {
+    grid: LevelGrid,
+    /// Level-0 grid steps per step of this level, `2^l`.
+    step: f64,
+    /// Stack spacing per grid step of `M`'s scale, `2^lift` (see [`synthesize_appearance`]).
+    lift: f64,
+    maps: Vec<[f32; 4]>,
+    /// Continuous sample coordinates (texel centres at integers).
+    coords: Vec<[f32; 2]>,
+}
+
+/// The size of the sample the coordinates point into.
+struct Sample {
+    width: i32,
+    height: i32,
+}
+
+impl Sample {
+    /// `(x, y)` clamped inside the sample.
+    #[inline]
+    fn clamp(&self, x: f64, y: f64) -> [f32; 2] {
+        [
+            x.clamp(0.0, (self.width - 1) as f64) as f32,
+            y.clamp(0.0, (self.height - 1) as f64) as f32,
+        ]
+    }
+
+    /// Whether `(x, y)` rounds to a texel at least `margin` inside the sample's borders.
+    #[inline]
+    fn inside(&self, x: f64, y: f64, margin: f64) -> bool {
+        let (x, y) = ((x + 0.5).floor(), (y + 0.5).floor());
+        (margin..=(self.width - 1) as f64 - margin).contains(&x)
+            && (margin..=(self.height - 1) as f64 - margin).contains(&y)
+    }
+
+    /// The texel nearest `u`.
+    #[inline]
+    fn index(&self, u: [f32; 2]) -> usize {
+        let x = ((u[0] + 0.5).floor() as i64).clamp(0, self.width as i64 - 1) as usize;
+        let y = ((u[1] + 0.5).floor() as i64).clamp(0, self.height as i64 - 1) as usize;
+        y * self.width as usize + x
+    }
+
+    /// `u`'s offset from the texel nearest it.
+    #[inline]
+    fn remainder(&self, u: [f32; 2]) -> [f32; 2] {
+        let t = self.index(u);
+        let w = self.width as usize;
+        [u[0] - (t % w) as f32, u[1] - (t / w) as f32]
+    }
+
+    /// Bilinear interpolation of the `c`-channel `texels` at `u`, into `out`.
+    fn bilinear(&self, texels: &[f32], c: usize, u: [f32; 2], out: &mut [f32]) {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let (x0, y0) = (u[0].floor().max(0.0), u[1].floor().max(0.0));
+        let (fx, fy) = (u[0] - x0, u[1] - y0);
+        let (x0, y0) = ((x0 as usize).min(w - 1), (y0 as usize).min(h - 1));
+        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+        for (ch, o) in out.iter_mut().enumerate().take(c) {
+            let at = |x: usize, y: usize| texels[(y * w + x) * c + ch];
+            let top = at(x0, y0) + (at(x1, y0) - at(x0, y0)) * fx;
+            let bot = at(x0, y1) + (at(x1, y1) - at(x0, y1)) * fx;
+            *o = top + (bot - top) * fy;
+        }
+    }
+}
+
+#[inline]
+fn apply(m: &[f32; 4], x: f64, y: f64) -> (f64, f64) {
+    (
+        m[0] as f64 * x + m[1] as f64 * y,
+        m[2] as f64 * x + m[3] as f64 * y,
+    )
+}
+
+/// The grid offsets `round(lift · M⁻¹ Δ)` of the 3×3 taps (`(0, 0)` for a singular map).
+fn tap_offsets(m: &[f32; 4], lift: f64) -> [(i64, i64); 9] {
+    let (a, b, c, d) = (m[0] as f64, m[1] as f64, m[2] as f64, m[3] as f64);
+    let det = a * d - b * c;
+    let mut out = [(0i64, 0i64); 9];
+    if det.abs() < 1e-12 {
+        return out;
+    }
+    for (o, &(dx, dy)) in out.iter_mut().zip(&TAPS_3X3) {
+        let (dx, dy) = (lift * dx as f64, lift * dy as f64);
+        let gx = (d * dx - b * dy) / det;
+        let gy = (-c * dx + a * dy) / det;
+        *o = ((gx + 0.5).floor() as i64, (gy + 0.5).floor() as i64);
+    }
+    out
+}
+
+/// The corrected coordinate of texel `t` of `lv` (see the module docs, step 3).
+fn correct(
+    lv: &Level,
+    s: &Sample,
+    al: &AppearanceLevel,
+    k: usize,
+    penalty: f32,
+    t: usize,
+) -> [f32; 2] {
+    let (i, j) = lv.grid.coords(t as u32);
+    let h = al.spacing as f64;
+    let step = lv.step;
+    let m = &lv.maps[t];
+    let me = lv.coords[t];
+    let mut query = [0.0f32; NEIGHBOURHOOD_DIMS];
+    let mut bases: [Option<(usize, [f32; 2])>; 9] = [None; 9];
+    let centre = 4 * APPEARANCE_DIMS;
+    let margin = interior_margin(s.width as u32, s.height as u32, al.spacing) as f64;
+    for (o, (&g, &(dx, dy))) in tap_offsets(m, lv.lift).iter().zip(&TAPS_3X3).enumerate() {
+        let at = match lv.grid.neighbour(i + g.1, j + g.0) {
+            Some(q) => {
+                let (sx, sy) = apply(m, g.0 as f64, g.1 as f64);
+                let u = lv.coords[q];
+                let (bx, by) = (u[0] as f64 - step * sx, u[1] as f64 - step * sy);
+                // A neighbour whose coherent run has left the sample proposes nothing:
+                // clamped, its proposal would repeat the sample's border into streaks.
+                if s.inside(bx, by, margin) {
+                    let base = s.clamp(bx, by);
+                    bases[o] = Some((s.index(base), s.remainder(base)));
+                }
+                s.clamp(
+                    u[0] as f64 - step * sx + h * dx as f64,
+                    u[1] as f64 - step * sy + h * dy as f64,
+                )
+            }
+            None => s.clamp(me[0] as f64 + h * dx as f64, me[1] as f64 + h * dy as f64),
+        };
+        let a = s.index(at) * NEIGHBOURHOOD_DIMS + centre;
+        query[o * APPEARANCE_DIMS..(o + 1) * APPEARANCE_DIMS]
+            .copy_from_slice(&al.neighbourhoods[a..a + APPEARANCE_DIMS]);
+    }
+    let dist = |u: usize| {
+        squared_distance(
+            &query,
+            &al.neighbourhoods[u * NEIGHBOURHOOD_DIMS..(u + 1) * NEIGHBOURHOOD_DIMS],
+        )
+    };
+    // A candidate keeps the sub-texel remainder of the coordinate it was proposed from, so a
+    // coherent run advances by `M g` exactly, not by whole texels (which repeats texels into
+    // streaks where a grid step spans less than a sample texel).
+    // The texel's own coordinate competes only inside the interior; outside it (a run that
+    // left it), the first proposal, or the interior texel nearest, takes its place.
+    let own = s.index(me);
+    let mut best = if s.inside(me[0] as f64, me[1] as f64, margin) {
+        (dist(own), own, s.remainder(me))
+    } else {
+        let m = margin as f32;
+        let (wf, hf) = ((s.width - 1) as f32 - m, (s.height - 1) as f32 - m);
+        let back = [me[0].clamp(m, wf), me[1].clamp(m, hf)];
+        let u = s.index(back);
+        (f32::INFINITY, u, s.remainder(back))
+    };
+    for &(base, rem) in bases.iter().flatten() {
+        for (e, &u) in al.candidates[base * k..(base + 1) * k].iter().enumerate() {
+            let u = u as usize;
+            // The coherent candidate (the base itself) is favoured by `1 + coherence`.
+            let d = if e == 0 { dist(u) } else { dist(u) * penalty };
+            if d < best.0 {
+                best = (d, u, rem);
+            }
+        }
+    }
+    let w = s.width as usize;
+    s.clamp(
+        (best.1 % w) as f64 + best.2[0] as f64,
+        (best.1 / w) as f64 + best.2[1] as f64,
+    )
+}
+
+/// Gives every mate group of `lv` one member's coordinate, chosen by hash of `(seed, step)`.
+fn unify_mates(lv: &mut Level, seed: u64, step: u64) {
+    for g in &lv.grid.groups {
+        let pick = counter_hash(seed, STREAM_MATE, step << 32 | g[0] as u64) % g.len() as u64;
+        let u = lv.coords[g[pick as usize] as usize];
+        for &q in g {
+            lv.coords[q as usize] = u;
+        }
+    }
+}
+
+/// Synthesizes a texel image over `gi` by appearance-space synthesis of sample coordinates
+/// (see the module docs); the result is as [`super::synthesize_geometry_texture`]'s.
+pub fn synthesize_appearance(
+    gi: &GeometryImage,
+    field: &ParamField,
+    variants: &TexelVariantsRef<'_>,
+    p: &GeometrySynthParams,
+    progress: &dyn Fn(f32),
+) -> Result<TexelImage, GeometryTextureError> {
+    p.validate()?;
+    check_inputs(gi, field, 1)?;
+    progress(0.0);
+    let vp = variants.params();
+    let c = variants.channels();
+    let n0 = gi.n as usize;
+    let base = variants.level(variants.variant(vp.middle_scale(), 0), 0);
+    let sample = TexelImage {
+        width: base.width,
+        height: base.height,
+        channels: c as u32,
+        data: base.texels.to_vec(),
+    };
+    let controls = texel_controls(gi, field, vp, p);
+    let maps0 = sample_frame_maps(&controls, variants);
+    // Grid level l matches at stack level l + lift, the lift being the footprint level of the
+    // median grid step: where a grid step spans 4 sample texels, level 0 matches at spacing 4.
+    let total = stack_levels(sample.width, sample.height);
+    let mut footprints: Vec<usize> = maps0.iter().map(|m| footprint_level(m, total)).collect();
+    footprints.sort_unstable();
+    let lift = footprints[footprints.len() / 2];
+    let nl = grid_levels(n0).min(total - lift).max(1);
+    let k = p.appearance_k as usize;
+    let penalty = 1.0 + p.appearance_coherence;
+    let weights = &variants.meta.channel_weights;
+    let space = AppearanceSpace::build(&sample, weights, lift + nl, lift, k);
+    let s = Sample {
+        width: sample.width as i32,
+        height: sample.height as i32,
+    };
+
+    let mut step = 0u64;
+    let mut coarser: Option<Level> = None;
+    for l in (0..nl).rev() {
+        let grid = LevelGrid::of_level(gi, l, 1);
+        let n = grid.n;
+        let maps: Vec<[f32; 4]> = (0..n * n)
+            .map(|t| maps0[((t / n) << l) * n0 + ((t % n) << l)])
+            .collect();
+        let h = (1u64 << l) as f64;
+        let al = space.level(l + lift);
+        // 1. Upsampling, or the random start.
+        let coords: Vec<[f32; 2]> = (0..n * n)
+            .into_par_iter()
+            .map(|t| match &coarser {
+                None => {
+                    let r = counter_hash(p.seed, STREAM_START, t as u64);
+                    let count = (s.width * s.height) as u64;
+                    let u = (r % count) as i32;
+                    [(u % s.width) as f32, (u / s.width) as f32]
+                }
+                Some(cl) => {
+                    let (i, j) = (t / n, t % n);
+                    let u = cl.coords[(i / 2) * cl.grid.n + j / 2];
+                    let (ox, oy) = apply(&maps[t], (j % 2) as f64, (i % 2) as f64);
+                    s.clamp(u[0] as f64 + h * ox, u[1] as f64 + h * oy)
+                }
+            })
+            .collect();
+        let mut lv = Level {
+            grid,
+            step: h,
+            lift: (1u64 << lift) as f64,
+            maps,
+            coords,
+        };
+        // 2. Jitter.
+        if p.jitter > 0.0 {
+            let amp = al.spacing as f64 * p.jitter as f64;
+            lv.coords.par_iter_mut().enumerate().for_each(|(t, u)| {
+                let key = (l as u64) << 40 | (t as u64) << 1;
+                let zx = counter_unit(p.seed, STREAM_JITTER, key) as f64 * 2.0 - 1.0;
+                let zy = counter_unit(p.seed, STREAM_JITTER, key | 1) as f64 * 2.0 - 1.0;
+                // Whole texels (the paper's floor(h r ζ + ½)): a sub-texel jitter would blur
+                // the gathered relief and shift every tap off the texels the candidates hold.
+                let jx = (amp * zx + 0.5).floor();
+                let jy = (amp * zy + 0.5).floor();
+                *u = s.clamp(u[0] as f64 + jx, u[1] as f64 + jy);
+            });
+        }
+        unify_mates(&mut lv, p.seed, step);
+        step += 1;
+        // 3. Correction in sub-passes.
+        let passes = p.appearance_passes * if coarser.is_none() { 2 } else { 1 };
+        for _ in 0..passes {
+            for &(pi, pj) in &SUB_PASSES {
+                let rows: Vec<usize> = (pi..n).step_by(2).collect();
+                let fixed: Vec<Vec<[f32; 2]>> = rows
+                    .par_iter()
+                    .map(|&i| {
+                        (pj..n)
+                            .step_by(2)
+                            .map(|j| correct(&lv, &s, al, k, penalty, i * n + j))
+                            .collect()
+                    })
+                    .collect();
+                for (&i, row) in rows.iter().zip(&fixed) {
+                    for (j, &u) in (pj..n).step_by(2).zip(row) {
+                        lv.coords[i * n + j] = u;
+                    }
+                }
+                unify_mates(&mut lv, p.seed, step);
+                step += 1;
+            }
+        }
+        progress((nl - l) as f32 / (nl as f32 + 0.5));
+        coarser = Some(lv);
+    }
+
+    // Gather the relief: each texel the sample's value at its coordinate, from the stack level
+    // of its grid step's footprint (a step spanning 4 sample texels cannot show finer relief),
+    // (dx, dy) turned into the grid's axes; a mated texel takes its representative's (in the
+    // representative's axes).
+    let lv = coarser.expect("at least one level");
+    let kk = vp.orientations as f64;
+    let mut out = TexelImage::new(gi.n, gi.n, c as u32);
+    out.data.par_chunks_mut(c).enumerate().for_each(|(t, o)| {
+        let r = lv.grid.rep[t] as usize;
+        let level = &space.stack[footprint_level(&maps0[r], lift + nl)];
+        s.bilinear(level, c, lv.coords[r], o);
+        let theta = std::f64::consts::TAU * controls.orient[r] as f64 / kk;
+        let (sin, cos) = (theta.sin_pure(), theta.cos_pure());
+        let (dx, dy) = (o[0] as f64, o[1] as f64);
+        o[0] = (cos * dx - sin * dy) as f32;
+        o[1] = (sin * dx + cos * dy) as f32;
+    });
+    progress(1.0);
+    Ok(out)
+}
