@@ -416,3 +416,171 @@ pub fn synthesize_appearance(
     progress(1.0);
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
+    use glam::{Vec2, Vec3};
+
+    /// A 64² sample of round bumps on a jittered lattice, as `(dx, dy, dn)`.
+    fn bumps() -> TexelImage {
+        let mut s = TexelImage::new(64, 64, 3);
+        for y in 0..64u32 {
+            for x in 0..64u32 {
+                let mut h = 0.0f32;
+                for cy in 0..5 {
+                    for cx in 0..5 {
+                        let j = counter_unit(4, 0, cy * 5 + cx) * 6.0;
+                        let (px, py) = (cx as f32 * 16.0 + j, cy as f32 * 16.0 + 6.0 - j);
+                        let d2 = (x as f32 - px).powi(2) + (y as f32 - py).powi(2);
+                        h = h.max(1.0 - d2 / 30.0);
+                    }
+                }
+                s.texel_mut(x, y)[2] = h.max(0.0);
+                s.texel_mut(x, y)[0] = 0.1 * (x as f32 * 0.3).sin_pure();
+            }
+        }
+        s
+    }
+
+    /// A 65² cylinder: the right side mated to the left, stretched 2:1 down the rows and
+    /// bent, under a turning field.
+    fn cylinder() -> (GeometryImage, ParamField) {
+        let n = 65u32;
+        let nn = (n * n) as usize;
+        let mut mate_rep: Vec<u32> = (0..nn as u32).collect();
+        for i in 0..n {
+            mate_rep[(i * n + n - 1) as usize] = i * n;
+        }
+        let gi = GeometryImage {
+            n,
+            positions: (0..nn)
+                .map(|k| {
+                    let (i, j) = ((k / n as usize) as f32, (k % n as usize) as f32);
+                    Vec3::new(j + 0.3 * i, 2.0 * i + 0.01 * j * j, 0.0)
+                })
+                .collect(),
+            normals: vec![Vec3::Z; nn],
+            mate_rep,
+        };
+        let field = ParamField {
+            dir: (0..nn)
+                .map(|k| Vec2::from_angle(k as f32 * 0.0004).rotate(Vec2::Y))
+                .collect(),
+            rel_scale: vec![1.0; nn],
+        };
+        (gi, field)
+    }
+
+    #[test]
+    fn any_thread_count_gives_the_same_bits_and_mates_agree() {
+        let vp = TexelVariantParams {
+            orientations: 4,
+            scales: 3,
+            ..Default::default()
+        };
+        let owned = build_texel_variants(&bumps(), &vp, &|_| {}).unwrap();
+        let variants = owned.as_ref();
+        let (gi, field) = cylinder();
+        let p = GeometrySynthParams {
+            jitter: 0.5,
+            ..Default::default()
+        };
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| synthesize_appearance(&gi, &field, &variants, &p, &|_| {}))
+                .unwrap()
+        };
+        let one = run(1);
+        let three = run(3);
+        let bits = |t: &TexelImage| t.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&one), bits(&three));
+        let n = gi.n;
+        for i in 0..n {
+            assert_eq!(
+                bits_of(one.texel(0, i)),
+                bits_of(one.texel(n - 1, i)),
+                "row {i}: mated texels differ"
+            );
+        }
+        // The relief is the sample's: every dn is one of the sample's values interpolated,
+        // within its range, and the output is not flat.
+        let dn: Vec<f32> = one.data.chunks_exact(3).map(|t| t[2]).collect();
+        let (lo, hi) = dn
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        assert!(lo >= -1e-6 && hi <= 1.0 + 1e-6, "{lo} {hi}");
+        assert!(hi - lo > 0.8, "flat output: {lo} {hi}");
+    }
+
+    fn bits_of(v: &[f32]) -> Vec<u32> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    #[test]
+    fn coherent_runs_follow_the_map_on_a_flat_square() {
+        // On an undistorted square with a constant field, most grid neighbours continue each
+        // other's coordinates (one grid step = one sample texel along x): the synthesis copies
+        // patches, not texels. A synthesizer that rematched every texel on its own, or that
+        // rounded the map's steps away, would not.
+        let vp = TexelVariantParams {
+            orientations: 4,
+            scales: 3,
+            ..Default::default()
+        };
+        let sample = bumps();
+        let owned = build_texel_variants(&sample, &vp, &|_| {}).unwrap();
+        let variants = owned.as_ref();
+        let n = 65u32;
+        let nn = (n * n) as usize;
+        let gi = GeometryImage {
+            n,
+            positions: (0..nn)
+                .map(|k| Vec3::new((k % n as usize) as f32, (k / n as usize) as f32, 0.0))
+                .collect(),
+            normals: vec![Vec3::Z; nn],
+            mate_rep: (0..nn as u32).collect(),
+        };
+        let field = ParamField {
+            dir: vec![Vec2::Y; nn],
+            rel_scale: vec![1.0; nn],
+        };
+        let out =
+            synthesize_appearance(&gi, &field, &variants, &Default::default(), &|_| {}).unwrap();
+        // A texel continues its left neighbour when it equals the sample one texel right of
+        // where the neighbour's value sits: count pairs whose (dn, dx) pair matches the
+        // sample's horizontal pairs exactly.
+        let pairs: std::collections::HashSet<[u32; 4]> = (0..64u32)
+            .flat_map(|y| (0..63u32).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let (a, b) = (sample.texel(x, y), sample.texel(x + 1, y));
+                [
+                    a[0].to_bits(),
+                    a[2].to_bits(),
+                    b[0].to_bits(),
+                    b[2].to_bits(),
+                ]
+            })
+            .collect();
+        let mut hits = 0;
+        for i in 0..n {
+            for j in 0..n - 1 {
+                let (a, b) = (out.texel(j, i), out.texel(j + 1, i));
+                if pairs.contains(&[
+                    a[0].to_bits(),
+                    a[2].to_bits(),
+                    b[0].to_bits(),
+                    b[2].to_bits(),
+                ]) {
+                    hits += 1;
+                }
+            }
+        }
+        let share = hits as f64 / (n * (n - 1)) as f64;
+        assert!(share > 0.6, "coherent share {share}");
+    }
+}

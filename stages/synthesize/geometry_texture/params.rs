@@ -16,7 +16,8 @@ pub struct GeometrySynthParams {
     /// Which synthesizer fills the geometry image: `"template"` (Lai et al.'s Γ-template
     /// scanline synthesis of texel values, the module docs) or `"appearance"` (parallel
     /// synthesis of sample coordinates in appearance space, Lefebvre & Hoppe 2005/2006, see
-    /// [`super::appearance_synthesis`]). Default: see [`GeometrySynthParams::default`].
+    /// [`super::appearance_synthesis`]). Default: `"appearance"`, which meets more of the
+    /// quality goals on the shipped configs (README, "Geometry images: which synthesizer").
     pub algorithm: SynthAlgorithm,
     /// `appearance` only: correction passes per level, 1..=8, each of 4 sub-passes (Lefebvre &
     /// Hoppe 2005 §3.2); the coarsest level runs twice as many. Default: 8 (on the flat
@@ -122,9 +123,9 @@ pub enum ScaleChoice {
 #[serde(rename_all = "snake_case")]
 pub enum SynthAlgorithm {
     /// Lai et al.'s Γ-template scanline synthesis of texel values (§4.2).
-    #[default]
     Template,
     /// Parallel synthesis of sample coordinates in appearance space (Lefebvre & Hoppe).
+    #[default]
     Appearance,
 }
 
@@ -143,7 +144,7 @@ pub enum Search {
 impl Default for GeometrySynthParams {
     fn default() -> Self {
         GeometrySynthParams {
-            algorithm: SynthAlgorithm::Template,
+            algorithm: SynthAlgorithm::Appearance,
             appearance_passes: 8,
             appearance_k: 4,
             appearance_coherence: 0.1,
