@@ -9,6 +9,9 @@
 
 use super::{AlignedBytes, Artifact, ArtifactError, ArtifactWriter, Format, Kind};
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
+use crate::stages::analyse_exemplar::appearance_space::{
+    AppearanceMeta, AppearanceSpace, AppearanceSpaceRef,
+};
 use crate::stages::analyse_exemplar::texel_variants::{TexelVariants, TexelVariantsRef};
 use crate::stages::field::param_field::ParamField;
 use glam::{Vec2, Vec3};
@@ -134,6 +137,30 @@ impl Format for TexelVariants {
     }
     fn decode(a: &Artifact) -> Result<TexelVariantsRef<'_>, ArtifactError> {
         TexelVariantsRef::from_arrays(a.meta()?, |name| a.raw_array(name).ok()).map_err(bad)
+    }
+}
+
+/// Metadata [`AppearanceMeta`]; arrays `stack`, `neighbourhoods`, `candidates`, viewed in
+/// place and checked by [`AppearanceSpaceRef::new`].
+impl Format for AppearanceSpace {
+    const KIND: Kind = Kind::AppearanceSpace;
+    type View<'a> = AppearanceSpaceRef<'a>;
+    fn write(&self) -> AlignedBytes {
+        ArtifactWriter::new(Kind::AppearanceSpace, &self.meta)
+            .array("stack", &self.stack)
+            .array("neighbourhoods", &self.neighbourhoods)
+            .array("candidates", &self.candidates)
+            .finish()
+    }
+    fn decode(a: &Artifact) -> Result<AppearanceSpaceRef<'_>, ArtifactError> {
+        let meta: AppearanceMeta = a.meta()?;
+        AppearanceSpaceRef::new(
+            meta,
+            a.array("stack")?,
+            a.array("neighbourhoods")?,
+            a.array("candidates")?,
+        )
+        .map_err(bad)
     }
 }
 

@@ -79,6 +79,7 @@ pub enum Kind {
     FeatureField = 25,
     RefinedMesh = 26,
     SurfaceColours = 27,
+    AppearanceSpace = 28,
 }
 
 impl Kind {
@@ -112,6 +113,7 @@ impl Kind {
             FeatureField,
             RefinedMesh,
             SurfaceColours,
+            AppearanceSpace,
         ]
         .into_iter()
         .find(|k| *k as u32 == code)

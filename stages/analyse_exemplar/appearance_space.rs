@@ -23,14 +23,15 @@
 //! them; here each level has its own basis, fitted to that level's (coarser, more blurred)
 //! neighbourhoods, as its Gaussian stack matches at that level. The candidate sets are searched
 //! in the first [`SEARCH_DIMS`] principal components of the neighbourhood vectors (a shortlist
-//! of `4k`), then ranked by the full vectors. The analysis runs inside the synthesis node:
-//! it takes about a tenth of a second for a 128² sample.
+//! of `4k`), then ranked by the full vectors. Every level is analysed, whatever level synthesis
+//! starts at, so the cached space serves any field and density.
 
 use crate::geom::geometry_image::TexelImage;
 use crate::image::knn::{KdTree, squared_distance};
 use crate::image::neighbourhood::mirror;
 use crate::image::pca::{Pca, PcaParams};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 /// Length of an appearance vector.
 pub const APPEARANCE_DIMS: usize = 8;
@@ -41,80 +42,193 @@ pub const SEARCH_DIMS: usize = 8;
 /// At most this many vectors (a regular subsample) fit each PCA basis.
 const PCA_FIT_SAMPLES: usize = 16384;
 
-/// One stack level of the appearance space.
-pub struct AppearanceLevel {
-    /// Tap spacing in finest texels, `2^ℓ`.
-    pub spacing: u32,
-    /// Per texel (row by row), its [`NEIGHBOURHOOD_DIMS`] neighbourhood vector.
+/// The `appearance_space` node's algorithm and version (part of its key; bump on any change of
+/// output).
+pub const NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("appearance_space", 1);
+
+/// The sizes of an appearance space: the sample's, its channels, its stack levels and the
+/// entries of each k-coherence set.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AppearanceMeta {
+    pub width: u32,
+    pub height: u32,
+    pub channels: u32,
+    pub levels: u32,
+    pub k: u32,
+}
+
+impl AppearanceMeta {
+    fn texels(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+}
+
+/// A sample's appearance space, one block per stack level `ℓ` (spacing `2^ℓ`) in each array:
+/// the Gaussian stack (unweighted texels, row by row), the neighbourhood vectors
+/// ([`NEIGHBOURHOOD_DIMS`] per texel) and the k-coherence sets (`k` texel indices per texel,
+/// the texel itself first).
+pub struct AppearanceSpace {
+    pub meta: AppearanceMeta,
+    pub stack: Vec<f32>,
     pub neighbourhoods: Vec<f32>,
-    /// Per texel, its k-coherence set: `k` texel indices, the texel itself first.
     pub candidates: Vec<u32>,
 }
 
-/// A sample's appearance space: its size, its Gaussian stack, and one [`AppearanceLevel`] per
-/// stack level from `first` on.
-pub struct AppearanceSpace {
-    pub width: u32,
-    pub height: u32,
-    pub channels: usize,
-    /// Entries of each k-coherence set.
-    pub k: usize,
-    /// The first analysed stack level.
-    pub first: usize,
-    /// The Gaussian stack, unweighted: level `ℓ`'s texels row by row.
-    pub stack: Vec<Vec<f32>>,
-    /// Stack levels `first..`, analysed.
-    pub levels: Vec<AppearanceLevel>,
+/// An appearance space as a reader sees it (borrowed, e.g. from a memory-mapped artifact).
+#[derive(Clone, Copy, Debug)]
+pub struct AppearanceSpaceRef<'a> {
+    pub meta: AppearanceMeta,
+    pub stack: &'a [f32],
+    pub neighbourhoods: &'a [f32],
+    pub candidates: &'a [u32],
+}
+
+/// One stack level of an appearance space, borrowed.
+#[derive(Clone, Copy, Debug)]
+pub struct AppearanceLevel<'a> {
+    /// Tap spacing in finest texels, `2^ℓ`.
+    pub spacing: u32,
+    /// The stack level's texels (unweighted).
+    pub texels: &'a [f32],
+    /// Per texel, its neighbourhood vector.
+    pub neighbourhoods: &'a [f32],
+    /// Per texel, its k-coherence set.
+    pub candidates: &'a [u32],
+}
+
+impl<'a> AppearanceSpaceRef<'a> {
+    /// Checks that the arrays hold what `meta` says.
+    pub fn new(
+        meta: AppearanceMeta,
+        stack: &'a [f32],
+        neighbourhoods: &'a [f32],
+        candidates: &'a [u32],
+    ) -> Result<Self, String> {
+        let (n, l) = (meta.texels(), meta.levels as usize);
+        let ok = meta.width >= 8
+            && meta.height >= 8
+            && (1..=8).contains(&meta.k)
+            && (1..=16).contains(&meta.levels)
+            && stack.len() == l * n * meta.channels as usize
+            && neighbourhoods.len() == l * n * NEIGHBOURHOOD_DIMS
+            && candidates.len() == l * n * meta.k as usize
+            && candidates.iter().all(|&u| (u as usize) < n);
+        if ok {
+            Ok(AppearanceSpaceRef {
+                meta,
+                stack,
+                neighbourhoods,
+                candidates,
+            })
+        } else {
+            Err(format!("appearance space arrays disagree with {meta:?}"))
+        }
+    }
+
+    /// Stack level `l`.
+    pub fn level(&self, l: usize) -> AppearanceLevel<'a> {
+        let n = self.meta.texels();
+        let (c, k) = (self.meta.channels as usize, self.meta.k as usize);
+        AppearanceLevel {
+            spacing: 1 << l,
+            texels: &self.stack[l * n * c..(l + 1) * n * c],
+            neighbourhoods: &self.neighbourhoods
+                [l * n * NEIGHBOURHOOD_DIMS..(l + 1) * n * NEIGHBOURHOOD_DIMS],
+            candidates: &self.candidates[l * n * k..(l + 1) * n * k],
+        }
+    }
+}
+
+/// The stack levels a sample of `w × h` gets: spacings up to `min(w, h) / 8`, so the coarsest
+/// level's 5×5 appearance taps around 3×3 neighbourhood taps (`± 3 h`) stay within the sample.
+pub fn stack_levels(w: u32, h: u32) -> usize {
+    let mut levels = 1;
+    while (1u32 << levels) * 8 <= w.min(h) {
+        levels += 1;
+    }
+    levels
 }
 
 impl AppearanceSpace {
-    /// The appearance space of `sample`: `levels` stack levels, levels `first..levels`
-    /// analysed with channels weighted by `weights` and k-coherence sets of `k` (at least 1).
-    pub fn build(
-        sample: &TexelImage,
-        weights: &[f32],
-        levels: usize,
-        first: usize,
-        k: usize,
-    ) -> Self {
+    /// The appearance space of `sample` ([`stack_levels`] levels), channels weighted by
+    /// `weights`, k-coherence sets of `k` (at least 1).
+    pub fn build(sample: &TexelImage, weights: &[f32], k: usize) -> Self {
         let (w, h) = (sample.width as usize, sample.height as usize);
         let c = sample.channels as usize;
         let k = k.max(1);
+        let levels = stack_levels(sample.width, sample.height);
         let mut stack: Vec<Vec<f32>> = vec![sample.data.clone()];
         for l in 1..levels {
             stack.push(blur_dilated(&stack[l - 1], w, h, c, 1i64 << (l - 1)));
         }
-        let analysed = (first..levels)
-            .map(|l| {
-                let weighted: Vec<f32> = stack[l]
-                    .chunks_exact(c)
-                    .flat_map(|t| t.iter().zip(weights).map(|(v, wt)| v * wt))
-                    .collect();
-                let spacing = 1u32 << l;
-                let appearance = appearance_vectors(&weighted, w, h, c, spacing as i64);
-                let neighbourhoods = neighbourhood_vectors(&appearance, w, h, spacing as i64);
-                let candidates = coherence_sets(&neighbourhoods, w, h, spacing as i64, k);
-                AppearanceLevel {
-                    spacing,
-                    neighbourhoods,
-                    candidates,
-                }
-            })
-            .collect();
+        let mut neighbourhoods = Vec::with_capacity(levels * w * h * NEIGHBOURHOOD_DIMS);
+        let mut candidates = Vec::with_capacity(levels * w * h * k);
+        for (l, texels) in stack.iter().enumerate() {
+            let weighted: Vec<f32> = texels
+                .chunks_exact(c)
+                .flat_map(|t| t.iter().zip(weights).map(|(v, wt)| v * wt))
+                .collect();
+            let spacing = 1i64 << l;
+            let appearance = appearance_vectors(&weighted, w, h, c, spacing);
+            let neigh = neighbourhood_vectors(&appearance, w, h, spacing);
+            candidates.extend(coherence_sets(&neigh, w, h, spacing, k));
+            neighbourhoods.extend(neigh);
+        }
         AppearanceSpace {
-            width: w as u32,
-            height: h as u32,
-            channels: c,
-            k,
-            first,
-            stack,
-            levels: analysed,
+            meta: AppearanceMeta {
+                width: w as u32,
+                height: h as u32,
+                channels: c as u32,
+                levels: levels as u32,
+                k: k as u32,
+            },
+            stack: stack.concat(),
+            neighbourhoods,
+            candidates,
         }
     }
 
-    /// Analysed stack level `l` (at least `first`).
-    pub fn level(&self, l: usize) -> &AppearanceLevel {
-        &self.levels[l - self.first]
+    pub fn view(&self) -> AppearanceSpaceRef<'_> {
+        AppearanceSpaceRef {
+            meta: self.meta,
+            stack: &self.stack,
+            neighbourhoods: &self.neighbourhoods,
+            candidates: &self.candidates,
+        }
+    }
+}
+
+/// The analysis node: the appearance space of the variants' middle scale, orientation 0
+/// (the sample at its own size), with the variants' channel weights.
+pub fn node(
+    variants: &crate::analyse_exemplar::texel_variants::TexelVariantsRef<'_>,
+    k: u32,
+) -> Result<AppearanceSpace, texsyn_core::algorithm::Failure> {
+    let sample = base_sample(variants);
+    if (1..=8).contains(&k) {
+        Ok(AppearanceSpace::build(
+            &sample,
+            &variants.meta.channel_weights,
+            k as usize,
+        ))
+    } else {
+        Err(texsyn_core::algorithm::Failure::input(format!(
+            "synthesize.appearance_k must be 1 to 8, got {k}"
+        )))
+    }
+}
+
+/// The variants' middle scale, orientation 0, finest level: the sample at its own size.
+pub fn base_sample(
+    variants: &crate::analyse_exemplar::texel_variants::TexelVariantsRef<'_>,
+) -> TexelImage {
+    let base = variants.level(variants.variant(variants.params().middle_scale(), 0), 0);
+    TexelImage {
+        width: base.width,
+        height: base.height,
+        channels: variants.channels() as u32,
+        data: base.texels.to_vec(),
     }
 }
 
@@ -294,7 +408,7 @@ mod tests {
         let mut s = TexelImage::new(w, h, 3);
         for y in 0..h {
             for x in 0..w {
-                s.texel_mut(x, y)[2] = if (x / (period / 2)) % 2 == 0 {
+                s.texel_mut(x, y)[2] = if (x / (period / 2)).is_multiple_of(2) {
                     1.0
                 } else {
                     0.0
@@ -307,8 +421,9 @@ mod tests {
     #[test]
     fn candidates_of_vertical_stripes_share_the_phase_and_keep_their_distance() {
         let s = stripes(48, 48, 8);
-        let space = AppearanceSpace::build(&s, &[1.0, 1.0, 1.0], 2, 0, 4);
-        let lv = &space.levels[0];
+        let space = AppearanceSpace::build(&s, &[1.0, 1.0, 1.0], 4);
+        let view = space.view();
+        let lv = view.level(0);
         for y in (6..42).step_by(5) {
             for x in (6..42).step_by(5) {
                 let t = y * 48 + x;
@@ -330,16 +445,17 @@ mod tests {
     #[test]
     fn coarser_levels_are_blurred_and_their_taps_spread() {
         let s = stripes(64, 64, 4);
-        let space = AppearanceSpace::build(&s, &[1.0, 1.0, 1.0], 3, 0, 2);
-        assert_eq!(space.levels.len(), 3);
-        assert_eq!(space.levels[2].spacing, 4);
+        let space = AppearanceSpace::build(&s, &[1.0, 1.0, 1.0], 2);
+        let view = space.view();
+        assert_eq!(space.meta.levels, 4);
+        assert_eq!(view.level(2).spacing, 4);
         // Period-4 stripes vanish from level 2 on (a blur across 2 periods): its
         // neighbourhoods nearly agree away from the borders, level 0's do not.
-        let spread = |lv: &AppearanceLevel| {
+        let spread = |lv: AppearanceLevel| {
             let a = &lv.neighbourhoods[(32 * 64 + 30) * NEIGHBOURHOOD_DIMS..][..NEIGHBOURHOOD_DIMS];
             let b = &lv.neighbourhoods[(32 * 64 + 32) * NEIGHBOURHOOD_DIMS..][..NEIGHBOURHOOD_DIMS];
             squared_distance(a, b)
         };
-        assert!(spread(&space.levels[0]) > 100.0 * spread(&space.levels[2]));
+        assert!(spread(view.level(0)) > 100.0 * spread(view.level(2)));
     }
 }

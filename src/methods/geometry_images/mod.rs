@@ -7,6 +7,9 @@
 //! inputs.sample ─ import.sample ─ extract (texels) ─ analyse_exemplar (8 × 3 variants) ─┘
 //! ```
 //!
+//! With `synthesize.algorithm = "appearance"` (the default) the variants feed a second
+//! analysis node, the sample's appearance space, which synthesize reads too.
+//!
 //! The sample is a mesh (a region of it is cut out and its relief extracted, §4.1) or an
 //! image read as a height field (§5; a colour photograph by its luma). Texel values are
 //! stored in units of the sample's texel spacing, so a relief keeps its proportions when it
@@ -17,6 +20,7 @@
 //! own ([`GeometryImageParams::with_levels`]).
 
 mod config;
+mod synthesis;
 
 pub use config::{GeometryImagesConfig, Inputs};
 
@@ -36,7 +40,7 @@ use crate::stages::extract::{self};
 use crate::stages::field::param_field::{self};
 use crate::stages::parameterize::geometry_image::{self};
 use crate::stages::reconstruct::relief_export::{self};
-use crate::stages::synthesize::geometry_texture::{self, Search};
+use crate::stages::synthesize::geometry_texture::Search;
 use std::path::Path;
 
 /// The `geometry_images` method.
@@ -89,16 +93,7 @@ impl Method for GeometryImages {
             gi,
             |_, p, gi| Ok(param_field::node(&gi, p)?),
         );
-        let synthesize = dag.node(
-            NodeSpec::of(Stage::Synthesize, geometry_texture::NODE),
-            c.synthesize.clone(),
-            (gi, field, variants),
-            |ctx, p, (gi, field, v)| {
-                Ok(geometry_texture::node(&gi, &field, &v, p, &|f| {
-                    ctx.progress.set(f)
-                })?)
-            },
-        );
+        let synthesize = synthesis::node(&mut dag, &c.synthesize, gi, field, variants);
         let reconstruct = dag.node(
             NodeSpec::of(Stage::Reconstruct, relief_export::NODE),
             c.reconstruct.clone(),

@@ -34,7 +34,9 @@
 //!
 //! Departures: coordinates are clamped inside the sample (samples are not assumed to tile);
 //! beyond an open side or a corner a tap is predicted from the texel itself; the appearance
-//! space is built per run ([`AppearanceSpace`]) from the sample at the variants' middle scale.
+//! space ([`crate::analyse_exemplar::appearance_space`], its own cached node) is the sample's
+//! at the variants' middle scale, and the orientation and scale variants are not read (the
+//! map `M` does their work continuously).
 //! Thread count does not change the result: each sub-pass reads only the coordinates the
 //! previous one left.
 
@@ -43,7 +45,7 @@ use super::controls::{sample_frame_maps, texel_controls};
 use super::grid::LevelGrid;
 use super::params::{GeometrySynthParams, GeometryTextureError, check_inputs};
 use crate::analyse_exemplar::appearance_space::{
-    APPEARANCE_DIMS, AppearanceLevel, AppearanceSpace, NEIGHBOURHOOD_DIMS, TAPS_3X3,
+    APPEARANCE_DIMS, AppearanceLevel, AppearanceSpaceRef, NEIGHBOURHOOD_DIMS, TAPS_3X3,
     interior_margin,
 };
 use crate::analyse_exemplar::texel_variants::TexelVariantsRef;
@@ -62,16 +64,6 @@ const SUB_PASSES: [(usize, usize); 4] = [(0, 0), (1, 1), (0, 1), (1, 0)];
 
 /// The smallest grid side the coarsest level may have.
 const MIN_SIDE: usize = 5;
-
-/// The stack levels a sample of `w × h` has: spacings up to `min(w, h) / 8`, so the coarsest
-/// level's 5×5 × 3×3 footprint (`± 3 h`) stays within the sample.
-fn stack_levels(w: u32, h: u32) -> usize {
-    let mut stack = 1;
-    while (1u32 << stack) * 8 <= w.min(h) {
-        stack += 1;
-    }
-    stack
-}
 
 /// The grid levels a geometry image of side `n` can halve into, down to [`MIN_SIDE`].
 fn grid_levels(n: usize) -> usize {
@@ -192,7 +184,7 @@ fn tap_offsets(m: &[f32; 4], lift: f64) -> [(i64, i64); 9] {
 fn correct(
     lv: &Level,
     s: &Sample,
-    al: &AppearanceLevel,
+    al: &AppearanceLevel<'_>,
     k: usize,
     penalty: f32,
     t: usize,
@@ -284,6 +276,7 @@ pub fn synthesize_appearance(
     gi: &GeometryImage,
     field: &ParamField,
     variants: &TexelVariantsRef<'_>,
+    space: &AppearanceSpaceRef<'_>,
     p: &GeometrySynthParams,
     progress: &dyn Fn(f32),
 ) -> Result<TexelImage, GeometryTextureError> {
@@ -293,29 +286,27 @@ pub fn synthesize_appearance(
     let vp = variants.params();
     let c = variants.channels();
     let n0 = gi.n as usize;
-    let base = variants.level(variants.variant(vp.middle_scale(), 0), 0);
-    let sample = TexelImage {
-        width: base.width,
-        height: base.height,
-        channels: c as u32,
-        data: base.texels.to_vec(),
-    };
+    let meta = space.meta;
+    if meta.channels as usize != c || meta.k != p.appearance_k {
+        return Err(GeometryTextureError::AppearanceSpace {
+            channels: meta.channels,
+            k: meta.k,
+        });
+    }
     let controls = texel_controls(gi, field, vp, p);
     let maps0 = sample_frame_maps(&controls, variants);
     // Grid level l matches at stack level l + lift, the lift being the footprint level of the
     // median grid step: where a grid step spans 4 sample texels, level 0 matches at spacing 4.
-    let total = stack_levels(sample.width, sample.height);
+    let total = meta.levels as usize;
     let mut footprints: Vec<usize> = maps0.iter().map(|m| footprint_level(m, total)).collect();
     footprints.sort_unstable();
     let lift = footprints[footprints.len() / 2];
     let nl = grid_levels(n0).min(total - lift).max(1);
-    let k = p.appearance_k as usize;
+    let k = meta.k as usize;
     let penalty = 1.0 + p.appearance_coherence;
-    let weights = &variants.meta.channel_weights;
-    let space = AppearanceSpace::build(&sample, weights, lift + nl, lift, k);
     let s = Sample {
-        width: sample.width as i32,
-        height: sample.height as i32,
+        width: meta.width as i32,
+        height: meta.height as i32,
     };
 
     let mut step = 0u64;
@@ -327,7 +318,7 @@ pub fn synthesize_appearance(
             .map(|t| maps0[((t / n) << l) * n0 + ((t % n) << l)])
             .collect();
         let h = (1u64 << l) as f64;
-        let al = space.level(l + lift);
+        let al = &space.level(l + lift);
         // 1. Upsampling, or the random start.
         let coords: Vec<[f32; 2]> = (0..n * n)
             .into_par_iter()
@@ -405,8 +396,8 @@ pub fn synthesize_appearance(
     let mut out = TexelImage::new(gi.n, gi.n, c as u32);
     out.data.par_chunks_mut(c).enumerate().for_each(|(t, o)| {
         let r = lv.grid.rep[t] as usize;
-        let level = &space.stack[footprint_level(&maps0[r], lift + nl)];
-        s.bilinear(level, c, lv.coords[r], o);
+        let level = space.level(footprint_level(&maps0[r], lift + nl));
+        s.bilinear(level.texels, c, lv.coords[r], o);
         let theta = std::f64::consts::TAU * controls.orient[r] as f64 / kk;
         let (sin, cos) = (theta.sin_pure(), theta.cos_pure());
         let (dx, dy) = (o[0] as f64, o[1] as f64);
@@ -420,6 +411,7 @@ pub fn synthesize_appearance(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analyse_exemplar::appearance_space::AppearanceSpace;
     use crate::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
     use glam::{Vec2, Vec3};
 
@@ -492,8 +484,11 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            pool.install(|| synthesize_appearance(&gi, &field, &variants, &p, &|_| {}))
-                .unwrap()
+            pool.install(|| {
+                let space = space_of(&variants, &p);
+                synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {})
+            })
+            .unwrap()
         };
         let one = run(1);
         let three = run(3);
@@ -515,6 +510,10 @@ mod tests {
             .fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
         assert!(lo >= -1e-6 && hi <= 1.0 + 1e-6, "{lo} {hi}");
         assert!(hi - lo > 0.8, "flat output: {lo} {hi}");
+    }
+
+    fn space_of(variants: &TexelVariantsRef<'_>, p: &GeometrySynthParams) -> AppearanceSpace {
+        crate::analyse_exemplar::appearance_space::node(variants, p.appearance_k).unwrap()
     }
 
     fn bits_of(v: &[f32]) -> Vec<u32> {
@@ -549,8 +548,10 @@ mod tests {
             dir: vec![Vec2::Y; nn],
             rel_scale: vec![1.0; nn],
         };
+        let p = GeometrySynthParams::default();
+        let space = space_of(&variants, &p);
         let out =
-            synthesize_appearance(&gi, &field, &variants, &Default::default(), &|_| {}).unwrap();
+            synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {}).unwrap();
         // A texel continues its left neighbour when it equals the sample one texel right of
         // where the neighbour's value sits: count pairs whose (dn, dx) pair matches the
         // sample's horizontal pairs exactly.

@@ -111,11 +111,13 @@ pub const NODE: texsyn_core::algorithm::Algorithm =
 /// The per-sample controls of synthesis (§4.3), computed by the field stage.
 pub use crate::field::param_field::ParamField;
 
-/// The synthesize node: the geometric texture over the geometry image.
+/// The synthesize node: the geometric texture over the geometry image. `appearance` is the
+/// analysis the appearance synthesizer reads (`None` for the template synthesizer).
 pub fn node(
     gi: &crate::geom::geometry_image::GeometryImage,
     field: &ParamField,
     variants: &crate::analyse_exemplar::texel_variants::TexelVariantsRef<'_>,
+    appearance: Option<&crate::analyse_exemplar::appearance_space::AppearanceSpaceRef<'_>>,
     p: &GeometrySynthParams,
     progress: &dyn Fn(f32),
 ) -> Result<crate::geom::geometry_image::TexelImage, texsyn_core::algorithm::Failure> {
@@ -125,9 +127,18 @@ pub fn node(
             "field and geometry image disagree on the sample count",
         ));
     }
-    match p.algorithm {
-        SynthAlgorithm::Template => synthesize_geometry_texture(gi, field, variants, p, progress),
-        SynthAlgorithm::Appearance => synthesize_appearance(gi, field, variants, p, progress),
+    match (p.algorithm, appearance) {
+        (SynthAlgorithm::Template, _) => {
+            synthesize_geometry_texture(gi, field, variants, p, progress)
+        }
+        (SynthAlgorithm::Appearance, Some(space)) => {
+            synthesize_appearance(gi, field, variants, space, p, progress)
+        }
+        (SynthAlgorithm::Appearance, None) => {
+            return Err(Failure::internal(
+                "the appearance synthesizer was planned without its appearance space",
+            ));
+        }
     }
     .map_err(Failure::input)
 }

@@ -205,6 +205,11 @@ pub enum GeometryTextureError {
          structures, which this variant set was built without"
     )]
     NoPerTexelSets,
+    #[error(
+        "geometry texture: the appearance space has {channels} channels and {k}-entry candidate \
+         sets, which disagree with the variants' channels or synthesize.appearance_k"
+    )]
+    AppearanceSpace { channels: u32, k: u32 },
     #[error("geometry texture: the geometry image has {entries} mate entries for {n}×{n} samples")]
     MateCount { entries: usize, n: usize },
     #[error(
