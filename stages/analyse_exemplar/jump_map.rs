@@ -34,7 +34,7 @@
 use crate::check::{ParamError, check_range};
 use crate::image::ImageView;
 use crate::image::knn::KdTree;
-use crate::image::neighbourhood::{NeighbourhoodParams, Neighbourhoods};
+use crate::image::neighbourhood::{NeighbourhoodParams, Neighbourhoods, level_window};
 use crate::image::pca::{Pca, PcaParams};
 use rayon::prelude::*;
 use texsyn_core::algorithm::Failure;
@@ -67,7 +67,9 @@ pub struct JumpMapParams {
     /// have them). Default: 3.
     pub levels: u32,
     /// Neighbourhood window side at the finest level, odd, 1..=15; coarser levels use
-    /// `window - 2·level`, at least 3. Default: 5.
+    /// `window - 2·level`, at least 3. A window whose descriptor on the exemplar is longer than
+    /// [`MAX_DESCRIPTOR_LEN`] numbers is refused when the analysis starts ([`check_descriptor`]).
+    /// Default: 5.
     pub window: u32,
     /// Weight of each pyramid level relative to the next finer one, 0..=1. Default: 0.5.
     pub coarse_weight: f32,
@@ -147,6 +149,70 @@ pub enum JumpMapError {
     },
     #[error("jump map: slot {slot} is not a valid jump: {jump:?}")]
     BadJump { slot: usize, jump: Jump },
+    #[error(
+        "jump map: analyse_exemplar.window = {window} over {levels} pyramid levels compares \
+         {len}-number neighbourhoods, more than the {MAX_DESCRIPTOR_LEN} whose analysis takes \
+         about 70 s on 2 cores (its PCA grows faster than the cube of the length: window 15 \
+         over 3 levels took about 25 minutes); the largest window that fits is {fits}"
+    )]
+    DescriptorTooLong {
+        window: u32,
+        levels: usize,
+        len: usize,
+        fits: u32,
+    },
+}
+
+/// The longest neighbourhood descriptor the analysis accepts, in numbers: window 13 over 3
+/// levels (13² + 11² + 9² RGB texels). On the 64×62 leopard, 2 cores: window 9 (465 numbers)
+/// 2.6 s, 11 (753) 12.7 s, 13 (1113) 70 s, 15 (1545) about 25 minutes, the cyclic Jacobi
+/// eigendecomposition of the covariance dominating.
+pub const MAX_DESCRIPTOR_LEN: usize = 1113;
+
+/// Length of the neighbourhood descriptor of finest window `window` over `levels` levels.
+pub fn descriptor_len(window: u32, levels: usize) -> usize {
+    (0..levels)
+        .map(|l| 3 * level_window(window.max(1) | 1, l).pow(2) as usize)
+        .sum()
+}
+
+/// Pyramid levels an exemplar of `width × height` gets for `levels` asked (as
+/// [`Pyramid::build`](crate::image::pyramid::Pyramid::build) stops).
+fn pyramid_levels(width: u32, height: u32, levels: u32) -> usize {
+    let (mut w, mut h, mut n) = (width, height, 1usize);
+    while n < levels.max(1) as usize {
+        let (nw, nh) = (w.div_ceil(2), h.div_ceil(2));
+        if nw.min(nh) < crate::image::pyramid::MIN_LEVEL_SIDE || w < 2 || h < 2 {
+            break;
+        }
+        (w, h, n) = (nw, nh, n + 1);
+    }
+    n
+}
+
+/// Refuses a window whose descriptor on this exemplar is longer than [`MAX_DESCRIPTOR_LEN`],
+/// naming the largest window that fits.
+pub fn check_descriptor(
+    width: u32,
+    height: u32,
+    params: &JumpMapParams,
+) -> Result<(), JumpMapError> {
+    let levels = pyramid_levels(width, height, params.levels);
+    let len = descriptor_len(params.window, levels);
+    if len <= MAX_DESCRIPTOR_LEN {
+        return Ok(());
+    }
+    let fits = (1..=params.window)
+        .rev()
+        .step_by(2)
+        .find(|&w| descriptor_len(w, levels) <= MAX_DESCRIPTOR_LEN)
+        .unwrap_or(1);
+    Err(JumpMapError::DescriptorTooLong {
+        window: params.window,
+        levels,
+        len,
+        fits,
+    })
 }
 
 /// Checks that an exemplar can have a jump map (addresses are u16).
@@ -453,6 +519,7 @@ pub fn node(
     progress: &dyn Fn(f32),
 ) -> Result<JumpMap, Failure> {
     check_exemplar_size(img.width, img.height).map_err(Failure::input)?;
+    check_descriptor(img.width, img.height, params).map_err(Failure::input)?;
     Ok(build_jump_map(img, params, progress))
 }
 
@@ -469,6 +536,41 @@ mod tests {
             exclusion_radius: f32::NAN =>
                 "jump map: exclusion_radius must be in 0..=10000, got NaN",
         });
+    }
+
+    #[test]
+    fn a_window_whose_analysis_would_take_minutes_is_refused_naming_one_that_fits() {
+        let p = |window, levels| JumpMapParams {
+            window,
+            levels,
+            ..Default::default()
+        };
+        // The measured cases: 13 over 3 levels fits, 15 does not and names 13.
+        assert_eq!(descriptor_len(13, 3), 1113);
+        assert!(check_descriptor(64, 62, &p(13, 3)).is_ok());
+        let e = check_descriptor(64, 62, &p(15, 3)).unwrap_err();
+        assert_eq!(
+            e,
+            JumpMapError::DescriptorTooLong {
+                window: 15,
+                levels: 3,
+                len: 1545,
+                fits: 13
+            }
+        );
+        assert!(
+            e.to_string().contains("the largest window that fits is 13"),
+            "{e}"
+        );
+        // More levels make the descriptor longer: 13 over 6 levels of a 512² exemplar is
+        // refused, 11 fits.
+        let e = check_descriptor(512, 512, &p(13, 6)).unwrap_err();
+        assert!(
+            matches!(e, JumpMapError::DescriptorTooLong { fits: 11, .. }),
+            "{e}"
+        );
+        // A 12² exemplar has one level, where window 15 fits.
+        assert!(check_descriptor(12, 12, &p(15, 3)).is_ok());
     }
 
     #[test]
