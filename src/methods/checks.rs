@@ -64,6 +64,18 @@ pub(crate) fn check_memory(
         .map_err(|e| MethodError::Config(config.invalid(key, &e.to_string())))
 }
 
+/// The preview of `reconstruct.preview_size` pixels per view
+/// ([`crate::render::preview_memory_estimate`]).
+pub(crate) fn check_preview_memory(config: &Config, size: u32) -> Result<(), MethodError> {
+    check_memory(
+        config,
+        "reconstruct.preview_size",
+        size as u64,
+        crate::render::preview_memory_estimate,
+        |s| s.to_string(),
+    )
+}
+
 /// The texel variants of a geometry-image sample of `extract.size`² texels
 /// ([`TexelVariantParams::memory_estimate`]).
 ///

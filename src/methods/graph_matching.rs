@@ -73,6 +73,7 @@ impl Method for GraphMatchingMethod {
         c.field.validate().map_err(|e| config.param(e))?;
         c.synthesize.validate().map_err(|e| config.param(e))?;
         c.reconstruct.validate().map_err(|e| config.param(e))?;
+        super::checks::check_preview_memory(config, c.reconstruct.preview_size)?;
         if c.reconstruct.atlas_size > 0 {
             super::check_atlas_memory(config, c.reconstruct.atlas_size)?;
         }

@@ -104,6 +104,30 @@ fn baked_name(surface: &str, page: usize, pages: usize) -> String {
     }
 }
 
+/// Peak memory of baking one surface, in bytes per page texel. Measured with
+/// `configs/demo.toml` (one surface): 416 MB above the run's 53 MB for one 5704×4980 page
+/// (`texel_density = 16`), 15 bytes per texel.
+pub const BAKE_BYTES_PER_TEXEL: u64 = 16;
+
+/// Refuses, before the bake, pages whose estimated memory ([`BAKE_BYTES_PER_TEXEL`] per texel
+/// and surface) is over the budget (`--max-memory`), naming a `texel_density` that fits: the
+/// pages' sizes follow the surface's area, so they are known only once its charts are laid
+/// out.
+fn check_bake_memory(pages: &[[u32; 2]], surfaces: usize, density: f32) -> Result<(), ExportError> {
+    let texels: u128 = pages.iter().map(|[w, h]| *w as u128 * *h as u128).sum();
+    let per = (BAKE_BYTES_PER_TEXEL * surfaces.max(1) as u64) as u128;
+    // In hundredths, so the value named has two decimals; the pages' area goes with its square.
+    let at = ((density as f64 * 100.0).round() as u64).max(1);
+    let estimate = |v: u64| {
+        let v = v as u128;
+        (per * texels * v * v / (at as u128 * at as u128)).min(u64::MAX as u128) as u64
+    };
+    texsyn_core::memory::check_budget("reconstruct.texel_density", at, estimate, |v| {
+        format!("{:.2}", v as f64 / 100.0)
+    })
+    .map_err(|e| ExportError::Atlas(e.to_string()))
+}
+
 /// Why the export files could not be built.
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
@@ -270,6 +294,7 @@ fn export_files<S: SurfaceShader>(
         files.push((file_name(&s.name, &s.extension), s.file.to_vec()));
     }
     let atlas = atlas.map_err(|e| ExportError::of_atlas(e, p))?;
+    check_bake_memory(&atlas.pages, surfaces.len(), density)?;
     let pages = atlas.pages.len();
     tracing::info!(
         "reconstruct: {} charts on {pages} page(s) ({}) at {density} atlas texels per exemplar texel",

@@ -48,7 +48,30 @@ fn texsyn_peak(args: &[&str], dir: &std::path::Path) -> (bool, String, u64) {
 fn estimates_are_within_twice_the_measured_peak() {
     crate::full_tier_only!("inputs sized to measure memory");
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&[&str], u64); 3] = [
+    let cases: [(&[&str], u64); 5] = [
+        (
+            // Jump maps' chart pages: 16 bytes per page texel (one 5704×4980 page, 469 MB
+            // measured).
+            &[
+                "run",
+                "configs/demo.toml",
+                "--set",
+                "reconstruct.texel_density=16",
+                "--set",
+                "reconstruct.atlas_size=8192",
+            ],
+            16 * 5704 * 4980 + (48 << 20),
+        ),
+        (
+            // A preview: 120 bytes per pixel of one view (513 MB measured at 2048).
+            &[
+                "run",
+                "configs/demo.toml",
+                "--set",
+                "reconstruct.preview_size=2048",
+            ],
+            120 * 2048 * 2048 + (48 << 20),
+        ),
         (
             // A solid section: about two bytes per voxel of the cube bound (158 MiB measured
             // at 384).
@@ -121,8 +144,7 @@ fn oversized_runs_are_refused_naming_a_value_that_fits() {
         err.contains("synthesize.width = 16384") && err.contains("fits") && err.contains("4.0 GiB"),
         "{err}"
     );
-    // The same for the per-triangle baked atlas (solid and feature-aligned; jump maps' chart
-    // pages follow the surface's area and are not estimated).
+    // The same for the per-triangle baked atlas (solid and feature-aligned).
     let out = texsyn(
         &[
             "run",
@@ -160,6 +182,46 @@ fn oversized_runs_are_refused_naming_a_value_that_fits() {
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
         err.contains("extract.size = 256") && err.contains("fits"),
+        "{err}"
+    );
+    // And for jump maps' chart pages, which follow the surface's area: refused once the
+    // charts are laid out, before the bake (469 MB measured at density 16).
+    let out = texsyn(
+        &[
+            "run",
+            "configs/demo.toml",
+            "--max-memory",
+            "100MiB",
+            "--set",
+            "reconstruct.texel_density=16",
+            "--set",
+            "reconstruct.atlas_size=8192",
+        ],
+        dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("reconstruct.texel_density = 16.00") && err.contains("fits"),
+        "{err}"
+    );
+    assert!(!dir.path().join("out").exists(), "no outputs written");
+    // And for a preview (1.9 GB measured at 4096).
+    let out = texsyn(
+        &[
+            "run",
+            "configs/demo.toml",
+            "--max-memory",
+            "100MiB",
+            "--set",
+            "reconstruct.preview_size=4096",
+        ],
+        dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("reconstruct.preview_size = 4096") && err.contains("fits"),
         "{err}"
     );
     // And for a solid's resolution (a surface request: 16 bytes per voxel of the cube bound up

@@ -28,4 +28,4 @@ pub use load::{RenderError, render_mesh_file};
 pub use shader::{
     ConstantShader, CornerUvShader, MaterialUvShader, SurfaceShader, VertexColorShader,
 };
-pub use views::{ViewOptions, render_views, render_views_of_each};
+pub use views::{ViewOptions, preview_memory_estimate, render_views, render_views_of_each};

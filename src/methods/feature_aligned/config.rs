@@ -63,6 +63,7 @@ pub(super) fn checked(config: &Config) -> Result<FeatureAlignedConfig, MethodErr
     c.field.validate().map_err(|e| config.param(e))?;
     c.synthesize.validate().map_err(|e| config.param(e))?;
     c.reconstruct.validate().map_err(|e| config.param(e))?;
+    crate::methods::checks::check_preview_memory(config, c.reconstruct.preview_size)?;
     Ok(c)
 }
 

@@ -60,6 +60,7 @@ pub(super) fn checked(
     config.check("field", c.field.validate())?;
     config.check("synthesize", c.synthesize.validate())?;
     config.check("reconstruct", c.reconstruct.displacement().validate())?;
+    crate::methods::checks::check_preview_memory(config, c.reconstruct.preview_size)?;
     let preview = c.reconstruct.preview_size;
     let range = check_range("reconstruct.preview_size", preview, 16, 4096);
     config.check("reconstruct.preview_size", range)?;

@@ -51,6 +51,7 @@ pub(super) fn checked(config: &Config) -> Result<JumpMapsConfig, MethodError> {
     config.check("parameterize", c.parameterize.validate())?;
     config.check("synthesize", c.synthesize.validate())?;
     config.check("reconstruct", c.reconstruct.validate())?;
+    crate::methods::checks::check_preview_memory(config, c.reconstruct.preview_size)?;
     // No up-front memory check on `reconstruct.atlas_size`: it caps a page's side, and
     // pages are only as big as the charts they hold (the need follows the surface's area).
     for name in c.inputs.maps.keys() {

@@ -75,6 +75,7 @@ pub(super) fn checked(config: &Config) -> Result<SolidConfig, MethodError> {
     config.check("field", c.field.validate())?;
     c.parameterize.validate().map_err(param)?;
     c.reconstruct.validate().map_err(param)?;
+    crate::methods::checks::check_preview_memory(config, c.reconstruct.preview_size)?;
     crate::methods::check_atlas_memory(config, c.reconstruct.atlas_size)?;
     crate::methods::check_solid_memory(config, c.parameterize.resolution, &c.parameterize.request)?;
     config.check("synthesize", c.synthesize.validate())?;
