@@ -176,6 +176,7 @@ pub fn decode_image(path: &Path, bytes: &[u8]) -> Result<Image, ImageError> {
     let img = if is_exr {
         decode_exr(path, bytes)?
     } else {
+        check_jpeg_complete(path, bytes)?;
         let dynimg = image::load_from_memory(bytes).map_err(|e| ImageError::Decode {
             path: path.to_owned(),
             message: e.to_string(),
@@ -213,6 +214,29 @@ pub fn decode_image(path: &Path, bytes: &[u8]) -> Result<Image, ImageError> {
         });
     }
     Ok(img)
+}
+
+/// Refuses a JPEG cut short: the decoder fills what is missing with grey and says nothing. A
+/// whole JPEG has an end-of-image marker (`FF D9`) after its last scan (`FF DA`); inside a
+/// scan's entropy-coded data an `FF` byte is always followed by `00` or a restart marker, so
+/// neither marker can appear there, and an embedded thumbnail's markers come before the main
+/// image's.
+fn check_jpeg_complete(path: &Path, bytes: &[u8]) -> Result<(), ImageError> {
+    if !bytes.starts_with(&[0xFF, 0xD8, 0xFF]) {
+        return Ok(());
+    }
+    let last = |marker: u8| bytes.windows(2).rposition(|w| w == [0xFF, marker]);
+    match (last(0xDA), last(0xD9)) {
+        (Some(scan), Some(end)) if end > scan => Ok(()),
+        _ => Err(ImageError::Invalid {
+            path: path.to_owned(),
+            message: format!(
+                "JPEG is truncated: no end-of-image marker after its last scan ({} bytes read); \
+                 the file was cut short, re-export or copy it again",
+                bytes.len()
+            ),
+        }),
+    }
 }
 
 fn decode_exr(path: &Path, bytes: &[u8]) -> Result<Image, ImageError> {
@@ -267,6 +291,30 @@ fn decode_exr(path: &Path, bytes: &[u8]) -> Result<Image, ImageError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_truncated_jpeg_is_refused_and_a_whole_one_read() {
+        let img =
+            image::RgbImage::from_fn(64, 48, |x, y| image::Rgb([x as u8 * 3, y as u8 * 5, 90]));
+        let mut bytes = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 90)
+            .encode_image(&img)
+            .unwrap();
+        let path = Path::new("e.jpg");
+        let whole = decode_image(path, &bytes).unwrap();
+        assert_eq!((whole.width, whole.height), (64, 48));
+        for keep in [bytes.len() - 2, bytes.len() * 3 / 4, bytes.len() / 2] {
+            let e = decode_image(path, &bytes[..keep]).unwrap_err().to_string();
+            assert!(
+                e.contains("e.jpg") && e.contains("truncated"),
+                "{keep}: {e}"
+            );
+        }
+        // Trailing bytes after the end marker (some cameras append data) are accepted.
+        let mut padded = bytes.clone();
+        padded.extend_from_slice(&[0u8; 16]);
+        assert!(decode_image(path, &padded).is_ok());
+    }
 
     #[test]
     fn bilinear_sample_hits_pixel_centres_and_midpoints() {
