@@ -212,6 +212,31 @@ fn render_command_uses_obj_vertex_colours_and_names_missing_files() {
 }
 
 #[test]
+fn render_refuses_the_obj_files_run_refuses_with_the_same_words() {
+    // tobj alone accepts a two-vertex face and a coordinate of five million digits; `render`
+    // reads through the pipeline's reader first, so both commands say the same.
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("two.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n".to_string()),
+        (
+            "huge.obj",
+            format!(
+                "v 0 0 0\nv 1 0 0\nv 0 1 {}\nf 1 2 3\n",
+                "1".repeat(5_000_000)
+            ),
+        ),
+    ];
+    for (name, text) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let e = render_mesh_file(&path, None, &unlit(32)).unwrap_err();
+        let want = texsyn::geom::io::read_mesh(&path).unwrap_err();
+        assert_eq!(e.to_string(), want.to_string(), "{name}");
+        assert!(e.to_string().contains(name), "{e}");
+    }
+}
+
+#[test]
 fn render_command_reads_other_formats_with_their_vertex_colours() {
     // COFF goes through geom::io::read_mesh; integer colours mean 0-255.
     let dir = tempfile::tempdir().unwrap();

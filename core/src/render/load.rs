@@ -58,7 +58,8 @@ fn obj_error(path: &Path, e: tobj::LoadError) -> RenderError {
     }
 }
 
-/// Reads an OBJ with tobj, keeping its per-corner texture coordinates, vertex colours and each
+/// Reads an OBJ checked by the pipeline's reader, then with tobj, keeping its per-corner
+/// texture coordinates, vertex colours and each
 /// face's material (from the `mtllib` files, relative to the OBJ; their images relative to each
 /// MTL). Groups and objects are merged
 /// into one mesh. An MTL that cannot be read is a warning: the mesh renders without it.
@@ -67,6 +68,10 @@ fn load_obj(path: &Path) -> Result<Loaded, RenderError> {
         path: path.to_owned(),
         source,
     })?;
+    // The file must pass the reader `run` uses, with its errors (a face of two vertices, a
+    // coordinate of a million digits, a bad index …): tobj is laxer, and is only asked for what
+    // that reader does not keep (corner texture coordinates, colours, materials).
+    crate::geom::io::read_mesh_bytes(path, &bytes)?;
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
