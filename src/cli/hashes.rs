@@ -20,7 +20,8 @@ pub struct HashesArgs {
     /// a version bump) is not overwritten unless `--accept-unbumped` is given.
     #[arg(short, long, value_name = "LOCKFILE")]
     output: Option<PathBuf>,
-    /// With `-o`: overwrite lines whose content changed under an unchanged key.
+    /// With `-o`: overwrite lines whose content changed under an unchanged key, and replace a
+    /// file that is not a lock at all.
     #[arg(long, requires = "output")]
     accept_unbumped: bool,
 }
@@ -47,10 +48,28 @@ pub fn hashes(args: &HashesArgs, g: &Globals) -> Result<i32> {
 
 /// Writes the lock `now` to `output` (atomically). When `output` holds a lock already, each
 /// of its lines whose content would change under an unchanged key is named on stderr, and
-/// unless `accept_unbumped`, nothing is written and that is the error.
+/// unless `accept_unbumped`, nothing is written and that is the error. A file there that does
+/// not parse as a lock is replaced only with `accept_unbumped`.
 fn write_lock(output: &Path, now: &LockFile, accept_unbumped: bool) -> Result<()> {
     if output.exists() {
-        let unbumped: Vec<_> = LockFile::read(output)?
+        let old = match LockFile::read(output) {
+            Ok(old) => old,
+            // A malformed lock is replaced only when asked: the file might not be a lock at
+            // all (a config named by mistake).
+            Err(e) if accept_unbumped => {
+                tracing::warn!(
+                    "replacing {}, which is not a lock file: {e:#}",
+                    output.display()
+                );
+                return write_atomic(output, now.to_text().as_bytes());
+            }
+            Err(e) => bail!(
+                "{e:#}\n{} is not a lock file, so it was not overwritten; remove it, or pass \
+                 --accept-unbumped to replace it",
+                output.display()
+            ),
+        };
+        let unbumped: Vec<_> = old
             .compare(now)
             .into_iter()
             .filter(|d| d.is_unbumped())

@@ -109,6 +109,27 @@ fn a_lock_file_that_disagrees_names_each_mismatching_node() {
     succeeded(hashes_to(&["-o", "bad.lock", "--accept-unbumped"]));
     assert_eq!(std::fs::read_to_string(d.join("bad.lock")).unwrap(), lock);
 
+    // A file that is not a lock at all is kept, and says how to replace it; replaced when
+    // asked.
+    std::fs::write(d.join("garbage.lock"), "garbage\n").unwrap();
+    let o = hashes_to(&["-o", "garbage.lock"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("garbage.lock is not a lock file")
+            && stderr(&o).contains("--accept-unbumped"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.join("garbage.lock")).unwrap(),
+        "garbage\n"
+    );
+    succeeded(hashes_to(&["-o", "garbage.lock", "--accept-unbumped"]));
+    assert_eq!(
+        std::fs::read_to_string(d.join("garbage.lock")).unwrap(),
+        lock
+    );
+
     // A changed key is an ordinary mismatch, and `hashes -o` replaces it.
     let rekeyed = lock.lines().map(|l| {
         if l.starts_with("synthesize ") {
