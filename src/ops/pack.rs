@@ -154,6 +154,11 @@ pub enum PackError {
     OtherFormat { archive: PathBuf, found: u64 },
     #[error("{archive} is damaged or truncated: {why}")]
     Damaged { archive: PathBuf, why: String },
+    #[error(
+        "{path}: {source}: unpack reads the whole archive into a temporary folder first; make \
+         room there, or point TMPDIR at a folder with room (the archive itself was not judged)"
+    )]
+    TempSpace { path: PathBuf, source: io::Error },
     #[error("{archive}: entry {entry}: {why}; the whole archive is refused")]
     Refused {
         archive: PathBuf,
@@ -688,8 +693,13 @@ fn check_archive(path: &Path, archive: &Path) -> Result<Checked, PackError> {
             )));
         }
         let dest = dir.path().join(&m.path);
-        let hash =
-            extract(&mut entry, &dest).map_err(|e| damaged(format!("reading entry {raw}: {e}")))?;
+        let hash = extract(&mut entry, &dest).map_err(|e| match e {
+            ExtractError::Read(e) => damaged(format!("reading entry {raw}: {e}")),
+            ExtractError::Write(source) => PackError::TempSpace {
+                path: dest.clone(),
+                source,
+            },
+        })?;
         if hash.to_hex() != m.blake3 {
             return Err(damaged(format!(
                 "entry {raw}: its blake3 hash {} differs from the manifest's {}",
@@ -1100,22 +1110,31 @@ pub fn unpack(
 }
 
 /// Copies an entry's bytes to `dest` (creating its folder), returning their blake3 hash.
-fn extract(entry: &mut impl Read, dest: &Path) -> io::Result<ContentHash> {
+/// Why an entry could not be extracted: the archive's side (a damaged stream) or the
+/// temporary folder's (full, or not writable), which must not be blamed on the archive.
+#[derive(Debug)]
+enum ExtractError {
+    Read(io::Error),
+    Write(io::Error),
+}
+
+fn extract(entry: &mut impl Read, dest: &Path) -> Result<ContentHash, ExtractError> {
+    use ExtractError::{Read as R, Write as W};
     if let Some(dir) = dest.parent() {
-        fs::create_dir_all(dir)?;
+        fs::create_dir_all(dir).map_err(W)?;
     }
-    let mut file = io::BufWriter::new(File::create_new(dest)?);
+    let mut file = io::BufWriter::new(File::create_new(dest).map_err(W)?);
     let mut hasher = blake3::Hasher::new();
     let mut buf = vec![0u8; 1 << 16];
     loop {
-        let n = entry.read(&mut buf)?;
+        let n = entry.read(&mut buf).map_err(R)?;
         if n == 0 {
             break;
         }
         hasher.update(&buf[..n]);
-        file.write_all(&buf[..n])?;
+        file.write_all(&buf[..n]).map_err(W)?;
     }
-    file.flush()?;
+    file.flush().map_err(W)?;
     Ok(ContentHash(*hasher.finalize().as_bytes()))
 }
 
@@ -1254,6 +1273,32 @@ impl Drop for TempFile {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_temporary_folder_that_cannot_take_an_entry_is_not_blamed_on_the_archive() {
+        // The entry's folder cannot be made (a file is in the way): a write-side error, which
+        // unpack reports as the temporary folder's, not as a damaged archive.
+        let d = tempfile::tempdir().unwrap();
+        fs::write(d.path().join("blocker"), b"x").unwrap();
+        let dest = d.path().join("blocker").join("entry");
+        let e = extract(&mut &b"payload"[..], &dest).unwrap_err();
+        assert!(matches!(e, ExtractError::Write(_)), "{e:?}");
+        // A stream that fails mid-read is the archive's.
+        struct Broken;
+        impl Read for Broken {
+            fn read(&mut self, _: &mut [u8]) -> io::Result<usize> {
+                Err(io::Error::new(io::ErrorKind::UnexpectedEof, "cut short"))
+            }
+        }
+        let e = extract(&mut Broken, &d.path().join("ok")).unwrap_err();
+        assert!(matches!(e, ExtractError::Read(_)), "{e:?}");
+        let msg = PackError::TempSpace {
+            path: dest,
+            source: io::Error::other("No space left on device"),
+        }
+        .to_string();
+        assert!(msg.contains("TMPDIR") && !msg.contains("damaged"), "{msg}");
+    }
 
     #[test]
     fn common_dir_and_absolute_are_lexical() {
