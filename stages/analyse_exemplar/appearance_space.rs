@@ -45,7 +45,7 @@ const PCA_FIT_SAMPLES: usize = 16384;
 /// The `appearance_space` node's algorithm and version (part of its key; bump on any change of
 /// output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("appearance_space", 1);
+    texsyn_core::algorithm::Algorithm::new("appearance_space", 2);
 
 /// The sizes of an appearance space: the sample's, its channels, its stack levels and the
 /// entries of each k-coherence set.
@@ -98,32 +98,46 @@ pub struct AppearanceLevel<'a> {
 }
 
 impl<'a> AppearanceSpaceRef<'a> {
-    /// Checks that the arrays hold what `meta` says.
+    /// Checks that the arrays hold what `meta` says: sizes within a sample's (8 to
+    /// [`MAX_SIDE`] texels a side), lengths that match, candidates inside the sample and
+    /// finite numbers.
     pub fn new(
         meta: AppearanceMeta,
         stack: &'a [f32],
         neighbourhoods: &'a [f32],
         candidates: &'a [u32],
     ) -> Result<Self, String> {
-        let (n, l) = (meta.texels(), meta.levels as usize);
-        let ok = meta.width >= 8
-            && meta.height >= 8
-            && (1..=8).contains(&meta.k)
-            && (1..=16).contains(&meta.levels)
-            && stack.len() == l * n * meta.channels as usize
-            && neighbourhoods.len() == l * n * NEIGHBOURHOOD_DIMS
-            && candidates.len() == l * n * meta.k as usize
-            && candidates.iter().all(|&u| (u as usize) < n);
-        if ok {
-            Ok(AppearanceSpaceRef {
-                meta,
-                stack,
-                neighbourhoods,
-                candidates,
-            })
-        } else {
-            Err(format!("appearance space arrays disagree with {meta:?}"))
+        let bad = |why: &str| Err(format!("appearance space {meta:?}: {why}"));
+        let side = 8..=MAX_SIDE;
+        if !side.contains(&meta.width) || !side.contains(&meta.height) {
+            return bad("sample size out of range");
         }
+        if !(1..=8).contains(&meta.k) || !(1..=16).contains(&meta.levels) {
+            return bad("k or levels out of range");
+        }
+        if !(1..=6).contains(&meta.channels) {
+            return bad("channels out of range");
+        }
+        let (n, l) = (meta.texels(), meta.levels as usize);
+        let len = |per: usize| l.checked_mul(n).and_then(|ln| ln.checked_mul(per));
+        if Some(stack.len()) != len(meta.channels as usize)
+            || Some(neighbourhoods.len()) != len(NEIGHBOURHOOD_DIMS)
+            || Some(candidates.len()) != len(meta.k as usize)
+        {
+            return bad("array lengths disagree with the sizes");
+        }
+        if candidates.iter().any(|&u| u as usize >= n) {
+            return bad("a candidate lies outside the sample");
+        }
+        if !stack.iter().chain(neighbourhoods).all(|v| v.is_finite()) {
+            return bad("a value is not finite");
+        }
+        Ok(AppearanceSpaceRef {
+            meta,
+            stack,
+            neighbourhoods,
+            candidates,
+        })
     }
 
     /// Stack level `l`.
@@ -139,6 +153,9 @@ impl<'a> AppearanceSpaceRef<'a> {
         }
     }
 }
+
+/// The largest sample side an appearance space holds (coordinates stay exact in `f32`).
+pub const MAX_SIDE: u32 = 1 << 14;
 
 /// The stack levels a sample of `w × h` gets: spacings up to `min(w, h) / 8`, so the coarsest
 /// level's 5×5 appearance taps around 3×3 neighbourhood taps (`± 3 h`) stay within the sample.
@@ -199,13 +216,22 @@ impl AppearanceSpace {
     }
 }
 
-/// The analysis node: the appearance space of the variants' middle scale, orientation 0
-/// (the sample at its own size), with the variants' channel weights.
+/// The analysis node: the appearance space of the variants' middle scale, orientation 0 (the
+/// sample's central square at its own texel size; resampled half a texel off, so slightly
+/// blurred, when the sides differ by an odd number), with the variants' channel weights.
 pub fn node(
     variants: &crate::analyse_exemplar::texel_variants::TexelVariantsRef<'_>,
     k: u32,
 ) -> Result<AppearanceSpace, texsyn_core::algorithm::Failure> {
     let sample = base_sample(variants);
+    let side = 8..=MAX_SIDE;
+    if !side.contains(&sample.width) || !side.contains(&sample.height) {
+        return Err(texsyn_core::algorithm::Failure::input(format!(
+            "the appearance synthesizer needs a sample of 8 to {MAX_SIDE} texels a side, got \
+             {}×{}",
+            sample.width, sample.height
+        )));
+    }
     if (1..=8).contains(&k) {
         Ok(AppearanceSpace::build(
             &sample,
@@ -219,7 +245,8 @@ pub fn node(
     }
 }
 
-/// The variants' middle scale, orientation 0, finest level: the sample at its own size.
+/// The variants' middle scale, orientation 0, finest level: the sample's central square at its
+/// own texel size.
 pub fn base_sample(
     variants: &crate::analyse_exemplar::texel_variants::TexelVariantsRef<'_>,
 ) -> TexelImage {
@@ -259,14 +286,25 @@ fn blur_dilated(src: &[f32], w: usize, h: usize, c: usize, step: i64) -> Vec<f32
     pass(&pass(src, true), false)
 }
 
-/// A regular subsample of at most [`PCA_FIT_SAMPLES`] of the `dim`-vectors in `data`.
+/// At most [`PCA_FIT_SAMPLES`] of the `dim`-vectors in `data`: all of them, or vector
+/// `i · p mod n` for `i < PCA_FIT_SAMPLES` with `p` a prime near `n / PCA_FIT_SAMPLES · φ` not
+/// dividing `n`, which spreads over every column (a plain stride dividing the width would fit
+/// the basis to a few columns, one phase of a periodic sample).
 fn fit_subsample(data: &[f32], dim: usize) -> Vec<f32> {
     let n = data.len() / dim;
-    let stride = n.div_ceil(PCA_FIT_SAMPLES).max(1);
-    data.chunks_exact(dim)
-        .step_by(stride)
-        .flatten()
-        .copied()
+    if n <= PCA_FIT_SAMPLES {
+        return data.to_vec();
+    }
+    let is_prime = |p: usize| p >= 2 && (2..).take_while(|d| d * d <= p).all(|d| p % d != 0);
+    let mut p = (n as f64 / PCA_FIT_SAMPLES as f64 * 1.618_034) as usize + 1;
+    while !is_prime(p) || n.is_multiple_of(p) {
+        p += 1;
+    }
+    (0..PCA_FIT_SAMPLES)
+        .flat_map(|i| {
+            let v = (i * p) % n;
+            data[v * dim..(v + 1) * dim].iter().copied()
+        })
         .collect()
 }
 
@@ -335,8 +373,8 @@ fn neighbourhood_vectors(appearance: &[f32], w: usize, h: usize, step: i64) -> V
 }
 
 /// The margin, in texels, of the interior a level's candidates come from: the spacing `h` of
-/// its 3×3 taps (so a candidate's neighbourhood reads no mirrored tap but those of the
-/// appearance vectors' outer ring), at most a quarter of the smaller side.
+/// its 3×3 taps (so the 3×3 taps stay inside; the outer two rings of the appearance vectors'
+/// 5×5 taps may still be mirrored), at most a quarter of the smaller side.
 pub fn interior_margin(w: u32, h: u32, spacing: u32) -> u32 {
     spacing.min(w.min(h) / 4)
 }
@@ -403,6 +441,48 @@ fn coherence_sets(neigh: &[f32], w: usize, h: usize, step: i64, k: usize) -> Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_view_refuses_sizes_that_overflow_or_disagree_and_values_that_are_not_finite() {
+        let space = AppearanceSpace::build(&stripes(16, 16, 4), &[1.0, 1.0, 1.0], 2);
+        let v = space.view();
+        let ok = |m: AppearanceMeta, s: &[f32], nb: &[f32], c: &[u32]| {
+            AppearanceSpaceRef::new(m, s, nb, c).is_ok()
+        };
+        assert!(ok(v.meta, v.stack, v.neighbourhoods, v.candidates));
+        // Sizes whose products wrap to the empty arrays' lengths.
+        let huge = AppearanceMeta {
+            width: 1 << 31,
+            height: 1 << 31,
+            ..v.meta
+        };
+        assert!(!ok(huge, &[], &[], &[]));
+        let wider = AppearanceMeta {
+            width: 17,
+            ..v.meta
+        };
+        assert!(!ok(wider, v.stack, v.neighbourhoods, v.candidates));
+        let mut c = v.candidates.to_vec();
+        c[5] = 16 * 16;
+        assert!(!ok(v.meta, v.stack, v.neighbourhoods, &c));
+        let mut s = v.stack.to_vec();
+        s[3] = f32::NAN;
+        assert!(!ok(v.meta, &s, v.neighbourhoods, v.candidates));
+    }
+
+    #[test]
+    fn the_pca_subsample_visits_every_column() {
+        // 256² vectors of one number, the column index: a stride of 4 (what 65536 / 16384
+        // gives) would only ever see columns 0, 4, 8, ….
+        let data: Vec<f32> = (0..256 * 256).map(|t| (t % 256) as f32).collect();
+        let sub = fit_subsample(&data, 1);
+        assert_eq!(sub.len(), PCA_FIT_SAMPLES);
+        let mut seen = [false; 256];
+        for v in sub {
+            seen[v as usize] = true;
+        }
+        assert!(seen.iter().all(|&s| s), "columns missed");
+    }
 
     fn stripes(w: u32, h: u32, period: u32) -> TexelImage {
         let mut s = TexelImage::new(w, h, 3);
