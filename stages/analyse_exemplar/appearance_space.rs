@@ -295,7 +295,12 @@ fn fit_subsample(data: &[f32], dim: usize) -> Vec<f32> {
     if n <= PCA_FIT_SAMPLES {
         return data.to_vec();
     }
-    let is_prime = |p: usize| p >= 2 && (2..).take_while(|d| d * d <= p).all(|d| p % d != 0);
+    let is_prime = |p: usize| {
+        p >= 2
+            && (2..)
+                .take_while(|d| d * d <= p)
+                .all(|d| !p.is_multiple_of(d))
+    };
     let mut p = (n as f64 / PCA_FIT_SAMPLES as f64 * 1.618_034) as usize + 1;
     while !is_prime(p) || n.is_multiple_of(p) {
         p += 1;
