@@ -418,7 +418,9 @@ pub fn synthesize_appearance(
 mod tests {
     use super::*;
     use crate::analyse_exemplar::appearance_space::AppearanceSpace;
-    use crate::analyse_exemplar::texel_variants::{TexelVariantParams, build_texel_variants};
+    use crate::analyse_exemplar::texel_variants::{
+        TexelVariantParams, TexelVariants, build_texel_variants,
+    };
     use glam::{Vec2, Vec3};
 
     /// A 64² sample of round bumps on a jittered lattice, as `(dx, dy, dn)`.
@@ -473,12 +475,7 @@ mod tests {
 
     #[test]
     fn any_thread_count_gives_the_same_bits_and_the_cut_is_seamless() {
-        let vp = TexelVariantParams {
-            orientations: 4,
-            scales: 3,
-            ..Default::default()
-        };
-        let owned = build_texel_variants(&bumps(), &vp, &|_| {}).unwrap();
+        let owned = variants_of(&bumps());
         let variants = owned.as_ref();
         let (gi, field) = cylinder();
         let p = GeometrySynthParams {
@@ -526,25 +523,21 @@ mod tests {
         assert!(hi - lo > 0.8, "flat output: {lo} {hi}");
     }
 
-    fn space_of(variants: &TexelVariantsRef<'_>, p: &GeometrySynthParams) -> AppearanceSpace {
-        crate::analyse_exemplar::appearance_space::node(variants, p.appearance_k).unwrap()
-    }
-
-    #[test]
-    fn coherent_runs_follow_the_map_on_a_flat_square() {
-        // On an undistorted square with a constant field, most grid neighbours continue each
-        // other's coordinates (one grid step = one sample texel along x): the synthesis copies
-        // patches, not texels. A synthesizer that rematched every texel on its own, or that
-        // rounded the map's steps away, would not.
+    /// The variants the tests analyse a sample into: 4 orientations, 3 scales.
+    fn variants_of(sample: &TexelImage) -> TexelVariants {
         let vp = TexelVariantParams {
             orientations: 4,
             scales: 3,
             ..Default::default()
         };
-        let sample = bumps();
-        let owned = build_texel_variants(&sample, &vp, &|_| {}).unwrap();
+        build_texel_variants(sample, &vp, &|_| {}).unwrap()
+    }
+
+    /// `sample` synthesized at the defaults over an undistorted `n × n` square with a constant
+    /// field: one grid step is one sample texel along x.
+    fn on_flat_square(sample: &TexelImage, n: u32) -> TexelImage {
+        let owned = variants_of(sample);
         let variants = owned.as_ref();
-        let n = 65u32;
         let nn = (n * n) as usize;
         let gi = GeometryImage {
             n,
@@ -560,8 +553,22 @@ mod tests {
         };
         let p = GeometrySynthParams::default();
         let space = space_of(&variants, &p);
-        let out =
-            synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {}).unwrap();
+        synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {}).unwrap()
+    }
+
+    fn space_of(variants: &TexelVariantsRef<'_>, p: &GeometrySynthParams) -> AppearanceSpace {
+        crate::analyse_exemplar::appearance_space::node(variants, p.appearance_k).unwrap()
+    }
+
+    #[test]
+    fn coherent_runs_follow_the_map_on_a_flat_square() {
+        // On an undistorted square with a constant field, most grid neighbours continue each
+        // other's coordinates (one grid step = one sample texel along x): the synthesis copies
+        // patches, not texels. A synthesizer that rematched every texel on its own, or that
+        // rounded the map's steps away, would not.
+        let sample = bumps();
+        let n = 65u32;
+        let out = on_flat_square(&sample, n);
         // A texel continues its left neighbour when it equals the sample one texel right of
         // where the neighbour's value sits: count pairs whose (dn, dx) pair matches the
         // sample's horizontal pairs exactly.
@@ -662,31 +669,7 @@ mod tests {
     /// The crack sample and its synthesis over a flat 129² square at the defaults.
     fn cracks_synthesized() -> (TexelImage, TexelImage) {
         let sample = cracks();
-        let vp = TexelVariantParams {
-            orientations: 4,
-            scales: 3,
-            ..Default::default()
-        };
-        let owned = build_texel_variants(&sample, &vp, &|_| {}).unwrap();
-        let variants = owned.as_ref();
-        let n = 129u32;
-        let nn = (n * n) as usize;
-        let gi = GeometryImage {
-            n,
-            positions: (0..nn)
-                .map(|k| Vec3::new((k % n as usize) as f32, (k / n as usize) as f32, 0.0))
-                .collect(),
-            normals: vec![Vec3::Z; nn],
-            mate_rep: (0..nn as u32).collect(),
-        };
-        let field = ParamField {
-            dir: vec![Vec2::Y; nn],
-            rel_scale: vec![1.0; nn],
-        };
-        let p = GeometrySynthParams::default();
-        let space = space_of(&variants, &p);
-        let out =
-            synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {}).unwrap();
+        let out = on_flat_square(&sample, 129);
         (sample, out)
     }
 
