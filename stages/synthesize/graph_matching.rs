@@ -23,6 +23,8 @@
 //!   `r_scale` alone lacks the edge length: `scale · ē` (texels per edge) is what turns the
 //!   region's side `aᵐ n` (texels of stack level `m`) into a count of edges. `k` is rounded and
 //!   kept in `1..=max_k` (with `k = 0` the region would be `P` alone and there is nothing to match).
+//!   A region that `max_k` cuts short covers fewer than `n` texels: such vertices are counted
+//!   per mesh level and named in a warning with the `max_k` that keeps them whole.
 //!   Departure: `aᵐ` is `2ᵐ` for stacks too. A stack's level `m` holds features of `2ᵐ`
 //!   texels, as a pyramid's does; with the paper's `a = 1` a coarse level's region would be as
 //!   small in texels as a fine one's (one ring, a few texels wide), and the coarse levels could
@@ -147,6 +149,45 @@ impl Default for MatchParams {
     }
 }
 
+/// The largest `synthesize.max_k` accepted.
+const MAX_K: u32 = 32;
+
+/// A vertex's region radius `k` in edges (§3.3.2): the `k` that solves
+/// `(k+1)² + k² = side²`, rounded, and kept in `1..=max_k`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct RegionRadius {
+    /// The radius used.
+    k: u8,
+    /// The rounded radius the region's side asks for, before `max_k` (at least 1).
+    wanted: u32,
+}
+
+impl RegionRadius {
+    /// `side`: the region's side in edges.
+    fn of(side: f32, max_k: u32) -> RegionRadius {
+        let rhs = side * side;
+        let kf = ((2.0 * rhs - 1.0).max(0.0).sqrt() - 1.0) / 2.0;
+        let wanted = kf.round().clamp(1.0, 1.0e6) as u32;
+        RegionRadius {
+            k: wanted.min(max_k) as u8,
+            wanted,
+        }
+    }
+
+    /// Whether `max_k` made the region smaller than its side asks.
+    fn capped(&self) -> bool {
+        self.wanted > self.k as u32
+    }
+}
+
+/// The vertices of one mesh level whose region `max_k` cut short.
+#[derive(Default)]
+struct CappedRegions {
+    count: usize,
+    /// The largest radius any of them wanted.
+    widest: u32,
+}
+
 impl MatchParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("synthesize.region", self.region, 1, 64)?;
@@ -164,7 +205,7 @@ impl MatchParams {
             0,
             1024,
         )?;
-        check_range("synthesize.max_k", self.max_k, 1, 32)
+        check_range("synthesize.max_k", self.max_k, 1, MAX_K)
     }
 }
 
@@ -387,6 +428,7 @@ impl<'a> Level<'a> {
         let mut right = vec![Vec3::ZERO; n];
         let mut stack_level = vec![0u8; n];
         let mut k = vec![1u8; n];
+        let mut capped = CappedRegions::default();
         for v in 0..n {
             let nrm = normals[v];
             let o = input.field.orientation[v];
@@ -404,9 +446,25 @@ impl<'a> Level<'a> {
             // (k+1)² + k² = rhs  ⇒  k = (√(2·rhs − 1) − 1) / 2
             // A region covers `n` texels of its level, `2^m` finest texels each (see the doc).
             let side = (1u32 << m) as f32 * p.region as f32 / (input.scale * ebar[v]).max(1e-9);
-            let rhs = side * side;
-            let kf = ((2.0 * rhs - 1.0).max(0.0).sqrt() - 1.0) / 2.0;
-            k[v] = kf.round().clamp(1.0, p.max_k as f32) as u8;
+            let radius = RegionRadius::of(side, p.max_k);
+            k[v] = radius.k;
+            if radius.capped() {
+                capped.count += 1;
+                capped.widest = capped.widest.max(radius.wanted);
+            }
+        }
+        if capped.count > 0 {
+            tracing::warn!(
+                "synthesize: on mesh level {l}, {} of {n} vertices wanted a region radius above \
+                 synthesize.max_k = {} (up to {} edges): their regions cover fewer than \
+                 region = {} texels of their stack level; max_k = {} keeps them whole (larger \
+                 regions take longer to match)",
+                capped.count,
+                p.max_k,
+                capped.widest,
+                p.region,
+                capped.widest.min(MAX_K),
+            );
         }
         let level_start = (0..stack.levels()).map(|m| stack.level_start(m)).collect();
         Level {
@@ -870,6 +928,21 @@ pub fn node(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn region_radius_solves_the_region_equation_and_says_when_max_k_cuts_it() {
+        // (k+1)² + k² = side²: side 5 gives k = 3 exactly (16 + 9 = 25), side 13 gives 8
+        // (81 + 64 = 145 ≈ 12.04²; 13² = 169 lies between k = 8 and k = 9 (181), nearer 8).
+        let r = RegionRadius::of(5.0, 8);
+        assert_eq!((r.k, r.wanted, r.capped()), (3, 3, false));
+        let r = RegionRadius::of(5.0, 2);
+        assert_eq!((r.k, r.wanted, r.capped()), (2, 3, true));
+        let r = RegionRadius::of(145f32.sqrt(), 8);
+        assert_eq!((r.k, r.wanted, r.capped()), (8, 8, false));
+        // A side under one edge still matches one ring.
+        let r = RegionRadius::of(0.5, 8);
+        assert_eq!((r.k, r.wanted, r.capped()), (1, 1, false));
+    }
     use crate::analyse_exemplar::gaussian_stack::{GaussianStack, StackParams, build_stack};
     use crate::field::orientation_field::Anchor;
     use crate::field::sweep_field::{SweepFieldParams, resolve_keys, sweep_field};

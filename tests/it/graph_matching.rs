@@ -256,3 +256,35 @@ fn auto_scale_spans_a_quarter_of_the_bounding_box_diagonal_at_any_size() {
         assert!((ratio - 1000.0).abs() < 0.1, "{config}: scales {scales:?}");
     }
 }
+
+/// A region that `synthesize.max_k` cuts below `region` texels is said, per mesh level, with
+/// the `max_k` that would keep it whole; a `max_k` that cuts nothing says nothing.
+#[test]
+fn regions_cut_short_by_max_k_are_named_in_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_with = |max_k: &str| {
+        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_texsyn"));
+        cmd.args(["run", "configs/graph_matching.toml"]);
+        for s in SMALL.iter().copied().chain([max_k]) {
+            cmd.args(["--set", s]);
+        }
+        let out = cmd
+            .arg("--cache")
+            .arg(dir.path().join("cache"))
+            .arg("--out")
+            .arg(dir.path().join("out"))
+            .current_dir(repo())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{err}");
+        err
+    };
+    let err = run_with("synthesize.max_k=1");
+    assert!(
+        err.contains("synthesize.max_k = 1") && err.contains("vertices wanted a region radius"),
+        "{err}"
+    );
+    let err = run_with("synthesize.max_k=32");
+    assert!(!err.contains("wanted a region radius"), "{err}");
+}
