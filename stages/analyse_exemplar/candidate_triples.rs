@@ -743,6 +743,18 @@ impl<'a> SolidAnalysisRef<'a> {
         acc.map(|x| x / total)
     }
 
+    /// What matching compares of pixel `px` of image `img` at level `li`: its colour, or with
+    /// a feature mask its appearance texel (the per-plane counterpart of [`Self::match_colour`]).
+    #[inline]
+    pub fn match_texel(&self, li: usize, img: usize, px: [u16; 2]) -> [f32; 3] {
+        let i = (li * self.layout.images + img) * self.layout.pixels + self.pixel_index(px);
+        if self.appearance.is_empty() {
+            self.stack[i]
+        } else {
+            self.appearance[i]
+        }
+    }
+
     /// The level of the stack that matching reads (appearance with a feature mask, else
     /// colour) of image `img` at array level `li`.
     pub fn match_level(&self, li: usize, img: usize) -> &'a [[f32; 3]] {

@@ -10,15 +10,17 @@ use std::sync::OnceLock;
 use glam::{Quat, Vec3};
 use texsyn::artifact::AlignedBytes;
 use texsyn::image::Image;
+use texsyn::image::patch_score::{ScoreParams, patch_score};
 use texsyn::random::counter_hash;
 use texsyn::stages::analyse_exemplar::candidate_triples::{
     AnalysisError, CandidateParams, SolidAnalysis, SolidAnalysisRef, Triple, analyse,
 };
+use texsyn::stages::reconstruct::solid_colour::{SolidColourRule, VoxelTriples};
 use texsyn::stages::synthesize::solid::dependent_set::{ChunkedNeed, dependent_set};
 use texsyn::stages::synthesize::solid::history_window::Schedule;
 use texsyn::stages::synthesize::solid::solid_synthesis::{
-    BatchLimits, Brick, BrickStore, MemoryBrickStore, Scheme, SolidParams, SolidSynthesis,
-    VoxelRequest,
+    BatchLimits, Brick, BrickStore, MemoryBrickStore, NeighbourhoodColour, Scheme, SolidParams,
+    SolidSynthesis, VoxelRequest,
 };
 
 fn crop(img: &Image, x0: u32, y0: u32, w: u32, h: u32) -> Image {
@@ -700,6 +702,68 @@ fn a_section_looks_more_like_the_exemplar_than_random_triples() {
     let ds = nearest_patch_distance(&synth, 32, 32, img);
     let dr = nearest_patch_distance(&random, 32, 32, img);
     assert!(ds < 0.5 * dr, "synthesized {ds}, random {dr}");
+}
+
+/// A z-section of a sketch-free solid of the marble crop, coloured as the reconstruct node
+/// colours it, with neighbourhoods and colour rule of one kind: the section as an image.
+fn marble_section(neighbourhoods: NeighbourhoodColour, rule: SolidColourRule) -> Image {
+    let (_, a) = small();
+    let (vol, field) = trivial_cube(40);
+    let mut p = small_solid_params();
+    p.neighbourhood_colour = neighbourhoods;
+    let s = SolidSynthesis::new(a.as_ref(), &field, vol, p).unwrap();
+    let store = MemoryBrickStore::new();
+    let voxels: Vec<[i32; 3]> = (0..40)
+        .flat_map(|y| (0..40).map(move |x| [x, y, 20]))
+        .collect();
+    let (triples, _) = s.synthesize_voxels(&voxels, &store).unwrap();
+    let mut shown = VoxelTriples::new(&field, &vol, rule);
+    shown.add(&voxels, &triples, a.as_ref());
+    let mut img = Image::new(40, 40);
+    for (i, v) in voxels.iter().enumerate() {
+        let c = shown.colour((*v).into(), Some(Vec3::Z)).unwrap();
+        img.pixels[i] = [c[0], c[1], c[2], 1.0];
+    }
+    img
+}
+
+/// Three texels averaged are a blur wherever a triple is not consistent across its planes: a
+/// section must be matched and shown as what a cut along its plane holds, the plane's own
+/// texels. Then the section keeps the exemplar's gradient energy (its marble veins); the
+/// averaged solid keeps under half of it.
+#[test]
+fn a_section_keeps_the_exemplar_s_detail_where_the_averaged_solid_blurs_it() {
+    let (img, _) = small();
+    let params = ScoreParams {
+        patch: 5,
+        ..Default::default()
+    };
+    let score = |section: &Image| patch_score(section.view(), img.view(), &params).unwrap();
+    let plane = score(&marble_section(
+        NeighbourhoodColour::Plane,
+        SolidColourRule::Facing,
+    ));
+    let mean = score(&marble_section(
+        NeighbourhoodColour::Mean,
+        SolidColourRule::Mean,
+    ));
+    assert!(
+        plane.gradient_ratio >= 0.7,
+        "plane neighbourhoods, facing colours: gradient ratio {:.3}",
+        plane.gradient_ratio
+    );
+    assert!(
+        mean.gradient_ratio < 0.5,
+        "mean neighbourhoods and colours: gradient ratio {:.3} (the setup no longer shows \
+         the blur it guards against)",
+        mean.gradient_ratio
+    );
+    assert!(
+        plane.coverage > 1.5 * mean.coverage,
+        "coverage {:.3} against the mean's {:.3}",
+        plane.coverage,
+        mean.coverage
+    );
 }
 
 /// A pyramid deeper than the analysis' and an odd cell are refused. (Bricks round-trip with

@@ -110,12 +110,13 @@ fn build(config: &Config) -> Result<(Dag, SolidScore), MethodError> {
         export: c.reconstruct.clone(),
         request: c.parameterize.request.clone(),
     };
-    // The core's samples and analysis, the request and mesh, then each region's pair.
+    // The core's samples and analysis, the request, mesh and field (the voxels' frames, for
+    // the planes facing a surface), then each region's pair.
     let reconstruct = dag.node(
         NodeSpec::of(Reconstruct, colour::NODE),
         key,
-        (samples, core_analysis, request, mesh, pairs),
-        |ctx, key, (samples, analysis, req, mesh, pairs)| {
+        (samples, core_analysis, request, mesh, field, pairs),
+        |ctx, key, (samples, analysis, req, mesh, field, pairs)| {
             let sets = std::iter::once((samples, analysis)).chain(pairs);
             let sets = sets.map(|(s, a)| (s.voxels, s.triples, a));
             let (volume, voxels, section) = (&req.volume, req.voxels, req.section.as_ref());
@@ -123,6 +124,7 @@ fn build(config: &Config) -> Result<(Dag, SolidScore), MethodError> {
                 volume,
                 voxels,
                 section,
+                field: &field,
             };
             let files = colour::node(key, &mesh, request, sets, &|f| ctx.progress.set(f))?;
             Ok(Bundle::from(files))

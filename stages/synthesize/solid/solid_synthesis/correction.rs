@@ -3,7 +3,7 @@
 //! `S(v)` collected and the nearest one kept; with the whole-frame and lattice shortcuts of
 //! the trivial field and the per-correction caches.
 
-use super::SolidSynthesis;
+use super::{NeighbourhoodColour, SolidSynthesis};
 use crate::analyse_exemplar::candidate_triples::{SolidAnalysisRef, Triple, wrap};
 use crate::simd::{
     Avx2, Kernels, Portable, prefetch_slice, project, project_avx2, project_avx512,
@@ -84,18 +84,20 @@ impl PlaneDistances {
     }
 }
 
-/// The colours of a lattice neighbourhood (see `lattice_steps`) into `out`, row-major: the
-/// voxel of row part `rows[j]`, column part `cols[i]` and `centre` (each `(table part, local
-/// part, inside the latest window)` of one axis) at `out[3(j·side + i)..]`, from `cur` inside
-/// the window and from `start` outside, as `read` does. Its own function, not inlined: inside
-/// the big correction loop the output cursor lived on the stack, and every cell waited on
-/// its store and reload; here the cursor, the tables and both sources stay in registers.
+/// The colours (`shown` of each voxel state) of a lattice neighbourhood (see
+/// `lattice_steps`) into `out`, row-major: the voxel of row part `rows[j]`, column part
+/// `cols[i]` and `centre` (each `(table part, local part, inside the latest window)` of one
+/// axis) at `out[3(j·side + i)..]`, from `cur` inside the window and from `start` outside, as
+/// `read` does. Its own function, not inlined: inside the big correction loop the output
+/// cursor lived on the stack, and every cell waited on its store and reload; here the cursor,
+/// the tables and both sources stay in registers.
 #[inline(never)]
 fn gather_lattice(
     st: &States,
     rows: &[(usize, usize, bool)],
     cols: &[(usize, usize, bool)],
     (tc, lc, inc): (usize, usize, bool),
+    shown: impl Fn(&VoxelState) -> [f32; 3],
     out: &mut [f32],
 ) {
     let (cur, start) = (&st.cur[..], &st.start[..]);
@@ -105,7 +107,7 @@ fn gather_lattice(
         for &(ta, la, ina) in cols {
             let slot = st.need.slot_of_parts(ta + t, la + l);
             let src = if ina && inside { cur } else { start };
-            out[o..o + 3].copy_from_slice(&src[slot].c);
+            out[o..o + 3].copy_from_slice(&shown(&src[slot]));
             o += 3;
         }
     }
@@ -408,13 +410,22 @@ impl<'a> SolidSynthesis<'a> {
                 &st.start[slot]
             }
         };
-        let trilinear = self.params.levels[li].trilinear;
-        let sample = |p: Vec3| -> [f32; 3] {
-            if !trilinear {
-                return read(round_v(p)).c;
+        // What a voxel shows in plane `p`'s neighbourhood.
+        let plane_colour = self.params.neighbourhood_colour == NeighbourhoodColour::Plane;
+        let shown = |s: &VoxelState, p: usize| -> [f32; 3] {
+            if plane_colour {
+                a.match_texel(li, a.image_of(p), s.t.c[p])
+            } else {
+                s.c
             }
-            let f = p.floor();
-            let t = p - f;
+        };
+        let trilinear = self.params.levels[li].trilinear;
+        let sample = |x: Vec3, p: usize| -> [f32; 3] {
+            if !trilinear {
+                return shown(read(round_v(x)), p);
+            }
+            let f = x.floor();
+            let t = x - f;
             let b = f.as_ivec3();
             let mut acc = [0.0f32; 3];
             for corner in 0..8 {
@@ -425,7 +436,7 @@ impl<'a> SolidSynthesis<'a> {
                 if wt == 0.0 {
                     continue;
                 }
-                let c = read(b + o).c;
+                let c = shown(read(b + o), p);
                 for ch in 0..3 {
                     acc[ch] += wt * c[ch];
                 }
@@ -450,7 +461,7 @@ impl<'a> SolidSynthesis<'a> {
                 let frame = |x: Vec3| self.frame_at(li, x);
                 integrated_neighbourhood(frame, vf, p, nh, bound, &mut sc.positions);
                 for (o, x) in sc.positions.iter().enumerate() {
-                    sc.vec[3 * o..3 * o + 3].copy_from_slice(&sample(*x));
+                    sc.vec[3 * o..3 * o + 3].copy_from_slice(&sample(*x, p));
                 }
             } else {
                 let out = &mut sc.vec[..dim];
@@ -471,14 +482,15 @@ impl<'a> SolidSynthesis<'a> {
                         axis_parts(st.need, bx, v[bx] - sb * nh, sb, dmax, latest, rows);
                         let mut centre = [(0, 0, false)];
                         axis_parts(st.need, cx, v[cx], 0, dmax, latest, &mut centre);
-                        gather_lattice(st, rows, cols, centre[0], out);
+                        let shown = |s: &VoxelState| shown(s, p);
+                        gather_lattice(st, rows, cols, centre[0], shown, out);
                     }
                     None => {
                         let mut o = 0;
                         for j in -nh..=nh {
                             let row = vf + c2 * j as f32;
                             for i in -nh..=nh {
-                                let col = sample(row + c1 * i as f32);
+                                let col = sample(row + c1 * i as f32, p);
                                 out[o..o + 3].copy_from_slice(&col);
                                 o += 3;
                             }

@@ -70,6 +70,13 @@
 //! # Departures
 //!
 //! - Matching uses squared L2 in PCA space (the paper: L1 on RGB); see the analysis.
+//! - §4.3 gathers "the color of voxels" into the three neighbourhoods, a voxel's colour being
+//!   the mean of its three texels. By default (`neighbourhood_colour = "plane"`,
+//!   [`NeighbourhoodColour`]) a voxel shows, in the neighbourhood of plane `P`, its own texel
+//!   in `P`: each plane is compared with what a cut along `P` holds, not with an average of
+//!   three unrelated texels wherever a triple is not consistent (which blurred sections:
+//!   README, "Solid: what a voxel shows"). The reconstruct node shows the facing planes'
+//!   texels to match (`stages/reconstruct/solid_colour.rs`).
 //! - `S(v)` also holds, for each neighbour `w` it visits, `w`'s whole triple shifted back to `v`
 //!   (`T(w) + [−h q_v⁻¹ (w − v) / s]`, eq. 4), as k-coherence does in 2D (option
 //!   `coherent_candidates`, default on). Without it, every correction replaces all three
@@ -122,7 +129,8 @@ mod shard;
 
 pub use bricks::{Brick, BrickMeta, BrickStore, MemoryBrickStore};
 pub use params::{
-    LevelParams, Pyramid, Scheme, SolidError, SolidParams, coarse_level, couple_levels,
+    LevelParams, NeighbourhoodColour, Pyramid, Scheme, SolidError, SolidParams, coarse_level,
+    couple_levels,
 };
 pub use plan::{BatchLimits, LevelDependency, LevelReport, SynthesisReport};
 pub use request::VoxelRequest;

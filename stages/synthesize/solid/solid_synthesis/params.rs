@@ -78,6 +78,19 @@ pub enum Scheme {
     DualGrid,
 }
 
+/// The colour a voxel shows in the plane neighbourhoods that matching gathers (§4.3 gathers
+/// "the color of voxels"; what that colour is, for a voxel holding three texels, is the
+/// choice here).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NeighbourhoodColour {
+    /// In the neighbourhood of plane `P` a voxel shows its own texel in `P`'s exemplar: each
+    /// plane is compared with what a cut along it shows (a departure, see the module docs).
+    Plane,
+    /// Every neighbourhood shows the plane-weighted mean of the voxel's three texels.
+    Mean,
+}
+
 /// Parameters of one level.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -136,6 +149,8 @@ pub struct SolidParams {
     /// Serialized only when on.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub field_integration: bool,
+    /// What a voxel shows in the neighbourhoods matching gathers. Default: `plane`.
+    pub neighbourhood_colour: NeighbourhoodColour,
 }
 
 fn is_zero(x: &f32) -> bool {
@@ -181,6 +196,7 @@ impl SolidParams {
             levels,
             field_smoothing: 0.0,
             field_integration: false,
+            neighbourhood_colour: NeighbourhoodColour::Plane,
         }
     }
 
