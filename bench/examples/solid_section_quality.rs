@@ -1,5 +1,7 @@
 //! The solid's section quality (README, "Solid: what a voxel shows"): a sketch-free solid
-//! (the trivial field) in an n³ cube, its middle z section synthesized and shown as the
+//! (the trivial field) in a cube of side n + 2·margin, the n² middle of its middle z section
+//! (away from the cube's faces, where neighbourhoods are clamped, as a config's
+//! `parameterize.margin` keeps the object away from them) synthesized and shown as the
 //! reconstruct node shows a cut, once with the paper's mean colours
 //! (`synthesize.neighbourhood_colour = "mean"`, `reconstruct.colour = "mean"`) and once with
 //! the defaults (`"plane"`, `"facing"`), scored by `texsyn score`'s nearest-patch measures
@@ -15,7 +17,7 @@
 //! cargo run --release -p texsyn-bench --example solid_section_quality -- [OUT_DIR]
 //! ```
 //!
-//! `SIZE` [128]: the cube's side.
+//! `SIZE` [128]: the section's side n; `MARGIN` [32]: voxels between it and the cube's faces.
 
 mod common;
 #[path = "../../tests/it/common/exemplars.rs"]
@@ -65,8 +67,11 @@ fn save_rows(path: &std::path::Path, rows: &[Vec<Image>], zoom: u32) {
 fn main() {
     let dir = common::out_dir();
     let n: u32 = env_or("SIZE", 128);
-    println!("| exemplar | neighbourhoods, colour | ratio | coverage | gradient ratio | patches | seconds |");
-    println!("|---|---|---:|---:|---:|---:|---:|");
+    let margin: u32 = env_or("MARGIN", 32);
+    println!(
+        "| exemplar | neighbourhoods, colour | ratio | coverage | largest offset | gradient ratio | patches | seconds |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---:|---:|");
     let mut picture = Vec::new();
     for (name, layers) in [("wood2.png", true), ("marble1.png", false)] {
         let img = load(name);
@@ -93,16 +98,16 @@ fn main() {
                 "plane, facing (default)",
             ),
         ] {
-            let (vol, field) = trivial_cube(n);
+            let (vol, field) = trivial_cube(n + 2 * margin);
             let params = SolidParams {
                 neighbourhood_colour: neighbourhoods,
                 ..SolidParams::paper(4)
             };
             let s = SolidSynthesis::new(a.as_ref(), &field, vol, params).unwrap();
-            let c = n as i32 / 2;
-            let voxels: Vec<[i32; 3]> = (0..n as i32)
-                .rev()
-                .flat_map(|y| (0..n as i32).map(move |x| [x, y, c]))
+            let (lo, c) = (margin as i32, (n + 2 * margin) as i32 / 2);
+            // Row r at y = lo + r: the exemplar's frame (image y along the local y axis).
+            let voxels: Vec<[i32; 3]> = (lo..lo + n as i32)
+                .flat_map(|y| (lo..lo + n as i32).map(move |x| [x, y, c]))
                 .collect();
             let t = std::time::Instant::now();
             let (triples, _) = s
@@ -118,8 +123,8 @@ fn main() {
             }
             let sc = patch_score(section.view(), img.view(), &ScoreParams::default()).unwrap();
             println!(
-                "| {name} | {what} | {:.3} | {:.3} | {:.3} | {} | {seconds:.1} |",
-                sc.ratio, sc.coverage, sc.gradient_ratio, sc.queries
+                "| {name} | {what} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {seconds:.1} |",
+                sc.ratio, sc.coverage, sc.largest_offset, sc.gradient_ratio, sc.queries
             );
             row.push(section);
         }

@@ -20,7 +20,7 @@ use texsyn_core::algorithm::Failure;
 
 /// The `volume_request` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("volume_request", 4);
+    texsyn_core::algorithm::Algorithm::new("volume_request", 5);
 
 /// What part of the solid to synthesize.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -353,13 +353,18 @@ impl Section {
     }
 }
 
-/// The section of the volume by the plane through `point` with `normal`. Errors when the
-/// plane misses the volume.
+/// The section of the volume by the plane with `normal` through the centre of the voxel
+/// holding `point` (moved less than half a voxel along the normal), sampled one voxel apart
+/// starting half a voxel in from the volume's box. So on a plane along a grid axis every
+/// sample is a voxel's centre, one per voxel: a plane or a sample on a voxel face would take
+/// the voxel on one side or the other by rounding, from sample to sample, duplicating and
+/// skipping columns or mixing two layers. Errors when the plane misses the volume.
 pub fn section(vol: &Volume, point: Vec3, normal: Vec3) -> Result<Section, VolumeError> {
     if !point.is_finite() || !normal.is_finite() || normal.length() < 1e-12 {
         return Err(VolumeError::DegeneratePlane);
     }
     let n = normal.normalize();
+    let point = point + n * (vol.centre(vol.voxel_of(point)) - point).dot(n);
     // In-plane axes: the world axis least aligned with n, orthogonalized.
     let helper = [Vec3::X, Vec3::Y, Vec3::Z]
         .into_iter()
@@ -401,10 +406,12 @@ pub fn section(vol: &Volume, point: Vec3, normal: Vec3) -> Result<Section, Volum
         vmin = vmin.min(d.dot(v));
         vmax = vmax.max(d.dot(v));
     }
-    let width = ((umax - umin) / vol.voxel).ceil() as u32 + 1;
-    let height = ((vmax - vmin) / vol.voxel).ceil() as u32 + 1;
+    // Whole voxels across (a hair under a whole number is that number, not one more).
+    let across = |extent: f32| ((extent / vol.voxel - 1e-3).ceil() as u32).max(1);
+    let (width, height) = (across(umax - umin), across(vmax - vmin));
+    let half = 0.5 * vol.voxel;
     Ok(Section {
-        origin: point + u * umin + v * vmin,
+        origin: point + u * (umin + half) + v * (vmin + half),
         u: u * vol.voxel,
         v: v * vol.voxel,
         width,
@@ -634,6 +641,26 @@ mod tests {
         // A z-slice: every voxel of that layer.
         assert_eq!(voxels.len(), (v.dims[0] * v.dims[1]) as usize);
         assert!(voxels.iter().all(|x| x.z == voxels[0].z));
+        // Planes along each axis, through a voxel's inside and through a face between two
+        // layers: one sample per voxel of one layer, each voxel once.
+        for normal in [Vec3::X, Vec3::Y, -Vec3::Z] {
+            let face = Vec3::from(v.origin) + Vec3::splat(7.0 * v.voxel);
+            for point in [Vec3::new(0.43, 0.57, 0.61), face] {
+                let s = section(&v, point, normal).unwrap();
+                let mut seen = std::collections::HashSet::new();
+                for j in 0..s.height {
+                    for i in 0..s.width {
+                        let x = v.voxel_of(s.point(i, j));
+                        assert!(seen.insert(x), "{normal} {point}: {x} sampled twice");
+                    }
+                }
+                let a = normal.abs().max_position();
+                let layer: u32 = (0..3).filter(|&k| k != a).map(|k| v.dims[k]).product();
+                assert_eq!(seen.len() as u32, layer, "{normal} {point}");
+                assert!(seen.iter().all(|x| x[a] == seen.iter().next().unwrap()[a]));
+                assert!(seen.iter().all(|x| v.contains(*x)), "{normal} {point}");
+            }
+        }
         let e = section(&v, Vec3::new(0.0, 0.0, 50.0), Vec3::Z).unwrap_err();
         assert!(e.to_string().contains("misses the volume"), "{e}");
         assert!(box_voxels(&v, Vec3::splat(10.0), Vec3::splat(11.0)).is_err());
