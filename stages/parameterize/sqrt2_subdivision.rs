@@ -30,11 +30,12 @@
 //!   place and each refined face gets a triangle on it, so such an input keeps its topology
 //!   rather than making the step fail; an edge two faces use in the same direction (an
 //!   inconsistently oriented input) still becomes one quad, oriented like its first face.
-//! - Pre-subdivision (§3.2.2) stops early: after a round that lowers the area spread by less
-//!   than [`MIN_SPREAD_GAIN`] of itself, and once edges span a texel. The paper runs a fixed
-//!   number of rounds (16 for the monarch), but each round refines a share of all faces, since
-//!   the mean area it thresholds against falls: 16 rounds took the cow from 2,904 to 114,535
-//!   vertices with the spread at 37 % after 6, which leaves no coarse level to start from.
+//! - Pre-subdivision (§3.2.2) stops early by default: after a round that lowers the area
+//!   spread by less than `adaptive_min_gain` (10 %) of itself, and once edges span a texel.
+//!   The paper runs a fixed number of rounds (16 for the monarch), but each round refines a
+//!   share of all faces, since the mean area it thresholds against falls: 16 rounds took the
+//!   cow from 2,904 to 114,535 vertices with the spread at 37 % after 6, which leaves no
+//!   coarse level to start from. `adaptive_min_gain = 0` runs the paper's fixed rounds.
 
 use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
@@ -338,9 +339,16 @@ pub struct SubdivisionParams {
     /// most objects).
     pub area_factor: f32,
     /// Most rounds of adaptive pre-subdivision (fewer when no face is over the threshold, a
-    /// round no longer lowers the area spread by 10 %, or edges already span a texel). Range 0
-    /// to 64. Default: 8.
+    /// round no longer lowers the area spread by `adaptive_min_gain`, or edges already span a
+    /// texel). Range 0 to 64. Default: 8.
     pub adaptive_rounds: u32,
+    /// The early stop of pre-subdivision: a round is kept only if it lowers the area spread by
+    /// at least this share of it, and no round refines edges that already span a texel. 0
+    /// turns both off, for the paper's fixed `adaptive_rounds` rounds (fewer only when no face
+    /// is over the threshold). Range 0 to 1. Default: 0.1. Left out of the node's key at the
+    /// default.
+    #[serde(skip_serializing_if = "is_default_min_gain")]
+    pub adaptive_min_gain: f32,
     /// Move old vertices at each full step (a relaxation, not Li et al.'s masks: see the module
     /// doc). Default: false, which keeps every vertex where it was created.
     pub smooth: bool,
@@ -356,10 +364,19 @@ impl Default for SubdivisionParams {
             scale: 0.0,
             area_factor: 1.5,
             adaptive_rounds: 8,
+            adaptive_min_gain: DEFAULT_MIN_SPREAD_GAIN,
             smooth: false,
             max_vertices: 4_000_000,
         }
     }
+}
+
+/// The default of `adaptive_min_gain`: a pre-subdivision round is kept only if it lowers the
+/// area spread by at least this share.
+const DEFAULT_MIN_SPREAD_GAIN: f32 = 0.1;
+
+fn is_default_min_gain(g: &f32) -> bool {
+    *g == DEFAULT_MIN_SPREAD_GAIN
 }
 
 /// Upper bound of `max_vertices`: the finest level has about as many faces as vertices, four
@@ -386,6 +403,12 @@ impl SubdivisionParams {
             ));
         }
         check_range("parameterize.adaptive_rounds", self.adaptive_rounds, 0, 64)?;
+        check_range(
+            "parameterize.adaptive_min_gain",
+            self.adaptive_min_gain,
+            0.0,
+            1.0,
+        )?;
         check_range(
             "parameterize.max_vertices",
             self.max_vertices,
@@ -498,11 +521,9 @@ impl Sqrt2Hierarchy {
     }
 }
 
-/// A pre-subdivision round is kept only if it lowers the area spread by at least this share.
-const MIN_SPREAD_GAIN: f32 = 0.1;
-
 /// Builds the hierarchy for a texture at `scale` texels per object unit: level 0 is the input
-/// after adaptive pre-subdivision (`p.area_factor`, `p.adaptive_rounds`; never smoothed),
+/// after adaptive pre-subdivision (`p.area_factor`, `p.adaptive_rounds`, stopped early by
+/// `p.adaptive_min_gain`; never smoothed),
 /// then full √2 steps follow while `scale × mean edge length > 1`, so the finest level is the
 /// first whose edges span at most about one texel. A mesh already that fine is one level.
 ///
@@ -545,16 +566,19 @@ pub fn build_hierarchy(
     // grow the mesh: a round refines a constant share of the faces, so many rounds on a large
     // mesh could take any amount of memory.
     if p.area_factor > 0.0 {
+        let early_stop = p.adaptive_min_gain > 0.0;
         for _ in 0..p.adaptive_rounds {
             // Pre-subdivision evens out the vertex distribution; once a round stops doing
             // that (the spread bottoms out at 30–40 %, §3.2.2), further rounds only refine
             // everything, as the mean area falls with each round. Nor is it refined past the
             // texture's resolution: the levels do that.
-            if spans_at_most_one_texel(scale, current.mean_edge_length()) {
+            if early_stop && spans_at_most_one_texel(scale, current.mean_edge_length()) {
                 break;
             }
             let (refined, parents, spread) = adaptive_presubdivision(&current, p.area_factor, 1);
-            if parents.is_empty() || spread[1] > (1.0 - MIN_SPREAD_GAIN) * spread[0] {
+            if parents.is_empty()
+                || (early_stop && spread[1] > (1.0 - p.adaptive_min_gain) * spread[0])
+            {
                 break;
             }
             tracing::debug!(
@@ -1136,10 +1160,11 @@ mod tests {
         let p = SubdivisionParams::default();
         let h = build_hierarchy(&mesh, 6.0, &p).unwrap();
         check_hierarchy(&h, &mesh, 6.0);
-        // The rounds kept are those that lowered the spread by at least MIN_SPREAD_GAIN.
+        // The rounds kept are those that lowered the spread by at least adaptive_min_gain.
         let (_, _, spread) = adaptive_presubdivision(&PolyMesh::from_mesh(&mesh), 1.5, 8);
+        let gain = p.adaptive_min_gain;
         let kept = (1..spread.len())
-            .take_while(|&i| spread[i] <= (1.0 - MIN_SPREAD_GAIN) * spread[i - 1])
+            .take_while(|&i| spread[i] <= (1.0 - gain) * spread[i - 1])
             .count();
         assert!(kept >= 1 && kept < spread.len() - 1, "{spread:?}");
         let (pre, parents, _) =
@@ -1149,6 +1174,45 @@ mod tests {
         for (i, corners) in parents.iter().enumerate() {
             assert_eq!(h.parents(6 + i), &corners[..]);
         }
+    }
+
+    #[test]
+    fn without_the_early_stop_pre_subdivision_runs_the_paper_s_fixed_rounds() {
+        let mesh = tall_octahedron();
+        let input = PolyMesh::from_mesh(&mesh);
+        let rounds = 8;
+        let (all, _, spread) = adaptive_presubdivision(&input, 1.5, rounds);
+        // Four rounds find a face over the threshold, and the second evens the areas out by
+        // under 10 %: the default stops after the first.
+        assert_eq!(spread.len(), 5, "{spread:?}");
+        assert!(spread[2] > 0.9 * spread[1], "{spread:?}");
+        let default = build_hierarchy(&mesh, 6.0, &SubdivisionParams::default()).unwrap();
+        assert!(default.level(0).vertex_count() < all.vertex_count());
+        let fixed = SubdivisionParams {
+            adaptive_min_gain: 0.0,
+            adaptive_rounds: rounds,
+            ..Default::default()
+        };
+        // At 6 texels per unit the early stop would also end the rounds once edges span a
+        // texel; the fixed rounds go on.
+        let h = build_hierarchy(&mesh, 6.0, &fixed).unwrap();
+        assert_eq!(h.level(0), all);
+        // A gain of 1 keeps no round (none removes the whole spread).
+        let none = SubdivisionParams {
+            adaptive_min_gain: 1.0,
+            ..Default::default()
+        };
+        let h = build_hierarchy(&mesh, 6.0, &none).unwrap();
+        assert_eq!(h.level(0), input);
+        let bad = SubdivisionParams {
+            adaptive_min_gain: 1.5,
+            ..Default::default()
+        };
+        let e = build_hierarchy(&mesh, 6.0, &bad).unwrap_err();
+        assert!(
+            e.to_string().contains("parameterize.adaptive_min_gain"),
+            "{e}"
+        );
     }
 
     #[test]
