@@ -2,13 +2,15 @@
 //! feature masks and the coarse-level field"):
 //!
 //! - `solid-feature-mask.png`: brick.png on all three planes, the trivial field; the middle z
-//!   section of a 64³ cube: exemplar | feature channel | without | with
-//!   `analyse_exemplar.feature_mask`;
+//!   section of a 64³ cube: exemplar | detected feature channel | without | with
+//!   `analyse_exemplar.feature_mask` (detected curves) | a drawn mask (the joints traced as
+//!   straight lines, as a user would draw them) | with the drawn mask;
 //! - `solid-coarse-field.png`: wood2 layered across x (yz not matched) in a "tree rings"
 //!   field (x pointing away from the cube's z axis, a singularity on it) with every node
 //!   tilted by up to 0.35 rad at random; the middle z section (top row) and level 2 of 4 under
 //!   it (bottom row, grey, contrast stretched): neither | `field_smoothing = 2` | `field_integration` | both.
 //!
+//! Sections are shown as the reconstruct node shows a z-cut (`reconstruct.colour = "facing"`).
 //! It prints the measurements the README quotes. `cargo run --release -p texsyn-bench --example
 //! solid_switches -- [OUT_DIR]`; `SIZE` [64].
 
@@ -20,14 +22,18 @@ mod solid;
 
 use common::env_or;
 use exemplars::load_exemplar as load;
+use glam::Vec3;
 use solid::{cube, jittered, rings_field, transpose, trivial_field};
 use texsyn::image::Image;
-use texsyn::stages::analyse_exemplar::candidate_triples::{CandidateParams, Triple, analyse};
+use texsyn::stages::analyse_exemplar::candidate_triples::{
+    CandidateParams, Triple, analyse, analyse_masked,
+};
 use texsyn::stages::analyse_exemplar::feature_mask::{FeatureMaskParams, feature_channel};
 use texsyn::stages::analyse_exemplar::texture_feature_lines::{
     TextureFeatureParams, detect_texture_features, line_length,
 };
 use texsyn::stages::field::quaternion_field::RotationField;
+use texsyn::stages::reconstruct::solid_colour::{SolidColourRule, VoxelTriples};
 use texsyn::stages::synthesize::solid::solid_synthesis::{
     MemoryBrickStore, SolidParams, SolidSynthesis, VoxelRequest,
 };
@@ -95,6 +101,7 @@ fn section(
     let s = SolidSynthesis::new(a.as_ref(), field, vol, params).unwrap();
     let store = MemoryBrickStore::new();
     let c = n as i32 / 2;
+    let finest = s.levels();
     let t = std::time::Instant::now();
     s.synthesize(
         &VoxelRequest::from_box([0, 0, c], [n as i32, n as i32, c + 1]),
@@ -102,14 +109,20 @@ fn section(
     )
     .unwrap();
     eprintln!("  section: {:.1} s", t.elapsed().as_secs_f64());
-    let mut px = vec![];
+    let mut voxels = vec![];
     let mut ts = vec![];
     for y in 0..n as i32 {
         for x in 0..n as i32 {
-            px.push(s.colour_at(&store, [x, y, c]).unwrap());
-            ts.push(s.triple_at(&store, s.levels(), [x, y, c]).unwrap());
+            voxels.push([x, y, c]);
+            ts.push(s.triple_at(&store, finest, [x, y, c]).unwrap());
         }
     }
+    let mut shown = VoxelTriples::new(field, &vol, SolidColourRule::Facing);
+    shown.add(&voxels, &ts, a.as_ref());
+    let px = voxels
+        .iter()
+        .map(|v| shown.colour((*v).into(), Some(Vec3::Z)).unwrap())
+        .collect();
     // Level L − 2 (a coarse level) under the same pixels, each of its voxels 4 × 4.
     let l = s.levels() - 2;
     let mut coarse = vec![];
@@ -195,6 +208,30 @@ fn main() {
     }
 }
 
+/// brick.png's joints traced as straight two-texel lines, as a user would draw them over the
+/// image: the bed joints (the dark rows between courses) at y = 24, 56 and 91, and the head
+/// joints of each course at the dark columns of its rows (x = 22 and 60 in the course that
+/// wraps from y = 92 to 23, 42 and 91 in y = 25–55, 54 in y = 57–90).
+fn drawn_joints(brick: &Image) -> Image {
+    assert_eq!((brick.width, brick.height), (96, 96), "traced on brick.png");
+    let near = |a: u32, b: u32| a == b || a == b + 1;
+    let on = |x: u32, y: u32| {
+        let bed = [24, 56, 91].iter().any(|&r| near(y, r));
+        let heads: &[u32] = if !(25..92).contains(&y) {
+            &[22, 60]
+        } else if y < 57 {
+            &[42, 91]
+        } else {
+            &[54]
+        };
+        bed || heads.iter().any(|&c| near(x, c))
+    };
+    Image::from_fn(96, 96, |x, y| {
+        let v = if on(x, y) { 1.0 } else { 0.0 };
+        [v, v, v, 1.0]
+    })
+}
+
 fn feature_mask_picture(dir: &std::path::Path, n: u32, levels: u32) {
     let brick = load("brick.png");
     let fm = FeatureMaskParams {
@@ -207,6 +244,7 @@ fn feature_mask_picture(dir: &std::path::Path, n: u32, levels: u32) {
         let f = chan[(y * brick.width + x) as usize];
         [f, f, f, 1.0]
     });
+    let drawn = drawn_joints(&brick);
     let mut tiles = vec![tile_of(&brick, n), tile_of(&chan_img, n)];
     let field = trivial_field(&cube(n));
     let ex = lines_in(&tiles[0], n);
@@ -214,14 +252,22 @@ fn feature_mask_picture(dir: &std::path::Path, n: u32, levels: u32) {
         "brick exemplar crop: lines {} total {:.0} longest {:.0}",
         ex.0, ex.1, ex.2
     );
-    for mask in [None, Some(fm.clone())] {
+    for (mask, what) in [
+        (None, "none"),
+        (Some(fm.clone()), "detected"),
+        (Some(fm.clone()), "drawn"),
+    ] {
         let cp = CandidateParams {
             levels,
             feature_mask: mask,
             ..Default::default()
         };
-        let a = analyse([brick.view(); 3], &cp).unwrap();
-        eprintln!("brick, feature mask {}:", cp.feature_mask.is_some());
+        let masks = [(what == "drawn").then(|| drawn.view()); 3];
+        let a = analyse_masked([brick.view(); 3], masks, &cp).unwrap();
+        eprintln!("brick, feature mask {what}:");
+        if what == "drawn" {
+            tiles.push(tile_of(&drawn, n));
+        }
         let (px, ts, _) = section(&a, &field, n, SolidParams::paper(levels));
         // The feature channel carried by the synthesized voxels (mean over the planes).
         let f: Vec<f32> = ts
@@ -236,8 +282,7 @@ fn feature_mask_picture(dir: &std::path::Path, n: u32, levels: u32) {
         let mean_f = f.iter().sum::<f32>() / f.len() as f32;
         let l = lines_in(&px, n);
         println!(
-            "brick, feature mask {}: lines {} total {:.0} longest {:.0}; mean F {:.3} (exemplar {:.3})",
-            cp.feature_mask.is_some(),
+            "brick, feature mask {what}: lines {} total {:.0} longest {:.0}; mean F {:.3} (exemplar {:.3})",
             l.0,
             l.1,
             l.2,

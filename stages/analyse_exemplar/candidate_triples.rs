@@ -977,13 +977,18 @@ fn near(a: [u16; 2], b: [u16; 2], w: u32, h: u32) -> bool {
 /// one image can show the same layers in two planes whose axes run the other way round.
 pub fn analyse_transposed(
     planes: [ImageView; 3],
+    masks: [Option<ImageView>; 3],
     transpose: [bool; 3],
     params: &CandidateParams,
 ) -> Result<SolidAnalysis, AnalysisError> {
     let turned: [Option<Image>; 3] =
         std::array::from_fn(|k| transpose[k].then(|| planes[k].transposed()));
     let views = std::array::from_fn(|k| turned[k].as_ref().map_or(planes[k], Image::view));
-    analyse(views, params)
+    let turned_masks: [Option<Image>; 3] =
+        std::array::from_fn(|k| masks[k].filter(|_| transpose[k]).map(|m| m.transposed()));
+    let mask_views =
+        std::array::from_fn(|k| turned_masks[k].as_ref().map(Image::view).or(masks[k]));
+    analyse_masked(views, mask_views, params)
 }
 
 /// Analyses the exemplars of the xy, yz and zx planes (pass the same image several times to
@@ -992,7 +997,38 @@ pub fn analyse(
     planes: [ImageView; 3],
     params: &CandidateParams,
 ) -> Result<SolidAnalysis, AnalysisError> {
+    analyse_masked(planes, [None; 3], params)
+}
+
+/// [`analyse`] with drawn feature masks: plane `P`'s mask, when given, holds the feature curves
+/// of `P`'s exemplar (its size; `feature_mask.rs`), in place of the detected ones. A mask needs
+/// `params.feature_mask`, which sets the channel's weight and radius.
+pub fn analyse_masked(
+    planes: [ImageView; 3],
+    masks: [Option<ImageView>; 3],
+    params: &CandidateParams,
+) -> Result<SolidAnalysis, AnalysisError> {
     params.validate()?;
+    if masks.iter().any(Option::is_some) && params.feature_mask.is_none() {
+        return Err(AnalysisError::Features(
+            "a drawn mask is given but the feature channel is off".into(),
+        ));
+    }
+    for (k, m) in masks.iter().enumerate() {
+        if let Some(m) = m
+            && (m.width, m.height) != (planes[k].width, planes[k].height)
+        {
+            return Err(AnalysisError::Features(format!(
+                "the {} plane's drawn mask is {}×{}, its exemplar {}×{}: a mask must match its \
+                 image texel for texel",
+                ["xy", "yz", "zx"][k],
+                m.width,
+                m.height,
+                planes[k].width,
+                planes[k].height
+            )));
+        }
+    }
     let sizes = planes.map(|p| (p.width, p.height));
     if sizes[1] != sizes[0] || sizes[2] != sizes[0] {
         return Err(AnalysisError::SizeMismatch {
@@ -1023,15 +1059,23 @@ pub fn analyse(
             expected: "finite colours",
         });
     }
-    // Distinct images.
+    // Distinct images (an image with another drawn mask is another image).
     let mut images: Vec<ImageView> = Vec::new();
+    let mut image_masks: Vec<Option<ImageView>> = Vec::new();
     let mut plane_image = [0u32; 3];
+    let same_mask = |a: Option<ImageView>, b: Option<ImageView>| match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => a.pixels == b.pixels,
+        _ => false,
+    };
     for (p, img) in planes.iter().enumerate() {
-        let found = images.iter().position(|o| o.pixels == img.pixels);
+        let found = (0..images.len())
+            .position(|o| images[o].pixels == img.pixels && same_mask(image_masks[o], masks[p]));
         plane_image[p] = match found {
             Some(i) => i as u32,
             None => {
                 images.push(*img);
+                image_masks.push(masks[p]);
                 (images.len() - 1) as u32
             }
         };
@@ -1049,8 +1093,9 @@ pub fn analyse(
         Some(f) => Some(
             images
                 .iter()
-                .map(|img| {
-                    let a = appearance(*img, f).map_err(AnalysisError::Features)?;
+                .zip(&image_masks)
+                .map(|(img, mask)| {
+                    let a = appearance(*img, *mask, f).map_err(AnalysisError::Features)?;
                     Ok(gaussian_stack(a.image.view(), levels))
                 })
                 .collect::<Result<_, AnalysisError>>()?,
@@ -1269,6 +1314,12 @@ pub enum ExemplarSpec {
         path: std::path::PathBuf,
         #[serde(default)]
         transpose: bool,
+        /// A drawn feature mask for this image (its size, transposed with it; texels at or
+        /// above half intensity on the feature curves): turns the feature channel on
+        /// (`analyse_exemplar.feature_mask`'s settings, or their defaults) in place of the
+        /// detected curves.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        mask: Option<std::path::PathBuf>,
     },
 }
 
@@ -1277,6 +1328,14 @@ impl ExemplarSpec {
     pub fn path(&self) -> &std::path::Path {
         match self {
             ExemplarSpec::Path(path) | ExemplarSpec::Spec { path, .. } => path,
+        }
+    }
+
+    /// The drawn feature mask's path, as the config gives it.
+    pub fn mask(&self) -> Option<&std::path::Path> {
+        match self {
+            ExemplarSpec::Spec { mask, .. } => mask.as_deref(),
+            ExemplarSpec::Path(_) => None,
         }
     }
 
@@ -1292,16 +1351,22 @@ impl ExemplarSpec {
     }
 }
 
-/// The analysis node's key: its parameters and which planes' images are transposed.
+/// The analysis node's key: its parameters and which planes' images are transposed (the
+/// drawn masks are inputs of the node, so their contents are in its key too).
 #[derive(Debug, Clone, Serialize)]
 pub struct AnalysisKey {
     pub analysis: CandidateParams,
     pub transpose: [bool; 3],
 }
 
-/// The analyse-exemplar node: [`analyse_transposed`] of the three planes' images.
-pub fn node(planes: [ImageView; 3], key: &AnalysisKey) -> Result<SolidAnalysis, Failure> {
-    analyse_transposed(planes, key.transpose, &key.analysis).map_err(Failure::input)
+/// The analyse-exemplar node: [`analyse_transposed`] of the three planes' images and drawn
+/// masks.
+pub fn node(
+    planes: [ImageView; 3],
+    masks: [Option<ImageView>; 3],
+    key: &AnalysisKey,
+) -> Result<SolidAnalysis, Failure> {
+    analyse_transposed(planes, masks, key.transpose, &key.analysis).map_err(Failure::input)
 }
 
 #[cfg(test)]

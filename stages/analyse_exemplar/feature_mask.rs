@@ -11,10 +11,11 @@
 //! reduced *appearance* vectors instead of the colours, while the output keeps the colours.
 //!
 //! What is done, per distinct exemplar image:
-//! 1. Feature lines: detected automatically with the curvilinear detector of
-//!    `texture_feature_lines.rs` (the feature-aligned method's, after Wu & Yu 2004; dark lines by
-//!    default), on the image tiled 3 × 3 so that lines and distances wrap around as the solid
-//!    analysis treats exemplars (toroidal).
+//! 1. Feature lines: drawn by the user (a mask image beside the exemplar, its texels at or
+//!    above half intensity on the curves: [`drawn_channel`]), or else detected automatically
+//!    with the curvilinear detector of `texture_feature_lines.rs` (the feature-aligned
+//!    method's, after Wu & Yu 2004; dark lines by default), on the image tiled 3 × 3 so that
+//!    lines and distances wrap around as the solid analysis treats exemplars (toroidal).
 //! 2. The channel: `F = 1 − min(d, R) / R`, `d` the distance in texels to the nearest line
 //!    texel and `R` = `radius`: 1 on a feature curve ("high intensity"), falling to 0 at `R`
 //!    texels — L&H's feature-distance channel, clamped so that the wide insides of regions,
@@ -26,9 +27,7 @@
 //!
 //! The appearance images then replace the colours in everything that *matches* (the Gaussian
 //! stacks' neighbourhood vectors and their PCA, crossbar lines and errors, slab seeds, the
-//! synthesized voxels' neighbourhoods), see `candidate_triples.rs`. User-drawn masks (the
-//! paper's alternative) are not wired into the solid config yet: the detector's lines are the
-//! mask.
+//! synthesized voxels' neighbourhoods), see `candidate_triples.rs`.
 
 use super::texture_feature_lines::{
     Polarity, TextureFeatureParams, detect_texture_features, distance_transform,
@@ -156,20 +155,52 @@ pub fn feature_channel(img: ImageView, p: &FeatureMaskParams) -> Result<Vec<f32>
             }
         }
     }
-    let d = distance_transform(&on, 3 * w as u32, 3 * h as u32);
+    Ok(falloff(&on, w, h, p.radius))
+}
+
+/// The feature channel of a drawn mask (`w × h`, the size of its exemplar): its texels whose
+/// mean of red, green and blue is at least ½ are the feature curves; distances wrap around.
+/// An error when no texel is.
+pub fn drawn_channel(mask: ImageView, p: &FeatureMaskParams) -> Result<Vec<f32>, String> {
+    let (w, h) = (mask.width as usize, mask.height as usize);
+    let drawn = |x: usize, y: usize| {
+        let c = mask.pixels[(y % h) * w + x % w];
+        (c[0] + c[1] + c[2]) / 3.0 >= 0.5
+    };
+    if !(0..h).any(|y| (0..w).any(|x| drawn(x, y))) {
+        return Err("the drawn mask has no feature texel (none at or above half intensity)".into());
+    }
+    let on: Vec<bool> = (0..9 * w * h)
+        .map(|i| drawn(i % (3 * w), i / (3 * w)))
+        .collect();
+    Ok(falloff(&on, w, h, p.radius))
+}
+
+/// `F = 1 − min(d, radius) / radius` over the centre tile of the 3 × 3 tiling `on`
+/// (`3w × 3h`, true on feature texels), `d` the distance to the nearest feature texel.
+fn falloff(on: &[bool], w: usize, h: usize, radius: f32) -> Vec<f32> {
+    let d = distance_transform(on, 3 * w as u32, 3 * h as u32);
     let mut out = Vec::with_capacity(w * h);
     for y in h..2 * h {
         for x in w..2 * w {
             let dist = d[y * 3 * w + x];
-            out.push(1.0 - dist.min(p.radius) / p.radius);
+            out.push(1.0 - dist.min(radius) / radius);
         }
     }
-    Ok(out)
+    out
 }
 
-/// The exemplar in appearance space (module docs, steps 1–3).
-pub fn appearance(img: ImageView, p: &FeatureMaskParams) -> Result<Appearance, String> {
-    let channel = feature_channel(img, p)?;
+/// The exemplar in appearance space (module docs, steps 1–3), its feature curves drawn in
+/// `mask` (the exemplar's size) or else detected.
+pub fn appearance(
+    img: ImageView,
+    mask: Option<ImageView>,
+    p: &FeatureMaskParams,
+) -> Result<Appearance, String> {
+    let channel = match mask {
+        Some(m) => drawn_channel(m, p)?,
+        None => feature_channel(img, p)?,
+    };
     let mut data = Vec::with_capacity(4 * channel.len());
     for (c, f) in img.pixels.iter().zip(&channel) {
         data.extend_from_slice(&[c[0], c[1], c[2], p.weight * f]);
@@ -265,13 +296,47 @@ mod tests {
             weight: 2.0,
             ..Default::default()
         };
-        let a = appearance(img.view(), &p).unwrap();
+        let a = appearance(img.view(), None, &p).unwrap();
         let (brick, mortar) = (a.image.pixels[4 * 32 + 4], a.image.pixels[8 * 32 + 4]);
         let d: f32 = (0..3)
             .map(|k| (brick[k] - mortar[k]) * (brick[k] - mortar[k]))
             .sum();
         assert!(d > 0.5, "appearance distance {d}");
         assert!(a.kept_variance > 0.9, "{}", a.kept_variance);
+    }
+
+    #[test]
+    fn a_drawn_mask_is_the_curves_and_its_distances_wrap_around() {
+        // One drawn column, x = 3, of a 16 × 12 mask.
+        let mask = Image::from_fn(16, 12, |x, _| {
+            let v = if x == 3 { 0.8 } else { 0.1 };
+            [v, v, v, 1.0]
+        });
+        let p = FeatureMaskParams::default();
+        let f = drawn_channel(mask.view(), &p).unwrap();
+        let at = |x: usize, y: usize| f[y * 16 + x];
+        assert_eq!(at(3, 5), 1.0);
+        assert!(
+            (at(5, 5) - (1.0 - 2.0 / p.radius)).abs() < 1e-5,
+            "{}",
+            at(5, 5)
+        );
+        // x = 15 is 4 texels from x = 3 across the wrap (12 the other way).
+        assert!(
+            (at(15, 0) - (1.0 - 4.0 / p.radius)).abs() < 1e-5,
+            "{}",
+            at(15, 0)
+        );
+        assert_eq!(at(10, 7), 0.0);
+        // The drawn curves replace the detector: the same image, other channels.
+        let img = bricks(16, 12);
+        let drawn = appearance(img.view(), Some(mask.view()), &p).unwrap();
+        let detected = appearance(img.view(), None, &p).unwrap();
+        assert_eq!(drawn.channel, f);
+        assert_ne!(drawn.channel, detected.channel);
+        let blank = Image::from_fn(16, 12, |_, _| [0.2, 0.2, 0.2, 1.0]);
+        let e = drawn_channel(blank.view(), &p).unwrap_err();
+        assert!(e.contains("no feature texel"), "{e}");
     }
 
     #[test]

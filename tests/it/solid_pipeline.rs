@@ -413,3 +413,57 @@ fn a_region_with_the_core_s_own_exemplars_changes_nothing() {
     both.extend(shell);
     assert_eq!(both, samples(&plain, "synthesize"));
 }
+
+/// A drawn mask given beside a plane's exemplar reaches the analysis (its key and result
+/// change, the feature channel turned on with its defaults), is read transposed with its
+/// image, and one of another size is refused naming the mask's file and key.
+#[test]
+fn a_drawn_mask_beside_an_exemplar_feeds_the_analysis_and_a_wrong_one_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let wood = repo().join("configs/assets/wood2.png");
+    let (w, h) = image::image_dimensions(&wood).unwrap();
+    // The grain's columns every 7 texels, as a user might draw them.
+    let mask =
+        image::GrayImage::from_fn(w, h, |x, _| image::Luma([if x % 7 == 0 { 255 } else { 0 }]));
+    let good = dir.path().join("grain.png");
+    mask.save(&good).unwrap();
+    let small = dir.path().join("small.png");
+    image::GrayImage::from_pixel(9, 9, image::Luma([255]))
+        .save(&small)
+        .unwrap();
+    let spec = |mask: &std::path::Path| {
+        format!(
+            "inputs.zx={{ path = {:?}, transpose = true, mask = {:?} }}",
+            wood.display().to_string(),
+            mask.display().to_string()
+        )
+    };
+    let cache = tempfile::tempdir().unwrap();
+    let analysis = |r: &RunResult| {
+        let n = r
+            .reports
+            .iter()
+            .find(|n| n.node == "analyse_exemplar")
+            .unwrap();
+        (n.key.clone(), n.content_hash.clone())
+    };
+    let plain = run("solid_trivial.toml", &[], cache.path()).unwrap();
+    let drawn = run("solid_trivial.toml", &[&spec(&good)], cache.path()).unwrap();
+    let (k0, h0) = analysis(&plain);
+    let (k1, h1) = analysis(&drawn);
+    assert_ne!(k0, k1);
+    assert_ne!(h0, h1);
+    // Not the detector's curves: the drawn ones.
+    let detected = run(
+        "solid_trivial.toml",
+        &["analyse_exemplar.feature_mask={}"],
+        cache.path(),
+    )
+    .unwrap();
+    assert_ne!(analysis(&detected).1, h1);
+    let e = err(run("solid_trivial.toml", &[&spec(&small)], cache.path()));
+    assert!(
+        e.contains("small.png") && e.contains("inputs.zx.mask") && e.contains("9×9"),
+        "{e}"
+    );
+}

@@ -7,13 +7,13 @@
 
 use crate::common;
 use common::load_exemplar as load;
-use common::solid::{cube, jittered, rings_field, rotated_field, trivial_field};
+use common::solid::{cube, jittered, rings_field, rotated_field, transpose, trivial_field};
 use std::sync::OnceLock;
 
 use glam::{IVec3, Quat};
 use texsyn::image::Image;
 use texsyn::stages::analyse_exemplar::candidate_triples::{
-    CandidateParams, SolidAnalysis, analyse,
+    CandidateParams, SolidAnalysis, analyse, analyse_masked, analyse_transposed,
 };
 use texsyn::stages::analyse_exemplar::feature_mask::{FeatureMaskParams, feature_channel};
 use texsyn::stages::field::quaternion_field::RotationField;
@@ -113,6 +113,57 @@ fn the_feature_mask_changes_matching_not_the_colours() {
     )
     .unwrap();
     assert_eq!(r.appearance.len(), on.appearance.len());
+}
+
+/// A drawn mask of the very texels the detector finds is the detector's mask: the analysis
+/// matches the same appearance vectors. A mask drawn elsewhere changes them.
+#[test]
+fn a_drawn_mask_takes_the_place_of_the_detected_curves() {
+    let img = brick();
+    let p = params(Some(FeatureMaskParams::default()));
+    let detected = analyse([img.view(); 3], &p).unwrap();
+    let chan = feature_channel(img.view(), &FeatureMaskParams::default()).unwrap();
+    let drawn_at = |keep: &dyn Fn(u32, u32) -> bool| {
+        Image::from_fn(img.width, img.height, |x, y| {
+            let on = chan[(y * img.width + x) as usize] == 1.0 && keep(x, y);
+            let v = if on { 1.0 } else { 0.0 };
+            [v, v, v, 1.0]
+        })
+    };
+    let same = drawn_at(&|_, _| true);
+    let drawn = analyse_masked([img.view(); 3], [Some(same.view()); 3], &p).unwrap();
+    assert!(drawn.features == detected.features, "features differ");
+    assert!(
+        drawn.appearance == detected.appearance,
+        "appearance differs"
+    );
+    // Only the left half's curves drawn: other appearance, other matching.
+    let half = drawn_at(&|x, _| x < img.width / 2);
+    let other = analyse_masked([img.view(); 3], [Some(half.view()); 3], &p).unwrap();
+    assert!(other.features != detected.features, "features alike");
+    assert!(other.stack == detected.stack, "colour stacks differ");
+    // A transposed plane reads its mask transposed too.
+    let (tr, half_tr) = (transpose(img), transpose(&half));
+    let turned = analyse_transposed([img.view(); 3], [Some(half.view()); 3], [true; 3], &p);
+    let pre = analyse_masked([tr.view(); 3], [Some(half_tr.view()); 3], &p).unwrap();
+    assert!(turned.unwrap().features == pre.features, "features differ");
+    // A mask needs the channel's settings, and the exemplar's size.
+    let e = analyse_masked(
+        [img.view(); 3],
+        [Some(same.view()), None, None],
+        &params(None),
+    );
+    assert!(
+        e.unwrap_err()
+            .to_string()
+            .contains("feature channel is off")
+    );
+    let small = Image::from_fn(8, 8, |_, _| [1.0; 4]);
+    let e = analyse_masked([img.view(); 3], [None, Some(small.view()), None], &p).unwrap_err();
+    assert!(
+        e.to_string().contains("yz plane's drawn mask is 8×8"),
+        "{e}"
+    );
 }
 
 /// Mean angle (radians) between the frames the coarsest level reads at face-neighbouring

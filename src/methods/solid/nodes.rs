@@ -17,16 +17,18 @@ use crate::stages::parameterize::volume_embedding::RequestedVoxels as Request;
 use crate::stages::synthesize::solid::solid_synthesis::{self as synthesis, Brick, SolidError};
 
 /// The candidate-triple analysis of one exemplar set: `[exemplar, xy, yz, zx]` of the config
-/// table `key`, each plane's image falling back to the shared one.
+/// table `key`, each plane's image (and drawn mask) falling back to the shared one. A drawn
+/// mask turns the feature channel on with its default settings when the config does not.
 pub(super) fn add_analysis(
     dag: &mut Dag,
     config: &Config,
     images: &mut Imports<Image>,
     (name, key): (&str, &str),
     [shared, xy, yz, zx]: [&Option<ExemplarSpec>; 4],
-    params: triples::CandidateParams,
+    mut params: triples::CandidateParams,
 ) -> Result<Handle<SolidAnalysis>, MethodError> {
-    // Each plane's image (imported once per file) and whether it is transposed.
+    // Each plane's image and drawn mask (each imported once per file) and whether they are
+    // transposed.
     let planes = [("xy", xy), ("yz", yz), ("zx", zx)].map(|(plane, spec)| {
         let (spec, role) = match (spec, shared) {
             (Some(s), _) => (s, format!("{key}.{plane}")),
@@ -37,18 +39,45 @@ pub(super) fn add_analysis(
             }
         };
         let image = images.get(dag, &config.resolve(spec.path()), &role)?;
-        Ok::<_, MethodError>((image, spec.transpose()))
+        let mask = spec.mask().map(|m| {
+            let (path, role) = (config.resolve(m), format!("{role}.mask"));
+            let name = format!("{} ({role})", path.display());
+            Ok::<_, MethodError>((images.get(dag, &path, &role)?, name))
+        });
+        Ok::<_, MethodError>((image, mask.transpose()?, spec.transpose()))
     });
     let [xy, yz, zx] = planes;
-    let [(xy, tx), (yz, ty), (zx, tz)] = [xy?, yz?, zx?];
+    let [(xy, mxy, tx), (yz, myz, ty), (zx, mzx, tz)] = [xy?, yz?, zx?];
+    let named = [mxy, myz, mzx];
+    let masks = named.clone().map(|m| m.map(|(h, _)| h));
+    let names = named.map(|m| m.map(|(_, n)| n));
+    if masks.iter().any(Option::is_some) && params.feature_mask.is_none() {
+        params.feature_mask = Some(Default::default());
+    }
     let key = triples::AnalysisKey {
         analysis: params,
         transpose: [tx, ty, tz],
     };
     let spec = NodeSpec::of(AnalyseExemplar, triples::NODE).named(name);
-    Ok(dag.node(spec, key, [xy, yz, zx], |_, key, planes| {
-        Ok(triples::node(planes, key)?)
-    }))
+    Ok(dag.node(
+        spec,
+        key,
+        ([xy, yz, zx], masks),
+        move |_, key, (planes, masks)| {
+            for ((plane, mask), name) in planes.iter().zip(&masks).zip(&names) {
+                if let (Some(m), Some(name)) = (mask, name)
+                    && (m.width, m.height) != (plane.width, plane.height)
+                {
+                    return Err(NodeError::input(format!(
+                        "{name}: the drawn mask is {}×{}, its exemplar {}×{}: a mask must match \
+                     its image texel for texel",
+                        m.width, m.height, plane.width, plane.height
+                    )));
+                }
+            }
+            Ok(triples::node(planes, masks, key)?)
+        },
+    ))
 }
 
 /// The synthesis of one exemplar set's solid at the requested voxels that `region` owns
