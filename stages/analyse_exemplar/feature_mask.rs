@@ -77,6 +77,7 @@ impl FeatureMaskParams {
             scale: self.scale,
             threshold: self.threshold,
             min_length: self.min_length,
+            direction: None,
         }
     }
 

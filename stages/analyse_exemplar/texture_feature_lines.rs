@@ -131,6 +131,11 @@ pub struct TextureFeatureParams {
     pub threshold: f32,
     /// Shortest line kept, in texels of arc length, 0..=65536. Default: 8.
     pub min_length: f32,
+    /// The feature lines to lay along the field: those running nearest this direction, in
+    /// degrees in the image (x right, y down: 0 horizontal, 90 vertical, so brick's head
+    /// joints are 90), instead of the dominant direction; -180..=180. Default: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direction: Option<f32>,
 }
 
 impl Default for TextureFeatureParams {
@@ -140,6 +145,7 @@ impl Default for TextureFeatureParams {
             scale: 1.0,
             threshold: 0.5,
             min_length: 8.0,
+            direction: None,
         }
     }
 }
@@ -148,7 +154,11 @@ impl TextureFeatureParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("analyse_exemplar.scale", self.scale, 0.5, 16.0)?;
         check_range("analyse_exemplar.threshold", self.threshold, 0.0, 1.0)?;
-        check_range("analyse_exemplar.min_length", self.min_length, 0.0, 65536.0)
+        check_range("analyse_exemplar.min_length", self.min_length, 0.0, 65536.0)?;
+        if let Some(d) = self.direction {
+            check_range("analyse_exemplar.direction", d, -180.0, 180.0)?;
+        }
+        Ok(())
     }
 }
 
@@ -198,6 +208,14 @@ pub enum TextureFeatureError {
         mask_height: u32,
         width: u32,
         height: u32,
+    },
+    #[error(
+        "analyse_exemplar.direction = {direction}°: too few feature lines run within ±{window}° of it (under a tenth of the dominant direction's length); the lines found run mostly at {dominant:.0}°"
+    )]
+    NoLineInDirection {
+        direction: f32,
+        window: f32,
+        dominant: f32,
     },
     #[error(transparent)]
     Param(#[from] ParamError),
@@ -779,7 +797,16 @@ fn finish(
                 .collect()
         })
         .collect();
-    let (principal, principal_angle) = principal_line(&lines);
+    let (principal, principal_angle) = match principal_line(&lines, p.direction) {
+        Ok(found) => found,
+        Err(dominant) => {
+            return Err(TextureFeatureError::NoLineInDirection {
+                direction: p.direction.unwrap_or_default(),
+                window: DIRECTION_WINDOW_DEG,
+                dominant: dominant.to_degrees(),
+            });
+        }
+    };
     let mut on = vec![false; w * h];
     for c in &chains {
         for &i in c {
@@ -900,8 +927,15 @@ fn angle_between(a: f32, b: f32) -> f32 {
     d.min(std::f32::consts::PI - d)
 }
 
-/// The principal line and its angle (module doc).
-fn principal_line(lines: &[Vec<[f32; 2]>]) -> (usize, f32) {
+/// A chosen direction needs segments within the window of it holding at least this share of
+/// the dominant direction's length.
+const MIN_CHOSEN_SUPPORT: f32 = 0.1;
+
+/// The principal line and its angle (module doc); with a preferred `direction` (degrees), the
+/// lines around it instead of the dominant direction, or `Err(dominant angle)` when the
+/// segments within the window of it hold less than [`MIN_CHOSEN_SUPPORT`] of the dominant
+/// direction's length.
+fn principal_line(lines: &[Vec<[f32; 2]>], direction: Option<f32>) -> Result<(usize, f32), f32> {
     struct Seg {
         line: usize,
         from: usize,
@@ -940,8 +974,22 @@ fn principal_line(lines: &[Vec<[f32; 2]>]) -> (usize, f32) {
         }
     }
     // Mean shift: the length-weighted mean (of doubled angles) of the segments in the window,
-    // so the direction is the cluster's, not that of the one segment that found it.
+    // so the direction is the cluster's, not that of the one segment that found it; from the
+    // preferred direction when one is given.
     let mut dominant = best.1;
+    if let Some(d) = direction {
+        let d = fold_angle(d.to_radians());
+        let support: f32 = segs
+            .iter()
+            .filter(|t| angle_between(d, t.angle) <= window)
+            .map(|t| t.length)
+            .sum();
+        // A few bends at junctions are no lines in that direction.
+        if support < MIN_CHOSEN_SUPPORT * best.0 {
+            return Err(best.1);
+        }
+        dominant = d;
+    }
     for _ in 0..5 {
         let (mut c2, mut s2) = (0.0f64, 0.0f64);
         for t in segs
@@ -989,7 +1037,7 @@ fn principal_line(lines: &[Vec<[f32; 2]>]) -> (usize, f32) {
         }
     }
     if sw <= 0.0 {
-        return (principal, fold_angle(dominant));
+        return Ok((principal, fold_angle(dominant)));
     }
     let (cx, cy) = (sx / sw, sy / sw);
     let (mut cxx, mut cxy, mut cyy) = (0.0f64, 0.0f64, 0.0f64);
@@ -999,7 +1047,7 @@ fn principal_line(lines: &[Vec<[f32; 2]>]) -> (usize, f32) {
         cyy += wgt * (y - cy) * (y - cy);
     }
     let angle = 0.5 * (2.0 * cxy).atan2_pure(cxx - cyy);
-    (principal, fold_angle(angle as f32))
+    Ok((principal, fold_angle(angle as f32)))
 }
 
 /// The analyse-exemplar node: the exemplar's feature lines, drawn by hand in `mask` or
@@ -1166,6 +1214,54 @@ mod tests {
         let shift = if row % 2 == 1 { 20 } else { 0 };
         let in_row = (y + 15) % 30 < 2;
         (in_row || (x + shift) % 40 < 2, in_row)
+    }
+
+    #[test]
+    fn a_chosen_direction_lays_the_head_joints_instead_of_the_rows() {
+        let (w, h) = (160, 120);
+        let img = bricks(w, h);
+        let p = TextureFeatureParams {
+            direction: Some(80.0),
+            ..Default::default()
+        };
+        let f = detect_texture_features(&img, &p).unwrap();
+        let a = degrees(f.principal_angle);
+        assert!((a.abs() - 90.0).abs() < 2.0, "principal at {a}°");
+        // The principal line is a head joint: its texels on a joint column.
+        let l = &f.lines[f.principal as usize];
+        let on_joint = l
+            .iter()
+            .filter(|q| brick_mortar(q[0] as u32, q[1] as u32).0)
+            .count();
+        assert!(
+            on_joint * 10 >= l.len() * 9,
+            "{on_joint} of {} on mortar",
+            l.len()
+        );
+        let (y0, y1) = (l[0][1], l[l.len() - 1][1]);
+        assert!((y1 - y0).abs() >= 20.0, "a joint from y {y0} to {y1}");
+        // The same lines and distances as without a direction: only the choice differs.
+        let plain = detect_texture_features(&img, &TextureFeatureParams::default()).unwrap();
+        assert_eq!(plain.lines, f.lines);
+        assert!(plain.distance == f.distance);
+        assert_ne!(plain.principal, f.principal);
+        // No line runs at 45°: an error naming the key and what the lines do run at.
+        let diagonal = TextureFeatureParams {
+            direction: Some(45.0),
+            ..Default::default()
+        };
+        let e = match detect_texture_features(&img, &diagonal) {
+            Ok(f) => panic!(
+                "45° chose line {} at {}°",
+                f.principal,
+                degrees(f.principal_angle)
+            ),
+            Err(e) => e.to_string(),
+        };
+        assert!(
+            e.contains("analyse_exemplar.direction = 45°") && e.contains("mostly at"),
+            "{e}"
+        );
     }
 
     #[test]

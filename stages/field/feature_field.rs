@@ -117,6 +117,16 @@ pub struct FeatureFieldParams {
     /// within it. Default: 60: a cube's 90° corners break, a staircase of mesh edges along a
     /// smooth feature does not (turns are measured over 3 edges).
     pub break_angle: f32,
+    /// A rotation of the texture against the field, in degrees (-180..=180): every vector is
+    /// turned by it about its vertex normal (counter-clockwise seen from outside), so the
+    /// exemplar's line runs at this angle to the curves. Default: 0. Left out of the node's
+    /// key at 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub rotation: f32,
+}
+
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
 }
 
 impl Default for FeatureFieldParams {
@@ -127,6 +137,7 @@ impl Default for FeatureFieldParams {
             alpha: 1e8,
             join_distance: 0.02,
             break_angle: 60.0,
+            rotation: 0.0,
         }
     }
 }
@@ -135,7 +146,20 @@ impl FeatureFieldParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("field.alpha", self.alpha, 1.0, 1e12)?;
         check_range("field.join_distance", self.join_distance, 0.0, 1.0)?;
-        check_range("field.break_angle", self.break_angle, 1.0, 180.0)
+        check_range("field.break_angle", self.break_angle, 1.0, 180.0)?;
+        check_range("field.rotation", self.rotation, -180.0, 180.0)
+    }
+}
+
+/// Each of `vectors` turned by `degrees` about its vertex's unit normal (Rodrigues, for a
+/// tangent vector: `v cos θ + (n × v) sin θ`), renormalized; zero vectors stay zero.
+pub fn rotate_about_normals(vectors: &mut [Vec3], normals: &[Vec3], degrees: f32) {
+    let (sin, cos) = degrees.to_radians().sin_cos_pure();
+    for (v, n) in vectors.iter_mut().zip(normals) {
+        if *v != Vec3::ZERO {
+            let t = *v - *n * n.dot(*v);
+            *v = (t * cos + n.cross(t) * sin).normalize_or(*v);
+        }
     }
 }
 
@@ -654,7 +678,10 @@ pub fn node(
     curves: &[Polyline],
     p: &FeatureFieldParams,
 ) -> Result<OrientedField, Failure> {
-    let (field, t) = feature_field(mesh, curves, p).map_err(Failure::input)?;
+    let (mut field, t) = feature_field(mesh, curves, p).map_err(Failure::input)?;
+    if p.rotation != 0.0 {
+        rotate_about_normals(&mut field.vectors, mesh.vertex_normals(), p.rotation);
+    }
     let mut steps = t.step_secs.clone();
     steps.sort_by(f64::total_cmp);
     let median = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
@@ -895,6 +922,49 @@ mod tests {
             })
             .sum();
         total as f64 / 10.0
+    }
+
+    #[test]
+    fn a_rotation_turns_the_node_s_field_about_the_normals() {
+        let mesh = unit_grid(21);
+        let curves = vec![trace(
+            &mesh,
+            &polyline(|t| Vec3::new(0.1 + 0.8 * t, 0.3 + 0.2 * t, 0.0), 4),
+            false,
+        )];
+        let plain = node(&mesh, &curves, &FeatureFieldParams::default()).unwrap();
+        let turned = FeatureFieldParams {
+            rotation: 90.0,
+            ..Default::default()
+        };
+        let rotated = node(&mesh, &curves, &turned).unwrap();
+        let n = mesh.vertex_normals()[0];
+        let mut compared = 0;
+        for (a, b) in plain.field.vectors.iter().zip(&rotated.field.vectors) {
+            if *a == Vec3::ZERO {
+                assert_eq!(*b, Vec3::ZERO);
+                continue;
+            }
+            // A quarter turn counter-clockwise seen from the normal's side: n × a.
+            assert!((*b - n.cross(*a)).length() < 1e-5, "{a} turned to {b}");
+            compared += 1;
+        }
+        assert!(compared > 400, "{compared}");
+        let mut v = vec![Vec3::X, Vec3::ZERO];
+        rotate_about_normals(&mut v, &[Vec3::Z, Vec3::Z], -30.0);
+        let (s, c) = (0.5f32, 0.75f32.sqrt());
+        assert!((v[0] - Vec3::new(c, -s, 0.0)).length() < 1e-6, "{}", v[0]);
+        assert_eq!(v[1], Vec3::ZERO);
+        let bad = FeatureFieldParams {
+            rotation: 200.0,
+            ..Default::default()
+        };
+        assert!(
+            bad.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("field.rotation")
+        );
     }
 
     #[test]
