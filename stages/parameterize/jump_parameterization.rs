@@ -37,6 +37,43 @@ pub struct ParameterizeParams {
     /// field says where the exemplar's "up" goes, and 90 makes an exemplar's horizontal
     /// features (wood grain, stripes) follow the field instead of crossing it. Default: 0.
     pub rotation: f32,
+    /// §1: "the mesh must be refined until each triangle fits". With a scale in texels whose
+    /// triangles do not fit the exemplar, split edges (the core's edge refiner) until every
+    /// edge spans at most an eighth of the exemplar's shorter side, so each vertex
+    /// neighbourhood fits in a quarter of it, and texture the refined mesh. Default: false (such
+    /// a scale is refused, naming the largest that fits). Left out of the node's key when off.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub refine: bool,
+}
+
+/// Most vertices `refine` may make.
+pub const REFINE_MAX_VERTICES: usize = 5_000_000;
+
+/// Edges after `refine`, in exemplar texels, as a share of the exemplar's shorter side.
+const REFINE_EDGE_SHARE: f32 = 0.125;
+
+/// The `parameterize.refine` step: `mesh` with every edge at most an eighth of the exemplar's
+/// shorter side (`width × height`) at `scale` texels per unit; the mesh itself when its edges
+/// already are.
+pub fn refine_to_fit(
+    mesh: &Mesh,
+    scale: f32,
+    (width, height): (u32, u32),
+) -> Result<Mesh, Failure> {
+    let max_edge = REFINE_EDGE_SHARE * width.min(height) as f32 / scale;
+    let r = crate::geom::edge_refine::refine_edges(mesh, max_edge, REFINE_MAX_VERTICES).map_err(
+        |e| {
+            Failure::input(format!(
+                "parameterize.refine: {e}; lower parameterize.scale (now {scale}) or use a larger exemplar"
+            ))
+        },
+    )?;
+    tracing::info!(
+        "parameterize: refined so that triangles fit the exemplar: {} → {} vertices",
+        mesh.vertex_count(),
+        r.mesh.vertex_count()
+    );
+    Ok(r.mesh)
 }
 
 /// `parameterize.scale`: a number of texels per object unit, or "auto".
@@ -90,7 +127,7 @@ pub enum ParameterizeError {
     #[error(
         "parameterize.scale = {scale} texels per unit is too large for this mesh and a {width}×{height} exemplar: \
          some triangles do not fit in the exemplar (§1 of the paper). They fit at scale ≤ {fit_s}; \
-         for good results use at most {half}, or refine the mesh",
+         for good results use at most {half}, or set parameterize.refine = true to split them",
         fit_s = crate::check::Significant(*fit as f64),
         half = crate::check::Significant(0.5 * *fit as f64)
     )]

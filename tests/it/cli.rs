@@ -241,6 +241,35 @@ fn a_scale_too_large_for_the_mesh_names_one_that_fits_and_keeps_earlier_outputs(
             &format!("parameterize.scale={}", fit * 0.999),
         ],
     ));
+    // Or keep the scale and let the mesh be refined until its triangles fit (§1).
+    assert!(e.contains("parameterize.refine = true"), "{e}");
+    let twice = format!("parameterize.scale={}", 2.0 * fit);
+    let o = run_demo(d, "o3", &["--set", &twice]);
+    assert!(!o.status.success(), "twice the fitting scale is refused");
+    let refined = ["-q", "--set", &twice, "--set", "parameterize.refine=true"];
+    succeeded(run_demo(d, "o3", &refined));
+    let vertices = |p: &str| {
+        let t = std::fs::read_to_string(d.join(p)).unwrap();
+        t.lines().filter(|l| l.starts_with("v ")).count()
+    };
+    assert!(
+        vertices("o3/textured.obj") > vertices("o/textured.obj"),
+        "{} refined against {}",
+        vertices("o3/textured.obj"),
+        vertices("o/textured.obj")
+    );
+    let o = run_demo(
+        d,
+        "o4",
+        &[
+            "--set",
+            "parameterize.scale=\"auto\"",
+            "--set",
+            "parameterize.refine=true",
+        ],
+    );
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("parameterize.refine"), "{}", stderr(&o));
 }
 
 #[test]

@@ -26,9 +26,10 @@ use crate::pipeline::{Dag, Handle, NodeSpec, Stage};
 use crate::score::charts::JumpMapNodes;
 use crate::stages::analyse_exemplar::jump_map::{self, JumpMap, JumpMapParams};
 use crate::stages::field::orientation_field::{self};
-use crate::stages::parameterize::jump_parameterization::{self};
+use crate::stages::parameterize::jump_parameterization::{self, Scale};
 use crate::stages::reconstruct::jump_export::{self, JumpExportKey, MapFile};
 use crate::stages::synthesize::jump_walk::{self};
+use texsyn_core::geom::edge_refine;
 
 /// The `jump_maps` method.
 pub struct JumpMaps;
@@ -43,6 +44,26 @@ impl Method for JumpMaps {
         let mut dag = Dag::default();
         let mesh = input::<Mesh>(&mut dag, config, "mesh", &c.inputs.mesh)?;
         let exemplar = input::<Image>(&mut dag, config, "exemplar", &c.inputs.exemplar)?;
+        // `parameterize.refine`: everything downstream works on the refined mesh.
+        let mesh = match (c.parameterize.refine, &c.parameterize.scale) {
+            (false, _) => mesh,
+            (true, Scale::Texels(scale)) => {
+                let spec = NodeSpec::of(Stage::Parameterize, edge_refine::NODE)
+                    .named("parameterize.refine");
+                dag.node(spec, *scale, (mesh, exemplar), |_, scale, (mesh, e)| {
+                    Ok(jump_parameterization::refine_to_fit(
+                        &mesh,
+                        *scale,
+                        (e.width, e.height),
+                    )?)
+                })
+            }
+            (true, Scale::Auto(_)) => {
+                let m = "needs a scale in texels: \"auto\" already lowers the scale until \
+                         triangles fit";
+                return Err(config.invalid("parameterize.refine", m).into());
+            }
+        };
         let jump_map = add_jump_map(&mut dag, exemplar, c.analyse_exemplar.clone());
         let field = dag.node(
             NodeSpec::of(Stage::Field, orientation_field::NODE),
