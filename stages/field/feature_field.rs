@@ -92,14 +92,19 @@ pub enum Orientation {
     Greedy,
     /// A seeded random sign per curve, solved once (for comparison, Figs. 3 and 6).
     Arbitrary,
+    /// Every curve along its vertex order as given, solved once: the user's orientation, for
+    /// what §4.1 says the greedy step cannot decide (symmetric spokes), and for an edited
+    /// `lines.obj` (written oriented as the field follows each curve) given back as the curves
+    /// file. A curve joined from pieces (`join_distance`) follows its first piece.
+    Given,
 }
 
 /// Parameters of [`feature_field`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FeatureFieldParams {
-    /// How curve orientations are chosen: "greedy" (the paper) or "arbitrary" (seeded random
-    /// signs, for comparison). Default: greedy.
+    /// How curve orientations are chosen: "greedy" (the paper), "arbitrary" (seeded random
+    /// signs, for comparison) or "given" (each curve's own vertex order). Default: greedy.
     pub orientation: Orientation,
     /// Seed of the arbitrary signs; unused by greedy. Default: 1.
     pub orientation_seed: u64,
@@ -242,11 +247,13 @@ pub fn feature_field(
     timings.setup_secs = t.elapsed().as_secs_f64();
 
     let (order, raw) = match p.orientation {
-        Orientation::Arbitrary => {
+        Orientation::Arbitrary | Orientation::Given => {
             let signed: Vec<(usize, i8)> = (0..curves.len())
                 .map(|c| {
                     let h = crate::random::counter_hash(p.orientation_seed, SIGN_STREAM, c as u64);
-                    (c, if h & 1 == 0 { 1 } else { -1 })
+                    let arbitrary = if h & 1 == 0 { 1 } else { -1 };
+                    let given = p.orientation == Orientation::Given;
+                    (c, if given { 1 } else { arbitrary })
                 })
                 .collect();
             let t = Instant::now();
@@ -687,7 +694,7 @@ pub fn node(
     let median = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
     let other = match p.orientation {
         Orientation::Arbitrary => field.singularities,
-        Orientation::Greedy => {
+        Orientation::Greedy | Orientation::Given => {
             let arbitrary = FeatureFieldParams {
                 orientation: Orientation::Arbitrary,
                 ..p.clone()
@@ -922,6 +929,50 @@ mod tests {
             })
             .sum();
         total as f64 / 10.0
+    }
+
+    #[test]
+    fn given_orientation_keeps_each_curve_s_own_direction() {
+        // Two parallel rows, the second drawn right to left: greedy makes them agree, "given"
+        // keeps what was drawn.
+        let mesh = unit_grid(31);
+        let row = |y: f32, left_to_right: bool| {
+            let pts = polyline(|t| Vec3::new(0.1 + 0.8 * t, y, 0.0), 4);
+            let pts: Vec<Vec3> = if left_to_right {
+                pts
+            } else {
+                pts.into_iter().rev().collect()
+            };
+            trace(&mesh, &pts, false)
+        };
+        let curves = vec![row(0.3, true), row(0.7, false)];
+        // Per curve of a result: the field at its middle vertex against its vertex order.
+        let follows_order = |f: &FeatureField| -> Vec<f32> {
+            f.curves
+                .iter()
+                .map(|(c, _)| {
+                    let (a, b) = (c.vertices[0], *c.vertices.last().unwrap());
+                    let d = (mesh.positions[b as usize] - mesh.positions[a as usize]).normalize();
+                    f.vectors[c.vertices[c.vertices.len() / 2] as usize].dot(d)
+                })
+                .collect()
+        };
+        let greedy = feature_field(&mesh, &curves, &FeatureFieldParams::default())
+            .unwrap()
+            .0;
+        let g = follows_order(&greedy);
+        assert!(
+            g.iter().any(|&x| x < -0.9),
+            "greedy turns one row round: {g:?}"
+        );
+        let given = FeatureFieldParams {
+            orientation: Orientation::Given,
+            ..Default::default()
+        };
+        let f = feature_field(&mesh, &curves, &given).unwrap().0;
+        assert!(f.curves.iter().all(|(_, s)| *s == 1));
+        let o = follows_order(&f);
+        assert!(o.iter().all(|&x| x > 0.9), "given: {o:?}");
     }
 
     #[test]

@@ -237,3 +237,78 @@ fn bad_inputs_are_clear_errors_naming_the_key() {
         ],
     );
 }
+
+/// The curves of lines.obj as position sequences, in file order.
+fn obj_lines(text: &str) -> Vec<Vec<[String; 3]>> {
+    let vs: Vec<[String; 3]> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("v "))
+        .map(|l| {
+            let p: Vec<&str> = l.split_whitespace().collect();
+            [p[0].to_owned(), p[1].to_owned(), p[2].to_owned()]
+        })
+        .collect();
+    text.lines()
+        .filter_map(|l| l.strip_prefix("l "))
+        .map(|l| {
+            l.split_whitespace()
+                .map(|i| vs[i.parse::<usize>().unwrap() - 1].clone())
+                .collect()
+        })
+        .collect()
+}
+
+/// An edited lines.obj given back with `field.orientation = "given"` keeps the edit: a line
+/// the user turned round comes back turned round (the greedy step would re-orient it).
+#[test]
+fn an_edited_lines_obj_given_back_keeps_its_directions() {
+    let cache = tempfile::tempdir().unwrap();
+    let first = run("feature_aligned.toml", &["compare=false"], cache.path()).unwrap();
+    let out = materialized(&first, "reconstruct");
+    let text = std::fs::read_to_string(out.path().join("lines.obj")).unwrap();
+    let lines = obj_lines(&text);
+    assert!(lines.len() >= 2, "{} lines", lines.len());
+    // Turn the second longest line round (greedy orientation starts from the longest, §4.1,
+    // and would keep that one's direction whatever it is).
+    let mut by_length: Vec<usize> = (0..lines.len()).collect();
+    by_length.sort_by_key(|&i| std::cmp::Reverse(lines[i].len()));
+    let chosen = by_length[1];
+    let mut edited = String::new();
+    let mut k = 0;
+    for l in text.lines() {
+        match l.strip_prefix("l ") {
+            Some(ids) if k == chosen => {
+                let mut ids: Vec<&str> = ids.split_whitespace().collect();
+                ids.reverse();
+                edited += &format!("l {}\n", ids.join(" "));
+                k += 1;
+            }
+            Some(_) => {
+                edited += &format!("{l}\n");
+                k += 1;
+            }
+            None => edited += &format!("{l}\n"),
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "lines.obj", edited.as_bytes());
+    let sets = [
+        "compare=false",
+        "extract.features=\"curves\"",
+        &format!("extract.curves_file={path:?}"),
+        "field.orientation=\"given\"",
+    ];
+    let again = run("feature_aligned.toml", &sets, cache.path()).unwrap();
+    let out = materialized(&again, "reconstruct");
+    let back = obj_lines(&std::fs::read_to_string(out.path().join("lines.obj")).unwrap());
+    let mut turned = lines[chosen].clone();
+    turned.reverse();
+    assert!(
+        back.contains(&turned),
+        "the edited line is not back as edited"
+    );
+    assert!(
+        !back.contains(&lines[chosen]),
+        "the edited line came back as before"
+    );
+}
