@@ -4,26 +4,41 @@
 //! must give `Ok` or an error: never a panic, and never an allocation beyond the input's size
 //! times a small factor (a header may claim a billion vertices; the reader must not believe
 //! it). The allocation bound is checked with a counting allocator, for this test binary only.
+//! It counts per thread, and a reader runs on a one-thread rayon pool made of the checking
+//! thread, so the count holds the reader's allocations, parallel parts included, and none of
+//! the other tests that run beside it in this binary.
 
 use proptest::prelude::*;
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// Counts the bytes live at once and their peak since the last reset.
+/// Counts, per thread, the bytes allocated and not yet freed by it, and their peak since the
+/// last reset.
 struct Counting;
-static LIVE: AtomicUsize = AtomicUsize::new(0);
-static PEAK: AtomicUsize = AtomicUsize::new(0);
+
+thread_local! {
+    static LIVE: Cell<isize> = const { Cell::new(0) };
+    static PEAK: Cell<isize> = const { Cell::new(0) };
+}
+
+fn count(delta: isize) {
+    // `try_with`: a thread being torn down has no counters left; its frees are not counted.
+    let _ = LIVE.try_with(|live| {
+        let now = live.get() + delta;
+        live.set(now);
+        let _ = PEAK.try_with(|peak| peak.set(peak.get().max(now)));
+    });
+}
 
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let now = LIVE.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
-        PEAK.fetch_max(now, Ordering::Relaxed);
+        count(layout.size() as isize);
         // SAFETY: forwarded unchanged to the system allocator.
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
+        count(-(layout.size() as isize));
         // SAFETY: forwarded unchanged to the system allocator.
         unsafe { System.dealloc(ptr, layout) }
     }
@@ -33,22 +48,29 @@ unsafe impl GlobalAlloc for Counting {
 static ALLOCATOR: Counting = Counting;
 
 /// Largest allocation growth allowed while reading `n` bytes: 64 per input byte plus 4 MiB
-/// (decoders keep fixed-size tables and buffers). Tests in this binary run one at a time
-/// (`PEAK` is global), see `serial`.
+/// (decoders keep fixed-size tables and buffers).
 fn bound(n: usize) -> usize {
     64 * n + (4 << 20)
 }
 
-static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+thread_local! {
+    /// This thread as a pool's only worker (a thread stays in such a pool for its life, so
+    /// one per thread): whatever a reader runs in parallel runs on it and is counted.
+    static ONE_THREAD: rayon::ThreadPool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .use_current_thread()
+        .build()
+        .expect("a one-thread pool on the test's thread");
+}
 
 /// Runs `read` on `bytes` and checks the allocation bound; panics inside `read` fail the
 /// property (proptest reports the input).
-fn check(bytes: &[u8], read: impl FnOnce(&[u8])) {
-    let _guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let base = LIVE.load(Ordering::Relaxed);
-    PEAK.store(base, Ordering::Relaxed);
-    read(bytes);
-    let grew = PEAK.load(Ordering::Relaxed).saturating_sub(base);
+fn check(bytes: &[u8], read: impl FnOnce(&[u8]) + Send) {
+    ONE_THREAD.with(|_| ()); // made before the count starts
+    let base = LIVE.with(Cell::get);
+    PEAK.with(|p| p.set(base));
+    ONE_THREAD.with(|pool| pool.install(|| read(bytes)));
+    let grew = (PEAK.with(Cell::get) - base).max(0) as usize;
     assert!(
         grew <= bound(bytes.len()),
         "reading {} bytes allocated {grew} bytes at once",
