@@ -22,7 +22,8 @@ fn main() {
         plane_weights: [1.0, 0.0, 1.0],
         ..Default::default()
     };
-    let analysis = analyse_transposed([img.view(); 3], [false, false, true], &cp).unwrap();
+    let analysis =
+        analyse_transposed([img.view(); 3], [None; 3], [false, false, true], &cp).unwrap();
     let emb = embed(&mesh, 512, 0.25).unwrap();
     let (lo, hi) = (emb.min(), emb.max());
     let field = RotationField::trivial(FieldGrid::covering(lo, hi, 24));

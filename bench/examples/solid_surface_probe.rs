@@ -32,8 +32,8 @@ fn main() {
         plane_weights: [1.0, 0.0, 1.0],
         ..Default::default()
     };
-    let analysis =
-        analyse_transposed([img.view(); 3], [false, false, true], &cp).expect("analysis");
+    let analysis = analyse_transposed([img.view(); 3], [None; 3], [false, false, true], &cp)
+        .expect("analysis");
     let emb = embed(&mesh, resolution, 0.25).expect("embedding");
     let (lo, hi) = (emb.min(), emb.max());
     let field = RotationField::trivial(FieldGrid::covering(lo, hi, 24));

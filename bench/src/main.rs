@@ -615,7 +615,7 @@ fn solid_rows(rows: &mut Vec<Row>, runs: usize) -> Result<String> {
     let t = Instant::now();
     let analysis =
         // What solid_elephant.toml asks for: wood2 in every plane, transposed in zx.
-        analyse_transposed([img.view(); 3], [false, false, true], &cp)
+        analyse_transposed([img.view(); 3], [None; 3], [false, false, true], &cp)
             .map_err(|e| anyhow::anyhow!("{e}"))?;
     rows.push(Row {
         what: format!(

@@ -37,14 +37,19 @@ pub struct ParameterizeParams {
     /// field says where the exemplar's "up" goes, and 90 makes an exemplar's horizontal
     /// features (wood grain, stripes) follow the field instead of crossing it. Default: 0.
     pub rotation: f32,
-    /// §1: "the mesh must be refined until each triangle fits". With a scale in texels whose
-    /// triangles do not fit the exemplar, split edges (the core's edge refiner) until every
-    /// edge spans at most an eighth of the exemplar's shorter side, so each vertex
-    /// neighbourhood fits in a quarter of it, and texture the refined mesh. Default: false (such
-    /// a scale is refused, naming the largest that fits). Left out of the node's key when off.
+    /// §1: "the mesh must be refined until each triangle fits". With a scale in texels, split
+    /// every edge that spans more than an eighth of the exemplar's shorter side (the core's
+    /// edge refiner), so each vertex neighbourhood fits in a quarter of it, and texture the
+    /// refined mesh; shorter edges are left alone. Default: false (a scale whose triangles do
+    /// not fit is refused, naming the largest that fits). Left out of the node's key when off.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub refine: bool,
 }
+
+/// The `jump_refine` node's algorithm and version ([`refine_to_fit`]; part of its key; bump on
+/// any change of output).
+pub const REFINE_NODE: texsyn_core::algorithm::Algorithm =
+    texsyn_core::algorithm::Algorithm::new("jump_refine", 1);
 
 /// Most vertices `refine` may make.
 pub const REFINE_MAX_VERTICES: usize = 5_000_000;

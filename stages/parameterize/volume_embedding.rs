@@ -354,7 +354,8 @@ impl Section {
 }
 
 /// The section of the volume by the plane with `normal` through the centre of the voxel
-/// holding `point` (moved less than half a voxel along the normal), sampled one voxel apart
+/// holding `point` (moved along the normal by at most half a voxel on an axis-aligned plane,
+/// under a voxel on any), sampled one voxel apart
 /// starting half a voxel in from the volume's box. So on a plane along a grid axis every
 /// sample is a voxel's centre, one per voxel: a plane or a sample on a voxel face would take
 /// the voxel on one side or the other by rounding, from sample to sample, duplicating and

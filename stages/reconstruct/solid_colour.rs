@@ -42,7 +42,7 @@ use texsyn_core::algorithm::Failure;
 
 /// The `solid_colour` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("solid_colour", 3);
+    texsyn_core::algorithm::Algorithm::new("solid_colour", 4);
 
 /// `[reconstruct]` of the solid method.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -71,7 +71,9 @@ pub enum SolidColourRule {
     /// The texels of the planes facing the surface, weighted by the plane weights times
     /// `|n · normal of the plane|⁸` (the power keeps the blend to a narrow band around the
     /// diagonals, where two planes face the surface equally): a cut along a plane of the frame
-    /// shows that plane's texel alone. Boxes, having no surface, take the mean.
+    /// shows that plane's texel alone. A cut along a plane of weight 0 (x for the wood layers'
+    /// `[1, 0, 1]`) shows the other two planes blended by how nearly they face it. Boxes,
+    /// having no surface, take the mean.
     Facing,
     /// The plane-weighted mean of the three texels (§4.3's voxel colour) everywhere.
     Mean,
@@ -164,8 +166,9 @@ impl<'a> VoxelTriples<'a> {
         let frame = Mat3::from_quat(self.field.rotation_at(self.volume.centre(v)));
         let w = facing_weights(frame, a.weights(), normal);
         let total: f32 = w.iter().sum();
-        if total < 1e-6 {
-            // Only planes of weight 0 face the surface.
+        if total <= f32::MIN_POSITIVE {
+            // No weighted plane faces the surface at all (its normal lies in the one plane of
+            // weight 0, to the last bit).
             return Some(a.colour(finest, &t));
         }
         let mut acc = [0.0f32; 3];
@@ -539,5 +542,13 @@ mod tests {
         assert!(f[0] > 10.0 * f[1], "{f:?}");
         let g = facing_weights(Mat3::IDENTITY, [1.0, 0.0, 1.0], Vec3::X);
         assert_eq!(g, [0.0, 0.0, 0.0]);
+        // Near x (10° off it), the weighted planes still blend by how nearly they face the
+        // surface, the one nearer winning (no fall back to the mean there).
+        let near = Vec3::new(1.0, 0.1, 0.05).normalize();
+        let h = facing_weights(Mat3::IDENTITY, [1.0, 0.0, 1.0], near);
+        assert!(
+            h[0] + h[2] > f32::MIN_POSITIVE && h[2] > 200.0 * h[0],
+            "{h:?}"
+        );
     }
 }

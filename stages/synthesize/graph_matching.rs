@@ -454,16 +454,24 @@ impl<'a> Level<'a> {
             }
         }
         if capped.count > 0 {
+            let remedy = if capped.widest <= MAX_K {
+                format!(
+                    "max_k = {} keeps them whole (larger regions take longer to match)",
+                    capped.widest
+                )
+            } else {
+                format!(
+                    "max_k is at most {MAX_K}, so a larger region or a finer mesh level keeps more of them"
+                )
+            };
             tracing::warn!(
                 "synthesize: on mesh level {l}, {} of {n} vertices wanted a region radius above \
                  synthesize.max_k = {} (up to {} edges): their regions cover fewer than \
-                 region = {} texels of their stack level; max_k = {} keeps them whole (larger \
-                 regions take longer to match)",
+                 region = {} texels of their stack level; {remedy}",
                 capped.count,
                 p.max_k,
                 capped.widest,
                 p.region,
-                capped.widest.min(MAX_K),
             );
         }
         let level_start = (0..stack.levels()).map(|m| stack.level_start(m)).collect();
@@ -931,8 +939,8 @@ mod tests {
 
     #[test]
     fn region_radius_solves_the_region_equation_and_says_when_max_k_cuts_it() {
-        // (k+1)² + k² = side²: side 5 gives k = 3 exactly (16 + 9 = 25), side 13 gives 8
-        // (81 + 64 = 145 ≈ 12.04²; 13² = 169 lies between k = 8 and k = 9 (181), nearer 8).
+        // (k+1)² + k² = side²: side 5 gives k = 3 exactly (16 + 9 = 25), side √145 gives
+        // k = 8 exactly (81 + 64 = 145).
         let r = RegionRadius::of(5.0, 8);
         assert_eq!((r.k, r.wanted, r.capped()), (3, 3, false));
         let r = RegionRadius::of(5.0, 2);

@@ -414,9 +414,10 @@ fn a_region_with_the_core_s_own_exemplars_changes_nothing() {
     assert_eq!(both, samples(&plain, "synthesize"));
 }
 
-/// A drawn mask given beside a plane's exemplar reaches the analysis (its key and result
-/// change, the feature channel turned on with its defaults), is read transposed with its
-/// image, and one of another size is refused naming the mask's file and key.
+/// A drawn mask given beside a plane's exemplar reaches the analysis (its result changes, and
+/// is not the detector's), and one of another size or without a drawn texel is refused naming
+/// the mask's file and key. (That a mask is read transposed with its image is checked on the
+/// analysis itself, in solid_switches.rs.)
 #[test]
 fn a_drawn_mask_beside_an_exemplar_feeds_the_analysis_and_a_wrong_one_is_named() {
     let dir = tempfile::tempdir().unwrap();
@@ -464,6 +465,13 @@ fn a_drawn_mask_beside_an_exemplar_feeds_the_analysis_and_a_wrong_one_is_named()
     let e = err(run("solid_trivial.toml", &[&spec(&small)], cache.path()));
     assert!(
         e.contains("small.png") && e.contains("inputs.zx.mask") && e.contains("9×9"),
+        "{e}"
+    );
+    let blank = dir.path().join("blank.png");
+    image::GrayImage::new(w, h).save(&blank).unwrap();
+    let e = err(run("solid_trivial.toml", &[&spec(&blank)], cache.path()));
+    assert!(
+        e.contains("blank.png") && e.contains("no feature texel"),
         "{e}"
     );
 }

@@ -29,7 +29,6 @@ use crate::stages::field::orientation_field::{self};
 use crate::stages::parameterize::jump_parameterization::{self, Scale};
 use crate::stages::reconstruct::jump_export::{self, JumpExportKey, MapFile};
 use crate::stages::synthesize::jump_walk::{self};
-use texsyn_core::geom::edge_refine;
 
 /// The `jump_maps` method.
 pub struct JumpMaps;
@@ -48,7 +47,7 @@ impl Method for JumpMaps {
         let mesh = match (c.parameterize.refine, &c.parameterize.scale) {
             (false, _) => mesh,
             (true, Scale::Texels(scale)) => {
-                let spec = NodeSpec::of(Stage::Parameterize, edge_refine::NODE)
+                let spec = NodeSpec::of(Stage::Parameterize, jump_parameterization::REFINE_NODE)
                     .named("parameterize.refine");
                 dag.node(spec, *scale, (mesh, exemplar), |_, scale, (mesh, e)| {
                     Ok(jump_parameterization::refine_to_fit(

@@ -65,13 +65,20 @@ pub(super) fn add_analysis(
         ([xy, yz, zx], masks),
         move |_, key, (planes, masks)| {
             for ((plane, mask), name) in planes.iter().zip(&masks).zip(&names) {
-                if let (Some(m), Some(name)) = (mask, name)
-                    && (m.width, m.height) != (plane.width, plane.height)
-                {
+                let (Some(m), Some(name)) = (mask, name) else {
+                    continue;
+                };
+                if (m.width, m.height) != (plane.width, plane.height) {
                     return Err(NodeError::input(format!(
-                        "{name}: the drawn mask is {}×{}, its exemplar {}×{}: a mask must match \
-                     its image texel for texel",
+                        "{name}: the drawn mask is {}×{}, its exemplar {}×{}: a mask must \
+                         match its image texel for texel",
                         m.width, m.height, plane.width, plane.height
+                    )));
+                }
+                if !m.pixels.iter().any(|c| (c[0] + c[1] + c[2]) / 3.0 >= 0.5) {
+                    return Err(NodeError::input(format!(
+                        "{name}: the drawn mask has no feature texel (none at or above half \
+                         intensity): draw the curves in white on black"
                     )));
                 }
             }

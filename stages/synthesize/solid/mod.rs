@@ -5,7 +5,7 @@
 
 /// The `solid_bricks` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("solid_bricks", 2);
+    texsyn_core::algorithm::Algorithm::new("solid_bricks", 3);
 
 /// Estimated peak memory, in bytes, of a solid of `resolution` voxels on its longest side
 /// asked for `request`. The volume's voxel masks and their prefix sums are dense over the

@@ -28,8 +28,9 @@
 //!   `t_v = h_l (v mod 2)`, plus optional jitter `h_l·jitter·(u − ½)` per axis (Lefebvre &
 //!   Hoppe's multiresolution jitter, `u` counter-based).
 //! - **Correction** (§4.3): the three `N × N` neighbourhoods `v + s q_v (i, j, 0)` etc., aligned
-//!   with the local frame, are gathered from the level's voxel colours (trilinear or nearest,
-//!   per level), each projected on its plane's PCA basis, and compared with the candidates
+//!   with the local frame, are gathered from the level's voxels (trilinear or nearest, per
+//!   level), each voxel showing in plane `P`'s neighbourhood its own texel in `P` (or, with
+//!   `neighbourhood_colour = "mean"`, its colour), each projected on its plane's PCA basis, and compared with the candidates
 //!   `S(v)` in the reduced form: for plane `P` and `d ∈ {−1, 0, 1}²` in `P`, the voxel
 //!   `w = [v + s q_v d]` and its coordinate `T_P(w)` shifted back by `w`'s exemplar offset
 //!   `h_l P(q_v⁻¹ (w − v) / s)` names an exemplar pixel whose `k` candidate triples join the
@@ -89,9 +90,9 @@
 //!   (`stages/field/coarse_field_smoothing.rs`). "Coarse levels" are the coarser half
 //!   ([`coarse_level`]). With integration a coarse level's stencil reach grows to
 //!   `2 N_h s_max` (see `widen_for_integration`).
-//! - With a feature mask (`analyse_exemplar.feature_mask`) voxels carry their triple's
-//!   appearance-space colour for matching ([`SolidAnalysisRef::match_colour`]); what is
-//!   output stays the colour.
+//! - With a feature mask (`analyse_exemplar.feature_mask`) matching reads appearance-space
+//!   texels ([`SolidAnalysisRef::match_texel`], or [`SolidAnalysisRef::match_colour`] for
+//!   the mean); what is output stays the colour.
 //! - Working values live in 8³ chunks allocated only where the dependent set is; the
 //!   dependency bytes are worked out densely over the bounding box of a batch's dependent set
 //!   (one byte per voxel, two more while dilating) and then kept in the same chunks.
