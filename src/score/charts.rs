@@ -131,6 +131,33 @@ pub fn unfolded_discs(
     seed: u64,
     colour: impl Fn(usize, Vec3) -> [f32; 4],
 ) -> Charts {
+    unfolded_discs_with(
+        triangles,
+        offsets,
+        seed,
+        |_, _, j| offsets.edge_offsets[j],
+        colour,
+    )
+}
+
+/// How a disc's breadth-first unfolding steps along one edge: `step(centre, from, j)` is the
+/// texel offset from vertex `from` to its neighbour `neighbors[j]`, in the disc around
+/// `centre`. Every disc visits its vertices in breadth-first order from its centre and steps
+/// each reached vertex's edges to unreached neighbours once, parents before children, so a
+/// step may carry state outward along the walk (a frame transported from the centre), which
+/// it starts afresh when `centre` changes.
+pub trait DiscStep: FnMut(usize, usize, usize) -> Vec2 {}
+impl<F: FnMut(usize, usize, usize) -> Vec2> DiscStep for F {}
+
+/// [`unfolded_discs`] with the edge offsets given by `step` (see [`DiscStep`]) instead of
+/// a fixed table; `offsets.edge_offsets` is not read.
+pub fn unfolded_discs_with(
+    triangles: &[[u32; 3]],
+    offsets: &EdgeOffsets,
+    seed: u64,
+    mut step: impl DiscStep,
+    colour: impl Fn(usize, Vec3) -> [f32; 4],
+) -> Charts {
     let param = offsets;
     let n = param.adj_offsets.len() - 1;
     let faces_of: Csr<u32> = Csr::from_pairs(
@@ -173,7 +200,7 @@ pub fn unfolded_discs(
             for j in a..b {
                 let w = param.neighbors[j] as usize;
                 if coord[w].is_none() {
-                    coord[w] = Some(cu + param.edge_offsets[j]);
+                    coord[w] = Some(cu + step(centre, u, j));
                     reached.push(w);
                 }
             }

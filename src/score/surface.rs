@@ -14,16 +14,20 @@
 //!
 //! Feature-aligned texturing's texture optimization (§5) reads a vertex's neighbourhood in
 //! the frame (u = the field on the tangent plane, n × u), turned by the texture's principal
-//! angle onto exemplar pixel axes, at `parameterize.scale` texels per unit; the same frame
-//! unfolds its refined mesh (see [`feature_aligned`]). Its `textured_atlas.png` is not used:
-//! it lays each input triangle with its longest edge horizontal, so its patches are rotated
-//! against the exemplar's.
+//! angle onto exemplar pixel axes, at `parameterize.scale` texels per unit; a disc is
+//! unfolded in its centre's frame, carried outward with the surface ([`TransportedFrame`]),
+//! as a patch is read in its sample's one frame. Its `textured_atlas.png` is not used: it
+//! lays each input triangle with its longest edge horizontal, so its patches are rotated
+//! against the exemplar's. Whether the texture's lines follow the field is measured on the
+//! surface itself ([`super::alignment::surface_alignment`]), not on the discs.
 //!
 //! Limits: colours between vertices are interpolated, so where edges are longer than a
 //! texel the discs are smoother than the synthesis meant (the gradient ratio falls with the
-//! edge length); near a singularity of the field the unfolding overlaps itself.
+//! edge length); near a singularity of the field the unfolding overlaps itself, and a
+//! feature-aligned disc wider than a thin part (a leg a few texels round) wraps around it
+//! and overlaps itself too (the later triangle wins).
 
-use super::charts::{EdgeOffsets, unfolded_discs};
+use super::charts::{EdgeOffsets, unfolded_discs_with};
 use super::{Item, Run, ScoreFailure};
 use crate::artifact::feature_aligned::OrientedField;
 use crate::geom::edge_refine::Refined;
@@ -37,6 +41,7 @@ use crate::stages::reconstruct::feature_aligned_export::{ExemplarLookup, nearest
 use crate::stages::synthesize::graph_matching::GraphMatching;
 use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
 use glam::{Vec2, Vec3};
+use std::collections::HashMap;
 use texsyn_core::math::PureMath;
 
 /// The nodes of a graph-matching run that its score reads.
@@ -135,12 +140,12 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
     // axis is n × u = −right.
     let frames = frames(&normals, &vectors);
     let (cos, sin) = (tf.principal_angle.cos_pure(), tf.principal_angle.sin_pure());
-    let step = |from: usize, to: usize| {
-        let d = mesh.positions[to] - mesh.positions[from];
-        let (u, right) = frames[from];
-        let o = Vec2::new(d.dot(u), -d.dot(right));
-        let o = Vec2::new(o.x * cos - o.y * sin, o.x * sin + o.y * cos);
-        at_length(o, d.length() * scale)
+    let unfolding = TransportedFrame {
+        positions: &mesh.positions,
+        normals: &normals,
+        frames: &frames,
+        scale,
+        turn: (cos, sin),
     };
     let mut items = Vec::new();
     for &(node, what) in &nodes.synthesize {
@@ -162,10 +167,21 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
             [c.x, c.y, c.z, 1.0]
         };
         let mut item = Item::new(format!("{what}, {DISCS_NOTE}"), "inputs.exemplar");
-        // The exemplar's principal line runs at `principal_angle` in its pixel axes, which the
-        // discs are unfolded onto.
-        let lines = Some(tf.principal_angle);
-        score_surface(run, &mut item, mesh, shade, step, ex, lines)?;
+        // Where the principal line should run: along the field (texture optimization lays the
+        // exemplar's `principal_angle` along it), measured on the surface; the exemplar's own
+        // measure at its principal angle is the floor.
+        let luma: Vec<f32> = colours
+            .iter()
+            .map(|c| 0.299 * c[0] + 0.587 * c[1] + 0.114 * c[2])
+            .collect();
+        let radius = super::alignment::WINDOW as f32 / 2.0 / scale;
+        let on_surface = super::alignment::surface_alignment(mesh, &luma, &vectors, radius);
+        let exemplar = super::alignment::alignment(ex, None, tf.principal_angle);
+        item.extra
+            .insert("alignment_deg".into(), degrees_or_null(on_surface));
+        item.extra
+            .insert("exemplar_alignment_deg".into(), degrees_or_null(exemplar));
+        score_surface(run, &mut item, mesh, shade, unfolding.step(), ex)?;
         items.push(item);
     }
     Ok(items)
@@ -187,6 +203,63 @@ fn frames(normals: &[Vec3], field: &[Vec3]) -> Vec<(Vec3, Vec3)> {
             (t, t.cross(nrm))
         })
         .collect()
+}
+
+/// Feature-aligned discs unfolded as texture optimization reads a patch, in one frame: the
+/// centre's synthesis frame (`u` the field on the tangent plane, `n × u`, turned by the
+/// principal angle onto exemplar pixel axes), carried outward along the walk by the rotation
+/// between neighbouring normals (a discrete exponential map), each edge at its own length
+/// times `scale`. Where the field turns inside a disc, the texture turns with it in the
+/// disc, as it does on the surface. Stepping every edge in its own vertex's field frame
+/// instead does not close around loops where the field turns (a few degrees per texel on the
+/// elephant's crest-line field): neighbours reached along different paths land far apart
+/// and the disc shows a scramble of texels the surface does not.
+struct TransportedFrame<'a> {
+    positions: &'a [Vec3],
+    normals: &'a [Vec3],
+    /// Per vertex, (u, u × n) as [`frames`] gives them.
+    frames: &'a [(Vec3, Vec3)],
+    scale: f32,
+    /// cos, sin of the principal angle.
+    turn: (f32, f32),
+}
+
+impl TransportedFrame<'_> {
+    /// The step for [`super::charts::unfolded_discs_with`]: `(centre, from, to)` to texels.
+    fn step(&self) -> impl FnMut(usize, usize, usize) -> Vec2 + '_ {
+        // The transported frame (u, v = n × u) of every vertex the current disc reached.
+        let mut carried: HashMap<usize, (Vec3, Vec3)> = HashMap::new();
+        let mut disc = usize::MAX;
+        move |centre, from, to| {
+            if centre != disc {
+                disc = centre;
+                carried.clear();
+                let (u, right) = self.frames[centre];
+                carried.insert(centre, (u, -right));
+            }
+            let (u, v) = carried[&from];
+            let turn = glam::Quat::from_rotation_arc(
+                unit_or_z(self.normals[from]),
+                unit_or_z(self.normals[to]),
+            );
+            carried.insert(to, (turn * u, turn * v));
+            let d = self.positions[to] - self.positions[from];
+            let o = Vec2::new(d.dot(u), d.dot(v));
+            let (cos, sin) = self.turn;
+            let o = Vec2::new(o.x * cos - o.y * sin, o.x * sin + o.y * cos);
+            at_length(o, d.length() * self.scale)
+        }
+    }
+}
+
+fn unit_or_z(n: Vec3) -> Vec3 {
+    n.try_normalize().unwrap_or(Vec3::Z)
+}
+
+/// An alignment median in degrees to one decimal, or null when no window counted.
+fn degrees_or_null(a: Option<super::alignment::Alignment>) -> serde_json::Value {
+    a.map(|a| serde_json::json!((a.median_degrees * 10.0).round() / 10.0))
+        .unwrap_or(serde_json::Value::Null)
 }
 
 /// `o` scaled to `len` (zero stays zero).
@@ -215,21 +288,19 @@ fn score_vertex_colours(
         }
         c
     };
-    score_surface(run, item, mesh, shade, step, ex, None)
+    score_surface(run, item, mesh, shade, |_, from, to| step(from, to), ex)
 }
 
-/// Unfolds discs of `mesh` with the texel offset `step(from, to)` of each edge, fills their
-/// triangles with `shade(triangle, barycentrics)` and scores them into `item`; with `lines`,
-/// also how well their lines follow that direction (radians in the discs' pixel axes,
-/// [`super::alignment`]), beside the exemplar's own measure as a reference.
+/// Unfolds discs of `mesh` with the texel offset `step(centre, from, to)` of each edge (see
+/// [`super::charts::DiscStep`]), fills their triangles with `shade(triangle, barycentrics)`
+/// and scores them into `item`.
 fn score_surface(
     run: &Run,
     item: &mut Item,
     mesh: &crate::geom::Mesh,
     shade: impl Fn(usize, Vec3) -> [f32; 4] + Sync,
-    step: impl Fn(usize, usize) -> Vec2,
+    mut step: impl FnMut(usize, usize, usize) -> Vec2,
     ex: crate::image::ImageView,
-    lines: Option<f32>,
 ) -> Result<(), ScoreFailure> {
     let n = mesh.positions.len();
     let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -240,35 +311,64 @@ fn score_surface(
             nbrs[b as usize].push(a);
         }
     }
-    let (mut adj, mut neighbors, mut offsets) = (vec![0u32], Vec::new(), Vec::new());
-    for (v, list) in nbrs.iter_mut().enumerate() {
+    let (mut adj, mut neighbors) = (vec![0u32], Vec::new());
+    for list in nbrs.iter_mut() {
         list.sort_unstable();
         list.dedup();
-        for &w in list.iter() {
-            neighbors.push(w);
-            offsets.push(step(v, w as usize));
-        }
+        neighbors.extend_from_slice(list);
         adj.push(neighbors.len() as u32);
     }
     let edges = EdgeOffsets {
         adj_offsets: &adj,
         neighbors: &neighbors,
-        edge_offsets: &offsets,
+        edge_offsets: &[],
     };
-    let charts = unfolded_discs(&mesh.triangles, &edges, run.params.seed, shade);
+    let to = |j: usize| neighbors[j] as usize;
+    let step = |centre, from, j| step(centre, from, to(j));
+    let charts = unfolded_discs_with(&mesh.triangles, &edges, run.params.seed, step, shade);
     item.extra
         .insert("discs".into(), serde_json::json!(charts.discs));
-    if let Some(direction) = lines {
-        let measure = |a: Option<super::alignment::Alignment>| {
-            a.map(|a| serde_json::json!((a.median_degrees * 10.0).round() / 10.0))
-                .unwrap_or(serde_json::Value::Null)
-        };
-        let on_discs =
-            super::alignment::alignment(charts.image.view(), Some(&charts.mask), direction);
-        let exemplar = super::alignment::alignment(ex, None, direction);
-        item.extra.insert("alignment_deg".into(), measure(on_discs));
-        item.extra
-            .insert("exemplar_alignment_deg".into(), measure(exemplar));
-    }
     run.score_into(item, charts.image.view(), Some(&charts.mask), ex)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_disc_in_one_transported_frame_is_the_plane_itself_however_the_field_turns() {
+        // A flat 11×11 sheet whose field turns 0.3 rad per unit along x: unfolded from vertex
+        // 0 (field along x there) at 2 texels per unit, every vertex must land at twice its
+        // offset from the centre, whichever path reaches it. Stepping each edge in its own
+        // vertex's field frame puts vertex 2 (reached through vertex 1, turned 0.3 rad) off.
+        let mesh = crate::geom::primitives::grid(11, 1.0);
+        let normals = mesh.vertex_normals().to_vec();
+        let field: Vec<Vec3> = (mesh.positions.iter())
+            .map(|p| Vec3::new((0.3 * p.x).cos_pure(), (0.3 * p.x).sin_pure(), 0.0))
+            .collect();
+        let frames = frames(&normals, &field);
+        let unfolding = TransportedFrame {
+            positions: &mesh.positions,
+            normals: &normals,
+            frames: &frames,
+            scale: 2.0,
+            turn: (1.0, 0.0),
+        };
+        for path in [[0usize, 1, 2, 13, 24], [0, 11, 22, 23, 24]] {
+            let mut step = unfolding.step();
+            let mut at = Vec2::ZERO;
+            for w in path.windows(2) {
+                at += step(0, w[0], w[1]);
+            }
+            let want = (mesh.positions[24] - mesh.positions[0]).truncate() * 2.0;
+            assert!(at.distance(want) < 1e-4, "{path:?}: {at} against {want}");
+        }
+        // A turned principal angle turns the whole disc.
+        let quarter = TransportedFrame {
+            turn: (0.0, 1.0),
+            ..unfolding
+        };
+        let o = quarter.step()(0, 0, 1);
+        assert!(o.distance(Vec2::new(0.0, 2.0)) < 1e-5, "{o}");
+    }
 }

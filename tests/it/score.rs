@@ -8,6 +8,7 @@ use common::repo;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Output;
+use texsyn_core::math::PureMath;
 
 fn json(o: &Output) -> Value {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -292,4 +293,53 @@ fn solid_surface_requests_are_scored_on_a_section_made_for_it() {
     let v = json(&texsyn(&args, d.path()));
     let reason = v["scores"]["not_scored"][0].as_str().unwrap();
     assert!(reason.contains("surface request"), "{reason}");
+}
+
+/// Feature-aligned texturing on a bent surface: a cylinder with one straight curve along its
+/// axis, the wood's stripes laid along the field. `score` measures the alignment where the
+/// texture lies (median angle between its lines and the field, `alignment_deg`) and keeps the
+/// exemplar's own as the floor.
+#[test]
+fn feature_aligned_stripes_on_a_cylinder_follow_the_field() {
+    let d = tempfile::tempdir().unwrap();
+    let mut obj = String::new();
+    let (around, along) = (40usize, 24usize);
+    for j in 0..=along {
+        for i in 0..around {
+            let a = i as f32 / around as f32 * std::f32::consts::TAU;
+            let z = j as f32 / along as f32;
+            obj += &format!("v {} {} {z}\n", 0.3 * a.cos_pure(), 0.3 * a.sin_pure());
+        }
+    }
+    for j in 0..along {
+        for i in 0..around {
+            let v = |i: usize, j: usize| j * around + i % around + 1;
+            let (a, b, c, e) = (v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1));
+            obj += &format!("f {a} {b} {c}\nf {a} {c} {e}\n");
+        }
+    }
+    std::fs::write(d.path().join("cylinder.obj"), obj).unwrap();
+    let wood = repo().join("tests/data/exemplars/wood2.png");
+    let config = format!(
+        "method = \"feature_aligned\"\n[inputs]\nmesh = \"cylinder.obj\"\nexemplar = {:?}\n\
+         [extract]\nfeatures = \"curves\"\ncurves = [ {{ points = [[0.3, 0.0, 0.05], [0.3, 0.0, 0.95]] }} ]\n\
+         [parameterize]\nscale = 120.0\n[synthesize]\niterations = 5\n\
+         [reconstruct]\npreview_size = 48\natlas_size = 256\n",
+        wood.to_str().unwrap()
+    );
+    std::fs::write(d.path().join("cylinder.toml"), config).unwrap();
+    let v = json(&texsyn(
+        &["score", "cylinder.toml", "--cache", "c", "--json", "-q"],
+        d.path(),
+    ));
+    let items = v["items"].as_array().unwrap();
+    assert_eq!(items.len(), 2, "aligned and unaligned: {v}");
+    for item in items {
+        let extra = &item["extra"];
+        let aligned = extra["alignment_deg"].as_f64().unwrap();
+        assert!(aligned <= 15.0, "{item}");
+        // wood2's stripes are straight: the exemplar measures a few degrees.
+        let floor = extra["exemplar_alignment_deg"].as_f64().unwrap();
+        assert!(floor < 5.0, "{item}");
+    }
 }
