@@ -2,16 +2,16 @@
 //! local dominant direction of an image (its structure tensor) and an expected direction.
 //!
 //! Feature-aligned texturing (Xu et al. 2009, §4–5) lays the exemplar's principal feature line
-//! along the field. On discs unfolded along the field and turned by the texture's principal
-//! angle (score/surface.rs), a correct result shows its lines at that angle, as the exemplar
-//! does. The structure tensor (the window sum of `∇I ∇Iᵀ` over luminance) gives each window's
+//! along the field, so a correct result's lines run along the field, as the exemplar's run at
+//! its principal angle. The structure tensor (the window sum of `∇I ∇Iᵀ` over luminance) gives each window's
 //! dominant gradient direction; lines run across it. Windows without a dominant direction
 //! (coherence `(λ₁ − λ₂) / (λ₁ + λ₂)` below 0.3: flat or isotropic content) say nothing
 //! about alignment and are left out. The median over the rest is the measure, in degrees,
 //! 0 (every line along the direction) to 90 (every line across it).
 //!
 //! On a surface ([`surface_alignment`]) the same measure is taken where the texture lies,
-//! without unfolding: windows are the triangles within a radius of evenly spread vertices,
+//! without unfolding: windows are the triangles around the vertices within a radius of
+//! every k-th vertex (at most 4,000 windows),
 //! the tensor sums each triangle's luminance gradient (area-weighted) in the centre's tangent
 //! frame, and the expected direction is the field at the centre. Unfolded discs would
 //! measure the unfolding too: a disc is laid out in one frame, and where the field turns
@@ -36,7 +36,8 @@ const MIN_COHERENCE: f32 = 0.3;
 pub struct Alignment {
     /// Median angle between the windows' line directions and the expected one, degrees.
     pub median_degrees: f32,
-    /// Windows counted (coherent, and wholly inside the mask).
+    /// Windows counted (coherent; in an image, wholly inside the mask; on a surface, with at
+    /// least half a flat disc's area).
     pub windows: usize,
 }
 
@@ -100,14 +101,15 @@ pub fn alignment(image: ImageView, mask: Option<&[bool]>, direction: f32) -> Opt
 /// Window centres on a surface: at most this many, every k-th vertex.
 const SURFACE_WINDOWS: usize = 4000;
 
-/// The alignment of a textured surface's lines with a tangent field: over windows of
-/// triangles within `radius` (object units; [`WINDOW`] / 2 texels for the exemplar's
-/// windows) of evenly spread vertices, each triangle's luminance gradient (linear over the
+/// The alignment of a textured surface's lines with a tangent field: over windows around
+/// every k-th vertex (at most [`SURFACE_WINDOWS`]), the triangles around the vertices reached
+/// from it by edges within `radius` (object units; [`WINDOW`] / 2 texels matches the
+/// exemplar's windows), each triangle's luminance gradient (linear over the
 /// triangle from `luma` at its corners) summed into a structure tensor in the centre's
 /// tangent frame, whose line direction is compared with `direction[centre]`, the tangent the
 /// principal line should take there. Triangles facing away from the centre's normal (the far
 /// side of a thin part) are left out, and so are windows with less than half a flat disc's
-/// area (mesh borders), without a dominant direction (coherence below [`MIN_COHERENCE`]), or
+/// area (mesh borders), flat, without a dominant direction (coherence below [`MIN_COHERENCE`]), or
 /// whose centre has no direction (zero vector). `None` when no window is counted.
 pub fn surface_alignment(
     mesh: &Mesh,
@@ -132,11 +134,12 @@ pub fn surface_alignment(
                 return (Vec3::ZERO, 0.0, Vec3::ZERO);
             }
             let nrm = cross / twice;
-            // ∇ of corner i's hat function: n × (the opposite edge) / twice the area.
-            let g = (0..3).fold(Vec3::ZERO, |g, i| {
-                let opposite = p[(i + 2) % 3] - p[(i + 1) % 3];
-                g + nrm.cross(opposite) * (luma[t[i] as usize] / twice)
-            });
+            // ∇ of corner i's hat function is n × (the opposite edge) / twice the area; the
+            // hat functions sum to one, so corner 0's value drops out and a flat triangle's
+            // gradient is exactly zero.
+            let l = t.map(|v| luma[v as usize]);
+            let hat = |i: usize| nrm.cross(p[(i + 2) % 3] - p[(i + 1) % 3]) / twice;
+            let g = hat(1) * (l[1] - l[0]) + hat(2) * (l[2] - l[0]);
             (g, 0.5 * twice, nrm)
         })
         .collect();
@@ -184,12 +187,14 @@ pub fn surface_alignment(
                 }
             }
         }
+        // Flat windows (mean squared luminance change across the radius below 10⁻⁸, far
+        // under one 8-bit level) have no direction.
         let trace = juu + jvv;
-        if area < min_area || trace.is_nan() || trace <= 0.0 {
+        if area < min_area || !trace.is_finite() || trace * radius * radius <= 1e-8 * area {
             continue;
         }
         let spread = ((juu - jvv) * (juu - jvv) + 4.0 * juv * juv).sqrt();
-        if spread / trace < MIN_COHERENCE {
+        if spread.is_nan() || spread / trace < MIN_COHERENCE {
             continue;
         }
         let gradient = 0.5 * (2.0 * juv).atan2_pure(juu - jvv);
@@ -303,8 +308,12 @@ mod tests {
 
     #[test]
     fn surface_windows_without_lines_or_direction_are_not_counted() {
-        let mesh = crate::geom::primitives::grid(41, 0.25);
-        let flat = vec![0.5; mesh.positions.len()];
+        // A grid turned and spaced so that its coordinates are not exact in binary: a flat
+        // colour's gradient must still be zero.
+        let mut mesh = crate::geom::primitives::grid(41, 0.1);
+        let turn = glam::Quat::from_rotation_z(0.3);
+        mesh.positions.iter_mut().for_each(|p| *p = turn * *p * 2.5);
+        let flat = vec![0.7; mesh.positions.len()];
         let field = vec![Vec3::X; mesh.positions.len()];
         assert_eq!(surface_alignment(&mesh, &flat, &field, 2.0), None);
         let stripes: Vec<f32> = mesh

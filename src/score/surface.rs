@@ -37,7 +37,9 @@ use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
 use crate::stages::field::feature_field::carry_field;
 use crate::stages::field::sweep_field::SweepField;
 use crate::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
-use crate::stages::reconstruct::feature_aligned_export::{ExemplarLookup, nearest_corner};
+use crate::stages::reconstruct::feature_aligned_export::{
+    ExemplarLookup, ExemplarSampling, nearest_corner,
+};
 use crate::stages::synthesize::graph_matching::GraphMatching;
 use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
 use glam::{Vec2, Vec3};
@@ -109,6 +111,8 @@ pub struct FeatureAlignedNodes {
     pub synthesize: Vec<(Handle<SurfaceSynthesis>, &'static str)>,
     /// `parameterize.scale`: exemplar texels per object unit.
     pub scale: f32,
+    /// `reconstruct.lookup`: how the atlas reads the exemplar, so the score sees what it holds.
+    pub lookup: ExemplarSampling,
 }
 
 impl super::Planned for FeatureAlignedNodes {
@@ -157,7 +161,7 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
         }
         // What textured.glb's atlas holds: the exemplar looked up inside each patch, the
         // nearest corner's colour across seams.
-        let lookup = ExemplarLookup::new(&refined, &out.source, ex);
+        let lookup = ExemplarLookup::new(&refined, &out.source, ex, nodes.lookup);
         let colours = &out.colours;
         let shade = |f: usize, b: Vec3| {
             let (tri, l) = (mesh.triangles[f], b.to_array());
@@ -363,6 +367,45 @@ mod tests {
             let want = (mesh.positions[24] - mesh.positions[0]).truncate() * 2.0;
             assert!(at.distance(want) < 1e-4, "{path:?}: {at} against {want}");
         }
+        // On a cylinder (radius 1, 24 vertices around) the frame turns with the tangent
+        // planes: a walk around the ring unrolls into a straight line at the edges' length,
+        // past the quarter turn where the edges point back against the centre's plane.
+        let around = 24usize;
+        let positions: Vec<Vec3> = (0..2 * around)
+            .map(|k| {
+                let a = (k % around) as f32 / around as f32 * std::f32::consts::TAU;
+                Vec3::new(a.cos_pure(), a.sin_pure(), (k / around) as f32)
+            })
+            .collect();
+        let normals: Vec<Vec3> = (positions.iter())
+            .map(|p| Vec3::new(p.x, p.y, 0.0))
+            .collect();
+        let axis = vec![Vec3::Z; positions.len()];
+        let ring_frames = super::frames(&normals, &axis);
+        let cylinder = TransportedFrame {
+            positions: &positions,
+            normals: &normals,
+            frames: &ring_frames,
+            scale: 1.0,
+            turn: (1.0, 0.0),
+        };
+        let mut step = cylinder.step();
+        let edge = positions[0].distance(positions[1]);
+        let mut at = Vec2::ZERO;
+        for k in 0..around - 1 {
+            let o = step(0, k, k + 1);
+            at += o;
+            let want = (k + 1) as f32 * edge;
+            assert!(o.x.abs() < 1e-4, "step {k}: {o} leaves the ring's line");
+            assert!(
+                (at.length() - want).abs() < 1e-3,
+                "after {} steps: {at}, {want} along",
+                k + 1
+            );
+        }
+        // Up the axis from there: along the other disc axis, as at the centre.
+        let up = step(0, around - 1, 2 * around - 1);
+        assert!((up - Vec2::new(1.0, 0.0)).length() < 1e-4, "{up}");
         // A turned principal angle turns the whole disc.
         let quarter = TransportedFrame {
             turn: (0.0, 1.0),

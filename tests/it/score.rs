@@ -295,51 +295,108 @@ fn solid_surface_requests_are_scored_on_a_section_made_for_it() {
     assert!(reason.contains("surface request"), "{reason}");
 }
 
-/// Feature-aligned texturing on a bent surface: a cylinder with one straight curve along its
-/// axis, the wood's stripes laid along the field. `score` measures the alignment where the
-/// texture lies (median angle between its lines and the field, `alignment_deg`) and keeps the
-/// exemplar's own as the floor.
-#[test]
-fn feature_aligned_stripes_on_a_cylinder_follow_the_field() {
-    let d = tempfile::tempdir().unwrap();
-    let mut obj = String::new();
-    let (around, along) = (40usize, 24usize);
-    for j in 0..=along {
-        for i in 0..around {
-            let a = i as f32 / around as f32 * std::f32::consts::TAU;
-            let z = j as f32 / along as f32;
-            obj += &format!("v {} {} {z}\n", 0.3 * a.cos_pure(), 0.3 * a.sin_pure());
-        }
-    }
-    for j in 0..along {
-        for i in 0..around {
-            let v = |i: usize, j: usize| j * around + i % around + 1;
-            let (a, b, c, e) = (v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1));
-            obj += &format!("f {a} {b} {c}\nf {a} {c} {e}\n");
-        }
-    }
-    std::fs::write(d.path().join("cylinder.obj"), obj).unwrap();
+/// A feature-aligned config in `dir`: `mesh` (OBJ text) with one straight curve from `from`
+/// to `to`, wood2's stripes, small.
+fn feature_aligned_config(dir: &Path, name: &str, mesh: &str, from: [f32; 3], to: [f32; 3]) {
+    std::fs::write(dir.join(format!("{name}.obj")), mesh).unwrap();
     let wood = repo().join("tests/data/exemplars/wood2.png");
     let config = format!(
-        "method = \"feature_aligned\"\n[inputs]\nmesh = \"cylinder.obj\"\nexemplar = {:?}\n\
-         [extract]\nfeatures = \"curves\"\ncurves = [ {{ points = [[0.3, 0.0, 0.05], [0.3, 0.0, 0.95]] }} ]\n\
+        "method = \"feature_aligned\"\n[inputs]\nmesh = \"{name}.obj\"\nexemplar = {:?}\n\
+         [extract]\nfeatures = \"curves\"\ncurves = [ {{ points = [{from:?}, {to:?}] }} ]\n\
          [parameterize]\nscale = 120.0\n[synthesize]\niterations = 5\n\
          [reconstruct]\npreview_size = 48\natlas_size = 256\n",
         wood.to_str().unwrap()
     );
-    std::fs::write(d.path().join("cylinder.toml"), config).unwrap();
-    let v = json(&texsyn(
-        &["score", "cylinder.toml", "--cache", "c", "--json", "-q"],
-        d.path(),
-    ));
-    let items = v["items"].as_array().unwrap();
-    assert_eq!(items.len(), 2, "aligned and unaligned: {v}");
-    for item in items {
-        let extra = &item["extra"];
-        let aligned = extra["alignment_deg"].as_f64().unwrap();
-        assert!(aligned <= 15.0, "{item}");
-        // wood2's stripes are straight: the exemplar measures a few degrees.
-        let floor = extra["exemplar_alignment_deg"].as_f64().unwrap();
-        assert!(floor < 5.0, "{item}");
+    std::fs::write(dir.join(format!("{name}.toml")), config).unwrap();
+}
+
+/// OBJ text of a grid of `cols` × `rows + 1` vertices at `at(i, j)`, closed around when
+/// `wrap` (column `cols` is column 0).
+fn grid_obj(cols: usize, rows: usize, wrap: bool, at: impl Fn(usize, usize) -> [f32; 3]) -> String {
+    let mut obj = String::new();
+    for j in 0..=rows {
+        for i in 0..cols {
+            let [x, y, z] = at(i, j);
+            obj += &format!("v {x} {y} {z}\n");
+        }
     }
+    let cells = if wrap { cols } else { cols - 1 };
+    for j in 0..rows {
+        for i in 0..cells {
+            let v = |i: usize, j: usize| j * cols + i % cols + 1;
+            let (a, b, c, e) = (v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1));
+            obj += &format!("f {a} {b} {c}\nf {a} {c} {e}\n");
+        }
+    }
+    obj
+}
+
+/// `score --json` of `name`.toml in `dir` with `sets`: (alignment_deg, gradient ratio) of
+/// the aligned result and the exemplar's own alignment.
+fn aligned_scores(dir: &Path, name: &str, sets: &[&str]) -> (f64, f64, f64) {
+    let config = format!("{name}.toml");
+    let mut args = vec!["score", &config, "--cache", "c", "--json", "-q"];
+    for s in sets {
+        args.extend(["--set", s]);
+    }
+    let v = json(&texsyn(&args, dir));
+    let item = &v["items"][0];
+    assert!(
+        item["output"].as_str().unwrap().starts_with("the aligned"),
+        "{item}"
+    );
+    let number = |x: &Value| x.as_f64().unwrap_or_else(|| panic!("no number: {item}"));
+    (
+        number(&item["extra"]["alignment_deg"]),
+        number(&item["score"]["gradient_ratio"]),
+        number(&item["extra"]["exemplar_alignment_deg"]),
+    )
+}
+
+/// Feature-aligned texturing with one straight curve, wood2's stripes laid along the field:
+/// on a flat sheet the atlas's nearest reads keep the stripes' detail (gradient ratio ≥ 0.7,
+/// where bilinear reads between texels lose some) and the lines follow the field (≤ 15°);
+/// on a cylinder, where the tangent planes turn, they follow it too. `alignment_deg` is
+/// measured where the texture lies; the exemplar's own (a few degrees: straight stripes) is
+/// its floor.
+#[test]
+fn feature_aligned_stripes_follow_the_field_on_a_sheet_and_a_cylinder() {
+    let d = tempfile::tempdir().unwrap();
+    let sheet = grid_obj(31, 30, false, |i, j| {
+        [i as f32 / 30.0, j as f32 / 30.0, 0.0]
+    });
+    feature_aligned_config(
+        d.path(),
+        "sheet",
+        &sheet,
+        [0.05, 0.5, 0.0],
+        [0.95, 0.5, 0.0],
+    );
+    let nearest = aligned_scores(
+        d.path(),
+        "sheet",
+        &["reconstruct.lookup=\"nearest\"", "compare=false"],
+    );
+    assert!(nearest.0 <= 15.0, "sheet, nearest: {nearest:?}");
+    assert!(nearest.1 >= 0.7, "sheet, nearest: {nearest:?}");
+    assert!(nearest.2 < 5.0, "wood2's own alignment: {nearest:?}");
+    let bilinear = aligned_scores(d.path(), "sheet", &["compare=false"]);
+    assert!(
+        bilinear.1 < nearest.1,
+        "bilinear {bilinear:?}, nearest {nearest:?}"
+    );
+
+    let cylinder = grid_obj(40, 24, true, |i, j| {
+        let a = i as f32 / 40.0 * std::f32::consts::TAU;
+        [0.3 * a.cos_pure(), 0.3 * a.sin_pure(), j as f32 / 24.0]
+    });
+    feature_aligned_config(
+        d.path(),
+        "cylinder",
+        &cylinder,
+        [0.3, 0.0, 0.05],
+        [0.3, 0.0, 0.95],
+    );
+    let bent = aligned_scores(d.path(), "cylinder", &["compare=false"]);
+    assert!(bent.0 <= 15.0, "cylinder: {bent:?}");
 }

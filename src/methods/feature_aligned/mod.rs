@@ -143,6 +143,7 @@ impl Method for FeatureAligned {
             exemplar,
             synthesize,
             scale: c.parameterize.scale,
+            lookup: c.reconstruct.lookup,
         };
         Ok((dag, Box::new(nodes)))
     }
