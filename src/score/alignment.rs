@@ -21,7 +21,6 @@
 //! joints or a basket weave's crossing boards cross the principal line in the exemplar too.
 
 use crate::geom::Mesh;
-use crate::graph::Csr;
 use crate::image::ImageView;
 use glam::Vec3;
 use texsyn_core::math::PureMath;
@@ -87,15 +86,7 @@ pub fn alignment(image: ImageView, mask: Option<&[bool]>, direction: f32) -> Opt
             angles.push(line_angle(line, direction).to_degrees());
         }
     }
-    if angles.is_empty() {
-        return None;
-    }
-    let mid = angles.len() / 2;
-    let median = *angles.select_nth_unstable_by(mid, f32::total_cmp).1;
-    Some(Alignment {
-        median_degrees: median,
-        windows: angles.len(),
-    })
+    median_of(angles)
 }
 
 /// Window centres on a surface: at most this many, every k-th vertex.
@@ -143,13 +134,7 @@ pub fn surface_alignment(
             (g, 0.5 * twice, nrm)
         })
         .collect();
-    let faces_of: Csr<u32> = Csr::from_pairs(
-        n,
-        mesh.triangles
-            .iter()
-            .enumerate()
-            .flat_map(|(f, t)| t.iter().map(move |&v| (v as usize, f as u32))),
-    );
+    let faces_of = mesh.vertex_faces();
     let min_area = 0.5 * std::f32::consts::PI * radius * radius;
     let mut seen = vec![usize::MAX; n];
     let mut counted = vec![usize::MAX; mesh.triangles.len()];
@@ -202,6 +187,11 @@ pub fn surface_alignment(
         // The expected direction is the frame's first axis: angle 0.
         angles.push(line_angle(line, 0.0).to_degrees());
     }
+    median_of(angles)
+}
+
+/// The median of the windows' angles (degrees), `None` without any.
+fn median_of(mut angles: Vec<f32>) -> Option<Alignment> {
     if angles.is_empty() {
         return None;
     }
