@@ -55,6 +55,7 @@ fn main() -> anyhow::Result<()> {
         RunOptions {
             progress: ProgressMode::Hidden,
             verify_all: false,
+            defer_export_checks: false,
         },
     )?;
     let wall = t.elapsed().as_secs_f64();

@@ -141,6 +141,11 @@ impl ContentHash {
     pub fn to_hex(&self) -> String {
         blake3::Hash::from_bytes(self.0).to_hex().to_string()
     }
+
+    /// Reads back what [`ContentHash::to_hex`] wrote; `None` for anything else.
+    pub fn from_hex(hex: &str) -> Option<Self> {
+        blake3::Hash::from_hex(hex).ok().map(|h| ContentHash(*h.as_bytes()))
+    }
 }
 
 impl fmt::Debug for ContentHash {

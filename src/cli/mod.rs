@@ -70,15 +70,20 @@ pub fn run_config(
 
 /// Runs a planned DAG in the cache at `cache_dir`, computing what is not cached.
 pub fn run_plan(plan: &Plan, cache_dir: &Path, progress: ProgressMode) -> Result<RunResult> {
-    let cache = Cache::open(cache_dir)?;
-    Ok(pipeline::run(
-        &plan.dag,
-        &cache,
+    run_plan_with(
+        plan,
+        cache_dir,
         RunOptions {
             progress,
-            verify_all: false,
+            ..RunOptions::default()
         },
-    )?)
+    )
+}
+
+/// [`run_plan`] with every option given.
+pub fn run_plan_with(plan: &Plan, cache_dir: &Path, opts: RunOptions) -> Result<RunResult> {
+    let cache = Cache::open(cache_dir)?;
+    Ok(pipeline::run(&plan.dag, &cache, opts)?)
 }
 
 /// Scores a run of `config` planned as `plan` (its method's score hook; `texsyn::score`).

@@ -3,13 +3,14 @@
 //! only that shard's bricks of a `solid` run into the cache and writes no outputs.
 
 use super::{
-    Globals, load_plan, load_shardable_plan, print_json, print_shard, run_plan, score_plan,
+    Globals, load_plan, load_shardable_plan, print_json, print_shard, run_plan_with, score_plan,
     write_atomic,
 };
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use texsyn::cache::Cache;
+use texsyn::pipeline::outputs::{OutputCheck, OutputError};
 use texsyn::pipeline::{self, RunOptions, RunResult, Shard, ShardResult, outputs};
 
 #[derive(clap::Args)]
@@ -31,6 +32,11 @@ pub struct RunArgs {
     /// the cached bricks (README, "Sharded solid runs").
     #[arg(long, value_name = "i/N", conflicts_with = "out")]
     shard: Option<String>,
+    /// Read and hash every output file and re-hash the exported bundles, instead of trusting
+    /// the files whose size, times and inode are the ones recorded when they were written
+    /// (README, "Reruns").
+    #[arg(long)]
+    recheck: bool,
 }
 
 /// `texsyn run`.
@@ -50,6 +56,7 @@ fn run_shard(args: &RunArgs, shard: &str, g: &Globals) -> Result<i32> {
     let opts = RunOptions {
         progress: g.progress,
         verify_all: false,
+        defer_export_checks: false,
     };
     let result = pipeline::run_shard(&plan.dag, &cache, opts, shard, false)?;
     let seconds = start.elapsed().as_secs_f64();
@@ -81,15 +88,34 @@ fn run_whole(args: &RunArgs, g: &Globals) -> Result<i32> {
     };
     // A swap a killed run left half done is finished (or undone) before anything else.
     outputs::recover(&out_dir).context("recovering the output directory")?;
-    let result = run_plan(&plan, &g.cache_dir, g.progress)?;
+    let scored = plan.score.as_ref().is_some_and(|s| s.enabled);
+    // Scoring reads the bundles' payloads: hand them out checked then.
+    let defer = !args.recheck && !scored;
+    let options = |defer_export_checks| RunOptions {
+        progress: g.progress,
+        verify_all: false,
+        defer_export_checks,
+    };
+    let check = if args.recheck {
+        OutputCheck::Rehash
+    } else {
+        OutputCheck::Stamps
+    };
+    let mut result = run_plan_with(&plan, &g.cache_dir, options(defer))?;
     // One run's exports are written as one set: all of them, or none on an error.
-    let written = outputs::materialize_exports(&plan.dag, &result.artifacts, &out_dir)
-        .with_context(|| {
-            format!(
-                "writing the outputs into {} (it still holds the previous run's outputs)",
-                out_dir.display()
-            )
-        })?;
+    let mut written = outputs::materialize_exports(&plan.dag, &result.artifacts, &out_dir, check);
+    if defer && matches!(written, Err(OutputError::Bundle(_))) {
+        // A cached bundle handed out unchecked was damaged and nothing was written: the
+        // checked run finds it, recomputes and replaces it.
+        result = run_plan_with(&plan, &g.cache_dir, options(false))?;
+        written = outputs::materialize_exports(&plan.dag, &result.artifacts, &out_dir, check);
+    }
+    let written = written.with_context(|| {
+        format!(
+            "writing the outputs into {} (it still holds the previous run's outputs)",
+            out_dir.display()
+        )
+    })?;
     // Scores when the config asks for them (`[score]`, enabled).
     let scores = match plan.score.as_ref().filter(|s| s.enabled) {
         Some(section) => Some(score_plan(config, &plan, &result, section)?),

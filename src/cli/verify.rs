@@ -151,6 +151,7 @@ fn rerun(plan: &texsyn::methods::Plan, cache: &Cache, g: &Globals) -> Result<Run
         RunOptions {
             progress: g.progress,
             verify_all: true,
+            defer_export_checks: false,
         },
     )?)
 }

@@ -253,6 +253,7 @@ pub fn pack(
         RunOptions {
             progress,
             verify_all: true,
+            defer_export_checks: false,
         },
     )?;
     let computed = result

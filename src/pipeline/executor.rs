@@ -6,7 +6,9 @@
 //! Payloads are re-hashed before a node reads them, and the artifacts a run hands out (the
 //! exported bundles and the nodes nothing else reads) are re-hashed before they are returned,
 //! so a corrupted object is caught where it would do harm, while a rerun with nothing changed
-//! reads nothing but headers and the outputs' payloads. Headers are checked on every lookup
+//! reads nothing but headers and the outputs' payloads. `texsyn run` defers the exported
+//! bundles' check to the moment it writes a file from one
+//! ([`RunOptions::defer_export_checks`]): when every output is already on disk it reads none. Headers are checked on every lookup
 //! (see [`Cache::peek_kind`]), including that the kind is the node's output kind. Any object
 //! that fails a check is removed, recomputed and stored again, and listed in
 //! [`RunResult::damaged`]; it is never an error.
@@ -38,6 +40,11 @@ pub struct RunOptions {
     pub progress: ProgressMode,
     /// Re-hash every artifact's payload, cached or not (`texsyn verify`).
     pub verify_all: bool,
+    /// Hand the exported bundles out without re-hashing the cached ones: the caller checks
+    /// a bundle when it reads it ([`super::outputs::materialize_checked`] does, before it
+    /// writes a file from it) and reruns with this off when that check fails, which repairs
+    /// the object. A rerun whose outputs are all on disk then reads no payload at all.
+    pub defer_export_checks: bool,
 }
 
 impl Default for RunOptions {
@@ -45,6 +52,7 @@ impl Default for RunOptions {
         RunOptions {
             progress: ProgressMode::Hidden,
             verify_all: false,
+            defer_export_checks: false,
         }
     }
 }
@@ -324,7 +332,9 @@ impl<'a> Executor<'a> {
             if self.states[i].is_none() {
                 self.resolve(i)?;
             }
-            if self.states[i].is_some() && (dag.nodes[i].exports || !read[i]) {
+            let handed_out = dag.nodes[i].exports || !read[i];
+            let deferred = self.opts.defer_export_checks && dag.nodes[i].exports;
+            if self.states[i].is_some() && handed_out && !deferred {
                 self.ensure_verified(i)?;
             }
         }

@@ -21,6 +21,7 @@ pub mod outputs;
 pub mod pieces;
 pub mod progress;
 pub mod shard;
+pub mod stamps;
 
 use crate::artifact::{Artifact, ContentHash};
 use crate::cache::Key;

@@ -52,6 +52,7 @@ use crate::artifact::ContentHash;
 use crate::artifact::{Bundle, Format};
 use crate::owner::Owner;
 use crate::pipeline::Dag;
+use crate::pipeline::stamps::Stamps;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -116,6 +117,7 @@ pub fn materialize_exports(
     dag: &Dag,
     artifacts: &[Artifact],
     dir: &Path,
+    check: OutputCheck,
 ) -> Result<Vec<(PathBuf, bool)>, OutputError> {
     let bundles: Vec<&Artifact> = dag
         .nodes
@@ -124,7 +126,17 @@ pub fn materialize_exports(
         .filter(|(node, _)| node.exports)
         .map(|(_, a)| a)
         .collect();
-    materialize_all(&bundles, dir)
+    materialize_checked(&bundles, dir, check)
+}
+
+/// How [`materialize_checked`] decides that a file on disk already holds its output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputCheck {
+    /// A file whose stat is the one recorded when it was last written or read is trusted
+    /// without reading it ([`super::stamps`]); others are read and hashed.
+    Stamps,
+    /// Every file is read and hashed (`run --recheck`, `verify`).
+    Rehash,
 }
 
 /// Writes the files of all `bundles` (one run's exports) into `dir` as one set: afterwards
@@ -134,6 +146,18 @@ pub fn materialize_exports(
 pub fn materialize_all(
     bundles: &[&Artifact],
     dir: &Path,
+) -> Result<Vec<(PathBuf, bool)>, OutputError> {
+    materialize_checked(bundles, dir, OutputCheck::Stamps)
+}
+
+/// [`materialize_all`], deciding which files are unchanged as `check` says. A bundle's
+/// payload is verified before any of its files is written from it, so a bundle handed out
+/// unverified (see [`super::RunOptions::defer_export_checks`]) is caught here, as
+/// [`OutputError::Bundle`], before it reaches the folder.
+pub fn materialize_checked(
+    bundles: &[&Artifact],
+    dir: &Path,
+    check: OutputCheck,
 ) -> Result<Vec<(PathBuf, bool)>, OutputError> {
     let _writer = WRITER.lock().unwrap_or_else(|e| e.into_inner());
     fs::create_dir_all(dir).map_err(io(dir))?;
@@ -160,6 +184,11 @@ pub fn materialize_all(
     }
 
     // Check what is on disk; collect the changed files.
+    let known = match check {
+        OutputCheck::Stamps => Stamps::read(dir),
+        OutputCheck::Rehash => Stamps::default(),
+    };
+    let mut seen = Stamps::default();
     let mut out = Vec::new();
     let mut changed = Vec::new(); // (view, entry, had_old)
     for &(v, e) in &files {
@@ -182,17 +211,37 @@ pub fn materialize_all(
             }
             Ok(_) => true,
         };
-        // Read only a regular file of the right length (a symlink may point anywhere).
+        // Read only a regular file of the right length (a symlink may point anywhere), and
+        // only when its stamp does not vouch for it.
+        let meta = fs::symlink_metadata(&path).ok().filter(|m| m.is_file());
         let same = had_old
-            && fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == entry.len)
-            && fs::read(&path).is_ok_and(|b| ContentHash::of(&b) == entry.hash);
-        if !same {
+            && (meta
+                .as_ref()
+                .is_some_and(|m| known.vouches(&entry.name, m, &entry.hash))
+                || (fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == entry.len)
+                    && fs::read(&path).is_ok_and(|b| ContentHash::of(&b) == entry.hash)));
+        if same {
+            seen.record(&entry.name, meta.as_ref(), entry.hash);
+        } else {
             changed.push((v, e, had_old));
         }
         out.push((path, !same));
     }
     if changed.is_empty() {
+        if !known.covers(&seen) {
+            let mut record = Stamps::read(dir);
+            record.merge(seen);
+            record.write(dir);
+        }
         return Ok(out);
+    }
+    // Only now is a bundle's payload read: check it first.
+    let mut checked = vec![false; views.len()];
+    for &(v, _, _) in &changed {
+        if !checked[v] {
+            bundles[v].verify()?;
+            checked[v] = true;
+        }
     }
 
     // Stage.
@@ -257,6 +306,14 @@ pub fn materialize_all(
             return Err(e);
         }
     }
+    for &(v, e, _) in &changed {
+        let entry = &views[v].entries[e];
+        let meta = fs::symlink_metadata(dir.join(&entry.name)).ok();
+        seen.record(&entry.name, meta.as_ref(), entry.hash);
+    }
+    let mut record = Stamps::read(dir);
+    record.merge(seen);
+    record.write(dir);
     Ok(out)
 }
 

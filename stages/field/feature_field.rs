@@ -235,6 +235,17 @@ pub fn feature_field(
     curves: &[Polyline],
     p: &FeatureFieldParams,
 ) -> Result<(FeatureField, FieldTimings), FeatureFieldError> {
+    feature_field_with(mesh, curves, p, &|_| {})
+}
+
+/// [`feature_field`], reporting the fraction done to `progress`: the setup, then each greedy
+/// step (one per curve, each a refactorization and solve of about the same cost).
+pub fn feature_field_with(
+    mesh: &Mesh,
+    curves: &[Polyline],
+    p: &FeatureFieldParams,
+    progress: &(dyn Fn(f32) + Sync),
+) -> Result<(FeatureField, FieldTimings), FeatureFieldError> {
     p.validate()?;
     check_vertices(mesh, curves)?;
     let curves = preprocess_curves(mesh, curves, p);
@@ -245,6 +256,7 @@ pub fn feature_field(
     let t = Instant::now();
     let sys = FieldSystem::new(mesh, p.alpha)?;
     timings.setup_secs = t.elapsed().as_secs_f64();
+    progress(0.05);
 
     let (order, raw) = match p.orientation {
         Orientation::Arbitrary | Orientation::Given => {
@@ -263,8 +275,9 @@ pub fn feature_field(
             let raw = upd.field(&curves)?;
             (signed, raw)
         }
-        Orientation::Greedy => greedy(&sys, &curves, &mut timings)?,
+        Orientation::Greedy => greedy(&sys, &curves, &mut timings, progress)?,
     };
+    progress(1.0);
     let mut vectors = raw;
     sys.apply_fallback(
         &mut vectors,
@@ -305,6 +318,7 @@ fn greedy(
     sys: &FieldSystem,
     curves: &[Polyline],
     timings: &mut FieldTimings,
+    progress: &(dyn Fn(f32) + Sync),
 ) -> Result<(Signed, Vec<Vec3>), FeatureFieldError> {
     let mesh = sys.mesh;
     let lengths: Vec<f32> = curves.iter().map(|c| polyline_length(mesh, c)).collect();
@@ -341,6 +355,7 @@ fn greedy(
         upd.add(curves, &[pick])?;
         field = upd.field(curves)?;
         timings.step_secs.push(t.elapsed().as_secs_f64());
+        progress(0.05 + 0.95 * order.len() as f32 / curves.len() as f32);
     }
     Ok((order, field))
 }
@@ -684,8 +699,12 @@ pub fn node(
     mesh: &Mesh,
     curves: &[Polyline],
     p: &FeatureFieldParams,
+    progress: &(dyn Fn(f32) + Sync),
 ) -> Result<OrientedField, Failure> {
-    let (mut field, t) = feature_field(mesh, curves, p).map_err(Failure::input)?;
+    // The arbitrary orientation's solve (for the report's comparison) is one factorization:
+    // about as long as a greedy step, so a small share at the end.
+    let share = |f: f32| progress(0.95 * f);
+    let (mut field, t) = feature_field_with(mesh, curves, p, &share).map_err(Failure::input)?;
     if p.rotation != 0.0 {
         rotate_about_normals(&mut field.vectors, mesh.vertex_normals(), p.rotation);
     }

@@ -79,11 +79,15 @@ fn run_ok(cache: &Path, out: &Path, seed: u32) {
     assert!(o.ok, "run failed: {}", o.stderr);
 }
 
-/// Every entry of `dir` (recursively), files with their bytes, folders as `None`.
+/// Every entry of `dir` (recursively), files with their bytes, folders as `None`; texsyn's
+/// record of the outputs' stats (`.texsyn-stamps`, rewritten whenever they change) left out.
 fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
     let mut all = BTreeMap::new();
     for e in std::fs::read_dir(dir).unwrap() {
         let e = e.unwrap();
+        if e.file_name() == texsyn::pipeline::stamps::STAMPS {
+            continue;
+        }
         let p = e.path();
         let rel = PathBuf::from(e.file_name());
         if e.file_type().unwrap().is_dir() {
@@ -427,4 +431,105 @@ fn a_second_writer_waits_for_the_folder_lock() {
         snapshot(&other),
         "the released run wrote its whole set"
     );
+}
+
+/// Flips one byte in the middle of every cache object's file (each payload then fails its
+/// hash; the headers stay readable).
+fn damage_every_object(cache: &Path) {
+    fn walk(dir: &Path, files: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap().flatten() {
+            if e.file_type().unwrap().is_dir() {
+                walk(&e.path(), files);
+            } else {
+                files.push(e.path());
+            }
+        }
+    }
+    let mut files = Vec::new();
+    walk(&cache.join("objects-v1"), &mut files);
+    assert!(!files.is_empty(), "no cache objects under {}", cache.display());
+    for f in files {
+        let mut bytes = std::fs::read(&f).unwrap();
+        let mid = bytes.len() - 1 - bytes.len() / 4;
+        bytes[mid] ^= 0x5a;
+        std::fs::write(&f, bytes).unwrap();
+    }
+}
+
+#[test]
+fn a_rerun_trusts_stamped_outputs_and_reads_an_edited_or_missing_one_again() {
+    let root = tempfile::tempdir().unwrap();
+    let (cache, out) = (root.path().join("cache"), root.path().join("out"));
+    run_ok(&cache, &out, 1);
+    let want: Vec<Vec<u8>> = OUTPUTS
+        .iter()
+        .map(|n| std::fs::read(out.join(n)).unwrap())
+        .collect();
+    // The second run re-reads the files written in the stamps' own clock tick and records them.
+    run_ok(&cache, &out, 1);
+    assert!(out.join(".texsyn-stamps").is_file());
+
+    // An edit that keeps the length and the modification time is still read again: the
+    // change time moved.
+    let path = out.join(OUTPUTS[1]);
+    let modified = std::fs::metadata(&path).unwrap().modified().unwrap();
+    let mut bytes = want[1].clone();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0xff;
+    std::fs::write(&path, &bytes).unwrap();
+    std::fs::File::options()
+        .write(true)
+        .open(&path)
+        .unwrap()
+        .set_modified(modified)
+        .unwrap();
+    run_ok(&cache, &out, 1);
+    assert_eq!(std::fs::read(&path).unwrap(), want[1], "the edited output was trusted");
+
+    // Trusted outputs need no bundle payload: with every cached object damaged, a rerun
+    // whose outputs are all on disk reads none and changes nothing...
+    run_ok(&cache, &out, 1);
+    damage_every_object(&cache);
+    let before = snapshot(&out);
+    run_ok(&cache, &out, 1);
+    assert_eq!(snapshot(&out), before);
+    // ...and one that must write a file checks the bundle first, finds it damaged, repairs
+    // the cache and writes the right bytes.
+    std::fs::remove_file(out.join(OUTPUTS[0])).unwrap();
+    let o = texsyn(&[
+        "run",
+        CONFIG,
+        "--json",
+        "--cache",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "synthesize.seed=1",
+    ]);
+    assert!(o.ok, "run failed: {}", o.stderr);
+    for (name, bytes) in OUTPUTS.iter().zip(&want) {
+        assert_eq!(&std::fs::read(out.join(name)).unwrap(), bytes, "{name}");
+    }
+    // The repair replaced every object on the way to the outputs: a run that re-hashes all
+    // it hands out finds nothing damaged.
+    let report = root.path().join("report.json");
+    let o = texsyn(&[
+        "run",
+        CONFIG,
+        "-q",
+        "--recheck",
+        "--cache",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "synthesize.seed=1",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert!(o.ok, "recheck failed: {}", o.stderr);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(report["warnings"], serde_json::json!([]), "{report}");
 }

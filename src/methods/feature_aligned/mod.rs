@@ -82,7 +82,10 @@ impl Method for FeatureAligned {
             NodeSpec::of(Stage::Field, feature_field::NODE),
             c.field.clone(),
             (mesh, shape),
-            |_, p, (mesh, shape)| Ok(feature_field::node(&mesh, &shape.curves, p)?),
+            |ctx, p, (mesh, shape)| {
+                let progress = |f| ctx.progress.set(f);
+                Ok(feature_field::node(&mesh, &shape.curves, p, &progress)?)
+            },
         );
         let refined = dag.node(
             NodeSpec::of(Stage::Parameterize, edge_refinement::NODE),
