@@ -145,11 +145,7 @@ fn real_main() -> Result<i32> {
             .clone()
             .or_else(|| std::env::var_os("TEXSYN_CACHE").map(PathBuf::from))
             .unwrap_or_else(|| PathBuf::from("cache")),
-        progress: if cli.quiet || cli.json {
-            ProgressMode::Hidden
-        } else {
-            ProgressMode::Bars
-        },
+        progress: ProgressMode::for_stderr(cli.quiet || cli.json),
         quiet: cli.quiet,
         json: cli.json,
         jobs: cli.jobs,

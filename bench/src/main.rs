@@ -426,7 +426,10 @@ fn shipped_configs() -> Result<Vec<String>> {
                 .lines()
                 .any(|l| l.trim_start().starts_with("method"))
         {
-            names.push(format!("configs/{}", p.file_name().unwrap().to_string_lossy()));
+            names.push(format!(
+                "configs/{}",
+                p.file_name().unwrap().to_string_lossy()
+            ));
         }
     }
     names.sort();

@@ -144,7 +144,9 @@ impl ContentHash {
 
     /// Reads back what [`ContentHash::to_hex`] wrote; `None` for anything else.
     pub fn from_hex(hex: &str) -> Option<Self> {
-        blake3::Hash::from_hex(hex).ok().map(|h| ContentHash(*h.as_bytes()))
+        blake3::Hash::from_hex(hex)
+            .ok()
+            .map(|h| ContentHash(*h.as_bytes()))
     }
 }
 

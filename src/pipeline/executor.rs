@@ -410,7 +410,7 @@ impl Executor<'_> {
             return false;
         }
         let name = &self.dag.nodes[i].name;
-        let bars = self.opts.progress == ProgressMode::Bars;
+        let bars = self.opts.progress != ProgressMode::Hidden;
         let locking = if wait {
             self.locks.lock(&key, || {
                 let msg = format!("waiting for {name} (computed by another process)");

@@ -148,10 +148,7 @@ impl Stamps {
                 name
             ));
         }
-        let tmp = dir.join(format!(
-            "{STAMPS}.tmp-{}",
-            crate::owner::Owner::this_tag()
-        ));
+        let tmp = dir.join(format!("{STAMPS}.tmp-{}", crate::owner::Owner::this_tag()));
         if fs::write(&tmp, text).is_ok() && fs::rename(&tmp, dir.join(STAMPS)).is_err() {
             let _ = fs::remove_file(&tmp);
         }
@@ -223,7 +220,11 @@ mod tests {
         assert!(!read.vouches("a b.png", &fs::metadata(&path).unwrap(), &hash));
 
         // A damaged record is no record.
-        fs::write(dir.path().join(STAMPS), "texsyn output stamps 1\nnot a line\n").unwrap();
+        fs::write(
+            dir.path().join(STAMPS),
+            "texsyn output stamps 1\nnot a line\n",
+        )
+        .unwrap();
         assert_eq!(Stamps::read(dir.path()).files.len(), 0);
     }
 }

@@ -1002,12 +1002,12 @@ mod tests {
             &polyline(|t| Vec3::new(0.1 + 0.8 * t, 0.3 + 0.2 * t, 0.0), 4),
             false,
         )];
-        let plain = node(&mesh, &curves, &FeatureFieldParams::default()).unwrap();
+        let plain = node(&mesh, &curves, &FeatureFieldParams::default(), &|_| {}).unwrap();
         let turned = FeatureFieldParams {
             rotation: 90.0,
             ..Default::default()
         };
-        let rotated = node(&mesh, &curves, &turned).unwrap();
+        let rotated = node(&mesh, &curves, &turned, &|_| {}).unwrap();
         let n = mesh.vertex_normals()[0];
         let mut compared = 0;
         for (a, b) in plain.field.vectors.iter().zip(&rotated.field.vectors) {

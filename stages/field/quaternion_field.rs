@@ -120,15 +120,18 @@ pub struct SolidFieldParams {
 
 /// §3 for a solid: the field on a grid over the volume's box around `mesh` with `p.cells`
 /// cells on its shortest side, from `p.curves` and then `more` (a curves file's).
+/// Reports the fraction done to `progress` (see [`rotation_field_with`]).
 pub fn solid_rotation_field(
     mesh: &Mesh,
     p: &SolidFieldParams,
     more: Vec<Curve>,
+    progress: &(dyn Fn(f32) + Sync),
 ) -> Result<RotationField, FieldError> {
     let mut curves = p.curves.clone();
     curves.extend(more);
     let (lo, hi) = SolidBox::around(mesh, p.margin).corners();
-    rotation_field(FieldGrid::covering(lo, hi, p.cells), &curves, &p.scales)
+    let grid = FieldGrid::covering(lo, hi, p.cells);
+    rotation_field_with(grid, &curves, &p.scales, progress)
 }
 
 /// Which local axis a curve follows.
@@ -397,7 +400,19 @@ pub fn rotation_field(
     curves: &[Curve],
     scales: &[ScalePoint],
 ) -> Result<RotationField, FieldError> {
+    rotation_field_with(grid, curves, scales, &|_| {})
+}
+
+/// [`rotation_field`], reporting the fraction done to `progress`: one solve per curve, and
+/// one for the scales (each about the same cost: one factorization of the grid's system).
+pub fn rotation_field_with(
+    grid: FieldGrid,
+    curves: &[Curve],
+    scales: &[ScalePoint],
+    progress: &(dyn Fn(f32) + Sync),
+) -> Result<RotationField, FieldError> {
     validate_curves(curves, scales)?;
+    let solves = (curves.len() + usize::from(!scales.is_empty())).max(1) as f32;
     let mut field = RotationField::trivial(grid);
     if !curves.is_empty() {
         let laplacian = SmoothnessSystem::new(&grid);
@@ -452,6 +467,7 @@ pub fn rotation_field(
             }
             let solved = laplacian.solve(&targets).map_err(FieldError::Solve)?;
             field.rotations = normalize_or_neighbour(&grid, solved);
+            progress((c + 1) as f32 / solves);
         }
     }
     if !scales.is_empty() {
@@ -467,6 +483,7 @@ pub fn rotation_field(
             .map(|x| x as f32)
             .collect();
     }
+    progress(1.0);
     Ok(field)
 }
 
@@ -580,13 +597,14 @@ pub fn node(
     mesh: &Mesh,
     p: &SolidFieldParams,
     file: Option<(&std::path::Path, &[u8])>,
+    progress: &(dyn Fn(f32) + Sync),
 ) -> Result<RotationField, Failure> {
     let more = match file {
         None => Vec::new(),
         Some((path, bytes)) => CurvesFile::read(bytes, p.curves.len())
             .map_err(|e| Failure::input(format!("{}: {e}", path.display())))?,
     };
-    solid_rotation_field(mesh, p, more).map_err(Failure::input)
+    solid_rotation_field(mesh, p, more, progress).map_err(Failure::input)
 }
 
 #[cfg(test)]

@@ -447,7 +447,11 @@ fn damage_every_object(cache: &Path) {
     }
     let mut files = Vec::new();
     walk(&cache.join("objects-v1"), &mut files);
-    assert!(!files.is_empty(), "no cache objects under {}", cache.display());
+    assert!(
+        !files.is_empty(),
+        "no cache objects under {}",
+        cache.display()
+    );
     for f in files {
         let mut bytes = std::fs::read(&f).unwrap();
         let mid = bytes.len() - 1 - bytes.len() / 4;
@@ -484,7 +488,11 @@ fn a_rerun_trusts_stamped_outputs_and_reads_an_edited_or_missing_one_again() {
         .set_modified(modified)
         .unwrap();
     run_ok(&cache, &out, 1);
-    assert_eq!(std::fs::read(&path).unwrap(), want[1], "the edited output was trusted");
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        want[1],
+        "the edited output was trusted"
+    );
 
     // Trusted outputs need no bundle payload: with every cached object damaged, a rerun
     // whose outputs are all on disk reads none and changes nothing...

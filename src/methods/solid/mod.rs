@@ -85,7 +85,10 @@ fn build(config: &Config) -> Result<(Dag, SolidScore), MethodError> {
         NodeSpec::of(Field, sketch::NODE),
         c.field.solid_field(c.parameterize.margin),
         (mesh, curves_file),
-        |_, p, (mesh, f)| Ok(sketch::node(&mesh, p, f.map(|f| (&*f.path, &*f.bytes)))?),
+        |ctx, p, (mesh, f)| {
+            let file = f.map(|f| (&*f.path, &*f.bytes));
+            Ok(sketch::node(&mesh, p, file, &|f| ctx.progress.set(f))?)
+        },
     );
     let regions = (!depths.is_empty()).then_some(depths);
     let request = dag.node(

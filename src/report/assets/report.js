@@ -8,8 +8,10 @@
 //   hides the rows of TABLEID whose column N text differs from the selected value; all
 //   filters on a table apply together.
 // - Live reload: with <meta name="texsyn-reload" content="URL">, URL is polled every 500 ms
-//   and the page reloads when the response text changes from the first one seen. Failed
-//   requests (the server restarting) are ignored.
+//   and the page reloads when the response text changes from the first one seen (or from the
+//   meta's data-version, when given: the version the page was built from, which also catches
+//   a rebuild that finished before the first poll). Failed requests (the server restarting)
+//   and non-2xx answers are ignored.
 (function () {
   'use strict';
 
@@ -120,7 +122,7 @@
     var meta = document.querySelector('meta[name="texsyn-reload"]');
     if (!meta || !window.fetch) return;
     var url = meta.getAttribute('content');
-    var first = null;
+    var first = meta.getAttribute('data-version'); // null when absent
     var busy = false;
     setInterval(function () {
       if (busy) return;
