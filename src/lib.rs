@@ -11,6 +11,7 @@ pub mod methods;
 pub mod ops;
 pub mod owner;
 pub mod pipeline;
+pub mod report;
 pub mod score;
 
 // The core (meshes, images, solvers, randomness, rasterizer, writers) and the stage algorithms

@@ -81,6 +81,11 @@ enum Command {
     Unpack(cli::pack::UnpackArgs),
     /// Trim the cache to a size, least recently used objects first.
     Gc(cli::gc::GcArgs),
+    /// Write one self-contained HTML page of a run (the config is run first, as `run` does)
+    /// or of a sweep's folder: the DAG with each node's status, time, size, key and hash, the
+    /// inputs and previews, a 3D view of the .glb outputs, scores and the lock's verdict; for
+    /// a sweep a gallery and a sortable, filterable results table. Opens from disk, no network.
+    Report(cli::report::ReportArgs),
 }
 
 fn main() {
@@ -162,5 +167,6 @@ fn real_main() -> Result<i32> {
         Command::Pack(args) => cli::pack::pack(args, &g),
         Command::Unpack(args) => cli::pack::unpack(args, &g),
         Command::Gc(args) => cli::gc::gc(args, &g),
+        Command::Report(args) => cli::report::report(args, &g),
     }
 }

@@ -7,6 +7,7 @@ pub mod graph;
 pub mod hashes;
 pub mod pack;
 pub mod render;
+pub mod report;
 pub mod run;
 pub mod score;
 pub mod status;

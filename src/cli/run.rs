@@ -74,29 +74,44 @@ fn run_shard(args: &RunArgs, shard: &str, g: &Globals) -> Result<i32> {
     Ok(0)
 }
 
-/// `texsyn run` without `--shard`: the whole run, its outputs and (when the config asks)
-/// its scores.
-fn run_whole(args: &RunArgs, g: &Globals) -> Result<i32> {
-    let RunArgs {
-        config, sets, out, ..
-    } = args;
+/// What a whole run did: the plan, the run, the outputs (and whether each was written),
+/// the scores when the config asks for them, and the time it took.
+pub struct Outcome {
+    pub plan: texsyn::methods::Plan,
+    pub result: RunResult,
+    pub out_dir: PathBuf,
+    pub written: Vec<(PathBuf, bool)>,
+    pub scores: Option<texsyn::score::Report>,
+    pub seconds: f64,
+}
+
+/// Runs `config` with `sets`, writes its outputs into `out` (default: out/<config name>) and
+/// scores it when the config asks. `recheck`: read every output back and re-hash the
+/// exported bundles instead of trusting the recorded stats.
+pub fn run_and_write(
+    config: &Path,
+    sets: &[String],
+    out: Option<&Path>,
+    recheck: bool,
+    g: &Globals,
+) -> Result<Outcome> {
     let start = Instant::now();
     let plan = load_plan(config, sets)?;
     let out_dir = match out {
-        Some(out) => out.clone(),
+        Some(out) => out.to_owned(),
         None => plan.default_out()?,
     };
     // A swap a killed run left half done is finished (or undone) before anything else.
     outputs::recover(&out_dir).context("recovering the output directory")?;
     let scored = plan.score.as_ref().is_some_and(|s| s.enabled);
     // Scoring reads the bundles' payloads: hand them out checked then.
-    let defer = !args.recheck && !scored;
+    let defer = !recheck && !scored;
     let options = |defer_export_checks| RunOptions {
         progress: g.progress,
         verify_all: false,
         defer_export_checks,
     };
-    let check = if args.recheck {
+    let check = if recheck {
         OutputCheck::Rehash
     } else {
         OutputCheck::Stamps
@@ -121,25 +136,50 @@ fn run_whole(args: &RunArgs, g: &Globals) -> Result<i32> {
         Some(section) => Some(score_plan(config, &plan, &result, section)?),
         None => None,
     };
-    let seconds = start.elapsed().as_secs_f64();
-    let report = run_report(&result, &written, scores.as_ref(), seconds, sets)?;
+    Ok(Outcome {
+        plan,
+        result,
+        out_dir,
+        written,
+        scores,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// `texsyn run` without `--shard`: the whole run, its outputs and (when the config asks)
+/// its scores.
+fn run_whole(args: &RunArgs, g: &Globals) -> Result<i32> {
+    let o = run_and_write(
+        &args.config,
+        &args.sets,
+        args.out.as_deref(),
+        args.recheck,
+        g,
+    )?;
+    let report = run_report(
+        &o.result,
+        &o.written,
+        o.scores.as_ref(),
+        o.seconds,
+        &args.sets,
+    )?;
     if let Some(f) = &args.report {
         write_report(f, &report)?;
     }
     if g.json {
         print_json(&report)?;
     } else if !g.quiet {
-        print_table(&result.reports);
-        if let Some(s) = &scores {
+        print_table(&o.result.reports);
+        if let Some(s) = &o.scores {
             print!("{}", texsyn::score::report_text(s));
         }
-        let changed = written.iter().filter(|w| w.1).count();
+        let changed = o.written.iter().filter(|w| w.1).count();
         println!(
             "outputs: {} ({} written, {} unchanged) in {:.3} s",
-            out_dir.display(),
+            o.out_dir.display(),
             changed,
-            written.len() - changed,
-            seconds
+            o.written.len() - changed,
+            o.seconds
         );
     }
     Ok(0)
@@ -197,7 +237,7 @@ fn write_report(file: &Path, report: &serde_json::Value) -> Result<()> {
 
 /// The node table: each node's stage, whether it ran or was cached, its seconds and size,
 /// and, when a node caches pieces (the solid's bricks), how many were computed and reused.
-fn print_table(reports: &[pipeline::NodeReport]) {
+pub fn print_table(reports: &[pipeline::NodeReport]) {
     let pieces = reports.iter().any(|r| r.pieces.is_some());
     println!(
         "{:<24} {:<17} {:<7} {:>9} {:>11}{}",

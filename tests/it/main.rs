@@ -33,6 +33,7 @@ mod pipeline;
 mod reader_properties;
 mod registry;
 mod render_export;
+mod report;
 mod score;
 mod slurm;
 mod solid_pipeline;
