@@ -86,6 +86,10 @@ enum Command {
     /// inputs and previews, a 3D view of the .glb outputs, scores and the lock's verdict; for
     /// a sweep a gallery and a sortable, filterable results table. Opens from disk, no network.
     Report(cli::report::ReportArgs),
+    /// Run a config, then rerun it whenever the config or an input file it reads changes,
+    /// saying which nodes reran and rewriting the outputs and report.html. With --serve PORT
+    /// the report is served on 127.0.0.1 and reloads itself after each rerun. Ctrl-C stops.
+    Watch(cli::watch::WatchArgs),
 }
 
 fn main() {
@@ -168,5 +172,6 @@ fn real_main() -> Result<i32> {
         Command::Unpack(args) => cli::pack::unpack(args, &g),
         Command::Gc(args) => cli::gc::gc(args, &g),
         Command::Report(args) => cli::report::report(args, &g),
+        Command::Watch(args) => cli::watch::watch(args, &g),
     }
 }

@@ -13,6 +13,7 @@ pub mod score;
 pub mod status;
 pub mod sweep;
 pub mod verify;
+pub mod watch;
 
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use texsyn::ops::lockfile::{Difference, LockFile};
 use texsyn::ops::sweep::{Sweep, SweepDir};
-use texsyn::report::{LockStatus, RunView, run_page, sweep_page};
+use texsyn::report::{LockStatus, Reload, RunView, run_page, sweep_page};
 
 #[derive(clap::Args)]
 pub struct ReportArgs {
@@ -64,7 +64,7 @@ pub fn run_html(
     config: &Path,
     sets: &[String],
     o: &Outcome,
-    reload: Option<&str>,
+    reload: Option<Reload<'_>>,
 ) -> Result<String> {
     let config_text =
         std::fs::read_to_string(config).with_context(|| format!("reading {}", config.display()))?;

@@ -63,8 +63,16 @@ pub struct RunView<'a> {
     pub lock: LockStatus,
     pub seconds: f64,
     pub peak_memory_bytes: Option<u64>,
-    /// `watch --serve`: the URL whose answer changes after each rerun.
-    pub reload: Option<&'a str>,
+    /// `watch --serve`: where the page learns that a rerun made a newer one.
+    pub reload: Option<Reload<'a>>,
+}
+
+/// A served page's reload: `url` answers the current version; the page reloads itself when
+/// the answer differs from `version`, the one it was made as.
+#[derive(Clone, Copy)]
+pub struct Reload<'a> {
+    pub url: &'a str,
+    pub version: u64,
 }
 
 /// Escapes text for HTML element content and quoted attributes.
@@ -199,12 +207,13 @@ svg.dag .file rect { fill: #e4e8f4; } svg.dag .missing rect { fill: #f6d0d0; }
 .gallery img { width: 200px; border: 1px solid #ccc; display: block; } .gallery span { font-size: 12px; }
 "#;
 
-fn page(title: &str, body: &str, reload: Option<&str>) -> String {
+fn page(title: &str, body: &str, reload: Option<Reload<'_>>) -> String {
     let meta = reload
-        .map(|url| {
+        .map(|r| {
             format!(
-                "<meta name=\"texsyn-reload\" content=\"{}\">\n",
-                escape(url)
+                "<meta name=\"texsyn-reload\" content=\"{}\" data-version=\"{}\">\n",
+                escape(r.url),
+                r.version
             )
         })
         .unwrap_or_default();
@@ -508,7 +517,7 @@ fn point_preview(out: &Path) -> Option<PathBuf> {
 }
 
 /// A sweep's page, from its folder (what `texsyn sweep` left there).
-pub fn sweep_page(sweep: &Sweep, dir: &SweepDir, reload: Option<&str>) -> String {
+pub fn sweep_page(sweep: &Sweep, dir: &SweepDir, reload: Option<Reload<'_>>) -> String {
     let table = Table::collect(sweep, dir, &Default::default());
     let title = format!("texsyn sweep: {}", sweep.path.display());
     let mut b = format!(

@@ -43,3 +43,4 @@ mod solid_synthesis;
 mod sweep;
 mod sweep_slurm;
 mod typed_wiring;
+mod watch;
