@@ -494,7 +494,11 @@ fn noop_rerun_rows(runs: usize, rows: &mut Vec<Row>) -> Result<()> {
         let t = median(report_times);
         rows.push(Row {
             what: format!("texsyn report {config}, cached"),
-            measured: format!("{:.0} ms wall, page {:.1} MB", t * 1e3, page_bytes as f64 / 1e6),
+            measured: format!(
+                "{:.0} ms wall, page {:.1} MB",
+                t * 1e3,
+                page_bytes as f64 / 1e6
+            ),
             goal: "< 1 s".into(),
             verdict: verdict_below(t, 1.0),
         });

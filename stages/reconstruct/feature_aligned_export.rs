@@ -22,6 +22,7 @@ use crate::check::{ParamError, check_range};
 use crate::export::encode_png;
 use crate::geom::Mesh;
 use crate::geom::edge_refine::Refined;
+use crate::render::up_axis::UpAxis;
 use crate::render::{VertexColorShader, ViewOptions, render_views};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -36,8 +37,11 @@ pub const NODE: texsyn_core::algorithm::Algorithm =
 pub struct FeatureAlignedExportParams {
     /// Side of each preview view, 16..=4096. Default: 512.
     pub preview_size: u32,
-    /// The mesh's up direction, for the previews. Default: [0, 1, 0].
-    pub up: [f32; 3],
+    /// The mesh's up direction in the previews, or `"auto"` (the default): guessed from the
+    /// mesh, the side it stands on most steadily ([`crate::render::up_axis`]). Left out of the
+    /// node's key when `"auto"`.
+    #[serde(skip_serializing_if = "UpAxis::is_auto")]
+    pub up: UpAxis,
     /// Side of the baked atlas in `textured.glb`, 64..=8192; 0 writes vertex colours only.
     /// Default: 2048.
     pub atlas_size: u32,
@@ -90,7 +94,7 @@ impl Default for FeatureAlignedExportParams {
     fn default() -> Self {
         FeatureAlignedExportParams {
             preview_size: 512,
-            up: [0.0, 1.0, 0.0],
+            up: UpAxis::default(),
             atlas_size: 2048,
             streak_length: 12,
             lookup: ExemplarSampling::Bilinear,
@@ -110,12 +114,9 @@ impl FeatureAlignedExportParams {
             )?;
         }
         check_range("reconstruct.streak_length", self.streak_length, 1, 200)?;
-        if !self.up.iter().all(|x| x.is_finite()) || Vec3::from(self.up).length() < 1e-12 {
-            return Err(ParamError::invalid(
-                "reconstruct.up",
-                "must be a finite, non-zero vector",
-            ));
-        }
+        self.up
+            .check()
+            .map_err(|m| ParamError::invalid("reconstruct.up", m))?;
         Ok(())
     }
 }
@@ -168,7 +169,9 @@ pub fn export_feature_aligned(
     let mesh = &r.refined.mesh;
     let opts = ViewOptions {
         size: p.preview_size,
-        up: Vec3::from(p.up),
+        up: p
+            .up
+            .resolve(&mesh.positions, &mesh.triangles, "reconstruct"),
         ..Default::default()
     };
     let colours = rgba(r.colours);

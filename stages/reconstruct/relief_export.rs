@@ -21,6 +21,7 @@ use crate::export::encode_png;
 use crate::field::param_field::{local_spacing, reference_spacing};
 use crate::geom::Mesh;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
+use crate::render::up_axis::UpAxis;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use texsyn_core::algorithm::Failure;
@@ -42,8 +43,11 @@ pub struct ReliefExportParams {
     pub flip_angle: f32,
     /// Side of each preview view, 16..=4096. Default: 512.
     pub preview_size: u32,
-    /// The mesh's up direction, for the preview. Default: [0, 1, 0].
-    pub up: [f32; 3],
+    /// The mesh's up direction in the previews, or `"auto"` (the default): guessed from the
+    /// mesh, the side it stands on most steadily ([`crate::render::up_axis`]). Left out of the
+    /// node's key when `"auto"`.
+    #[serde(skip_serializing_if = "UpAxis::is_auto")]
+    pub up: UpAxis,
 }
 
 impl ReliefExportParams {
@@ -65,7 +69,7 @@ impl Default for ReliefExportParams {
             steps: d.steps,
             flip_angle: d.flip_angle,
             preview_size: 512,
-            up: [0.0, 1.0, 0.0],
+            up: UpAxis::default(),
         }
     }
 }
@@ -139,7 +143,9 @@ pub fn export_relief(
     progress(0.6);
     let opts = crate::render::ViewOptions {
         size: p.preview_size,
-        up: Vec3::from(p.up),
+        up: p
+            .up
+            .resolve(&mesh.positions, &mesh.triangles, "reconstruct"),
         ..Default::default()
     };
     let preview = match crate::render::VertexColorShader::from_mesh(&mesh) {

@@ -34,6 +34,7 @@ use crate::field::quaternion_field::RotationField;
 use crate::geom::Mesh;
 use crate::parameterize::volume_embedding::{Request, Section, Volume};
 use crate::reconstruct::textured_export::encode_png;
+use crate::render::up_axis::UpAxis;
 use crate::render::{AtlasError, MAX_ATLAS_SIZE};
 use glam::{IVec3, Mat3, Vec3};
 use serde::{Deserialize, Serialize};
@@ -50,8 +51,11 @@ pub const NODE: texsyn_core::algorithm::Algorithm =
 pub struct SolidExportParams {
     /// Side of each preview view, 16..=4096. Default: 512.
     pub preview_size: u32,
-    /// The mesh's up direction, for the preview. Default: [0, 1, 0].
-    pub up: [f32; 3],
+    /// The mesh's up direction in the previews, or `"auto"` (the default): guessed from the
+    /// mesh, the side it stands on most steadily ([`crate::render::up_axis`]). Left out of the
+    /// node's key when `"auto"`.
+    #[serde(skip_serializing_if = "UpAxis::is_auto")]
+    pub up: UpAxis,
     /// Side of the baked texture in the .glb, 64..=8192. Default: 2048.
     pub atlas_size: u32,
     /// The surface is refined until its edges are at most this many voxels long (so every
@@ -83,7 +87,7 @@ impl Default for SolidExportParams {
     fn default() -> Self {
         SolidExportParams {
             preview_size: 512,
-            up: [0.0, 1.0, 0.0],
+            up: UpAxis::default(),
             atlas_size: 2048,
             edge_voxels: 1.5,
             max_faces: 2_000_000,
@@ -95,6 +99,9 @@ impl Default for SolidExportParams {
 impl SolidExportParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
+        self.up
+            .check()
+            .map_err(|m| ParamError::invalid("reconstruct.up", m))?;
         check_range(
             "reconstruct.atlas_size",
             self.atlas_size,
@@ -374,7 +381,9 @@ fn export_surface(
     }
     let opts = crate::render::ViewOptions {
         size: p.preview_size,
-        up: Vec3::from(p.up),
+        up: p
+            .up
+            .resolve(&coloured.positions, &coloured.triangles, "reconstruct"),
         ..Default::default()
     };
     let preview = crate::render::render_views(

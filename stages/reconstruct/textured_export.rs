@@ -22,6 +22,7 @@ use crate::geom::Mesh;
 use crate::image::texel_to_uv;
 use crate::render::chart_atlas::{ChartAtlas, ChartAtlasError, bake_page, build_chart_atlas};
 use crate::render::shader::SurfaceShader;
+use crate::render::up_axis::UpAxis;
 use crate::render::views::{ViewOptions, render_views_of_each};
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
@@ -42,8 +43,11 @@ pub struct ExportParams {
     pub texel_density: f32,
     /// Side of each of the three preview views, 16..=4096. Default: 512.
     pub preview_size: u32,
-    /// The mesh's up direction, for the preview. Default: [0, 1, 0].
-    pub up: [f32; 3],
+    /// The mesh's up direction in the previews, or `"auto"` (the default): guessed from the
+    /// mesh, the side it stands on most steadily ([`crate::render::up_axis`]). Left out of the
+    /// node's key when `"auto"`.
+    #[serde(skip_serializing_if = "UpAxis::is_auto")]
+    pub up: UpAxis,
 }
 
 impl Default for ExportParams {
@@ -52,7 +56,7 @@ impl Default for ExportParams {
             atlas_size: 8192,
             texel_density: 1.0,
             preview_size: 512,
-            up: [0.0, 1.0, 0.0],
+            up: UpAxis::default(),
         }
     }
 }
@@ -63,13 +67,9 @@ impl ExportParams {
         let (lo, hi) = TEXEL_DENSITY_RANGE;
         check_range("reconstruct.texel_density", self.texel_density, lo, hi)?;
         check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
-        let up = Vec3::from(self.up);
-        if !up.is_finite() || up.length() < 1e-12 {
-            return Err(ParamError::invalid(
-                "reconstruct.up",
-                format!("must be a finite non-zero vector, got {:?}", self.up),
-            ));
-        }
+        self.up
+            .check()
+            .map_err(|m| ParamError::invalid("reconstruct.up", m))?;
         Ok(())
     }
 }
@@ -217,7 +217,9 @@ pub fn export_textured_mesh<S: SurfaceShader>(
         scope.spawn(|_| {
             let opts = ViewOptions {
                 size: p.preview_size,
-                up: Vec3::from(p.up),
+                up: p
+                    .up
+                    .resolve(&mesh.positions, &mesh.triangles, "reconstruct"),
                 ..Default::default()
             };
             let shaders: Vec<(&str, &dyn SurfaceShader)> = surfaces
@@ -830,8 +832,8 @@ mod tests {
             "reconstruct.atlas_size must be in 64..=8192, got 10"
         );
         assert_eq!(
-            error(|p| p.up = [0.0; 3]),
-            "reconstruct.up must be a finite non-zero vector, got [0.0, 0.0, 0.0]"
+            error(|p| p.up = UpAxis::Given([0.0; 3])),
+            "reconstruct.up must be a finite non-zero vector or \"auto\", got [0.0, 0.0, 0.0]"
         );
     }
 }

@@ -23,6 +23,7 @@ use crate::check::{ParamError, check_range};
 use crate::export::encode_png;
 use crate::geom::Mesh;
 use crate::geom::poly_mesh::PolyMesh;
+use crate::render::up_axis::UpAxis;
 use crate::render::{ConstantShader, VertexColorShader, ViewOptions, render_views, srgb};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -38,8 +39,11 @@ pub const NODE: texsyn_core::algorithm::Algorithm =
 pub struct VertexColourExportParams {
     /// Side of each preview view, 16..=4096. Default: 512.
     pub preview_size: u32,
-    /// The mesh's up direction, for the previews. Default: [0, 1, 0].
-    pub up: [f32; 3],
+    /// The mesh's up direction in the previews, or `"auto"` (the default): guessed from the
+    /// mesh, the side it stands on most steadily ([`crate::render::up_axis`]). Left out of the
+    /// node's key when `"auto"`.
+    #[serde(skip_serializing_if = "UpAxis::is_auto")]
+    pub up: UpAxis,
     /// Displacement along the normal for a value of 1 (relative to 0.5), in object units,
     /// 0..=1e6; 0 writes no displaced mesh. Default: 0.
     pub displacement: f32,
@@ -55,7 +59,7 @@ impl Default for VertexColourExportParams {
     fn default() -> Self {
         VertexColourExportParams {
             preview_size: 512,
-            up: [0.0, 1.0, 0.0],
+            up: UpAxis::default(),
             displacement: 0.0,
             level_previews: false,
             atlas_size: 2048,
@@ -71,12 +75,9 @@ impl VertexColourExportParams {
             let most = crate::render::MAX_ATLAS_SIZE;
             check_range("reconstruct.atlas_size", self.atlas_size, 64, most)?;
         }
-        if !self.up.iter().all(|x| x.is_finite()) || Vec3::from(self.up).length() < 1e-12 {
-            return Err(ParamError::invalid(
-                "reconstruct.up",
-                "must be a finite, non-zero vector",
-            ));
-        }
+        self.up
+            .check()
+            .map_err(|m| ParamError::invalid("reconstruct.up", m))?;
         Ok(())
     }
 }
@@ -104,7 +105,11 @@ pub fn export_vertex_colours(
     let colours = rgba(finest.colours);
     let opts = ViewOptions {
         size: p.preview_size,
-        up: Vec3::from(p.up),
+        // The coarsest level is the input mesh: the same shape, far fewer vertices.
+        up: {
+            let coarse = levels[0].mesh.to_triangles();
+            p.up.resolve(&coarse.positions, &coarse.triangles, "reconstruct")
+        },
         ..Default::default()
     };
     let mut files = vec![(

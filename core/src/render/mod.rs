@@ -20,6 +20,7 @@ pub mod load;
 pub mod raster;
 pub mod shader;
 pub mod srgb;
+pub mod up_axis;
 pub mod views;
 
 pub use atlas::{ATLAS_GUTTER, Atlas, AtlasError, MAX_ATLAS_SIZE, bake, build_atlas};
