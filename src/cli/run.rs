@@ -114,16 +114,18 @@ pub fn run_and_write(
     let check = if recheck {
         OutputCheck::Rehash
     } else {
-        OutputCheck::Stamps
+        OutputCheck::Stamps(g.cache_dir.join(texsyn::pipeline::stamps::RECORDS))
     };
     let mut result = run_plan_with(&plan, &g.cache_dir, options(defer))?;
     // One run's exports are written as one set: all of them, or none on an error.
-    let mut written = outputs::materialize_exports(&plan.dag, &result.artifacts, &out_dir, check);
+    let mut written =
+        outputs::materialize_exports(&plan.dag, &result.artifacts, &out_dir, check.clone());
     if defer && matches!(written, Err(OutputError::Bundle(_))) {
         // A cached bundle handed out unchecked was damaged and nothing was written: the
         // checked run finds it, recomputes and replaces it.
         result = run_plan_with(&plan, &g.cache_dir, options(false))?;
-        written = outputs::materialize_exports(&plan.dag, &result.artifacts, &out_dir, check);
+        written =
+            outputs::materialize_exports(&plan.dag, &result.artifacts, &out_dir, check.clone());
     }
     let written = written.with_context(|| {
         format!(

@@ -130,12 +130,13 @@ pub fn materialize_exports(
 }
 
 /// How [`materialize_checked`] decides that a file on disk already holds its output.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub enum OutputCheck {
     /// A file whose stat is the one recorded when it was last written or read is trusted
-    /// without reading it ([`super::stamps`]); others are read and hashed.
-    Stamps,
-    /// Every file is read and hashed (`run --recheck`, `verify`).
+    /// without reading it ([`super::stamps`]); others are read and hashed. The records are
+    /// kept in this folder (a cache's [`super::stamps::RECORDS`]).
+    Stamps(PathBuf),
+    /// Every file is read and hashed (`run --recheck`, `pack`, `unpack`).
     Rehash,
 }
 
@@ -147,7 +148,7 @@ pub fn materialize_all(
     bundles: &[&Artifact],
     dir: &Path,
 ) -> Result<Vec<(PathBuf, bool)>, OutputError> {
-    materialize_checked(bundles, dir, OutputCheck::Stamps)
+    materialize_checked(bundles, dir, OutputCheck::Rehash)
 }
 
 /// [`materialize_all`], deciding which files are unchanged as `check` says. A bundle's
@@ -184,10 +185,11 @@ pub fn materialize_checked(
     }
 
     // Check what is on disk; collect the changed files.
-    let known = match check {
-        OutputCheck::Stamps => Stamps::read(dir),
-        OutputCheck::Rehash => Stamps::default(),
+    let record = match &check {
+        OutputCheck::Stamps(records) => super::stamps::record_path(records, dir),
+        OutputCheck::Rehash => None,
     };
+    let known = record.as_deref().map(Stamps::read).unwrap_or_default();
     let mut seen = Stamps::default();
     let mut out = Vec::new();
     let mut changed = Vec::new(); // (view, entry, had_old)
@@ -228,10 +230,12 @@ pub fn materialize_checked(
         out.push((path, !same));
     }
     if changed.is_empty() {
-        if !known.covers(&seen) {
-            let mut record = Stamps::read(dir);
-            record.merge(seen);
-            record.write(dir);
+        if let Some(record) = &record
+            && !known.covers(&seen)
+        {
+            let mut stamps = Stamps::read(record);
+            stamps.merge(seen);
+            stamps.write(record);
         }
         return Ok(out);
     }
@@ -311,9 +315,11 @@ pub fn materialize_checked(
         let meta = fs::symlink_metadata(dir.join(&entry.name)).ok();
         seen.record(&entry.name, meta.as_ref(), entry.hash);
     }
-    let mut record = Stamps::read(dir);
-    record.merge(seen);
-    record.write(dir);
+    if let Some(record) = &record {
+        let mut stamps = Stamps::read(record);
+        stamps.merge(seen);
+        stamps.write(record);
+    }
     Ok(out)
 }
 

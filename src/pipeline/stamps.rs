@@ -2,11 +2,16 @@
 //! with nothing changed trusts a file by its stat instead of reading and hashing it, as make
 //! and ninja trust a timestamp.
 //!
-//! The record is `D/.texsyn-stamps`: per output name, its content hash and the stat it had
-//! (length, modification and change times in nanoseconds, inode and device). A file is trusted
-//! when its stat is the recorded one and the recorded hash is the one the run wants. Anything
-//! that rewrites a file changes its change time (which no user call can set back), copying a
-//! folder changes the inodes, so an edited, replaced or copied file is read again.
+//! The record holds, per output name, its content hash and the stat it had (length,
+//! modification and change times in nanoseconds, inode and device). A file is trusted when its
+//! stat is the recorded one and the recorded hash is the one the run wants. Anything that
+//! rewrites a file changes its change time (which no user call can set back), copying a folder
+//! changes the inodes, so an edited, replaced or copied file is read again.
+//!
+//! Records live in the cache, not in the output folder, so the folder holds nothing but the
+//! outputs (a CI job may compare two folders byte for byte): `CACHE/output-stamps/HASH`, the
+//! hash being that of the folder's canonical path. Another cache, or a moved folder, has no
+//! record and reads the files once.
 //!
 //! A file modified within the same clock tick as the record was written could keep its
 //! stat (file times are coarse, a few milliseconds); as git does with its index, a stamp whose
@@ -22,9 +27,17 @@ use std::collections::BTreeMap;
 use std::fs;
 use std::path::Path;
 
-/// The record's file name inside an output folder.
-pub const STAMPS: &str = ".texsyn-stamps";
+/// The folder of the records inside a cache.
+pub const RECORDS: &str = "output-stamps";
 const HEAD: &str = "texsyn output stamps 1";
+
+/// Where the record of output folder `dir` is kept among `records` (a cache's
+/// [`RECORDS`] folder); `None` when `dir` cannot be resolved (then nothing is trusted).
+pub fn record_path(records: &Path, dir: &Path) -> Option<std::path::PathBuf> {
+    let canonical = dir.canonicalize().ok()?;
+    let hash = ContentHash::of(canonical.as_os_str().as_encoded_bytes());
+    Some(records.join(hash.to_hex()))
+}
 
 /// A file's stat, as far as trusting it goes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -68,13 +81,12 @@ pub struct Stamps {
 }
 
 impl Stamps {
-    /// The record in `dir`; empty when there is none or it cannot be read.
-    pub fn read(dir: &Path) -> Stamps {
-        let path = dir.join(STAMPS);
-        let Ok(text) = fs::read_to_string(&path) else {
+    /// The record at `path`; empty when there is none or it cannot be read.
+    pub fn read(path: &Path) -> Stamps {
+        let Ok(text) = fs::read_to_string(path) else {
             return Stamps::default();
         };
-        let written_ns = fs::metadata(&path)
+        let written_ns = fs::metadata(path)
             .ok()
             .and_then(|m| FileStat::of(&m))
             .map(|s| s.mtime_ns);
@@ -131,9 +143,9 @@ impl Stamps {
         self.files.extend(other.files);
     }
 
-    /// Writes the record into `dir` (temporary file, then rename; no fsync: see the module
+    /// Writes the record to `path` (temporary file, then rename; no fsync: see the module
     /// doc). Failures are ignored: the next run reads the files again.
-    pub fn write(&self, dir: &Path) {
+    pub fn write(&self, path: &Path) {
         let mut text = String::from(HEAD);
         text.push('\n');
         for (name, (s, hash)) in &self.files {
@@ -148,8 +160,12 @@ impl Stamps {
                 name
             ));
         }
-        let tmp = dir.join(format!("{STAMPS}.tmp-{}", crate::owner::Owner::this_tag()));
-        if fs::write(&tmp, text).is_ok() && fs::rename(&tmp, dir.join(STAMPS)).is_err() {
+        let Some(parent) = path.parent() else { return };
+        let _ = fs::create_dir_all(parent);
+        let mut tmp = path.as_os_str().to_owned();
+        tmp.push(format!(".tmp-{}", crate::owner::Owner::this_tag()));
+        let tmp = std::path::PathBuf::from(tmp);
+        if fs::write(&tmp, text).is_ok() && fs::rename(&tmp, path).is_err() {
             let _ = fs::remove_file(&tmp);
         }
     }
@@ -194,9 +210,10 @@ mod tests {
         let hash = ContentHash::of(b"one");
         let mut stamps = Stamps::default();
         stamps.record("a b.png", Some(&fs::metadata(&path).unwrap()), hash);
-        stamps.write(dir.path());
+        let record = dir.path().join("records").join("one");
+        stamps.write(&record);
 
-        let read = Stamps::read(dir.path());
+        let read = Stamps::read(&record);
         let meta = fs::metadata(&path).unwrap();
         assert!(read.vouches("a b.png", &meta, &hash));
         assert!(read.covers(&stamps));
@@ -209,22 +226,18 @@ mod tests {
         // A file not older than the record is racy: not trusted even with its own stat.
         let mut racy = Stamps::default();
         racy.record("a b.png", Some(&fs::metadata(&path).unwrap()), hash);
-        racy.write(dir.path());
+        racy.write(&record);
         fs::File::options()
             .write(true)
-            .open(dir.path().join(STAMPS))
+            .open(&record)
             .unwrap()
             .set_modified(old)
             .unwrap();
-        let read = Stamps::read(dir.path());
+        let read = Stamps::read(&record);
         assert!(!read.vouches("a b.png", &fs::metadata(&path).unwrap(), &hash));
 
         // A damaged record is no record.
-        fs::write(
-            dir.path().join(STAMPS),
-            "texsyn output stamps 1\nnot a line\n",
-        )
-        .unwrap();
-        assert_eq!(Stamps::read(dir.path()).files.len(), 0);
+        fs::write(&record, "texsyn output stamps 1\nnot a line\n").unwrap();
+        assert_eq!(Stamps::read(&record).files.len(), 0);
     }
 }

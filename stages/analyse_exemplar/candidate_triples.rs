@@ -981,6 +981,18 @@ pub fn analyse_transposed(
     transpose: [bool; 3],
     params: &CandidateParams,
 ) -> Result<SolidAnalysis, AnalysisError> {
+    analyse_transposed_with(planes, masks, transpose, params, &|_| {})
+}
+
+/// [`analyse_transposed`], reporting the fraction done to `progress` (see
+/// [`analyse_masked_with`]).
+pub fn analyse_transposed_with(
+    planes: [ImageView; 3],
+    masks: [Option<ImageView>; 3],
+    transpose: [bool; 3],
+    params: &CandidateParams,
+    progress: &(dyn Fn(f32) + Sync),
+) -> Result<SolidAnalysis, AnalysisError> {
     let turned: [Option<Image>; 3] =
         std::array::from_fn(|k| transpose[k].then(|| planes[k].transposed()));
     let views = std::array::from_fn(|k| turned[k].as_ref().map_or(planes[k], Image::view));
@@ -988,7 +1000,7 @@ pub fn analyse_transposed(
         std::array::from_fn(|k| masks[k].filter(|_| transpose[k]).map(|m| m.transposed()));
     let mask_views =
         std::array::from_fn(|k| turned_masks[k].as_ref().map(Image::view).or(masks[k]));
-    analyse_masked(views, mask_views, params)
+    analyse_masked_with(views, mask_views, params, progress)
 }
 
 /// Analyses the exemplars of the xy, yz and zx planes (pass the same image several times to
@@ -1007,6 +1019,17 @@ pub fn analyse_masked(
     planes: [ImageView; 3],
     masks: [Option<ImageView>; 3],
     params: &CandidateParams,
+) -> Result<SolidAnalysis, AnalysisError> {
+    analyse_masked_with(planes, masks, params, &|_| {})
+}
+
+/// [`analyse_masked`], reporting the fraction done to `progress`: one step per pyramid level
+/// (the finest, with the most texels, last), weighted by the level's neighbourhood size.
+pub fn analyse_masked_with(
+    planes: [ImageView; 3],
+    masks: [Option<ImageView>; 3],
+    params: &CandidateParams,
+    progress: &(dyn Fn(f32) + Sync),
 ) -> Result<SolidAnalysis, AnalysisError> {
     params.validate()?;
     if masks.iter().any(Option::is_some) && params.feature_mask.is_none() {
@@ -1255,6 +1278,9 @@ pub fn analyse_masked(
                 candidate_errors.extend(e);
             }
         }
+        let weight = |l: usize| (params.n(l) * params.n(l)) as f32;
+        let done: f32 = (0..=li).map(weight).sum();
+        progress(done / (0..levels).map(weight).sum::<f32>());
     }
 
     // Slab seeds at the coarsest level: the candidate whose column carried along z keeps the
@@ -1365,8 +1391,10 @@ pub fn node(
     planes: [ImageView; 3],
     masks: [Option<ImageView>; 3],
     key: &AnalysisKey,
+    progress: &(dyn Fn(f32) + Sync),
 ) -> Result<SolidAnalysis, Failure> {
-    analyse_transposed(planes, masks, key.transpose, &key.analysis).map_err(Failure::input)
+    analyse_transposed_with(planes, masks, key.transpose, &key.analysis, progress)
+        .map_err(Failure::input)
 }
 
 #[cfg(test)]

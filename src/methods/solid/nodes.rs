@@ -63,7 +63,7 @@ pub(super) fn add_analysis(
         spec,
         key,
         ([xy, yz, zx], masks),
-        move |_, key, (planes, masks)| {
+        move |ctx, key, (planes, masks)| {
             for ((plane, mask), name) in planes.iter().zip(&masks).zip(&names) {
                 let (Some(m), Some(name)) = (mask, name) else {
                     continue;
@@ -82,7 +82,7 @@ pub(super) fn add_analysis(
                     )));
                 }
             }
-            Ok(triples::node(planes, masks, key)?)
+            Ok(triples::node(planes, masks, key, &|f| ctx.progress.set(f))?)
         },
     ))
 }
