@@ -189,8 +189,19 @@ pub fn materialize_checked(
         OutputCheck::Stamps(records) => super::stamps::record_path(records, dir),
         OutputCheck::Rehash => None,
     };
+    // The folder's clock before anything in it is looked at: only files older than it get a
+    // stamp (see `stamps`); without it nothing is recorded.
+    let clock = record
+        .as_ref()
+        .and_then(|_| super::stamps::folder_clock(dir));
+    let record = record.filter(|_| clock.is_some());
+    let clock = clock.unwrap_or(i128::MIN);
     let known = record.as_deref().map(Stamps::read).unwrap_or_default();
     let mut seen = Stamps::default();
+    let names: Vec<&str> = files
+        .iter()
+        .map(|&(v, e)| views[v].entries[e].name.as_str())
+        .collect();
     let mut out = Vec::new();
     let mut changed = Vec::new(); // (view, entry, had_old)
     for &(v, e) in &files {
@@ -223,7 +234,7 @@ pub fn materialize_checked(
                 || (fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == entry.len)
                     && fs::read(&path).is_ok_and(|b| ContentHash::of(&b) == entry.hash)));
         if same {
-            seen.record(&entry.name, meta.as_ref(), entry.hash);
+            seen.record(&entry.name, meta.as_ref(), entry.hash, clock);
         } else {
             changed.push((v, e, had_old));
         }
@@ -231,10 +242,10 @@ pub fn materialize_checked(
     }
     if changed.is_empty() {
         if let Some(record) = &record
-            && !known.covers(&seen)
+            && !known.covers(&seen, &names)
         {
-            let mut stamps = Stamps::read(record);
-            stamps.merge(seen);
+            let mut stamps = known.clone();
+            stamps.merge(&seen, &names);
             stamps.write(record);
         }
         return Ok(out);
@@ -312,12 +323,13 @@ pub fn materialize_checked(
     }
     for &(v, e, _) in &changed {
         let entry = &views[v].entries[e];
+        // Written in this run's tick: forgotten, and read once by the next run.
         let meta = fs::symlink_metadata(dir.join(&entry.name)).ok();
-        seen.record(&entry.name, meta.as_ref(), entry.hash);
+        seen.record(&entry.name, meta.as_ref(), entry.hash, clock);
     }
     if let Some(record) = &record {
-        let mut stamps = Stamps::read(record);
-        stamps.merge(seen);
+        let mut stamps = known;
+        stamps.merge(&seen, &names);
         stamps.write(record);
     }
     Ok(out)

@@ -13,10 +13,13 @@
 //! hash being that of the folder's canonical path. Another cache, or a moved folder, has no
 //! record and reads the files once.
 //!
-//! A file modified within the same clock tick as the record was written could keep its
-//! stat (file times are coarse, a few milliseconds); as git does with its index, a stamp whose
-//! file is not older than the record itself is not trusted ("racily clean"): such a file is
-//! hashed on the next run, which then writes a record it can trust.
+//! A file could be modified within the same clock tick (file times are coarse, a few
+//! milliseconds) as it was last written, after texsyn looked at it, and keep its stat. So a
+//! stamp is recorded only for a file whose modification and change times are both older than
+//! the output folder's clock when texsyn began looking ([`folder_clock`], read off the folder's
+//! own filesystem, which may not be the cache's): any later change then moves a time. A file
+//! written or touched in the run's own tick is left out and hashed on the next run, which then
+//! records it ("racily clean", as git calls it).
 //!
 //! The record is a cache: losing it, or a damaged one, costs one full read; it is written
 //! without fsync (temporary file, then rename) and only when it changes. `texsyn run
@@ -29,7 +32,7 @@ use std::path::Path;
 
 /// The folder of the records inside a cache.
 pub const RECORDS: &str = "output-stamps";
-const HEAD: &str = "texsyn output stamps 1";
+const HEAD: &str = "texsyn output stamps 2";
 
 /// Where the record of output folder `dir` is kept among `records` (a cache's
 /// [`RECORDS`] folder); `None` when `dir` cannot be resolved (then nothing is trusted).
@@ -72,12 +75,28 @@ impl FileStat {
     }
 }
 
-/// The stamps of one output folder, by file name.
+/// The output folder's clock now, in nanoseconds: the modification time of a probe file
+/// made (and removed) in `dir`, so it is the time of the filesystem the outputs are on.
+/// `None` when no file can be made there (nothing is recorded then).
+pub fn folder_clock(dir: &Path) -> Option<i128> {
+    let probe = dir.join(format!(
+        ".texsyn-probe.tmp-{}",
+        crate::owner::Owner::this_tag()
+    ));
+    let made = fs::write(&probe, b"").ok();
+    let time = made
+        .and_then(|()| fs::metadata(&probe).ok())
+        .and_then(|m| FileStat::of(&m))
+        .map(|s| s.mtime_ns);
+    let _ = fs::remove_file(&probe);
+    time
+}
+
+/// The stamps of one output folder, by file name. Only stamps whose file was older than the
+/// folder's clock when they were taken are held (see the module doc).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Stamps {
     files: BTreeMap<String, (FileStat, ContentHash)>,
-    /// The record's own modification time when read (stamps of files not older are racy).
-    written_ns: Option<i128>,
 }
 
 impl Stamps {
@@ -86,10 +105,6 @@ impl Stamps {
         let Ok(text) = fs::read_to_string(path) else {
             return Stamps::default();
         };
-        let written_ns = fs::metadata(path)
-            .ok()
-            .and_then(|m| FileStat::of(&m))
-            .map(|s| s.mtime_ns);
         let mut lines = text.lines();
         if lines.next() != Some(HEAD) {
             return Stamps::default();
@@ -103,44 +118,59 @@ impl Stamps {
                 None => return Stamps::default(),
             }
         }
-        Stamps { files, written_ns }
+        Stamps { files }
     }
 
     /// Whether the file `name` with metadata `meta` is known to hold content `hash`.
     pub fn vouches(&self, name: &str, meta: &fs::Metadata, hash: &ContentHash) -> bool {
-        let (Some(stat), Some(written)) = (FileStat::of(meta), self.written_ns) else {
+        let Some(stat) = FileStat::of(meta) else {
             return false;
         };
         self.files
             .get(name)
-            .is_some_and(|(s, h)| *s == stat && h == hash && stat.mtime_ns < written)
+            .is_some_and(|(s, h)| *s == stat && h == hash)
     }
 
-    /// Records that `name` (metadata `meta`) holds `hash`; a file without a usable stat is
-    /// forgotten instead.
-    pub fn record(&mut self, name: &str, meta: Option<&fs::Metadata>, hash: ContentHash) {
+    /// Records that `name` (metadata `meta`) holds `hash`, when its times are older than
+    /// `clock`, the folder's clock before it was looked at; otherwise (or without a usable
+    /// stat) forgets it, so the next run reads it.
+    pub fn record(
+        &mut self,
+        name: &str,
+        meta: Option<&fs::Metadata>,
+        hash: ContentHash,
+        clock: i128,
+    ) {
         match meta.and_then(FileStat::of) {
-            Some(stat) => {
+            Some(stat) if stat.mtime_ns.max(stat.ctime_ns) < clock => {
                 self.files.insert(name.to_owned(), (stat, hash));
             }
-            None => {
+            _ => {
                 self.files.remove(name);
             }
         }
     }
 
-    /// Whether every stamp of `other` is in this record, unchanged and trusted: writing
-    /// `other` would change nothing.
-    pub fn covers(&self, other: &Stamps) -> bool {
-        other.files.iter().all(|(name, (stat, hash))| {
-            self.files.get(name) == Some(&(*stat, *hash))
-                && self.written_ns.is_some_and(|w| stat.mtime_ns < w)
-        })
+    /// Whether writing `other` over this record would change nothing: every stamp of `other`
+    /// is here, and no name `other` forgot is.
+    pub fn covers(&self, other: &Stamps, names: &[&str]) -> bool {
+        names
+            .iter()
+            .all(|n| self.files.get(*n) == other.files.get(*n))
     }
 
-    /// Adds every stamp of `other`, replacing the ones of the same name.
-    pub fn merge(&mut self, other: Stamps) {
-        self.files.extend(other.files);
+    /// Takes `other`'s stamp (or its lack of one) for each of `names`.
+    pub fn merge(&mut self, other: &Stamps, names: &[&str]) {
+        for n in names {
+            match other.files.get(*n) {
+                Some(s) => {
+                    self.files.insert((*n).to_owned(), *s);
+                }
+                None => {
+                    self.files.remove(*n);
+                }
+            }
+        }
     }
 
     /// Writes the record to `path` (temporary file, then rename; no fsync: see the module
@@ -196,48 +226,56 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_record_reads_back_and_vouches_only_for_unchanged_older_files() {
+    fn a_record_reads_back_and_vouches_only_for_unchanged_files_older_than_the_clock() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("a b.png");
         fs::write(&path, b"one").unwrap();
-        let old = std::time::SystemTime::now() - std::time::Duration::from_secs(60);
+        let hash = ContentHash::of(b"one");
+        let meta = fs::metadata(&path).unwrap();
+        let clock = folder_clock(dir.path()).unwrap();
+        // Written in this run's tick or just before: only a clock after its times trusts it.
+        let mut racy = Stamps::default();
+        racy.record(
+            "a b.png",
+            Some(&meta),
+            hash,
+            FileStat::of(&meta).unwrap().ctime_ns,
+        );
+        assert!(
+            !racy.vouches("a b.png", &meta, &hash),
+            "a racy stamp was kept"
+        );
+
+        let mut stamps = Stamps::default();
+        stamps.record("a b.png", Some(&meta), hash, clock + 1_000_000_000);
+        let record = dir.path().join("records").join("one");
+        stamps.write(&record);
+        let read = Stamps::read(&record);
+        assert!(read.vouches("a b.png", &meta, &hash));
+        assert!(read.covers(&stamps, &["a b.png"]));
+        assert!(!read.vouches("a b.png", &meta, &ContentHash::of(b"two")));
+        assert!(!read.vouches("other", &meta, &hash));
+        // Rewritten with the same length and the old modification time: the change time moved.
+        let modified = meta.modified().unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        fs::write(&path, b"two").unwrap();
         fs::File::options()
             .write(true)
             .open(&path)
             .unwrap()
-            .set_modified(old)
+            .set_modified(modified)
             .unwrap();
-        let hash = ContentHash::of(b"one");
-        let mut stamps = Stamps::default();
-        stamps.record("a b.png", Some(&fs::metadata(&path).unwrap()), hash);
-        let record = dir.path().join("records").join("one");
-        stamps.write(&record);
-
-        let read = Stamps::read(&record);
-        let meta = fs::metadata(&path).unwrap();
-        assert!(read.vouches("a b.png", &meta, &hash));
-        assert!(read.covers(&stamps));
-        assert!(!read.vouches("a b.png", &meta, &ContentHash::of(b"two")));
-        assert!(!read.vouches("other", &meta, &hash));
-
-        // Rewritten with the same length: the times moved.
-        fs::write(&path, b"two").unwrap();
         assert!(!read.vouches("a b.png", &fs::metadata(&path).unwrap(), &hash));
-        // A file not older than the record is racy: not trusted even with its own stat.
-        let mut racy = Stamps::default();
-        racy.record("a b.png", Some(&fs::metadata(&path).unwrap()), hash);
-        racy.write(&record);
-        fs::File::options()
-            .write(true)
-            .open(&record)
+        // The probe leaves nothing behind.
+        let left: Vec<_> = fs::read_dir(dir.path())
             .unwrap()
-            .set_modified(old)
-            .unwrap();
-        let read = Stamps::read(&record);
-        assert!(!read.vouches("a b.png", &fs::metadata(&path).unwrap(), &hash));
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert_eq!(left.len(), 2, "{left:?}");
 
         // A damaged record is no record.
-        fs::write(&record, "texsyn output stamps 1\nnot a line\n").unwrap();
+        fs::write(&record, "texsyn output stamps 2\nnot a line\n").unwrap();
         assert_eq!(Stamps::read(&record).files.len(), 0);
     }
 }

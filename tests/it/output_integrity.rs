@@ -456,8 +456,42 @@ fn damage_every_object(cache: &Path) {
     }
 }
 
+/// `texsyn run` of synth2d seed 1 with `extra` flags; its `--report` JSON.
+fn run_report(cache: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let report = out.with_extension("report.json");
+    let mut args = vec![
+        "run",
+        CONFIG,
+        "-q",
+        "--cache",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "synthesize.seed=1",
+        "--report",
+        report.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    let o = texsyn(&args);
+    assert!(o.ok, "run {extra:?} failed: {}", o.stderr);
+    serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
+}
+
+/// The one record of output stamps in `cache` (README, "Set up and run").
+fn record_of(cache: &Path) -> PathBuf {
+    let records: Vec<PathBuf> = std::fs::read_dir(cache.join(texsyn::pipeline::stamps::RECORDS))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| !p.to_string_lossy().contains(".tmp-"))
+        .collect();
+    assert_eq!(records.len(), 1, "{records:?}");
+    records[0].clone()
+}
+
 #[test]
 fn a_rerun_trusts_stamped_outputs_and_reads_an_edited_or_missing_one_again() {
+    use std::os::unix::fs::MetadataExt;
     let root = tempfile::tempdir().unwrap();
     let (cache, out) = (root.path().join("cache"), root.path().join("out"));
     run_ok(&cache, &out, 1);
@@ -465,24 +499,60 @@ fn a_rerun_trusts_stamped_outputs_and_reads_an_edited_or_missing_one_again() {
         .iter()
         .map(|n| std::fs::read(out.join(n)).unwrap())
         .collect();
-    // The second run re-reads the files written in the stamps' own clock tick and records them.
+    // The second run reads back the files written in the first one's tick and stamps them.
     run_ok(&cache, &out, 1);
+    let record = record_of(&cache);
+    let text = std::fs::read_to_string(&record).unwrap();
+    assert_eq!(text.lines().count(), 1 + OUTPUTS.len(), "{text}");
     // The record is in the cache; the output folder holds the outputs alone.
-    let records = cache.join(texsyn::pipeline::stamps::RECORDS);
-    assert_eq!(std::fs::read_dir(&records).unwrap().count(), 1);
-    let names: Vec<String> = std::fs::read_dir(&out)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .collect();
-    assert_eq!(names.len(), OUTPUTS.len(), "{names:?}");
+    assert_eq!(std::fs::read_dir(&out).unwrap().count(), OUTPUTS.len());
 
-    // An edit that keeps the length and the modification time is still read again: the
-    // change time moved.
+    // A stamp is trusted without reading the file: a record that vouches for wrong bytes
+    // (their own stat, the wanted hash) keeps them; --recheck reads them and repairs them.
     let path = out.join(OUTPUTS[1]);
-    let modified = std::fs::metadata(&path).unwrap().modified().unwrap();
     let mut bytes = want[1].clone();
     let mid = bytes.len() / 2;
     bytes[mid] ^= 0xff;
+    std::fs::write(&path, &bytes).unwrap();
+    let m = std::fs::metadata(&path).unwrap();
+    let forged: String = text
+        .lines()
+        .map(|l| {
+            if !l.ends_with(OUTPUTS[1]) {
+                return format!("{l}\n");
+            }
+            let hash = l.split(' ').next().unwrap();
+            let ns = |s: i64, n: i64| s as i128 * 1_000_000_000 + n as i128;
+            format!(
+                "{hash} {} {} {} {} {} {}\n",
+                m.len(),
+                ns(m.mtime(), m.mtime_nsec()),
+                ns(m.ctime(), m.ctime_nsec()),
+                m.ino(),
+                m.dev(),
+                OUTPUTS[1]
+            )
+        })
+        .collect();
+    std::fs::write(&record, forged).unwrap();
+    run_ok(&cache, &out, 1);
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        bytes,
+        "the stamp was not trusted"
+    );
+    run_report(&cache, &out, &["--recheck"]);
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        want[1],
+        "--recheck kept the wrong bytes"
+    );
+    run_ok(&cache, &out, 1);
+
+    // An edit that keeps the length and the modification time is read again: the change
+    // time moved.
+    let modified = std::fs::metadata(&path).unwrap().modified().unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(20));
     std::fs::write(&path, &bytes).unwrap();
     std::fs::File::options()
         .write(true)
@@ -498,49 +568,32 @@ fn a_rerun_trusts_stamped_outputs_and_reads_an_edited_or_missing_one_again() {
     );
 
     // Trusted outputs need no bundle payload: with every cached object damaged, a rerun
-    // whose outputs are all on disk reads none and changes nothing...
+    // whose outputs are all on disk reads none (it finds no damage, changes no object and
+    // no output)...
     run_ok(&cache, &out, 1);
     damage_every_object(&cache);
-    let before = snapshot(&out);
-    run_ok(&cache, &out, 1);
+    let (objects, before) = (snapshot(&cache.join("objects-v1")), snapshot(&out));
+    let report = run_report(&cache, &out, &[]);
+    assert_eq!(report["warnings"], serde_json::json!([]), "{report}");
     assert_eq!(snapshot(&out), before);
+    assert!(
+        snapshot(&cache.join("objects-v1")) == objects,
+        "an object was read and repaired"
+    );
     // ...and one that must write a file checks the bundle first, finds it damaged, repairs
     // the cache and writes the right bytes.
     std::fs::remove_file(out.join(OUTPUTS[0])).unwrap();
-    let o = texsyn(&[
-        "run",
-        CONFIG,
-        "--json",
-        "--cache",
-        cache.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--set",
-        "synthesize.seed=1",
-    ]);
-    assert!(o.ok, "run failed: {}", o.stderr);
+    let report = run_report(&cache, &out, &[]);
+    assert_ne!(
+        report["warnings"],
+        serde_json::json!([]),
+        "no damage was found"
+    );
     for (name, bytes) in OUTPUTS.iter().zip(&want) {
         assert_eq!(&std::fs::read(out.join(name)).unwrap(), bytes, "{name}");
     }
     // The repair replaced every object on the way to the outputs: a run that re-hashes all
     // it hands out finds nothing damaged.
-    let report = root.path().join("report.json");
-    let o = texsyn(&[
-        "run",
-        CONFIG,
-        "-q",
-        "--recheck",
-        "--cache",
-        cache.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--set",
-        "synthesize.seed=1",
-        "--report",
-        report.to_str().unwrap(),
-    ]);
-    assert!(o.ok, "recheck failed: {}", o.stderr);
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let report = run_report(&cache, &out, &["--recheck"]);
     assert_eq!(report["warnings"], serde_json::json!([]), "{report}");
 }
