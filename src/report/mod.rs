@@ -235,6 +235,16 @@ fn page(title: &str, body: &str, reload: Option<Reload<'_>>) -> String {
     )
 }
 
+/// A page with a title and one message (HTML), e.g. while `watch` runs the config for the
+/// first time, or when its last run failed.
+pub fn message_page(title: &str, message_html: &str, reload: Option<Reload<'_>>) -> String {
+    page(
+        title,
+        &format!("<h1>{}</h1>\n{message_html}", escape(title)),
+        reload,
+    )
+}
+
 fn status_word(s: NodeStatus) -> &'static str {
     match s {
         NodeStatus::Cached => "cached",

@@ -11,22 +11,21 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::Receiver;
 use std::time::Duration;
 
-/// A `texsyn watch` process and its stdout, line by line.
+/// A `texsyn watch` process and its output (stdout and stderr, line by line, in the order
+/// the reading threads got them: a line of one stream may come before an earlier line of
+/// the other, so lines are looked for among all those not yet matched).
 struct Watch {
     child: Child,
     lines: Receiver<String>,
+    unmatched: Vec<String>,
     seen: Vec<String>,
+    port: u16,
 }
 
 impl Watch {
-    fn start(config: &Path, root: &Path, port: u16) -> Watch {
+    fn start(config: &Path, root: &Path) -> Watch {
         let mut child = Command::new(env!("CARGO_BIN_EXE_texsyn"))
-            .args([
-                "watch",
-                config.to_str().unwrap(),
-                "--serve",
-                &port.to_string(),
-            ])
+            .args(["watch", config.to_str().unwrap(), "--serve", "0"])
             .arg("--cache")
             .arg(root.join("cache"))
             .arg("--out")
@@ -46,15 +45,29 @@ impl Watch {
                 }
             });
         }
-        Watch {
+        let mut w = Watch {
             child,
             lines,
+            unmatched: Vec::new(),
             seen: Vec::new(),
-        }
+            port: 0,
+        };
+        let serving = w.expect("serving the report on http://127.0.0.1:");
+        w.port = serving
+            .rsplit(':')
+            .next()
+            .unwrap()
+            .trim_end_matches('/')
+            .parse()
+            .unwrap();
+        w
     }
 
-    /// The first new line containing `text` (failing after 60 s).
+    /// The first line not yet matched that contains `text` (failing after 60 s).
     fn expect(&mut self, text: &str) -> String {
+        if let Some(i) = self.unmatched.iter().position(|l| l.contains(text)) {
+            return self.unmatched.remove(i);
+        }
         loop {
             match self.lines.recv_timeout(Duration::from_secs(60)) {
                 Ok(line) => {
@@ -62,6 +75,7 @@ impl Watch {
                     if line.contains(text) {
                         return line;
                     }
+                    self.unmatched.push(line);
                 }
                 Err(_) => panic!(
                     "no line with {text:?} within 60 s; saw:\n{}",
@@ -79,19 +93,10 @@ impl Drop for Watch {
     }
 }
 
-/// A port nothing listens on now.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 /// The body of `GET path` on 127.0.0.1:`port`.
 fn get(port: u16, path: &str) -> String {
     let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
-    write!(s, "GET {path} HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n").unwrap();
+    write!(s, "GET {path} HTTP/1.0\r\nHost: 127.0.0.1:{port}\r\n\r\n").unwrap();
     let mut text = String::new();
     s.read_to_string(&mut text).unwrap();
     text.split_once("\r\n\r\n")
@@ -129,8 +134,8 @@ fn save(path: &Path, bytes: &[u8]) {
 fn watch_reruns_what_an_edit_changes_survives_a_broken_config_and_stops_whole() {
     let root = tempfile::tempdir().unwrap();
     let config = editable_config(root.path());
-    let port = free_port();
-    let mut w = Watch::start(&config, root.path(), port);
+    let mut w = Watch::start(&config, root.path());
+    let port = w.port;
     let first = w.expect("run 1:");
     assert!(
         first.contains("reran") && first.contains("synthesize"),
@@ -158,14 +163,19 @@ fn watch_reruns_what_an_edit_changes_survives_a_broken_config_and_stops_whole() 
     let second = w.expect("run 2:");
     assert!(second.contains("reran synthesize"), "{second}");
     assert!(!second.contains("analyse_exemplar"), "{second}");
+    w.expect("watching");
 
-    // A broken config is reported; watching goes on, and the fix reruns.
+    // A broken config is reported, in the terminal and on the served page; watching goes
+    // on, and the fix reruns.
     save(&config, b"method = \"synth2d\"\n[synthesize\n");
     w.expect("error:");
     w.expect("watching");
+    assert_eq!(get(port, "/version"), "3");
+    assert!(get(port, "/").contains("the run failed"));
     save(&config, seeded.as_bytes());
     let fixed = w.expect("run 4:");
     assert!(fixed.contains("nothing reran"), "{fixed}");
+    w.expect("watching");
 
     // An input file: its import and everything after rerun.
     let other = std::fs::read(repo().join("configs/assets/wood2.png")).unwrap();
@@ -222,8 +232,8 @@ fn the_served_page_reloads_itself_after_a_config_edit_in_chromium() {
     assert!(install.success(), "scripts/browser install failed");
     let root = tempfile::tempdir().unwrap();
     let config = editable_config(root.path());
-    let port = free_port();
-    let mut w = Watch::start(&config, root.path(), port);
+    let mut w = Watch::start(&config, root.path());
+    let port = w.port;
     w.expect("watching");
     let o = Command::new(repo().join("scripts/browser"))
         .args([
