@@ -32,6 +32,13 @@ pub struct ReportArgs {
 pub fn report(args: &ReportArgs, g: &Globals) -> Result<i32> {
     let start = Instant::now();
     let (html, default) = if Sweep::is_sweep_file(&args.config) {
+        if !args.sets.is_empty() {
+            anyhow::bail!(
+                "{}: --set applies to a config; a sweep's page shows its points as `texsyn \
+                 sweep` ran them (change the sweep file instead)",
+                args.config.display()
+            );
+        }
         let sweep = Sweep::load_saying(&args.config, true)?;
         let root = match &args.out {
             Some(out) => out.clone(),

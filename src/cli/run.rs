@@ -34,7 +34,7 @@ pub struct RunArgs {
     shard: Option<String>,
     /// Read and hash every output file and re-hash the exported bundles, instead of trusting
     /// the files whose size, times and inode are the ones recorded when they were written
-    /// (README, "Reruns").
+    /// (README, "Set up and run").
     #[arg(long)]
     recheck: bool,
 }

@@ -387,7 +387,7 @@ fn outputs_html(id: &str, outputs: &[PathBuf], budget: &mut u64) -> String {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let Ok(bytes) = std::fs::read(path) else {
+        let Ok(meta) = std::fs::metadata(path) else {
             let _ = write!(list, "<tr><td>{}</td><td>missing</td></tr>", escape(&name));
             continue;
         };
@@ -395,9 +395,14 @@ fn outputs_html(id: &str, outputs: &[PathBuf], budget: &mut u64) -> String {
             list,
             "<tr><td>{}</td><td class=\"num\" data-value=\"{}\">{}</td></tr>",
             escape(&name),
-            bytes.len(),
-            human(bytes.len() as u64)
+            meta.len(),
+            human(meta.len())
         );
+        // Only images and models are read (an OBJ may be hundreds of MB).
+        let shown = mime_of(path).is_some() || path.extension().is_some_and(|e| e == "glb");
+        let Some(bytes) = shown.then(|| std::fs::read(path).ok()).flatten() else {
+            continue;
+        };
         if mime_of(path).is_some() {
             let _ = write!(
                 images,
@@ -528,7 +533,25 @@ fn point_preview(out: &Path) -> Option<PathBuf> {
 
 /// A sweep's page, from its folder (what `texsyn sweep` left there).
 pub fn sweep_page(sweep: &Sweep, dir: &SweepDir, reload: Option<Reload<'_>>) -> String {
-    let table = Table::collect(sweep, dir, &Default::default());
+    // A point whose run left no report of its own but a log failed: its log's last error.
+    let failures = sweep
+        .points
+        .iter()
+        .filter(|p| {
+            RunReport::read(&dir.report(p))
+                .filter(|r| r.sets == p.sets)
+                .is_none()
+        })
+        .filter_map(|p| {
+            let log = dir.log(p);
+            log.is_file().then(|| {
+                let why = crate::ops::sweep::local::last_error(&log)
+                    .unwrap_or_else(|| "it wrote no report".into());
+                (p.index, format!("{why} (log: {})", log.display()))
+            })
+        })
+        .collect();
+    let table = Table::collect(sweep, dir, &failures);
     let title = format!("texsyn sweep: {}", sweep.path.display());
     let mut b = format!(
         "<h1>{}</h1>\n<p>base config <code>{}</code> · {} points · folder <code>{}</code></p>",
@@ -540,7 +563,10 @@ pub fn sweep_page(sweep: &Sweep, dir: &SweepDir, reload: Option<Reload<'_>>) -> 
     // Gallery.
     b += "<h2>Gallery</h2><div class=\"gallery\">";
     for (row, point) in table.rows.iter().zip(&sweep.points) {
-        let thumb = point_preview(&row.out)
+        // Only a point that ran shows its folder: after a failure it holds an older run's.
+        let thumb = (row.state == "ok")
+            .then(|| point_preview(&row.out))
+            .flatten()
             .and_then(|p| std::fs::read(p).ok())
             .and_then(|bytes| scaled_png(&bytes, 200));
         let img = match thumb {
@@ -659,7 +685,9 @@ pub fn sweep_page(sweep: &Sweep, dir: &SweepDir, reload: Option<Reload<'_>>) -> 
                 .collect::<Vec<_>>()
                 .join(" ")
         );
-        if let Some(report) = RunReport::read(&dir.report(point)) {
+        if let Some(report) = RunReport::read(&dir.report(point))
+            .filter(|r| r.sets == point.sets && row.state == "ok")
+        {
             b += "<table><thead><tr><th>node</th><th>stage</th><th>status</th><th>seconds</th>\
                   <th>content hash</th></tr></thead><tbody>";
             for n in &report.nodes {
@@ -675,7 +703,12 @@ pub fn sweep_page(sweep: &Sweep, dir: &SweepDir, reload: Option<Reload<'_>>) -> 
                 );
             }
             b += "</tbody></table>";
-            let outputs: Vec<PathBuf> = report.outputs.iter().map(|o| o.path.clone()).collect();
+            // The report's paths are relative to where `sweep` ran: take the names only.
+            let outputs: Vec<PathBuf> = report
+                .outputs
+                .iter()
+                .filter_map(|o| o.path.file_name().map(|n| row.out.join(n)))
+                .collect();
             let _ = write!(
                 b,
                 "<details><summary>outputs, previews and 3D view</summary>{}</details>",

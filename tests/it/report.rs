@@ -208,3 +208,55 @@ fn the_pages_open_in_chromium_with_no_errors_draw_the_model_and_sort() {
     let summary = browser(&["check-report", page.to_str().unwrap(), "--sort", "results"]);
     assert!(summary.contains("\"pass\": true"), "{summary}");
 }
+
+#[test]
+fn a_failed_point_shows_its_error_and_no_thumbnail_on_the_sweep_s_page() {
+    let root = tempfile::tempdir().unwrap();
+    std::fs::write(root.path().join("bad.png"), "not a png").unwrap();
+    let sweep = root.path().join("exemplars.toml");
+    std::fs::write(
+        &sweep,
+        format!(
+            "base = \"{}\"\n[axes]\n\"inputs.exemplar\" = [\"{}\", \"bad.png\"]\n",
+            repo().join("configs/synth2d.toml").display(),
+            repo().join("configs/assets/wood2.png").display()
+        ),
+    )
+    .unwrap();
+    let (cache, out) = (root.path().join("cache"), root.path().join("sweep"));
+    let common = [
+        "-q",
+        "--cache",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let mut args = vec!["sweep", sweep.to_str().unwrap()];
+    args.extend(common);
+    let o = texsyn(&args, &repo());
+    assert!(
+        !o.status.success(),
+        "a sweep with a failed point exits non-zero"
+    );
+    let mut args = vec!["report", sweep.to_str().unwrap()];
+    args.extend(common);
+    succeeded(texsyn(&args, &repo()));
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let failed = &html[html.find("<section id=\"point-001\">").unwrap()..];
+    assert!(
+        failed.contains("state failed"),
+        "the failed point is not marked"
+    );
+    assert!(
+        failed.contains("cannot decode image"),
+        "its error is not shown"
+    );
+    let gallery =
+        &html[html.find("class=\"gallery\"").unwrap()..html.find("id=\"results\"").unwrap()];
+    assert_eq!(
+        gallery.matches("<img src=").count(),
+        1,
+        "only the point that ran has a thumbnail"
+    );
+    assert!(gallery.contains("no preview (failed)"));
+}

@@ -17,11 +17,11 @@
 //! standing man modelled Z-up gets +Z (support 82 % of his footprint against 0 % on +Y), the
 //! mushroom +Z (98 % against 39 %), the cow keeps +Y (52 %), the elephant and the Chinese
 //! dragon keep +Y (no side reaches 10 %), a knot lies flat (±Z, 35 %).
-
 //!
-//! A node's key holds `"auto"`, not the guess (the guess follows from the mesh, an input of
-//! the node): a change to this rule changes what a cached key stands for, so it must come with
-//! a version bump of every node that calls [`UpAxis::resolve`].
+//! A node's key leaves `up` out when it is `"auto"` and never holds the guess (the guess
+//! follows from the mesh, an input of the node): a change to this rule changes what a cached
+//! key stands for, so it must come with a version bump of every node that calls
+//! [`UpAxis::resolve`].
 
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
