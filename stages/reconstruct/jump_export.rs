@@ -16,7 +16,7 @@ use texsyn_core::algorithm::Failure;
 
 /// The `jump_blend_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("jump_blend_export", 5);
+    texsyn_core::algorithm::Algorithm::new("jump_blend_export", 6);
 
 /// An image textured onto the surface with the walk's coordinates: the exemplar itself or a
 /// map aligned with it. Its original file is copied into the export as it is.
@@ -61,7 +61,7 @@ impl JumpExportError {
 }
 
 /// The files of the jump-map export: textured OBJ/MTL/PNG, the baked .glb and its textures,
-/// the preview and `patches.png`.
+/// the preview, `patches.png` and (up to [`PATCH_MODEL_TRIANGLES`]) `patches.glb`.
 pub fn export_jump_textured(
     mesh: &Mesh,
     param: &ParamParts,
@@ -114,7 +114,7 @@ pub fn export_jump_textured(
         sets: &sets,
         texture: ramp.view(),
     };
-    Ok(export_textured_mesh(
+    let mut files = export_textured_mesh(
         mesh,
         &single,
         &layout,
@@ -123,7 +123,54 @@ pub fn export_jump_textured(
         &[("patches.png", &patches)],
         p,
         progress,
-    )?)
+    )?;
+    if mesh.triangles.len() <= PATCH_MODEL_TRIANGLES {
+        files.push(("patches.glb".into(), patch_model(mesh, &single, &ramp)));
+    } else {
+        tracing::info!(
+            "reconstruct: no patches.glb for {} triangles (it repeats every corner; at most {} \
+             are written): patches.png shows the patches",
+            mesh.triangles.len(),
+            PATCH_MODEL_TRIANGLES
+        );
+    }
+    Ok(files)
+}
+
+/// Largest mesh whose patch view is written as a model (three vertices a triangle: 300k
+/// triangles make about 40 MB).
+pub const PATCH_MODEL_TRIANGLES: usize = 300_000;
+
+/// The patch view as a model (`patches.glb`, the 3D counterpart of `patches.png` and of the
+/// paper's Fig. 3): every triangle textured through its own exemplar coordinates (`single`,
+/// the walk's one set per triangle, before the §4.4 blend) with the colour `ramp` in place of
+/// the exemplar, so a patch shows as one smooth ramp and its border as a jump.
+fn patch_model(mesh: &Mesh, single: &[[Vec2; 3]], ramp: &Image) -> Vec<u8> {
+    let (w, h) = (ramp.width, ramp.height);
+    let normals = mesh.vertex_normals();
+    let mut glb = crate::export::GlbMesh {
+        name: "patches".into(),
+        ..Default::default()
+    };
+    let mut uvs = Vec::with_capacity(3 * mesh.triangles.len());
+    for (t, corners) in mesh.triangles.iter().zip(single) {
+        for (&v, &a) in t.iter().zip(corners) {
+            glb.positions.push(mesh.positions[v as usize]);
+            glb.normals.push(normals[v as usize]);
+            let uv = crate::image::texel_to_uv(a, w, h);
+            // glTF's v runs down the image.
+            uvs.push(Vec2::new(uv.x, 1.0 - uv.y));
+        }
+    }
+    glb.texcoords = vec![uvs];
+    glb.indices = (0..glb.positions.len() as u32).collect();
+    glb.material = crate::export::GlbMaterial {
+        name: "patches".into(),
+        base_color_png: Some(crate::export::encode_png(&ramp.to_rgba8(), false)),
+        double_sided: true,
+        ..Default::default()
+    };
+    crate::export::write_glb(&glb)
 }
 
 /// How far (texels, plus a fraction of the edge) the walk's addresses along an edge may stray

@@ -59,6 +59,8 @@ fn a_run_s_page_embeds_its_model_previews_and_dag_and_says_whether_its_lock_veri
     // The model in the 3D view is the run's .glb, byte for byte.
     assert_eq!(html.matches("class=\"texsyn-viewer\"").count(), 1);
     assert!(html.contains("&quot;label&quot;:&quot;textured&quot;"));
+    // Jump maps also have a patch view: a second model, toggled in the same view.
+    assert!(html.contains("&quot;label&quot;:&quot;patches&quot;"));
     let glb = base64::engine::general_purpose::STANDARD
         .decode(embedded(&html, "run-glb-0"))
         .unwrap();
