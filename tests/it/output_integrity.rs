@@ -61,7 +61,13 @@ fn texsyn(args: &[&str]) -> Output {
 
 /// `texsyn run` of synth2d with `seed` into `out`, with the cache at `cache`.
 fn run(cache: &Path, out: &Path, seed: u32) -> Output {
-    texsyn(&[
+    run_with(cache, out, seed, &[])
+}
+
+/// [`run`] with `extra` arguments.
+fn run_with(cache: &Path, out: &Path, seed: u32, extra: &[&str]) -> Output {
+    let seed = format!("synthesize.seed={seed}");
+    let mut args = vec![
         "run",
         CONFIG,
         "-q",
@@ -70,8 +76,10 @@ fn run(cache: &Path, out: &Path, seed: u32) -> Output {
         "--out",
         out.to_str().unwrap(),
         "--set",
-        &format!("synthesize.seed={seed}"),
-    ])
+        &seed,
+    ];
+    args.extend(extra);
+    texsyn(&args)
 }
 
 fn run_ok(cache: &Path, out: &Path, seed: u32) {
@@ -459,21 +467,9 @@ fn damage_every_object(cache: &Path) {
 /// `texsyn run` of synth2d seed 1 with `extra` flags; its `--report` JSON.
 fn run_report(cache: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
     let report = out.with_extension("report.json");
-    let mut args = vec![
-        "run",
-        CONFIG,
-        "-q",
-        "--cache",
-        cache.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--set",
-        "synthesize.seed=1",
-        "--report",
-        report.to_str().unwrap(),
-    ];
+    let mut args = vec!["--report", report.to_str().unwrap()];
     args.extend(extra);
-    let o = texsyn(&args);
+    let o = run_with(cache, out, 1, &args);
     assert!(o.ok, "run {extra:?} failed: {}", o.stderr);
     serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
 }

@@ -96,33 +96,51 @@ fn a_run_s_page_embeds_its_model_previews_and_dag_and_says_whether_its_lock_veri
     assert!(other.contains("<g class=\"node ran\""));
 }
 
-#[test]
-fn a_sweep_s_page_has_a_thumbnail_a_row_a_filter_value_and_a_section_per_point() {
-    let root = tempfile::tempdir().unwrap();
-    let sweep = root.path().join("seeds.toml");
+/// Runs `texsyn sweep` of a sweep file with `axes` (TOML lines under `[axes]`) over `base`
+/// (a config of the repository) in `root`, then `texsyn report` of it; whether the sweep
+/// succeeded and the page's text.
+fn sweep_and_report(root: &Path, base: &str, axes: &str) -> (bool, String) {
+    let sweep = root.join("sweep.toml");
     std::fs::write(
         &sweep,
         format!(
-            "base = \"{}\"\n[axes]\n\"synthesize.seed\" = [1, 2, 3]\n",
-            repo().join("configs/synth2d.toml").display()
+            "base = \"{}\"\n[axes]\n{axes}\n",
+            repo().join(base).display()
         ),
     )
     .unwrap();
-    let (cache, out) = (root.path().join("cache"), root.path().join("sweep"));
-    let common = [
-        "-q",
-        "--cache",
-        cache.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    let mut args = vec!["sweep", sweep.to_str().unwrap()];
-    args.extend(common);
-    succeeded(texsyn(&args, &repo()));
-    let mut args = vec!["report", sweep.to_str().unwrap()];
-    args.extend(common);
-    succeeded(texsyn(&args, &repo()));
-    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let (cache, out) = (root.join("cache"), root.join("sweep"));
+    let run = |cmd: &str| {
+        texsyn(
+            &[
+                cmd,
+                sweep.to_str().unwrap(),
+                "-q",
+                "--cache",
+                cache.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &repo(),
+        )
+    };
+    let swept = run("sweep").status.success();
+    succeeded(run("report"));
+    (
+        swept,
+        std::fs::read_to_string(out.join("report.html")).unwrap(),
+    )
+}
+
+#[test]
+fn a_sweep_s_page_has_a_thumbnail_a_row_a_filter_value_and_a_section_per_point() {
+    let root = tempfile::tempdir().unwrap();
+    let (swept, html) = sweep_and_report(
+        root.path(),
+        "configs/synth2d.toml",
+        "\"synthesize.seed\" = [1, 2, 3]",
+    );
+    assert!(swept);
     assert_offline(&html);
     for i in 0..3 {
         let id = format!("point-{i:03}");
@@ -170,43 +188,22 @@ fn browser(args: &[&str]) -> String {
 #[test]
 fn the_pages_open_in_chromium_with_no_errors_draw_the_model_and_sort() {
     crate::full_tier_only!("headless Chromium");
-    let install = std::process::Command::new(repo().join("scripts/browser"))
-        .arg("install")
-        .current_dir(repo())
-        .status()
-        .unwrap();
-    assert!(install.success(), "scripts/browser install failed");
+    crate::common::install_browser();
     let root = tempfile::tempdir().unwrap();
     demo_report(root.path(), &[]);
     let page = root.path().join("out/report.html");
     let summary = browser(&["check-report", page.to_str().unwrap(), "--sort", "nodes"]);
     assert!(summary.contains("\"pass\": true"), "{summary}");
 
-    let sweep = root.path().join("seeds.toml");
-    std::fs::write(
-        &sweep,
-        format!(
-            "base = \"{}\"\n[axes]\n\"synthesize.seed\" = [3, 1, 2]\n",
-            repo().join("configs/demo.toml").display()
-        ),
-    )
-    .unwrap();
-    let (cache, out) = (root.path().join("cache"), root.path().join("sweep"));
-    for cmd in ["sweep", "report"] {
-        succeeded(texsyn(
-            &[
-                cmd,
-                sweep.to_str().unwrap(),
-                "-q",
-                "--cache",
-                cache.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ],
-            &repo(),
-        ));
-    }
-    let page = out.join("report.html");
+    let sweep_root = root.path().join("seeds");
+    std::fs::create_dir(&sweep_root).unwrap();
+    let (swept, _) = sweep_and_report(
+        &sweep_root,
+        "configs/demo.toml",
+        "\"synthesize.seed\" = [3, 1, 2]",
+    );
+    assert!(swept);
+    let page = sweep_root.join("sweep/report.html");
     let summary = browser(&["check-report", page.to_str().unwrap(), "--sort", "results"]);
     assert!(summary.contains("\"pass\": true"), "{summary}");
 }
@@ -215,35 +212,16 @@ fn the_pages_open_in_chromium_with_no_errors_draw_the_model_and_sort() {
 fn a_failed_point_shows_its_error_and_no_thumbnail_on_the_sweep_s_page() {
     let root = tempfile::tempdir().unwrap();
     std::fs::write(root.path().join("bad.png"), "not a png").unwrap();
-    let sweep = root.path().join("exemplars.toml");
-    std::fs::write(
-        &sweep,
-        format!(
-            "base = \"{}\"\n[axes]\n\"inputs.exemplar\" = [\"{}\", \"bad.png\"]\n",
-            repo().join("configs/synth2d.toml").display(),
-            repo().join("configs/assets/wood2.png").display()
+    let wood = repo().join("configs/assets/wood2.png");
+    let (swept, html) = sweep_and_report(
+        root.path(),
+        "configs/synth2d.toml",
+        &format!(
+            "\"inputs.exemplar\" = [\"{}\", \"bad.png\"]",
+            wood.display()
         ),
-    )
-    .unwrap();
-    let (cache, out) = (root.path().join("cache"), root.path().join("sweep"));
-    let common = [
-        "-q",
-        "--cache",
-        cache.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    let mut args = vec!["sweep", sweep.to_str().unwrap()];
-    args.extend(common);
-    let o = texsyn(&args, &repo());
-    assert!(
-        !o.status.success(),
-        "a sweep with a failed point exits non-zero"
     );
-    let mut args = vec!["report", sweep.to_str().unwrap()];
-    args.extend(common);
-    succeeded(texsyn(&args, &repo()));
-    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(!swept, "a sweep with a failed point exits non-zero");
     let failed = &html[html.find("<section id=\"point-001\">").unwrap()..];
     assert!(
         failed.contains("state failed"),

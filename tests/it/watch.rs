@@ -224,12 +224,7 @@ fn watch_reruns_what_an_edit_changes_survives_a_broken_config_and_stops_whole() 
 #[test]
 fn the_served_page_reloads_itself_after_a_config_edit_in_chromium() {
     crate::full_tier_only!("headless Chromium");
-    let install = Command::new(repo().join("scripts/browser"))
-        .arg("install")
-        .current_dir(repo())
-        .status()
-        .unwrap();
-    assert!(install.success(), "scripts/browser install failed");
+    crate::common::install_browser();
     let root = tempfile::tempdir().unwrap();
     let config = editable_config(root.path());
     let mut w = Watch::start(&config, root.path());

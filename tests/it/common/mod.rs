@@ -38,6 +38,17 @@ pub fn say_skipped(why: &str) {
     );
 }
 
+/// Installs the headless Chromium and playwright-core of the full tier's browser checks
+/// (`scripts/browser install`, idempotent).
+pub fn install_browser() {
+    let status = std::process::Command::new(repo().join("scripts/browser"))
+        .arg("install")
+        .current_dir(repo())
+        .status()
+        .unwrap();
+    assert!(status.success(), "scripts/browser install failed");
+}
+
 /// The first line of a full-tier test: outside the full tier it says so and returns.
 #[macro_export]
 macro_rules! full_tier_only {
