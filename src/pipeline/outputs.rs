@@ -189,13 +189,10 @@ pub fn materialize_checked(
         OutputCheck::Stamps(records) => super::stamps::record_path(records, dir),
         OutputCheck::Rehash => None,
     };
-    // The folder's clock before anything in it is looked at: only files older than it get a
-    // stamp (see `stamps`); without it nothing is recorded.
-    let clock = record
-        .as_ref()
-        .and_then(|_| super::stamps::folder_clock(dir));
-    let record = record.filter(|_| clock.is_some());
-    let clock = clock.unwrap_or(i128::MIN);
+    // The folder's clock, read (from a probe file) before the first file that is not vouched
+    // for is looked at: only files older than it get a stamp (see `stamps`). A rerun whose
+    // files are all vouched for never needs it, and makes no probe.
+    let mut clock: Option<i128> = None;
     let known = record.as_deref().map(Stamps::read).unwrap_or_default();
     let mut seen = Stamps::default();
     let names: Vec<&str> = files
@@ -227,14 +224,27 @@ pub fn materialize_checked(
         // Read only a regular file of the right length (a symlink may point anywhere), and
         // only when its stamp does not vouch for it.
         let meta = fs::symlink_metadata(&path).ok().filter(|m| m.is_file());
+        let vouched = meta
+            .as_ref()
+            .is_some_and(|m| known.vouches(&entry.name, m, &entry.hash));
+        // A file that is read is stamped with its stat taken after the clock and before the
+        // read: any later change moves a time past the clock.
+        let mut read_meta = None;
         let same = had_old
-            && (meta
-                .as_ref()
-                .is_some_and(|m| known.vouches(&entry.name, m, &entry.hash))
-                || (fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == entry.len)
-                    && fs::read(&path).is_ok_and(|b| ContentHash::of(&b) == entry.hash)));
-        if same {
-            seen.record(&entry.name, meta.as_ref(), entry.hash, clock);
+            && (vouched || {
+                if record.is_some() && clock.is_none() {
+                    clock = Some(super::stamps::folder_clock(dir).unwrap_or(i128::MIN));
+                }
+                read_meta = fs::symlink_metadata(&path).ok().filter(|m| m.is_file());
+                fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == entry.len)
+                    && fs::read(&path).is_ok_and(|b| ContentHash::of(&b) == entry.hash)
+            });
+        if vouched {
+            // Its stamp stands as it was.
+            seen.record(&entry.name, meta.as_ref(), entry.hash, i128::MAX);
+        } else if same {
+            let clock = clock.unwrap_or(i128::MIN);
+            seen.record(&entry.name, read_meta.as_ref(), entry.hash, clock);
         } else {
             changed.push((v, e, had_old));
         }
@@ -325,7 +335,7 @@ pub fn materialize_checked(
         let entry = &views[v].entries[e];
         // Written in this run's tick: forgotten, and read once by the next run.
         let meta = fs::symlink_metadata(dir.join(&entry.name)).ok();
-        seen.record(&entry.name, meta.as_ref(), entry.hash, clock);
+        seen.record(&entry.name, meta.as_ref(), entry.hash, i128::MIN);
     }
     if let Some(record) = &record {
         let mut stamps = known;

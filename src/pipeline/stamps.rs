@@ -16,10 +16,11 @@
 //! A file could be modified within the same clock tick (file times are coarse, a few
 //! milliseconds) as it was last written, after texsyn looked at it, and keep its stat. So a
 //! stamp is recorded only for a file whose modification and change times are both older than
-//! the output folder's clock when texsyn began looking ([`folder_clock`], read off the folder's
-//! own filesystem, which may not be the cache's): any later change then moves a time. A file
-//! written or touched in the run's own tick is left out and hashed on the next run, which then
-//! records it ("racily clean", as git calls it).
+//! the output folder's clock, read ([`folder_clock`], off the folder's own filesystem, which may
+//! not be the cache's) before the file's stat and bytes were: any later change then moves a
+//! time. A file written or touched in the run's own tick is left out and hashed on the next
+//! run, which then records it ("racily clean", as git calls it). A rerun whose files are all
+//! vouched for reads no clock.
 //!
 //! The record is a cache: losing it, or a damaged one, costs one full read; it is written
 //! without fsync (temporary file, then rename) and only when it changes. `texsyn run
