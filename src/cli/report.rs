@@ -89,6 +89,9 @@ pub fn run_html(
         seconds: o.seconds,
         peak_memory_bytes: texsyn::memory::peak_resident(),
         reload,
+        up: texsyn::config::Config::load(config, sets)
+            .ok()
+            .and_then(|c| texsyn::report::preview_up(&c)),
     };
     Ok(run_page(&view))
 }

@@ -65,6 +65,28 @@ pub struct RunView<'a> {
     pub peak_memory_bytes: Option<u64>,
     /// `watch --serve`: where the page learns that a rerun made a newer one.
     pub reload: Option<Reload<'a>>,
+    /// The up direction the 3D view turns onto its +Y ([`preview_up`]).
+    pub up: Option<[f32; 3]>,
+}
+
+/// The up direction of a config's previews, for the 3D view: `reconstruct.up` when it is a
+/// vector, else (`"auto"` or absent) the guess for the mesh `inputs.mesh` names
+/// ([`crate::render::up_axis::guess_up`]); `None` without a mesh or when it cannot be read.
+pub fn preview_up(config: &crate::config::Config) -> Option<[f32; 3]> {
+    use crate::render::up_axis::{UpAxis, guess_up};
+    let given = config
+        .table
+        .get("reconstruct")
+        .and_then(|r| r.get("up"))
+        .and_then(|u| u.clone().try_into::<UpAxis>().ok());
+    if let Some(UpAxis::Given(v)) = given {
+        return Some(v);
+    }
+    let mesh = config.table.get("inputs")?.get("mesh")?.as_str()?;
+    let path = config.resolve(Path::new(mesh));
+    let bytes = std::fs::read(&path).ok()?;
+    let mesh = crate::geom::io::read_mesh_bytes(&path, &bytes).ok()?;
+    Some(guess_up(&mesh.positions, &mesh.triangles).to_array())
 }
 
 /// A served page's reload: `url` answers the current version; the page reloads itself when
@@ -148,7 +170,7 @@ fn image_tag(path: &Path, bytes: &[u8], alt: &str) -> String {
 
 /// The models of `glbs` (label, bytes) as one viewer and its data elements, ids prefixed by
 /// `id`; models beyond `budget` bytes are named and left out.
-fn viewer(id: &str, glbs: &[(String, Vec<u8>)], budget: &mut u64) -> String {
+fn viewer(id: &str, glbs: &[(String, Vec<u8>)], up: Option<[f32; 3]>, budget: &mut u64) -> String {
     let mut data = String::new();
     let mut models = Vec::new();
     let mut left_out = Vec::new();
@@ -164,7 +186,11 @@ fn viewer(id: &str, glbs: &[(String, Vec<u8>)], budget: &mut u64) -> String {
             "<script type=\"application/octet-stream\" id=\"{data_id}\">{}</script>",
             base64(bytes)
         );
-        models.push(serde_json::json!({ "label": label, "data": data_id }));
+        let mut model = serde_json::json!({ "label": label, "data": data_id });
+        if let Some(up) = up {
+            model["up"] = serde_json::json!(up);
+        }
+        models.push(model);
     }
     let mut s = String::new();
     if !models.is_empty() {
@@ -375,7 +401,7 @@ fn lock_html(lock: &LockStatus) -> String {
 }
 
 /// The outputs' images and models, read from `dir` (names from `outputs`).
-fn outputs_html(id: &str, outputs: &[PathBuf], budget: &mut u64) -> String {
+fn outputs_html(id: &str, outputs: &[PathBuf], up: Option<[f32; 3]>, budget: &mut u64) -> String {
     let mut images = String::new();
     let mut glbs = Vec::new();
     let mut list = String::from(
@@ -423,7 +449,7 @@ fn outputs_html(id: &str, outputs: &[PathBuf], budget: &mut u64) -> String {
     if !glbs.is_empty() {
         s += "<h3>3D view</h3><p class=\"note\">Drag to orbit, scroll to zoom, right-drag to \
               pan.</p>";
-        s += &viewer(id, &glbs, budget);
+        s += &viewer(id, &glbs, up, budget);
     }
     if !images.is_empty() {
         let _ = write!(s, "<h3>Images</h3><div class=\"images\">{images}</div>");
@@ -510,7 +536,7 @@ pub fn run_page(v: &RunView<'_>) -> String {
     b += "<h2>Outputs</h2>";
     let outputs: Vec<PathBuf> = v.outputs.iter().map(|o| o.0.clone()).collect();
     let mut budget = MAX_MODELS_BYTES;
-    b += &outputs_html("run", &outputs, &mut budget);
+    b += &outputs_html("run", &outputs, v.up, &mut budget);
     page(&title, &b, v.reload)
 }
 
@@ -712,7 +738,12 @@ pub fn sweep_page(sweep: &Sweep, dir: &SweepDir, reload: Option<Reload<'_>>) -> 
             let _ = write!(
                 b,
                 "<details><summary>outputs, previews and 3D view</summary>{}</details>",
-                outputs_html(&format!("p{:03}", row.index), &outputs, &mut budget)
+                outputs_html(
+                    &format!("p{:03}", row.index),
+                    &outputs,
+                    sweep.point_config(point).ok().and_then(|c| preview_up(&c)),
+                    &mut budget
+                )
             );
         }
         b += "<p><a href=\"#results\">back to the table</a></p></section>";

@@ -116,6 +116,9 @@ async function checkViewer(page, i) {
   }
   if (failures.length) return;
   // Orbit: a drag must change the picture, "reset view" must bring it back.
+  // The mouse acts in the viewport: bring the canvas into it first.
+  await div.locator('canvas').scrollIntoViewIfNeeded();
+  await nextFrames(page);
   const before = await page.evaluate(canvasStats, [i, BG, TOLERANCE]);
   const box = await div.locator('canvas').boundingBox();
   const cx = box.x + box.width / 2;

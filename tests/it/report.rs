@@ -61,6 +61,8 @@ fn a_run_s_page_embeds_its_model_previews_and_dag_and_says_whether_its_lock_veri
     assert!(html.contains("&quot;label&quot;:&quot;textured&quot;"));
     // Jump maps also have a patch view: a second model, toggled in the same view.
     assert!(html.contains("&quot;label&quot;:&quot;patches&quot;"));
+    // The 3D view stands the model as the previews do: the demo gives +Y.
+    assert!(html.contains("&quot;up&quot;:[0.0,1.0,0.0]"));
     let glb = base64::engine::general_purpose::STANDARD
         .decode(embedded(&html, "run-glb-0"))
         .unwrap();
@@ -239,4 +241,28 @@ fn a_failed_point_shows_its_error_and_no_thumbnail_on_the_sweep_s_page() {
         "only the point that ran has a thumbnail"
     );
     assert!(gallery.contains("no preview (failed)"));
+}
+
+#[test]
+fn the_3d_view_stands_a_z_up_mesh_up_as_the_previews_do() {
+    // graph_matching_open leaves reconstruct.up at "auto"; its mushroom is modelled Z-up.
+    let root = tempfile::tempdir().unwrap();
+    let out = root.path().join("out");
+    succeeded(texsyn(
+        &[
+            "report",
+            "configs/graph_matching_open.toml",
+            "-q",
+            "--cache",
+            root.path().join("cache").to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &repo(),
+    ));
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        html.contains("&quot;up&quot;:[0.0,0.0,1.0]"),
+        "the mushroom is not stood on +Z"
+    );
 }

@@ -4,7 +4,8 @@
 // Contract with the page written by `texsyn report`:
 //   <script type="application/octet-stream" id="ID">BASE64 of a .glb</script>
 //   <div class="texsyn-viewer"
-//        data-models='[{"label":"textured","data":"ID1"},{"label":"patches","data":"ID2"}]'></div>
+//        data-models='[{"label":"textured","data":"ID1","up":[0,0,1]},{"label":"patches","data":"ID2"}]'></div>
+//   ("up", optional: the model's up direction, turned onto the view's +Y)
 // Every .texsyn-viewer gets a toolbar (one toggle button per model when there are several,
 // and "reset view") and a WebGL canvas with orbit controls. A viewer is mounted when it first
 // comes near the viewport (so viewers inside closed <details> cost nothing until opened), and
@@ -68,6 +69,13 @@ function modelBytes(id) {
 
 const live = []; // viewers holding a WebGL context, least recently visible first
 
+/** A model's `up` ([x, y, z], optional) as a unit vector, or null when absent or unusable. */
+function upOf(up) {
+  if (!Array.isArray(up) || up.length !== 3 || !up.every(Number.isFinite)) return null;
+  const v = new Vector3(up[0], up[1], up[2]);
+  return v.lengthSq() > 0 ? v.normalize() : null;
+}
+
 class Viewer {
   constructor(el, index) {
     this.el = el;
@@ -90,7 +98,7 @@ class Viewer {
       return;
     }
     this.models = list.map((m) => ({ label: String(m.label ?? m.data), data: String(m.data),
-      object: null, box: null, sphere: null, promise: null, error: null }));
+      up: upOf(m.up), object: null, box: null, sphere: null, promise: null, error: null }));
     this.status.models = this.models.map((m) => ({ label: m.label, loaded: false, error: null }));
     this.index = index;
 
@@ -248,6 +256,11 @@ class Viewer {
         .then(() => new GLTFLoader().parseAsync(modelBytes(m.data), ''))
         .then((gltf) => {
           m.object = gltf.scene;
+          // Stand the model up: its up direction (the one texsyn's previews use) onto +Y.
+          if (m.up) {
+            m.object.quaternion.setFromUnitVectors(m.up, new Vector3(0, 1, 0));
+            m.object.updateMatrixWorld(true);
+          }
           m.box = new Box3().setFromObject(m.object);
           m.sphere = m.box.getBoundingSphere(new Sphere());
           if (!(m.sphere.radius > 0) || !Number.isFinite(m.sphere.radius)) {
