@@ -86,8 +86,8 @@ impl Method for GraphMatchingMethod {
             config.check(key, verdict)?;
         }
         let spec = NodeSpec::of(Stage::Field, sweep_field::KEYS_NODE).named("field.keys");
-        let keys = dag.node(spec, c.field.keys.clone(), mesh, |_, keys, mesh| {
-            Ok(sweep_field::keys_node(&mesh, keys)?)
+        let keys = dag.node(spec, c.field.key_points(), mesh, |_, points, mesh| {
+            Ok(sweep_field::keys_node(&mesh, points)?)
         });
         let stack = dag.node(
             NodeSpec::of(Stage::AnalyseExemplar, gaussian_stack::NODE),

@@ -354,7 +354,7 @@ fn extremes_along(mesh: &Mesh, referenced: &[bool], axis: Vec3) -> (u32, u32) {
     (lo.1, hi.1)
 }
 
-fn farthest_from(mesh: &Mesh, referenced: &[bool], from: &[u32]) -> u32 {
+pub(crate) fn farthest_from(mesh: &Mesh, referenced: &[bool], from: &[u32]) -> u32 {
     let mut best = (f32::NEG_INFINITY, 0u32);
     for (v, p) in mesh.positions.iter().enumerate() {
         if referenced[v] {

@@ -17,6 +17,14 @@
 //!   flow from a source to a sink at the two ends of the shape's longest axis (or `axis`),
 //!   computed on level 0 ([`super::orientation_field`]), so a config runs on any mesh. Level 0
 //!   is then not relaxed (that field is already smooth); finer levels are.
+//! - Sinks and sources (beyond the paper, as the jump-map method has them): level 0's field is
+//!   the flow of the harmonic potential between them ([`super::orientation_field`]), the keys
+//!   turning it where they are; level 0 is then not relaxed, finer levels are, with the keys
+//!   fixed. The singularities stay where the user put them, which averaging from keys alone
+//!   cannot promise.
+//! - Rotation: every finished vector is turned by `rotation` degrees about its vertex's normal
+//!   (counter-clockwise seen from outside), turning the texture against the field; the sweep
+//!   follows the turned vectors.
 //! - Sweep (§3.1.1–3.1.2): a value increasing along the orientation, used to order the first
 //!   level's visits. From a start vertex (the first key, or the default field's source) each
 //!   vertex gets the mean over its neighbours `u` of `s(u) + (p − p_u)·ō`, `ō` the mean of the
@@ -24,8 +32,10 @@
 //!   sweep is a relaxation of the same relation. Only level 0 needs it (later levels are
 //!   visited in random order, §3.1.2), so only level 0's values are stored.
 
+use super::feature_field::rotate_about_normals;
 use super::orientation_field::{
-    Anchor, FieldError, FieldParams, orientation_field, resolve_point, tangent,
+    Anchor, FieldError, FieldParams, Point, farthest_from, orientation_field, resolve_point,
+    tangent,
 };
 use crate::check::{ParamError, check_range};
 use crate::geom::Mesh;
@@ -54,6 +64,13 @@ pub struct SweepFieldParams {
     /// Key orientation vectors (`at` or `vertex`, and `direction`), fixed while the rest is
     /// averaged. Default: none (the flow along the longest axis).
     pub keys: Vec<Anchor>,
+    /// Points the field flows into (`at` or `vertex`). Default: none. Left out of the node's
+    /// key when empty, as are `sources` and `rotation` at their defaults.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sinks: Vec<Point>,
+    /// Points the field flows out of. Default: none.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sources: Vec<Point>,
     /// The axis of the default field (no keys). Default: the bounding box's longest side.
     pub axis: Option<[f32; 3]>,
     /// A level is converged when no vector moves farther than this in a pass,
@@ -61,6 +78,14 @@ pub struct SweepFieldParams {
     pub tolerance: f32,
     /// Cap on the averaging passes per level, 1..=100000. Default: 500.
     pub max_passes: u32,
+    /// Degrees (-180..=180) every vector is turned about its normal: the texture turned
+    /// against the field. Default: 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub rotation: f32,
+}
+
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
 }
 
 impl Default for SweepFieldParams {
@@ -70,6 +95,9 @@ impl Default for SweepFieldParams {
             axis: None,
             tolerance: 1e-3,
             max_passes: 500,
+            sinks: Vec::new(),
+            sources: Vec::new(),
+            rotation: 0.0,
         }
     }
 }
@@ -78,6 +106,7 @@ impl SweepFieldParams {
     pub fn validate(&self) -> Result<(), ParamError> {
         check_range("field.tolerance", self.tolerance, 1e-6, 0.5)?;
         check_range("field.max_passes", self.max_passes, 1, 100_000)?;
+        check_range("field.rotation", self.rotation, -180.0, 180.0)?;
         let usable =
             |v: &[f32; 3]| v.iter().all(|x| x.is_finite()) && Vec3::from(*v).length() > 1e-12;
         for (i, k) in self.keys.iter().enumerate() {
@@ -107,12 +136,57 @@ pub struct FieldKeys {
     pub directions: Vec<Vec3>,
 }
 
-/// Resolves the keys on the input mesh; an error names the key (`field.keys[i]`).
+/// What the `field.keys` node reads of `[field]`: the keys, resolved into its artifact, and the
+/// sinks and sources, only checked there (the field node resolves them on level 0, which keeps
+/// the input's vertices). Without sinks and sources its canonical bytes are the keys' alone.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct KeyPoints {
+    pub keys: Vec<Anchor>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sinks: Vec<Point>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sources: Vec<Point>,
+}
+
+impl SweepFieldParams {
+    /// The part of `[field]` the `field.keys` node reads.
+    pub fn key_points(&self) -> KeyPoints {
+        KeyPoints {
+            keys: self.keys.clone(),
+            sinks: self.sinks.clone(),
+            sources: self.sources.clone(),
+        }
+    }
+}
+
+/// Resolves the keys on the input mesh and checks the sinks and sources there; an error names
+/// the entry (`field.keys[i]`, `field.sinks[i]`, `field.sources[i]`).
 pub fn resolve_keys(mesh: &Mesh, p: &SweepFieldParams) -> Result<FieldKeys, FieldError> {
     let mut referenced = vec![false; mesh.vertex_count()];
     for t in &mesh.triangles {
         for &v in t {
             referenced[v as usize] = true;
+        }
+    }
+    let mut sinks = Vec::new();
+    for (i, q) in p.sinks.iter().enumerate() {
+        sinks.push(resolve_point(
+            mesh,
+            &referenced,
+            "sinks",
+            i,
+            &q.at,
+            &q.vertex,
+        )?);
+    }
+    for (i, q) in p.sources.iter().enumerate() {
+        let v = resolve_point(mesh, &referenced, "sources", i, &q.at, &q.vertex)?;
+        if sinks.contains(&v) {
+            return Err(FieldError::Value {
+                what: "sources",
+                index: i,
+                message: format!("vertex {v} is also a sink"),
+            });
         }
     }
     let normals = mesh.vertex_normals();
@@ -159,7 +233,68 @@ pub fn sweep_field(
     let level0 = h.level(0);
     let mut passes = Vec::new();
     let start;
-    if keys.vertices.is_empty() {
+    let flow = !p.sinks.is_empty() || !p.sources.is_empty();
+    if flow {
+        // The potential's flow on level 0, turned by the keys (as jump maps' anchors).
+        let tri = level0.to_triangles();
+        let anchors = keys
+            .vertices
+            .iter()
+            .zip(&keys.directions)
+            .map(|(&v, d)| Anchor {
+                at: None,
+                vertex: Some(v),
+                direction: d.to_array(),
+            })
+            .collect();
+        let fp = FieldParams {
+            anchors,
+            sinks: p.sinks.clone(),
+            sources: p.sources.clone(),
+            axis: p.axis,
+            ..Default::default()
+        };
+        let f = orientation_field(&tri, &fp)?;
+        let normals = tri.vertex_normals();
+        for (v, d) in f.iter().enumerate() {
+            orientation[v] = *d;
+            defined[v] = *d != Vec3::ZERO;
+            // Level 0 holds the solve's field; finer levels only fill in between, so the
+            // singularities stay at the vertices the user named.
+            fixed[v] = true;
+        }
+        for (&v, &d) in keys.vertices.iter().zip(&keys.directions) {
+            orientation[v as usize] = tangent(d, normals[v as usize]);
+        }
+        passes.push(0);
+        let mut referenced = vec![false; tri.vertex_count()];
+        for t in &tri.triangles {
+            for &v in t {
+                referenced[v as usize] = true;
+            }
+        }
+        let resolve = |what, points: &[Point]| {
+            (points.iter().enumerate())
+                .map(|(i, q)| resolve_point(&tri, &referenced, what, i, &q.at, &q.vertex))
+                .collect::<Result<Vec<u32>, _>>()
+        };
+        let mut sinks = resolve("sinks", &p.sinks)?;
+        let mut sources = resolve("sources", &p.sources)?;
+        // A lone sink flows from the vertex farthest from it, and vice versa, as the potential
+        // places it.
+        if sources.is_empty() {
+            sources.push(farthest_from(&tri, &referenced, &sinks));
+        }
+        if sinks.is_empty() {
+            sinks.push(farthest_from(&tri, &referenced, &sources));
+        }
+        // A sink's or source's own vector is a neighbour's (the flow vanishes there): it
+        // must not be averaged into the vertices around it.
+        for &v in sinks.iter().chain(&sources) {
+            defined[v as usize] = false;
+        }
+        start = sources[0];
+    } else if keys.vertices.is_empty() {
         let tri = level0.to_triangles();
         let fp = FieldParams {
             axis: p.axis,
@@ -238,12 +373,19 @@ pub fn sweep_field(
             h.level_vertices[l] as usize,
         );
         for v in lo..hi {
-            let sum: Vec3 = h.parents(v).iter().map(|&u| orientation[u as usize]).sum();
+            let sum: Vec3 = (h.parents(v).iter())
+                .filter(|&&u| defined[u as usize])
+                .map(|&u| orientation[u as usize])
+                .sum();
             orientation[v] = sum.try_normalize().unwrap_or(Vec3::ZERO);
             defined[v] = orientation[v] != Vec3::ZERO;
         }
         let level = h.level(l);
         passes.push(relax(&level, &mut orientation, &mut defined, &fixed, p));
+    }
+    if p.rotation != 0.0 {
+        let normals = h.level(h.levels() - 1).vertex_normals();
+        rotate_about_normals(&mut orientation, &normals, p.rotation);
     }
     let sweep = sweep_values(&level0, &orientation, start);
     Ok(SweepField {
@@ -382,9 +524,11 @@ pub fn sweep_order(mesh: &PolyMesh, sweep: &[f32]) -> Vec<u32> {
 
 /// The `field.keys` node: the config's keys resolved on the input mesh, so a key on a vertex
 /// that does not exist is reported before the subdivision runs.
-pub fn keys_node(mesh: &Mesh, keys: &[Anchor]) -> Result<FieldKeys, Failure> {
+pub fn keys_node(mesh: &Mesh, points: &KeyPoints) -> Result<FieldKeys, Failure> {
     let p = SweepFieldParams {
-        keys: keys.to_vec(),
+        keys: points.keys.clone(),
+        sinks: points.sinks.clone(),
+        sources: points.sources.clone(),
         ..Default::default()
     };
     resolve_keys(mesh, &p).map_err(Failure::input)
@@ -491,6 +635,149 @@ mod tests {
             "{max} {}",
             sum / count as f32
         );
+    }
+
+    fn point(v: u32) -> Point {
+        Point {
+            at: None,
+            vertex: Some(v),
+        }
+    }
+
+    #[test]
+    fn a_sink_and_sources_place_the_flow_and_its_singularities() {
+        // A sink in the middle of the unit square, sources at its corners: the field flows
+        // inwards around the sink on every level, which keys averaged outward cannot give
+        // (their mean has no singularity where the user wants one).
+        let mesh = grid(9, 0.125);
+        let h = hierarchy(&mesh, 40.0);
+        let p = SweepFieldParams {
+            sinks: vec![point(40)],
+            sources: vec![point(0), point(8), point(72), point(80)],
+            ..Default::default()
+        };
+        let keys = resolve_keys(&mesh, &p).unwrap();
+        let f = sweep_field(&h, &keys, &p).unwrap();
+        let centre = Vec3::new(0.5, 0.5, 0.0);
+        let mut checked = 0;
+        for (v, o) in f.orientation.iter().enumerate() {
+            let to_sink = centre - h.positions[v];
+            if (0.08..0.2).contains(&to_sink.length()) {
+                let a = o.angle_between(to_sink).to_degrees();
+                assert!(
+                    a < 25.0,
+                    "vertex {v} at {}: {a}° off the sink",
+                    h.positions[v]
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 50, "{checked}");
+        // The sweep starts at the first source and rises towards the sink.
+        assert!(
+            f.sweep[40] > f.sweep[0] + 0.3,
+            "{} {}",
+            f.sweep[0],
+            f.sweep[40]
+        );
+        // A lone sink flows from the vertex farthest from it (a corner) into it.
+        let p = SweepFieldParams {
+            sinks: vec![point(80)],
+            ..Default::default()
+        };
+        let f = sweep_field(&h, &resolve_keys(&mesh, &p).unwrap(), &p).unwrap();
+        let mid = f.orientation[40];
+        assert!(
+            mid.angle_between(Vec3::new(1.0, 1.0, 0.0)).to_degrees() < 10.0,
+            "{mid}"
+        );
+    }
+
+    #[test]
+    fn keys_turn_the_flow_and_stay_fixed_on_every_level() {
+        // Flow from the left edge's middle (0, 0.5) to the right edge's (1, 0.5); a key at the
+        // centre turns it a quarter turn, one at (0.2, 0.5) keeps it: between them it turns
+        // part way, and both keys hold on every level.
+        let mesh = grid(11, 0.1);
+        let h = hierarchy(&mesh, 20.0);
+        let key = |v, d: [f32; 3]| Anchor {
+            vertex: Some(v),
+            at: None,
+            direction: d,
+        };
+        let p = SweepFieldParams {
+            sources: vec![point(55)],
+            sinks: vec![point(65)],
+            keys: vec![key(60, [0.0, 1.0, 0.0]), key(57, [1.0, 0.0, 0.0])],
+            ..Default::default()
+        };
+        let keys = resolve_keys(&mesh, &p).unwrap();
+        let f = sweep_field(&h, &keys, &p).unwrap();
+        assert!(h.levels() > 2);
+        assert_eq!(f.orientation[60], Vec3::Y);
+        assert_eq!(f.orientation[57], Vec3::X);
+        let between = f.orientation[59].angle_between(Vec3::X).to_degrees();
+        assert!((20.0..80.0).contains(&between), "{between}");
+        // Without the keys the flow runs along x there.
+        let plain = SweepFieldParams {
+            keys: vec![],
+            ..p.clone()
+        };
+        let g = sweep_field(&h, &resolve_keys(&mesh, &plain).unwrap(), &plain).unwrap();
+        assert!(g.orientation[59].angle_between(Vec3::X).to_degrees() < 5.0);
+    }
+
+    #[test]
+    fn a_rotation_turns_every_vector_about_its_normal() {
+        let mesh = grid(9, 0.125);
+        let h = hierarchy(&mesh, 40.0);
+        let key = Anchor {
+            vertex: Some(40),
+            at: None,
+            direction: [1.0, 0.0, 0.0],
+        };
+        for (degrees, want) in [(90.0, Vec3::Y), (-90.0, -Vec3::Y), (180.0, -Vec3::X)] {
+            let p = SweepFieldParams {
+                keys: vec![key.clone()],
+                rotation: degrees,
+                ..Default::default()
+            };
+            let f = sweep_field(&h, &resolve_keys(&mesh, &p).unwrap(), &p).unwrap();
+            for (v, o) in f.orientation.iter().enumerate() {
+                assert!(o.distance(want) < 1e-3, "{degrees}°, vertex {v}: {o}");
+            }
+        }
+        let p = SweepFieldParams {
+            rotation: 200.0,
+            ..Default::default()
+        };
+        assert!(
+            p.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("field.rotation")
+        );
+    }
+
+    #[test]
+    fn bad_sinks_and_sources_are_named() {
+        let mesh = grid(5, 0.25);
+        let p = SweepFieldParams {
+            sinks: vec![point(3)],
+            sources: vec![point(1), point(3)],
+            ..Default::default()
+        };
+        let e = resolve_keys(&mesh, &p).unwrap_err().to_string();
+        assert!(
+            e.contains("field.sources[1]") && e.contains("also a sink"),
+            "{e}"
+        );
+        let p = SweepFieldParams {
+            sinks: vec![Point::default()],
+            ..Default::default()
+        };
+        let e = resolve_keys(&mesh, &p).unwrap_err().to_string();
+        assert!(e.contains("field.sinks[0]"), "{e}");
     }
 
     #[test]

@@ -121,6 +121,37 @@ fn a_new_seed_reruns_synthesis_and_export_only() {
         ran(&r),
         vec!["field.keys", "field", "synthesize", "reconstruct"]
     );
+    // A rotation is the field's alone; a sink is checked on the input mesh too.
+    let r = run("graph_matching.toml", &["field.rotation=45"], cache.path()).unwrap();
+    assert_eq!(ran(&r), vec!["field", "synthesize", "reconstruct"]);
+    let r = run(
+        "graph_matching.toml",
+        &["field.sinks=[{ at = [0, 0, 1] }]"],
+        cache.path(),
+    )
+    .unwrap();
+    assert_eq!(
+        ran(&r),
+        vec!["field.keys", "field", "synthesize", "reconstruct"]
+    );
+}
+
+/// The keys of existing configs' nodes stay as they were: sinks, sources and rotation at their
+/// defaults add nothing to the field nodes' canonical parameter bytes (so no lock changes),
+/// and a rotation does.
+#[test]
+fn sinks_sources_and_rotation_at_their_defaults_leave_the_field_keys_as_they_were() {
+    use texsyn::artifact::canonical_bytes;
+    use texsyn::stages::field::sweep_field::SweepFieldParams;
+    let p = SweepFieldParams::default();
+    let without = (p.keys.clone(), p.axis, p.tolerance, p.max_passes);
+    assert_eq!(canonical_bytes(&p), canonical_bytes(&without));
+    assert_eq!(canonical_bytes(&p.key_points()), canonical_bytes(&p.keys));
+    let turned = SweepFieldParams {
+        rotation: 10.0,
+        ..p.clone()
+    };
+    assert_ne!(canonical_bytes(&turned), canonical_bytes(&without));
 }
 
 #[test]
@@ -175,21 +206,43 @@ fn bad_inputs_are_named_before_synthesis() {
                 &["synthesize.sigma=0"],
                 &["synthesize.sigma"],
             ),
+            (
+                "graph_matching.toml",
+                &["field.sinks=[{ vertex = 5000 }]"],
+                &["field.sinks[0]", "5000", "2904"],
+            ),
+            (
+                "graph_matching.toml",
+                &[
+                    "field.sinks=[{ vertex = 7 }]",
+                    "field.sources=[{ vertex = 3 }, { vertex = 7 }]",
+                ],
+                &["field.sources[1]", "vertex 7", "also a sink"],
+            ),
+            (
+                "graph_matching.toml",
+                &["field.rotation=270"],
+                &["field.rotation"],
+            ),
         ],
     );
     // A wrong key is found before any other work: nothing but the imports is in the cache.
     // (A scale that is too fine is found by the subdivision, which builds levels until the
     // next would pass the budget, so that the scale it names is one that fits.)
     let cache = tempfile::tempdir().unwrap();
-    let e = run(
-        "graph_matching.toml",
-        &["field.keys=[{ vertex = 99999, direction = [0, 1, 0] }]"],
-        cache.path(),
-    );
-    assert!(e.is_err());
-    // The cache's objects (its lock files, left by the imports, are not objects).
-    let objects = common::cli::object_count(cache.path());
-    assert!(objects <= 2, "{objects} objects stored before the error");
+    for bad in [
+        "field.keys=[{ vertex = 99999, direction = [0, 1, 0] }]",
+        "field.sources=[{ vertex = 99999 }]",
+    ] {
+        let e = run("graph_matching.toml", &[bad], cache.path());
+        assert!(e.is_err());
+        // The cache's objects (its lock files, left by the imports, are not objects).
+        let objects = common::cli::object_count(cache.path());
+        assert!(
+            objects <= 2,
+            "{bad}: {objects} objects stored before the error"
+        );
+    }
 }
 
 /// `parameterize.scale = "auto"` (and no scale at all) follows jump maps' rule for graph
