@@ -1,0 +1,92 @@
+//! Graph matching's orientation controls as a user sees them: configs/graph_matching_open.toml
+//! (wood2's stripes on the mushroom) run as shipped (the default flow along the longest axis),
+//! with a sink at the centre of the round cap (the stripes run into it), and with the same sink
+//! and `field.rotation = 90` (the stripes turn a quarter turn: rings around it). One view of
+//! each `preview.png` (the third, from above; `VIEW=0` or `1` for the others), side by side in
+//! that order, into `graph-matching-sink.png`.
+//!
+//! ```text
+//! cargo build --release && cargo run --release -p texsyn-bench --example gm_orientation_pictures -- [OUT_DIR]
+//! ```
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The texsyn binary beside this example's folder (target/release/examples/..).
+fn texsyn() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let bin = exe.parent().unwrap().parent().unwrap().join("texsyn");
+    assert!(
+        bin.exists(),
+        "{}: build it first (cargo build --release)",
+        bin.display()
+    );
+    bin
+}
+
+/// Runs `config` with `sets` into `out` (a fresh cache beside it); the preview's path.
+fn preview(config: &Path, sets: &[&str], out: &Path) -> PathBuf {
+    let cache = out.join("cache");
+    let mut cmd = Command::new(texsyn());
+    cmd.arg("run")
+        .arg(config)
+        .arg("--cache")
+        .arg(&cache)
+        .arg("--out")
+        .arg(out)
+        .arg("-q");
+    for s in sets {
+        cmd.arg("--set").arg(s);
+    }
+    let status = cmd.status().unwrap();
+    assert!(status.success(), "{sets:?}: {status}");
+    std::fs::remove_dir_all(&cache).ok();
+    out.join("preview.png")
+}
+
+/// View `view` (0-based; a preview's views are squares side by side) of each preview, side by
+/// side into `out`.
+fn strip(previews: &[PathBuf], view: u32, out: &Path) {
+    let gap = 8;
+    let crops: Vec<image::RgbImage> = previews
+        .iter()
+        .map(|p| {
+            let img = image::open(p).unwrap().to_rgb8();
+            let side = img.height();
+            image::imageops::crop_imm(&img, view * side, 0, side, side).to_image()
+        })
+        .collect();
+    let w = crops.iter().map(|c| c.width()).sum::<u32>() + gap * (crops.len() as u32 - 1);
+    let h = crops.iter().map(|c| c.height()).max().unwrap();
+    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+    let mut x = 0;
+    for c in &crops {
+        image::imageops::replace(&mut img, c, x as i64, 0);
+        x += c.width() + gap;
+    }
+    img.save(out).unwrap();
+}
+
+fn main() {
+    let dir = common::out_dir();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let config = repo.join("configs/graph_matching_open.toml");
+    // The round cap's centre: the mushroom is modelled along z, the cap at its top.
+    let sink = "field.sinks=[{ at = [0.0, 0.0, 0.232] }]";
+    let cases: [(&str, Vec<&str>); 3] = [
+        ("shipped", vec![]),
+        ("sink", vec![sink]),
+        ("sink-rotation", vec![sink, "field.rotation=90"]),
+    ];
+    let mut previews = Vec::new();
+    for (name, sets) in &cases {
+        let out = dir.join(format!("gm-orientation-{name}"));
+        previews.push(preview(&config, sets, &out));
+        println!("{name}: {}", out.display());
+    }
+    let out = dir.join("graph-matching-sink.png");
+    strip(&previews, common::env_or("VIEW", 2), &out);
+    println!("{}", out.display());
+}
