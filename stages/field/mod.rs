@@ -6,3 +6,4 @@ pub mod orientation_field;
 pub mod param_field;
 pub mod quaternion_field;
 pub mod sweep_field;
+pub mod symmetric_field;

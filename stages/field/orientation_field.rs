@@ -60,7 +60,7 @@ pub struct Anchor {
 }
 
 /// `[field]` in a config.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FieldParams {
     /// The texture has no preferred direction: skip the relaxation. Default: false.
@@ -75,6 +75,29 @@ pub struct FieldParams {
     /// high end), and the axis projected by the isotropic field. Default: the longest side
     /// of the bounding box.
     pub axis: Option<[f32; 3]>,
+    /// 1, 2 or 4: the texture looks the same turned by a half (2) or a quarter (4) turn, so
+    /// the field is relaxed only up to that turn ([`super::symmetric_field`]): anchors, or
+    /// with none the projected `axis` as a soft guide. Default: 1. Left out of the node's key
+    /// at 1.
+    #[serde(skip_serializing_if = "is_one")]
+    pub symmetry: u32,
+}
+
+fn is_one(x: &u32) -> bool {
+    *x == 1
+}
+
+impl Default for FieldParams {
+    fn default() -> Self {
+        FieldParams {
+            isotropic: false,
+            anchors: Vec::new(),
+            sinks: Vec::new(),
+            sources: Vec::new(),
+            axis: None,
+            symmetry: 1,
+        }
+    }
 }
 
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -127,6 +150,23 @@ impl FieldParams {
                 "axis must be a finite, non-zero vector".into(),
             ));
         }
+        if ![1, 2, 4].contains(&self.symmetry) {
+            return Err(FieldError::Other(format!(
+                "symmetry = {} is not one of 1, 2 or 4",
+                self.symmetry
+            )));
+        }
+        if self.symmetry > 1 && self.isotropic {
+            return Err(FieldError::Other(
+                "isotropic = true has no direction to take up to a symmetry: remove symmetry or set isotropic = false".into(),
+            ));
+        }
+        if self.symmetry > 1 && !(self.sinks.is_empty() && self.sources.is_empty()) {
+            return Err(FieldError::Other(format!(
+                "symmetry = {} relaxes anchors (or follows the axis) up to a 1/{} turn; sinks and sources make a flow, a field of symmetry 1: remove them or set symmetry = 1",
+                self.symmetry, self.symmetry
+            )));
+        }
         if self.isotropic
             && !(self.anchors.is_empty() && self.sinks.is_empty() && self.sources.is_empty())
         {
@@ -169,6 +209,22 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
     let mut field: Vec<Vec3>;
     if params.isotropic {
         field = (0..n).map(|v| tangent(axis, normals[v])).collect();
+    } else if params.symmetry > 1 {
+        let mut anchors = Vec::new();
+        for (i, a) in params.anchors.iter().enumerate() {
+            let v = resolve("anchors", i, &a.at, &a.vertex)?;
+            let d = tangent(Vec3::from(a.direction), normals[v as usize]);
+            if d == Vec3::ZERO {
+                return Err(FieldError::Value {
+                    what: "anchors",
+                    index: i,
+                    message: format!("direction {:?} is along the surface normal at vertex {v}", a.direction),
+                });
+            }
+            anchors.push((v, d));
+        }
+        field = super::symmetric_field::symmetric_field(mesh, params.symmetry, &anchors, axis)
+            .map_err(|e| FieldError::Other(e.to_string()))?;
     } else {
         let mut sinks = Vec::new();
         for (i, p) in params.sinks.iter().enumerate() {
@@ -451,7 +507,17 @@ fn any_tangent(n: Vec3) -> Vec3 {
 /// names the method in the mesh-health warning.
 pub fn node(mesh: &Mesh, params: &FieldParams, method: &str) -> Result<Vec<Vec3>, Failure> {
     texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, method);
-    orientation_field(mesh, params).map_err(Failure::input)
+    let field = orientation_field(mesh, params).map_err(Failure::input)?;
+    let m = super::symmetric_field::measure(mesh, &field, params.symmetry);
+    tracing::info!(
+        "field (symmetry {}): mean turn between neighbours {:.2}°, energy {:.3e}, {} singular triangles, total |index| {}",
+        m.symmetry,
+        m.mean_turn_deg,
+        m.energy,
+        m.singular_triangles,
+        m.index_abs_total
+    );
+    Ok(field)
 }
 
 #[cfg(test)]
