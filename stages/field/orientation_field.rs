@@ -218,7 +218,10 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
                 return Err(FieldError::Value {
                     what: "anchors",
                     index: i,
-                    message: format!("direction {:?} is along the surface normal at vertex {v}", a.direction),
+                    message: format!(
+                        "direction {:?} is along the surface normal at vertex {v}",
+                        a.direction
+                    ),
                 });
             }
             anchors.push((v, d));

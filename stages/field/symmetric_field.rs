@@ -49,7 +49,11 @@ fn frames(mesh: &Mesh) -> Frames {
     let (mut normal, mut e1, mut e2) = (vec![DVec3::Z; n], vec![DVec3::X; n], vec![DVec3::Y; n]);
     for v in 0..n {
         let nv = mesh.vertex_normals()[v].as_dvec3();
-        let nv = if nv.length_squared() > 0.5 { nv } else { DVec3::Z };
+        let nv = if nv.length_squared() > 0.5 {
+            nv
+        } else {
+            DVec3::Z
+        };
         let first = adj.neighbors(v).first().map(|&u| {
             let e = (mesh.positions[u as usize] - mesh.positions[v]).as_dvec3();
             e - e.dot(nv) * nv
@@ -169,7 +173,13 @@ pub fn symmetric_field(
         triplets.push((2 * u + 1, 2 * u + 1, d + eps));
     }
     if count > 0 {
-        solve_spd(2 * count, &triplets, &mut rhs, 1, &IterativeParams::default())?;
+        solve_spd(
+            2 * count,
+            &triplets,
+            &mut rhs,
+            1,
+            &IterativeParams::default(),
+        )?;
     }
     let directions: Vec<f64> = (0..n)
         .map(|v| {
@@ -314,7 +324,11 @@ pub fn measure(mesh: &Mesh, field: &[Vec3], n_sym: u32) -> FieldMeasures {
         } else {
             0.0
         },
-        energy: if edges > 0 { energy / edges as f64 } else { 0.0 },
+        energy: if edges > 0 {
+            energy / edges as f64
+        } else {
+            0.0
+        },
         singular_triangles: singular,
         index_abs_total: index_total,
     }
@@ -352,7 +366,11 @@ mod tests {
         // 2-direction field: θ/2) has index 1/2, and as a 1-field it is not continuous.
         let mesh = grid(21, 0.05);
         let c = Vec3::new(0.5, 0.5, 0.0) + Vec3::new(0.013, 0.007, 0.0);
-        let radial: Vec<Vec3> = mesh.positions.iter().map(|p| (*p - c).normalize()).collect();
+        let radial: Vec<Vec3> = mesh
+            .positions
+            .iter()
+            .map(|p| (*p - c).normalize())
+            .collect();
         let m = measure(&mesh, &radial, 1);
         assert_eq!(m.singular_triangles, 1, "{m:?}");
         assert!((m.index_abs_total - 1.0).abs() < 1e-9);
