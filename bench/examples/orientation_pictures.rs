@@ -16,22 +16,10 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The texsyn binary beside this example's folder (target/release/examples/..).
-fn texsyn() -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    let bin = exe.parent().unwrap().parent().unwrap().join("texsyn");
-    assert!(
-        bin.exists(),
-        "{}: build it first (cargo build --release)",
-        bin.display()
-    );
-    bin
-}
-
 /// Runs `config` with `sets` into `out` (a fresh cache beside it); the preview's path.
 fn preview(config: &Path, sets: &[&str], out: &Path) -> PathBuf {
     let cache = out.join("cache");
-    let mut cmd = Command::new(texsyn());
+    let mut cmd = Command::new(common::texsyn_binary());
     cmd.arg("run")
         .arg(config)
         .arg("--cache")

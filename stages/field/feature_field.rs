@@ -130,7 +130,8 @@ pub struct FeatureFieldParams {
     pub rotation: f32,
 }
 
-fn is_zero(x: &f32) -> bool {
+/// Whether a key-omittable parameter is at its default 0.
+pub(crate) fn is_zero(x: &f32) -> bool {
     *x == 0.0
 }
 

@@ -80,12 +80,8 @@ pub struct SweepFieldParams {
     pub max_passes: u32,
     /// Degrees (-180..=180) every vector is turned about its normal: the texture turned
     /// against the field. Default: 0.
-    #[serde(skip_serializing_if = "is_zero")]
+    #[serde(skip_serializing_if = "super::feature_field::is_zero")]
     pub rotation: f32,
-}
-
-fn is_zero(x: &f32) -> bool {
-    *x == 0.0
 }
 
 impl Default for SweepFieldParams {

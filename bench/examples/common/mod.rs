@@ -23,3 +23,15 @@ pub fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
         .and_then(|v| v.parse().ok())
         .unwrap_or(default)
 }
+
+/// The texsyn binary beside the running example's folder (target/release/examples/..).
+pub fn texsyn_binary() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let bin = exe.parent().unwrap().parent().unwrap().join("texsyn");
+    assert!(
+        bin.exists(),
+        "{}: build it first (cargo build --release)",
+        bin.display()
+    );
+    bin
+}
