@@ -13,48 +13,12 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// Runs `config` with the algorithm and extra `--set`s into `out`; the preview's path.
 fn preview(config: &Path, algorithm: &str, sets: &[String], out: &Path) -> PathBuf {
-    let cache = out.join("cache");
-    let mut cmd = Command::new(common::texsyn_binary());
-    cmd.arg("run")
-        .arg(config)
-        .arg("--cache")
-        .arg(&cache)
-        .arg("--out")
-        .arg(out)
-        .arg("-q")
-        .arg("--set")
-        .arg(format!("synthesize.algorithm=\"{algorithm}\""));
-    for s in sets {
-        cmd.arg("--set").arg(s);
-    }
-    let status = cmd.status().unwrap();
-    assert!(
-        status.success(),
-        "{} {algorithm}: {status}",
-        config.display()
-    );
-    std::fs::remove_dir_all(&cache).ok();
-    out.join("preview.png")
-}
-
-/// View `view` (0-based) of the previews `a` and `b`, side by side into `out`.
-fn side_by_side(a: &Path, b: &Path, view: u32, out: &Path) {
-    let crop = |p: &Path| {
-        let img = image::open(p).unwrap().to_rgb8();
-        let side = img.height();
-        image::imageops::crop_imm(&img, view * side, 0, side, side).to_image()
-    };
-    let (a, b) = (crop(a), crop(b));
-    let gap = 8;
-    let (w, h) = (a.width() + gap + b.width(), a.height().max(b.height()));
-    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
-    image::imageops::replace(&mut img, &a, 0, 0);
-    image::imageops::replace(&mut img, &b, (a.width() + gap) as i64, 0);
-    img.save(out).unwrap();
+    let mut all = vec![format!("synthesize.algorithm=\"{algorithm}\"")];
+    all.extend_from_slice(sets);
+    common::run_preview(config, &all, out)
 }
 
 fn main() {
@@ -110,7 +74,7 @@ fn main() {
             &dir.join(format!("{name}-appearance")),
         );
         let out = dir.join(format!("gi-{name}-algorithms.png"));
-        side_by_side(&t, &a, view, &out);
+        common::preview_strip(&[t, a], view, &out);
         println!("wrote {}", out.display());
     }
 }

@@ -13,51 +13,7 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
-
-/// Runs `config` with `sets` into `out` (a fresh cache beside it); the preview's path.
-fn preview(config: &Path, sets: &[&str], out: &Path) -> PathBuf {
-    let cache = out.join("cache");
-    let mut cmd = Command::new(common::texsyn_binary());
-    cmd.arg("run")
-        .arg(config)
-        .arg("--cache")
-        .arg(&cache)
-        .arg("--out")
-        .arg(out)
-        .arg("-q");
-    for s in sets {
-        cmd.arg("--set").arg(s);
-    }
-    let status = cmd.status().unwrap();
-    assert!(status.success(), "{sets:?}: {status}");
-    std::fs::remove_dir_all(&cache).ok();
-    out.join("preview.png")
-}
-
-/// View `view` (0-based; a preview's views are squares side by side) of each preview, side by
-/// side into `out`.
-fn strip(previews: &[PathBuf], view: u32, out: &Path) {
-    let gap = 8;
-    let crops: Vec<image::RgbImage> = previews
-        .iter()
-        .map(|p| {
-            let img = image::open(p).unwrap().to_rgb8();
-            let side = img.height();
-            image::imageops::crop_imm(&img, view * side, 0, side, side).to_image()
-        })
-        .collect();
-    let w = crops.iter().map(|c| c.width()).sum::<u32>() + gap * (crops.len() as u32 - 1);
-    let h = crops.iter().map(|c| c.height()).max().unwrap();
-    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
-    let mut x = 0;
-    for c in &crops {
-        image::imageops::replace(&mut img, c, x as i64, 0);
-        x += c.width() + gap;
-    }
-    img.save(out).unwrap();
-}
+use std::path::Path;
 
 /// A picture's file, its config, its runs as (name, --sets), and the preview's view to show.
 type Picture<'a> = (&'a str, &'a str, Vec<(&'a str, Vec<&'a str>)>, u32);
@@ -99,11 +55,12 @@ fn main() {
         let mut previews = Vec::new();
         for (name, sets) in runs {
             let out = dir.join(format!("orientation-{name}"));
-            previews.push(preview(&repo.join(config), sets, &out));
+            let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+            previews.push(common::run_preview(&repo.join(config), &sets, &out));
             println!("{name}: {}", out.display());
         }
         let out = dir.join(picture);
-        strip(&previews, *view, &out);
+        common::preview_strip(&previews, *view, &out);
         println!("{}", out.display());
     }
 }

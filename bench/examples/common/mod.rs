@@ -35,3 +35,47 @@ pub fn texsyn_binary() -> PathBuf {
     );
     bin
 }
+
+/// Runs `config` with `sets` (each a `--set`) into `out`, in a fresh cache beside it that is
+/// removed afterwards; the path of the run's `preview.png`.
+pub fn run_preview(config: &std::path::Path, sets: &[String], out: &std::path::Path) -> PathBuf {
+    let cache = out.join("cache");
+    let mut cmd = std::process::Command::new(texsyn_binary());
+    cmd.arg("run")
+        .arg(config)
+        .arg("--cache")
+        .arg(&cache)
+        .arg("--out")
+        .arg(out)
+        .arg("-q");
+    for s in sets {
+        cmd.arg("--set").arg(s);
+    }
+    let status = cmd.status().unwrap();
+    assert!(status.success(), "{} {sets:?}: {status}", config.display());
+    std::fs::remove_dir_all(&cache).ok();
+    out.join("preview.png")
+}
+
+/// View `view` (0-based; a preview's views are squares side by side) of each preview, side by
+/// side, 8 pixels apart, into `out`.
+pub fn preview_strip(previews: &[PathBuf], view: u32, out: &std::path::Path) {
+    let gap = 8;
+    let crops: Vec<image::RgbImage> = previews
+        .iter()
+        .map(|p| {
+            let img = image::open(p).unwrap().to_rgb8();
+            let side = img.height();
+            image::imageops::crop_imm(&img, view * side, 0, side, side).to_image()
+        })
+        .collect();
+    let w = crops.iter().map(|c| c.width()).sum::<u32>() + gap * (crops.len() as u32 - 1);
+    let h = crops.iter().map(|c| c.height()).max().unwrap();
+    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+    let mut x = 0;
+    for c in &crops {
+        image::imageops::replace(&mut img, c, x as i64, 0);
+        x += c.width() + gap;
+    }
+    img.save(out).unwrap();
+}
