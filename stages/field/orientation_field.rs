@@ -511,6 +511,10 @@ fn any_tangent(n: Vec3) -> Vec3 {
 pub fn node(mesh: &Mesh, params: &FieldParams, method: &str) -> Result<Vec<Vec3>, Failure> {
     texsyn_core::geom::mesh_check::warn_if_unhealthy(mesh, method);
     let field = orientation_field(mesh, params).map_err(Failure::input)?;
+    // The measures cost a pass over every edge: only when someone reads them (`run -v`).
+    if !tracing::enabled!(tracing::Level::INFO) {
+        return Ok(field);
+    }
     let m = super::symmetric_field::measure(mesh, &field, params.symmetry);
     tracing::info!(
         "field (symmetry {}): mean turn between neighbours {:.2}°, energy {:.3e}, {} singular triangles, total |index| {}",
