@@ -18,6 +18,15 @@
 //! and divides the mean by the same measure with the second side placed at a seeded random
 //! position in the exemplar ("randomly placed triangles"): 0 means invisible seams, 1 seams as
 //! visible as pasting unrelated pieces together.
+//!
+//! **Blended seams.** The seam score reads the OBJ's single coordinate set; the blended
+//! surface has no coordinate seam, but where a jump falls inside a small triangle its colour
+//! still changes across that triangle as abruptly as at a seam. The blended seam score takes
+//! every triangle edge the walk jumped across and compares the surface's colours at its two
+//! ends with the exemplar's at the first end's address and one edge offset further: 1 means the
+//! surface changes across a jump no more than the texture does over that distance, more means
+//! a visible seam. A wider blend (`reconstruct.blend_radius`) lowers it; blur would too, which
+//! the discs' patch ratio and gradient ratio show.
 
 use super::{Item, Run, ScoreFailure};
 use crate::artifact::jump_maps::{JumpParameterization, TexelAddresses};
@@ -28,6 +37,8 @@ use crate::pipeline::Handle;
 use crate::random::{counter_hash, counter_unit};
 use crate::stages::parameterize::jump_parameterization::ParamParts;
 use crate::stages::reconstruct::jump_blend::{BlendShader, corner_sets, random_base_set};
+use crate::stages::reconstruct::jump_export::wide_blend_of;
+use crate::stages::reconstruct::wide_blend::jumped;
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 
@@ -49,6 +60,8 @@ pub struct JumpMapNodes {
     pub parameterize: Handle<JumpParameterization>,
     pub synthesize: Handle<TexelAddresses>,
     pub exemplar: Handle<Image>,
+    /// `reconstruct.blend_radius`: the discs show the blend the export bakes.
+    pub blend_radius: f32,
 }
 
 impl super::Planned for JumpMapNodes {
@@ -65,9 +78,13 @@ pub fn jump_maps(run: &Run, nodes: &JumpMapNodes) -> Result<Vec<Item>, ScoreFail
     let sets = corner_sets(&mesh.triangles, &param, walk.addresses)
         .map_err(|e| ScoreFailure::new(format!("internal error: {e}")))?;
     let single = random_base_set(&sets);
+    let size = (ex.width, ex.height);
+    let wide = wide_blend_of(&mesh, &param, walk.addresses, nodes.blend_radius, size)
+        .map_err(|e| ScoreFailure::new(format!("internal error: {e}")))?;
     let shader = BlendShader {
         sets: &sets,
         texture: ex,
+        wide: wide.as_ref(),
     };
     let charts = unfolded_discs(
         &mesh.triangles,
@@ -87,6 +104,17 @@ pub fn jump_maps(run: &Run, nodes: &JumpMapNodes) -> Result<Vec<Item>, ScoreFail
     item.extra.insert(
         "seams".into(),
         serde_json::to_value(&seams).expect("plain numbers"),
+    );
+    let blended = blended_seam_score(
+        &mesh.triangles,
+        &param,
+        walk.addresses,
+        |f, b| shader.rgba(f, b),
+        ex,
+    );
+    item.extra.insert(
+        "blended_seams".into(),
+        serde_json::to_value(&blended).expect("plain numbers"),
     );
     Ok(vec![item])
 }
@@ -347,6 +375,64 @@ pub fn seam_score(
         random_rms,
         seam_edges: seams,
         interior_edges: pairs.len(),
+    }
+}
+
+/// How visible the walk's jumps are on the blended surface; see the module doc.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BlendedSeamScore {
+    /// The surface's colour difference across jump edges over the exemplar's across the same
+    /// offsets (1 = the seams are as smooth as the texture itself).
+    pub ratio: f64,
+    /// Mean RMS colour difference of the blended surface between a jump edge's ends.
+    pub surface_rms: f64,
+    /// The same in the exemplar, from the first end's address along the edge's offset.
+    pub exemplar_rms: f64,
+    /// Triangle edges across which the walk jumped (each counted once per triangle).
+    pub jump_edges: usize,
+}
+
+/// The blended seam score: over every triangle edge the walk jumped across
+/// ([`jumped`]), the colour `shade` gives its two corners, against the exemplar read at the
+/// first end's address and at that address plus the edge's offset.
+pub fn blended_seam_score(
+    triangles: &[[u32; 3]],
+    param: &ParamParts,
+    addresses: &[Vec2],
+    shade: impl Fn(usize, Vec3) -> [f32; 4],
+    ex: ImageView,
+) -> BlendedSeamScore {
+    let rgb = |c: [f32; 4]| [c[0], c[1], c[2]];
+    let corner = |k: usize| Vec3::from_array(std::array::from_fn(|i| (i == k) as u32 as f32));
+    let (mut surface, mut exemplar, mut n) = (0.0f64, 0.0f64, 0usize);
+    for (f, t) in triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let Some(o) = param.offset(a, b) else {
+                continue;
+            };
+            let (pa, pb) = (addresses[a as usize], addresses[b as usize]);
+            if !jumped(o, pa, pb) {
+                continue;
+            }
+            surface += rms(rgb(shade(f, corner(k))), rgb(shade(f, corner((k + 1) % 3))));
+            exemplar += rms(
+                bilinear(ex, pa + Vec2::splat(0.5)),
+                bilinear(ex, pa + o + Vec2::splat(0.5)),
+            );
+            n += 1;
+        }
+    }
+    let (surface_rms, exemplar_rms) = (surface / n.max(1) as f64, exemplar / n.max(1) as f64);
+    BlendedSeamScore {
+        ratio: if exemplar_rms > 0.0 {
+            surface_rms / exemplar_rms
+        } else {
+            0.0
+        },
+        surface_rms,
+        exemplar_rms,
+        jump_edges: n,
     }
 }
 

@@ -11,6 +11,7 @@
 use crate::image::ImageView;
 use crate::parameterize::jump_parameterization::ParamParts;
 use crate::random::counter_hash;
+use crate::reconstruct::wide_blend::WideBlend;
 use crate::render::shader::SurfaceShader;
 use glam::{Vec2, Vec3};
 
@@ -70,6 +71,20 @@ pub fn corner_sets(
     }
 }
 
+/// How far (texels, plus a fraction of the edge) the walk's addresses along an edge may stray
+/// from the edge's offset and still count as one patch: the walk sets each vertex from one
+/// neighbour exactly (§4.2.5's continuation), and the other edges of a patch agree up to the
+/// offsets' own inconsistency, while a jump lands at least the jump map's exclusion radius
+/// away.
+const CONTINUITY_TEXELS: f32 = 0.1;
+const CONTINUITY_FRACTION: f32 = 0.25;
+
+/// Whether an edge with offset `offset` whose ends have the addresses `from` and `to` lies
+/// inside one patch of the walk (no jump taken across it).
+pub fn one_patch(offset: Vec2, from: Vec2, to: Vec2) -> bool {
+    ((to - from) - offset).length() <= CONTINUITY_TEXELS + CONTINUITY_FRACTION * offset.length()
+}
+
 /// One set per face with a random base corner (§4.3), for formats that hold one set. The
 /// choice is a fixed hash of the face index: §4.3 found no strategy better than random.
 pub fn random_base_set(sets: &CornerSets) -> Vec<[Vec2; 3]> {
@@ -80,14 +95,19 @@ pub fn random_base_set(sets: &CornerSets) -> Vec<[Vec2; 3]> {
 }
 
 /// The blended surface colour of §4.4: Σ_b λ_b · T(Σ_c λ_c · sets[f][b][c]), λ the
-/// barycentric coordinates (so the alpha ramp of set b is λ_b and the weights sum to 1).
+/// barycentric coordinates (so the alpha ramp of set b is λ_b and the weights sum to 1); or,
+/// with `wide`, the blend over several triangles of [`crate::reconstruct::wide_blend`].
 pub struct BlendShader<'a> {
     pub sets: &'a CornerSets,
     pub texture: ImageView<'a>,
+    pub wide: Option<&'a WideBlend>,
 }
 
 impl BlendShader<'_> {
     pub fn rgba(&self, face: usize, bary: Vec3) -> [f32; 4] {
+        if let Some(wide) = self.wide {
+            return wide.rgba(&self.texture, face, bary);
+        }
         let s = &self.sets[face];
         let l = bary.to_array();
         let mut out = [0.0f32; 4];
@@ -134,6 +154,7 @@ mod tests {
         let shader = BlendShader {
             sets: &sets,
             texture: img.view(),
+            wide: None,
         };
         for bary in [
             Vec3::new(0.2, 0.3, 0.5),
@@ -161,6 +182,7 @@ mod tests {
         let shader = BlendShader {
             sets: &sets,
             texture: img.view(),
+            wide: None,
         };
         assert_eq!(
             shader.rgba(0, Vec3::new(1.0, 0.0, 0.0)),

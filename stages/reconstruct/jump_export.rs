@@ -6,10 +6,13 @@
 use crate::geom::Mesh;
 use crate::image::{Image, ImageView};
 use crate::parameterize::jump_parameterization::ParamParts;
-use crate::reconstruct::jump_blend::{BlendShader, MissingEdge, corner_sets, random_base_set};
+use crate::reconstruct::jump_blend::{
+    BlendShader, MissingEdge, corner_sets, one_patch, random_base_set,
+};
 use crate::reconstruct::textured_export::{
     ExportError, ExportParams, ExportSurface, export_textured_mesh,
 };
+use crate::reconstruct::wide_blend::{WideBlend, wide_blend};
 use glam::Vec2;
 use std::path::PathBuf;
 use texsyn_core::algorithm::Failure;
@@ -83,6 +86,11 @@ pub fn export_jump_textured(
         clock.elapsed().as_secs_f64()
     );
     let size = (exemplar.image.width, exemplar.image.height);
+    let wide = wide_blend_of(mesh, param, addresses, p.blend_radius, size)?;
+    tracing::debug!(
+        "reconstruct: blend patches at {:.3} s",
+        clock.elapsed().as_secs_f64()
+    );
     let mut surfaces = Vec::new();
     for m in std::iter::once(exemplar).chain(maps) {
         let map_size = (m.image.width, m.image.height);
@@ -101,6 +109,7 @@ pub fn export_jump_textured(
             shader: BlendShader {
                 sets: &sets,
                 texture: m.image,
+                wide: wide.as_ref(),
             },
         });
     }
@@ -113,6 +122,7 @@ pub fn export_jump_textured(
     let patches = BlendShader {
         sets: &sets,
         texture: ramp.view(),
+        wide: wide.as_ref(),
     };
     let mut files = export_textured_mesh(
         mesh,
@@ -135,6 +145,29 @@ pub fn export_jump_textured(
         );
     }
     Ok(files)
+}
+
+/// The blend over several triangles for `reconstruct.blend_radius` (none at 0: §4.4's own
+/// blend), logged with how many triangles it touches.
+pub fn wide_blend_of(
+    mesh: &Mesh,
+    param: &ParamParts,
+    addresses: &[Vec2],
+    radius: f32,
+    exemplar: (u32, u32),
+) -> Result<Option<WideBlend>, MissingEdge> {
+    if radius <= 0.0 {
+        return Ok(None);
+    }
+    let wide = wide_blend(&mesh.triangles, param, addresses, radius, exemplar)?;
+    let faces = mesh.triangles.len();
+    let blended = (0..faces).filter(|&f| wide.face(f).len() > 1).count();
+    tracing::info!(
+        "reconstruct: blending over {radius} texels: {blended} of {faces} triangles ({:.1} %) \
+         mix several patches",
+        100.0 * blended as f64 / faces.max(1) as f64
+    );
+    Ok(Some(wide))
 }
 
 /// Largest mesh whose patch view is written as a model (three vertices a triangle: 300k
@@ -173,14 +206,6 @@ fn patch_model(mesh: &Mesh, single: &[[Vec2; 3]], ramp: &Image) -> Vec<u8> {
     crate::export::write_glb(&glb)
 }
 
-/// How far (texels, plus a fraction of the edge) the walk's addresses along an edge may stray
-/// from the edge's offset and still count as one patch: the walk sets each vertex from one
-/// neighbour exactly (§4.2.5's continuation), and the other edges of a patch agree up to the
-/// offsets' own inconsistency, while a jump lands at least the jump map's exclusion radius
-/// away.
-const CONTINUITY_TEXELS: f32 = 0.1;
-const CONTINUITY_FRACTION: f32 = 0.25;
-
 /// The chart layout of the atlas: a face inside a patch of the walk (every edge's address
 /// difference agrees with its offset) is laid at its vertices' own addresses, so that the faces
 /// of a patch share their corners and stay together in one chart; a face across a jump keeps
@@ -198,13 +223,9 @@ pub fn chart_layout(
         .map(|(t, own)| {
             let continuous = (0..3).all(|k| {
                 let (a, b) = (t[k], t[(k + 1) % 3]);
-                match param.offset(a, b) {
-                    Some(o) => {
-                        let d = addresses[b as usize] - addresses[a as usize];
-                        (d - o).length() <= CONTINUITY_TEXELS + CONTINUITY_FRACTION * o.length()
-                    }
-                    None => false,
-                }
+                param
+                    .offset(a, b)
+                    .is_some_and(|o| one_patch(o, addresses[a as usize], addresses[b as usize]))
             });
             if continuous {
                 t.map(|v| addresses[v as usize])

@@ -10,3 +10,4 @@ pub mod relief_export;
 pub mod solid_colour;
 pub mod textured_export;
 pub mod vertex_colour_export;
+pub mod wide_blend;

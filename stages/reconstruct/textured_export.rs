@@ -48,6 +48,15 @@ pub struct ExportParams {
     /// node's key when `"auto"`.
     #[serde(skip_serializing_if = "UpAxis::is_auto")]
     pub up: UpAxis,
+    /// Texels over which the walk's patches cross-fade at their seams, 0..=64
+    /// ([`crate::reconstruct::wide_blend`]); 0 (the default) is §4.4's blend over each single
+    /// triangle. Left out of the node's key at 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub blend_radius: f32,
+}
+
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
 }
 
 impl Default for ExportParams {
@@ -57,6 +66,7 @@ impl Default for ExportParams {
             texel_density: 1.0,
             preview_size: 512,
             up: UpAxis::default(),
+            blend_radius: 0.0,
         }
     }
 }
@@ -67,6 +77,13 @@ impl ExportParams {
         let (lo, hi) = TEXEL_DENSITY_RANGE;
         check_range("reconstruct.texel_density", self.texel_density, lo, hi)?;
         check_range("reconstruct.preview_size", self.preview_size, 16, 4096)?;
+        let max_radius = crate::reconstruct::wide_blend::MAX_RADIUS;
+        check_range(
+            "reconstruct.blend_radius",
+            self.blend_radius,
+            0.0,
+            max_radius,
+        )?;
         self.up
             .check()
             .map_err(|m| ParamError::invalid("reconstruct.up", m))?;

@@ -194,6 +194,66 @@ fn jump_maps_score_their_surface_and_seams() {
     assert!(r > 0.0 && r < 1.0, "{seams}");
 }
 
+/// The demo at a texture scale large against the cow (60 texels per unit: an edge spans about
+/// 1.5 exemplar texels), with brick: blending over 3 texels (`reconstruct.blend_radius`) makes
+/// the walk's jumps less visible on the blended surface than §4.4's one-triangle ramp, while
+/// the discs keep most of their detail; the OBJ's coordinate seams are the same; a radius out
+/// of range is refused naming the key.
+#[test]
+fn a_wider_blend_hides_the_jumps_at_a_large_texture_scale() {
+    let d = tempfile::tempdir().unwrap();
+    let score = |radius: &str| {
+        let o = texsyn(
+            &[
+                "score",
+                repo().join("configs/demo.toml").to_str().unwrap(),
+                "--cache",
+                "c",
+                "--json",
+                "--set",
+                "inputs.exemplar=\"assets/brick.png\"",
+                "--set",
+                "parameterize.scale=60",
+                "--set",
+                "parameterize.rotation=0",
+                "--set",
+                "reconstruct.atlas_size=256",
+                "--set",
+                "reconstruct.preview_size=32",
+                "--set",
+                &format!("reconstruct.blend_radius={radius}"),
+            ],
+            d.path(),
+        );
+        json(&o)["items"][0].clone()
+    };
+    let (narrow, wide) = (score("0"), score("3"));
+    let seam = |v: &Value| v["extra"]["blended_seams"]["ratio"].as_f64().unwrap();
+    // Under the one-triangle ramp a jump edge's ends differ more than the texture does over
+    // the same offset; the wide blend brings that below it.
+    assert!(seam(&narrow) > 1.2, "{narrow}");
+    assert!(seam(&wide) < 0.6 * seam(&narrow), "{wide} vs {narrow}");
+    let grad = |v: &Value| v["score"]["gradient_ratio"].as_f64().unwrap();
+    assert!(grad(&wide) > 0.6 * grad(&narrow), "{wide} vs {narrow}");
+    assert_eq!(narrow["extra"]["seams"], wide["extra"]["seams"]);
+    let o = texsyn(
+        &[
+            "run",
+            repo().join("configs/demo.toml").to_str().unwrap(),
+            "--cache",
+            "c",
+            "--set",
+            "reconstruct.blend_radius=100",
+        ],
+        d.path(),
+    );
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && e.contains("reconstruct.blend_radius"),
+        "{e}"
+    );
+}
+
 /// A small geometry-image run: the relief scored at density offset 0, and the mesh checks.
 #[test]
 fn geometry_images_score_the_relief_and_check_the_mesh() {

@@ -121,6 +121,7 @@ impl Method for JumpMaps {
             parameterize,
             synthesize,
             exemplar,
+            blend_radius: c.reconstruct.blend_radius,
         };
         Ok((dag, Box::new(nodes)))
     }
