@@ -20,13 +20,14 @@
 //!   the demo's cow, so one patch would count several times.)
 //! - Inside a patch every vertex agrees, so a triangle far from a seam has one patch and shows
 //!   the exemplar unblended: the blend touches seams only.
-//! - In a triangle a patch's coordinates and weight are interpolated from the corners it
-//!   reaches, so that triangles sharing an edge agree along it; at a corner it does not reach
-//!   (weight 0) it is placed from its heaviest corner along the triangle's edge (as §4.3 places
-//!   a triangle). A vertex's own patch always has weight 1 there,
+//! - In a triangle a patch's coordinates and weight are interpolated from its corners, so that
+//!   triangles sharing an edge agree along it. Each vertex searches one edge further than `r`
+//!   (weight 0 there) so that it has a place for every patch its neighbours weight; only a
+//!   patch cut by [`MAX_PATCHES`] is placed from its heaviest corner along the triangle's edge
+//!   (as §4.3 places a triangle). A vertex's own patch always has weight 1 there,
 //!   so the weights never vanish, and with `r` at or below the shortest edge the blend is §4.4's
 //!   own ramp.
-//! - A patch is left out at a vertex where it places the vertex outside the exemplar: there it
+//! - A patch has weight 0 at a vertex where it places the vertex outside the exemplar: there it
 //!   would read the clamped border (streaks), and the vertex's own patch lies inside (§4.2.4).
 
 use crate::image::ImageView;
@@ -38,11 +39,13 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
 /// An edge whose ends' addresses differ from its offset by more than this many texels is
-/// one the walk jumped across. A jump lands at least the jump map's exclusion radius (4 texels
-/// by default) away, while the offsets along other paths inside one patch close only up to
-/// the field's turn and the surface's curvature: over a texel on a fifth of the demo cow's
-/// edges at 60 texels per unit. Such a small shift is left sharp: blending it would blur.
-pub const CONTINUOUS_TEXELS: f32 = 2.0;
+/// one the walk jumped across (a jump lands at least the jump map's exclusion radius, 4 texels
+/// by default, away). Inside one patch the offsets along other paths close only up to the
+/// field's turn and the surface's curvature: by over a texel on a fifth of the demo cow's
+/// edges at 60 texels per unit. Across such an edge the two ends' places are interpolated,
+/// which stretches the texture by the mismatch over the edge; at 2 texels that drew visible
+/// streaks on the cow, at 1 it does not, and the larger mismatches are cross-faded instead.
+pub const CONTINUOUS_TEXELS: f32 = 1.0;
 
 /// Whether the walk jumped across an edge with offset `offset` whose ends have the addresses
 /// `from` and `to` (see [`CONTINUOUS_TEXELS`]).
@@ -52,7 +55,7 @@ pub fn jumped(offset: Vec2, from: Vec2, to: Vec2) -> bool {
 
 /// Patches kept per vertex, the heaviest first: three patches meet at most at a point in the
 /// common case, and more only where jumps crowd.
-pub const MAX_PATCHES: usize = 6;
+pub const MAX_PATCHES: usize = 8;
 
 /// Largest `reconstruct.blend_radius`, in texels.
 pub const MAX_RADIUS: f32 = 64.0;
@@ -143,7 +146,9 @@ pub fn wide_blend(
 }
 
 /// The patches at vertex `c`: a shortest-path search over the edge offsets' lengths out to
-/// `radius`. A vertex reached across an edge the walk did not jump across is in its
+/// `radius` plus `c`'s longest edge, so that every patch with a weight at a neighbour of `c`
+/// also has a place at `c` (with weight 0 beyond `radius`), and the triangles around `c`
+/// interpolate one place each. A vertex reached across an edge the walk did not jump across is in its
 /// predecessor's patch; one reached across a jump is in the patch that places `c` within
 /// [`CONTINUOUS_TEXELS`] of where it does, or starts one. A patch places `c` where its first
 /// (nearest) vertex does: at that vertex's address minus the path's offset.
@@ -156,13 +161,22 @@ fn vertex_patches(
 ) -> Vec<VertexPatch> {
     let inside =
         |p: Vec2| p.x >= -0.5 && p.y >= -0.5 && p.x <= w as f32 - 0.5 && p.y <= h as f32 - 0.5;
+    let (first, last) = (
+        param.adj_offsets[c] as usize,
+        param.adj_offsets[c + 1] as usize,
+    );
+    let longest_edge = param.edge_offsets[first..last]
+        .iter()
+        .map(|o| o.length())
+        .fold(0.0f32, f32::max);
+    let reach = radius + longest_edge;
     // Per vertex queued or settled: distance, path offset c → v, predecessor; and per settled
-    // vertex its patch (an index into `out`, or none where that patch left the exemplar).
+    // vertex its patch (an index into `out`).
     struct Seen {
         d: f32,
         offset: Vec2,
         from: u32,
-        patch: Option<Option<usize>>,
+        patch: Option<usize>,
     }
     let mut seen: std::collections::HashMap<u32, Seen> = Default::default();
     let mut heap = BinaryHeap::new();
@@ -188,7 +202,7 @@ fn vertex_patches(
             .then(|| {
                 let edge = param.offset(from, v).expect("searched along an edge");
                 let (a, b) = (addresses[from as usize], addresses[v as usize]);
-                (!jumped(edge, a, b)).then(|| seen[&from].patch.flatten())
+                (!jumped(edge, a, b)).then(|| seen[&from].patch.expect("settled"))
             })
             .flatten();
         let patch = match inherited {
@@ -197,16 +211,20 @@ fn vertex_patches(
                 .iter()
                 .position(|p| p.at.distance(at) <= CONTINUOUS_TEXELS)
             {
-                Some(k) => Some(k),
-                // A vertex's own patch always counts, so weights never vanish.
-                None if inside(at) || v as usize == c => {
-                    out.push(VertexPatch {
-                        at,
-                        weight: 1.0 - d / radius,
-                    });
-                    Some(out.len() - 1)
+                Some(k) => k,
+                None => {
+                    // A vertex's own patch always counts, so weights never vanish; one that
+                    // would read outside the exemplar here is placed but not weighted.
+                    let weight = if v as usize == c {
+                        1.0
+                    } else if inside(at) {
+                        (1.0 - d / radius).max(0.0)
+                    } else {
+                        0.0
+                    };
+                    out.push(VertexPatch { at, weight });
+                    out.len() - 1
                 }
-                None => None,
             },
         };
         seen.get_mut(&v).expect("queued").patch = Some(patch);
@@ -217,7 +235,7 @@ fn vertex_patches(
         for j in a..b {
             let u = param.neighbors[j];
             let du = d + param.edge_offsets[j].length();
-            if du >= radius {
+            if du >= reach {
                 continue;
             }
             let better = seen.get(&u).is_none_or(|s| s.patch.is_none() && du < s.d);
@@ -301,6 +319,7 @@ fn face_patches(
     // the heaviest corner along the triangle's edge.
     found
         .into_iter()
+        .filter(|q| q.weights.iter().any(|&w| w > 0.0))
         .map(|q| {
             let best_at = q.at[q.best].expect("the heaviest corner is reached");
             let mut coords = [Vec2::ZERO; 3];
