@@ -14,6 +14,7 @@ use crate::parameterize::edge_offsets::{
     OffsetBox, edge_offsets, largest_fitting_scale, validity_boxes,
 };
 use crate::parameterize::region_growing::region_growing_order;
+use crate::parameterize::scale_keys::{ScaleKey, edge_factor, vertex_factors};
 use glam::Vec2;
 use serde::{Deserialize, Serialize};
 use texsyn_core::algorithm::Failure;
@@ -44,6 +45,11 @@ pub struct ParameterizeParams {
     /// not fit is refused, naming the largest that fits). Left out of the node's key when off.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub refine: bool,
+    /// A scale that varies over the surface ([`crate::parameterize::scale_keys`]): factors of
+    /// `scale` at given places, relaxed in between. Default: none (one scale). Left out of the
+    /// node's key when empty.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub scale_keys: Vec<ScaleKey>,
 }
 
 /// The `jump_refine` node's algorithm and version ([`refine_to_fit`]; part of its key; bump on
@@ -118,7 +124,7 @@ impl ParameterizeParams {
                 format!("must be in -360..=360 degrees, got {}", self.rotation),
             ));
         }
-        Ok(())
+        crate::parameterize::scale_keys::validate(&self.scale_keys)
     }
 }
 
@@ -254,8 +260,17 @@ pub fn jump_parameterization(
         Scale::Texels(s) => s,
         Scale::Auto(_) => crate::parameterize::automatic_scale(mesh, w),
     };
+    let factors = vertex_factors(mesh, &p.scale_keys)?;
     let offsets_at = |scale: f32| {
         let mut o = edge_offsets(mesh, adj, up, scale);
+        if !p.scale_keys.is_empty() {
+            for v in 0..n {
+                let (a, b) = (adj.offsets[v] as usize, adj.offsets[v + 1] as usize);
+                for (d, &w) in o[a..b].iter_mut().zip(&adj.neighbors[a..b]) {
+                    *d *= edge_factor(factors[v], factors[w as usize]);
+                }
+            }
+        }
         if p.rotation != 0.0 {
             // Texel y points down, so a counter-clockwise turn on screen is clockwise in
             // (x, y). Negation commutes with the rotation exactly, keeping offsets antisymmetric.

@@ -323,3 +323,69 @@ fn a_four_fold_field_turns_less_than_the_default_on_a_genus_3_mesh() {
         assert!(words.iter().all(|w| e.contains(w)), "{e}");
     }
 }
+
+/// `parameterize.scale_keys` on the demo cow: texels per unit near a key follow its factor
+/// (the tail's 0.4 against the head's 2.5, a ratio of 6.25), every offset is still the
+/// negation of its reverse, and a key the mesh does not have is refused naming it.
+#[test]
+fn scale_keys_vary_the_texture_scale_over_the_cow() {
+    let cache = tempfile::tempdir().unwrap();
+    let base = ["reconstruct.preview_size=32", "reconstruct.atlas_size=256"];
+    let keys = "parameterize.scale_keys=[{ at = [-0.5, -0.15, 0.0], factor = 0.4 }, \
+                { at = [0.5, 0.16, 0.0], factor = 2.5 }]";
+    let r = run_config(&demo(), &base, &[keys], cache.path()).unwrap();
+    let param = JumpParameterization::view(artifact(&r, "parameterize")).unwrap();
+    let mesh = <texsyn::geom::Mesh as Format>::view(artifact(&r, "import.mesh")).unwrap();
+    let flat = run_config(&demo(), &base, &[], cache.path()).unwrap();
+    let plain = JumpParameterization::view(artifact(&flat, "parameterize")).unwrap();
+    // Texels per unit length over the edges of the vertices within 0.05 of a point (inside
+    // a key's default radius, 5 % of the cow's 1.25 diagonal).
+    let texels_per_unit = |p: &texsyn::stages::parameterize::jump_parameterization::ParamParts,
+                           at: [f32; 3]| {
+        let at = glam::Vec3::from(at);
+        let (mut texels, mut length) = (0.0f32, 0.0f32);
+        for v in 0..mesh.vertex_count() {
+            if mesh.positions[v].distance(at) > 0.05 {
+                continue;
+            }
+            let (a, b) = (p.adj_offsets[v] as usize, p.adj_offsets[v + 1] as usize);
+            for j in a..b {
+                let w = p.neighbors[j] as usize;
+                texels += p.edge_offsets[j].length();
+                length += mesh.positions[v].distance(mesh.positions[w]);
+                assert_eq!(p.offset(w as u32, v as u32), Some(-p.edge_offsets[j]));
+            }
+        }
+        texels / length
+    };
+    let (tail, head) = ([-0.5, -0.15, 0.0], [0.5, 0.16, 0.0]);
+    let (t, h) = (texels_per_unit(&param, tail), texels_per_unit(&param, head));
+    let (t0, h0) = (texels_per_unit(&plain, tail), texels_per_unit(&plain, head));
+    let ratio = (h / h0) / (t / t0);
+    assert!(
+        (4.5..8.0).contains(&ratio),
+        "{ratio}: tail {t} / {t0}, head {h} / {h0}"
+    );
+    // In between, on the back, the scale lies between the two keys'.
+    let back = [0.0, 0.2, 0.0];
+    let middle = texels_per_unit(&param, back) / texels_per_unit(&plain, back);
+    assert!(
+        t / t0 < middle && middle < h / h0,
+        "{}, {middle}, {}",
+        t / t0,
+        h / h0
+    );
+    for (set, words) in [
+        (
+            "parameterize.scale_keys=[{ vertex = 999999, factor = 2.0 }]",
+            &["parameterize.scale_keys[0]", "vertex 999999"][..],
+        ),
+        (
+            "parameterize.scale_keys=[{ vertex = 1, factor = 50.0 }]",
+            &["parameterize.scale_keys[0]", "factor = 50"][..],
+        ),
+    ] {
+        let e = common::err(run_config(&demo(), &base, &[set], cache.path()));
+        assert!(words.iter().all(|w| e.contains(w)), "{e}");
+    }
+}

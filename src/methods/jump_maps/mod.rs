@@ -47,9 +47,18 @@ impl Method for JumpMaps {
         let mesh = match (c.parameterize.refine, &c.parameterize.scale) {
             (false, _) => mesh,
             (true, Scale::Texels(scale)) => {
+                // Split for the largest scale a key asks for.
+                let largest = crate::stages::parameterize::scale_keys::largest_factor(
+                    &c.parameterize.scale_keys,
+                );
+                let scale = if largest > 1.0 {
+                    scale * largest
+                } else {
+                    *scale
+                };
                 let spec = NodeSpec::of(Stage::Parameterize, jump_parameterization::REFINE_NODE)
                     .named("parameterize.refine");
-                dag.node(spec, *scale, (mesh, exemplar), |_, scale, (mesh, e)| {
+                dag.node(spec, scale, (mesh, exemplar), |_, scale, (mesh, e)| {
                     Ok(jump_parameterization::refine_to_fit(
                         &mesh,
                         *scale,
