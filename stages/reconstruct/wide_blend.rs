@@ -189,9 +189,11 @@ fn vertex_patches(
             patch: None,
         },
     );
-    heap.push(Reverse((OrdF32(0.0), c as u32)));
+    // Distances are non-negative floats, whose bits order as the numbers do.
+    heap.push(Reverse((0u32, c as u32)));
     let mut out: Vec<VertexPatch> = Vec::new();
-    while let Some(Reverse((OrdF32(d), v))) = heap.pop() {
+    while let Some(Reverse((bits, v))) = heap.pop() {
+        let d = f32::from_bits(bits);
         let s = &seen[&v];
         if d > s.d || s.patch.is_some() {
             continue;
@@ -250,7 +252,7 @@ fn vertex_patches(
                         patch: None,
                     },
                 );
-                heap.push(Reverse((OrdF32(du), u)));
+                heap.push(Reverse((du.to_bits(), u)));
             }
         }
     }
@@ -337,26 +339,12 @@ fn face_patches(
         .collect()
 }
 
-/// An `f32` ordered totally, for the search's heap (distances are finite and non-negative).
-#[derive(Clone, Copy, PartialEq)]
-struct OrdF32(f32);
-impl Eq for OrdF32 {}
-impl PartialOrd for OrdF32 {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-impl Ord for OrdF32 {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.0.total_cmp(&other.0)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::image::Image;
     use crate::parameterize::jump_parameterization::ParamMeta;
+    use crate::reconstruct::jump_blend::{BlendShader, corner_sets};
     use texsyn_core::geom::{VertexAdjacency, primitives::grid};
 
     /// A flat n×n grid, one texel per edge, with its edge offsets (x, y in texels).
@@ -477,14 +465,13 @@ mod tests {
         let param = parts(&s);
         let radius = 4.0;
         let wide = wide_blend(&s.triangles, &param, &addresses, radius, (64, 64)).unwrap();
-        let sets =
-            crate::reconstruct::jump_blend::corner_sets(&s.triangles, &param, &addresses).unwrap();
-        let narrow = crate::reconstruct::jump_blend::BlendShader {
+        let sets = corner_sets(&s.triangles, &param, &addresses).unwrap();
+        let narrow = BlendShader {
             sets: &sets,
             texture: ex.view(),
             wide: None,
         };
-        let blended = crate::reconstruct::jump_blend::BlendShader {
+        let blended = BlendShader {
             sets: &sets,
             texture: ex.view(),
             wide: Some(&wide),
@@ -536,9 +523,8 @@ mod tests {
         let ex = noise();
         let param = parts(&s);
         let wide = wide_blend(&s.triangles, &param, &addresses, 0.9, (64, 64)).unwrap();
-        let sets =
-            crate::reconstruct::jump_blend::corner_sets(&s.triangles, &param, &addresses).unwrap();
-        let narrow = crate::reconstruct::jump_blend::BlendShader {
+        let sets = corner_sets(&s.triangles, &param, &addresses).unwrap();
+        let narrow = BlendShader {
             sets: &sets,
             texture: ex.view(),
             wide: None,
