@@ -48,19 +48,26 @@ fn from_csr(start: &[u32], vertices: &[u32], closed: &[u8]) -> Vec<Polyline> {
         .collect()
 }
 
-/// Metadata: the source; arrays `start`, `vertices`, `closed`, `kinds`.
+/// Metadata: the source; arrays `start`, `vertices`, `closed`, `kinds`, and `fixed` (one
+/// byte per curve) only when some curve is fixed, so that curves without the flag keep the
+/// bytes (and hashes) they had before the flag existed.
 impl Format for ShapeFeatures {
     const KIND: Kind = Kind::ShapeFeatures;
     type View<'a> = ShapeFeatures;
     fn write(&self) -> AlignedBytes {
         let (start, vertices, closed) = to_csr(&self.curves.iter().collect::<Vec<_>>());
         let kinds: Vec<u8> = self.kinds.iter().map(|&k| k as u8).collect();
-        ArtifactWriter::new(Self::KIND, &self.source)
+        let fixed: Vec<u8> = self.fixed.iter().map(|&f| f as u8).collect();
+        let w = ArtifactWriter::new(Self::KIND, &self.source)
             .array("start", &start)
             .array("vertices", &vertices)
             .array("closed", &closed)
-            .array("kinds", &kinds)
-            .finish()
+            .array("kinds", &kinds);
+        if self.fixed.contains(&true) {
+            w.array("fixed", &fixed).finish()
+        } else {
+            w.finish()
+        }
     }
     fn decode(a: &Artifact) -> Result<ShapeFeatures, ArtifactError> {
         let source: FeatureSource = a.meta()?;
@@ -70,15 +77,22 @@ impl Format for ShapeFeatures {
         let kinds: &[u8] = a.array("kinds")?;
         let kinds: Option<Vec<CurveKind>> =
             kinds.iter().map(|&k| CurveKind::from_code(k)).collect();
+        let fixed: Vec<bool> = if a.array_names().contains(&"fixed") {
+            a.array::<u8>("fixed")?.iter().map(|&f| f != 0).collect()
+        } else {
+            vec![false; closed.len()]
+        };
         match kinds {
             Some(kinds)
                 if curves_ok(start, vertices, None)
                     && closed.len() + 1 == start.len()
-                    && kinds.len() == closed.len() =>
+                    && kinds.len() == closed.len()
+                    && fixed.len() == closed.len() =>
             {
                 Ok(ShapeFeatures {
                     curves: from_csr(start, vertices, closed),
                     kinds,
+                    fixed,
                     source,
                 })
             }
@@ -271,5 +285,41 @@ impl Format for SurfaceSynthesis {
             source: source.to_vec(),
             stats,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn features(fixed: Vec<bool>) -> ShapeFeatures {
+        ShapeFeatures {
+            curves: vec![
+                Polyline {
+                    vertices: vec![0, 1, 2],
+                    closed: false,
+                },
+                Polyline {
+                    vertices: vec![3, 4, 5],
+                    closed: true,
+                },
+            ],
+            kinds: vec![CurveKind::User; 2],
+            fixed,
+            source: FeatureSource::Curves,
+        }
+    }
+
+    #[test]
+    fn shape_features_keep_their_fixed_flags_and_write_them_only_when_set() {
+        let some = features(vec![false, true]);
+        let a = Artifact::from_bytes(some.write()).unwrap();
+        assert!(a.array_names().contains(&"fixed"));
+        assert_eq!(ShapeFeatures::decode(&a).unwrap(), some);
+
+        let none = features(vec![false, false]);
+        let a = Artifact::from_bytes(none.write()).unwrap();
+        assert!(!a.array_names().contains(&"fixed"));
+        assert_eq!(ShapeFeatures::decode(&a).unwrap(), none);
     }
 }

@@ -80,6 +80,16 @@ pub struct UserCurve {
     /// Whether the last point joins the first. Default: false.
     #[serde(default)]
     pub closed: bool,
+    /// Keep this curve's direction as drawn (first point to last) instead of letting §4.1's
+    /// greedy orientation choose it; the other curves are then oriented around it. For what
+    /// the paper says the greedy step cannot decide (symmetric spokes), and for an edited
+    /// `lines.obj` given back (there: the lines of a group named `fixed`). Default: false.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub fixed: bool,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 /// `extract.*` of a `feature_aligned` config.
@@ -156,6 +166,8 @@ impl ShapeFeatureParams {
 pub struct ShapeFeatures {
     pub curves: Vec<Polyline>,
     pub kinds: Vec<CurveKind>,
+    /// Per curve: its direction is the user's (`UserCurve::fixed`), not the field's to choose.
+    pub fixed: Vec<bool>,
     /// The source used (never `Auto`).
     pub source: FeatureSource,
 }
@@ -179,6 +191,10 @@ pub enum ShapeFeatureError {
     #[error("extract.curves_file: {0}")]
     File(String),
 }
+
+/// The OBJ group name that marks a curves file's lines as fixed (`g fixed`, or one name of
+/// several: `g user fixed`).
+pub const FIXED_GROUP: &str = "fixed";
 
 /// A curves file's curves: TOML `curves = [{ points = [...] }]` or OBJ `v` + `l` lines.
 pub fn read_curves_file(name: &str, bytes: &[u8]) -> Result<Vec<UserCurve>, ShapeFeatureError> {
@@ -212,6 +228,8 @@ pub fn read_curves_file(name: &str, bytes: &[u8]) -> Result<Vec<UserCurve>, Shap
 fn read_obj_lines(name: &str, text: &str) -> Result<Vec<UserCurve>, ShapeFeatureError> {
     let mut v: Vec<[f32; 3]> = Vec::new();
     let mut curves = Vec::new();
+    // Lines under a `g` statement naming the group `fixed` keep their direction.
+    let mut fixed = false;
     for (ln, line) in text.lines().enumerate() {
         let bad = |what: &str| ShapeFeatureError::File(format!("{name}, line {}: {what}", ln + 1));
         let mut it = line.split_whitespace();
@@ -227,6 +245,7 @@ fn read_obj_lines(name: &str, text: &str) -> Result<Vec<UserCurve>, ShapeFeature
                 }
                 v.push([xyz[0], xyz[1], xyz[2]]);
             }
+            Some("g") => fixed = it.any(|name| name == FIXED_GROUP),
             Some("l") => {
                 let mut ids = Vec::new();
                 for s in it {
@@ -255,6 +274,7 @@ fn read_obj_lines(name: &str, text: &str) -> Result<Vec<UserCurve>, ShapeFeature
                 curves.push(UserCurve {
                     points: ids.iter().map(|&i| v[i]).collect(),
                     closed,
+                    fixed,
                 });
             }
             _ => {}
@@ -300,7 +320,7 @@ pub fn shape_features(
         }
         s => s,
     };
-    let (curves, kinds) = match source {
+    let (curves, kinds, fixed) = match source {
         FeatureSource::Crease => {
             let c = crease_lines(mesh, &p.crease);
             if c.is_empty() {
@@ -309,8 +329,8 @@ pub fn shape_features(
                     hint: "extract.crease.angle or extract.crease.min_length",
                 });
             }
-            let k = vec![CurveKind::Crease; c.len()];
-            (c, k)
+            let (k, fixed) = (vec![CurveKind::Crease; c.len()], vec![false; c.len()]);
+            (c, k, fixed)
         }
         FeatureSource::Crest => {
             let c = crest_polylines(mesh, &p.crest);
@@ -330,11 +350,13 @@ pub fn shape_features(
                     }
                 })
                 .collect();
-            (c.into_iter().map(|(l, _)| l).collect(), kinds)
+            let fixed = vec![false; c.len()];
+            (c.into_iter().map(|(l, _)| l).collect(), kinds, fixed)
         }
         FeatureSource::Curves | FeatureSource::Auto => {
             let max = p.snap_distance * diagonal(mesh);
             let mut out = Vec::with_capacity(user);
+            let mut fixed = Vec::with_capacity(user);
             let all = p.curves.iter().chain(file_curves);
             for (i, c) in all.enumerate() {
                 let key = if i < p.curves.len() {
@@ -348,6 +370,7 @@ pub fn shape_features(
                 // All points on one vertex: nothing to align to.
                 if line.vertices.len() >= 2 {
                     out.push(line);
+                    fixed.push(c.fixed);
                 }
             }
             if out.is_empty() {
@@ -357,12 +380,13 @@ pub fn shape_features(
                 });
             }
             let k = vec![CurveKind::User; out.len()];
-            (out, k)
+            (out, k, fixed)
         }
     };
     Ok(ShapeFeatures {
         curves,
         kinds,
+        fixed,
         source,
     })
 }
@@ -436,6 +460,7 @@ mod tests {
             curves: vec![UserCurve {
                 points: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]],
                 closed: false,
+                fixed: false,
             }],
             ..Default::default()
         };
@@ -466,6 +491,34 @@ mod tests {
     }
 
     #[test]
+    fn a_fixed_group_in_an_obj_and_a_fixed_key_in_toml_mark_curves_fixed() {
+        let obj =
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\ng user\nl 1 2\ng user fixed\nl 2 3\ng valley\nl 3 1\n";
+        let read = read_curves_file("lines.obj", obj.as_bytes()).unwrap();
+        let fixed: Vec<bool> = read.iter().map(|c| c.fixed).collect();
+        assert_eq!(fixed, [false, true, false]);
+        let toml = "curves = [{ points = [[0, 0, 0], [1, 0, 0]] }, \
+                    { points = [[1, 0, 0], [1, 1, 0]], fixed = true }]";
+        let read = read_curves_file("c.toml", toml.as_bytes()).unwrap();
+        assert_eq!(
+            read.iter().map(|c| c.fixed).collect::<Vec<_>>(),
+            [false, true]
+        );
+
+        // The flag reaches the snapped curves, one per curve kept.
+        let grid = primitives::grid(5, 0.25);
+        let p = ShapeFeatureParams {
+            features: FeatureSource::Curves,
+            ..Default::default()
+        };
+        let f = shape_features(&grid, &p, &read).unwrap();
+        assert_eq!(f.fixed, [false, true]);
+        // A flag left at its default is not part of the node's key (existing keys stay).
+        let key = |c: &UserCurve| serde_json::to_string(c).unwrap();
+        assert!(!key(&read[0]).contains("fixed") && key(&read[1]).contains("fixed"));
+    }
+
+    #[test]
     fn a_curve_off_the_mesh_names_its_key() {
         let grid = primitives::grid(5, 0.25);
         let p = ShapeFeatureParams {
@@ -474,10 +527,12 @@ mod tests {
                 UserCurve {
                     points: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]],
                     closed: false,
+                    fixed: false,
                 },
                 UserCurve {
                     points: vec![[0.0, 0.5, 0.0], [0.5, 0.5, 3.0]],
                     closed: false,
+                    fixed: false,
                 },
             ],
             ..Default::default()

@@ -92,6 +92,43 @@ fn end_vertex(c: &Polyline, end: usize) -> u32 {
     }
 }
 
+/// The consecutive vertex pairs of `c`, the closing pair of a loop included.
+fn directed_edges(c: &Polyline) -> impl Iterator<Item = (u32, u32)> + '_ {
+    let v = &c.vertices;
+    let closing = (c.closed && v.len() > 2).then(|| (v[v.len() - 1], v[0]));
+    v.windows(2).map(|w| (w[0], w[1])).chain(closing)
+}
+
+/// The direction each preprocessed curve keeps because it runs along fixed input curves
+/// (`fixed[i]` for `originals[i]`): +1 where most of its edges that lie on a fixed curve run
+/// as they do there, −1 where most run against, `None` where it shares no edge with one.
+/// Joining and breaking keep every input vertex and its order up to reversing a whole piece,
+/// so a piece of a fixed curve, or a join of one with free curves and bridging paths, is
+/// found by its edges; a tie keeps the piece's own order.
+pub fn fixed_signs(
+    preprocessed: &[Polyline],
+    originals: &[Polyline],
+    fixed: &[bool],
+) -> Vec<Option<i8>> {
+    let on_fixed: std::collections::HashSet<(u32, u32)> = originals
+        .iter()
+        .zip(fixed)
+        .filter(|(_, f)| **f)
+        .flat_map(|(c, _)| directed_edges(c))
+        .collect();
+    preprocessed
+        .iter()
+        .map(|c| {
+            let (mut along, mut against) = (0usize, 0usize);
+            for (a, b) in directed_edges(c) {
+                along += on_fixed.contains(&(a, b)) as usize;
+                against += on_fixed.contains(&(b, a)) as usize;
+            }
+            (along + against > 0).then_some(if along >= against { 1 } else { -1 })
+        })
+        .collect()
+}
+
 /// Joins curve ends one pair at a time, smallest gap first, until no pair qualifies.
 fn join_all(mesh: &Mesh, curves: &mut Vec<Polyline>, join_distance: f32, cos_limit: f32) {
     let mean_edge = mesh.mean_edge_length();
@@ -311,5 +348,45 @@ fn break_curve(mesh: &Mesh, c: &Polyline, cos_limit: f32) -> Vec<Polyline> {
         cuts.extend(&breaks);
         cuts.push(m - 1);
         cuts.windows(2).map(|w| piece(w[0], w[1])).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn open(v: &[u32]) -> Polyline {
+        Polyline {
+            vertices: v.to_vec(),
+            closed: false,
+        }
+    }
+
+    #[test]
+    fn pieces_follow_the_fixed_curves_they_run_along() {
+        let originals = [open(&[0, 1, 2, 3, 4]), open(&[10, 11, 12])];
+        let fixed = [true, false];
+        let pieces = [
+            open(&[2, 1, 0]),                 // a broken-off piece, reversed
+            open(&[2, 3, 4]),                 // one as drawn
+            open(&[12, 11, 10]),              // a free curve
+            open(&[4, 3, 2, 20, 10, 11, 12]), // a join: two fixed edges against, free ones
+        ];
+        let s = fixed_signs(&pieces, &originals, &fixed);
+        assert_eq!(s, [Some(-1), Some(1), None, Some(-1)]);
+        // A loop's closing edge counts.
+        let loop_ = Polyline {
+            vertices: vec![5, 6, 7],
+            closed: true,
+        };
+        let originals = [loop_.clone()];
+        let turned = Polyline {
+            vertices: vec![7, 6, 5],
+            closed: true,
+        };
+        assert_eq!(
+            fixed_signs(&[loop_, turned], &originals, &[true]),
+            [Some(1), Some(-1)]
+        );
     }
 }

@@ -8,7 +8,9 @@
 //!   positive floor on obtuse triangles, see there), P diagonal with α (paper: 10⁸) at
 //!   constrained vertices, b the signed unit tangent of the curve. The result is projected to
 //!   the vertex tangent planes and normalized (the paper projects "as in [Praun et al. 2000]").
-//! * §4.1 greedy orientation: the longest curve gets +1; then repeatedly every un-oriented
+//! * §4.1 greedy orientation: the longest curve gets +1 (or, when the user fixed some curves'
+//!   directions, those curves get theirs, the paper's remedy for symmetric spokes made per
+//!   curve; see [`feature_field_with`]); then repeatedly every un-oriented
 //!   curve c is scored by eq. (1), g(c, u) = max{Σ (π−θ_p)/(π+θ_p), Σ θ_p/(2π−θ_p)}, against
 //!   the current field u; the best one is oriented (+1 if the first sum wins, −1 if the
 //!   second) and the field re-solved, until all curves are oriented. `Arbitrary` gives each
@@ -60,7 +62,7 @@
 //! faer runs sequentially (as in [`crate::linalg::SpdSolver`]), and the only rayon use is
 //! per-vertex / per-curve / per-triangle maps, so results are identical for any thread count.
 
-use super::curve_grouping::group_and_break;
+use super::curve_grouping::{fixed_signs, group_and_break};
 use crate::check::{ParamError, check_range};
 use crate::extract::crease_lines::{Polyline, polyline_length};
 use crate::geom::Mesh;
@@ -92,10 +94,10 @@ pub enum Orientation {
     Greedy,
     /// A seeded random sign per curve, solved once (for comparison, Figs. 3 and 6).
     Arbitrary,
-    /// Every curve along its vertex order as given, solved once: the user's orientation, for
-    /// what §4.1 says the greedy step cannot decide (symmetric spokes), and for an edited
+    /// Every curve along its vertex order as given, solved once: as if every curve were
+    /// fixed (`extract.curves[i].fixed`, see [`feature_field_with`]). For an edited
     /// `lines.obj` (written oriented as the field follows each curve) given back as the curves
-    /// file. A curve joined from pieces (`join_distance`) follows its first piece.
+    /// file. A curve joined from pieces (`join_distance`) follows most of its edges.
     Given,
 }
 
@@ -230,29 +232,46 @@ pub fn preprocess_curves(
     )
 }
 
-/// The field of `curves` (see the module doc), with timings.
+/// The field of `curves` (see the module doc), with timings; no curve fixed.
 pub fn feature_field(
     mesh: &Mesh,
     curves: &[Polyline],
     p: &FeatureFieldParams,
 ) -> Result<(FeatureField, FieldTimings), FeatureFieldError> {
-    feature_field_with(mesh, curves, p, &|_| {})
+    feature_field_with(mesh, curves, &[], p, &|_| {})
 }
 
-/// [`feature_field`], reporting the fraction done to `progress`: the setup, then each greedy
-/// step (one per curve, each a refactorization and solve of about the same cost).
+/// [`feature_field`] with some curves fixed (`fixed[i]` for `curves[i]`; a shorter slice
+/// leaves the rest free), reporting the fraction done to `progress`: the setup, then each
+/// greedy step (one per curve, each a refactorization and solve of about the same cost).
+///
+/// A fixed curve keeps its own vertex order: the paper's remedy for §4.1's limitation
+/// ("for symmetric configurations such as spokes … the user can specify the orientation of
+/// one curve") made per curve. The greedy step then starts from the fixed curves, all
+/// oriented at once, instead of from the longest curve, and orients the rest around them;
+/// arbitrary signs leave fixed curves as they are; `Given` fixes every curve. After §4.1's
+/// joining and breaking, a piece follows the fixed curves it runs along ([`fixed_signs`]).
 pub fn feature_field_with(
     mesh: &Mesh,
     curves: &[Polyline],
+    fixed: &[bool],
     p: &FeatureFieldParams,
     progress: &(dyn Fn(f32) + Sync),
 ) -> Result<(FeatureField, FieldTimings), FeatureFieldError> {
     p.validate()?;
     check_vertices(mesh, curves)?;
+    let originals = curves;
     let curves = preprocess_curves(mesh, curves, p);
     if curves.is_empty() {
         return Err(FeatureFieldError::NoCurves);
     }
+    let fixed: Vec<bool> = match p.orientation {
+        Orientation::Given => vec![true; originals.len()],
+        _ => (0..originals.len())
+            .map(|i| fixed.get(i).copied().unwrap_or(false))
+            .collect(),
+    };
+    let kept = fixed_signs(&curves, originals, &fixed);
     let mut timings = FieldTimings::default();
     let t = Instant::now();
     let sys = FieldSystem::new(mesh, p.alpha)?;
@@ -265,8 +284,7 @@ pub fn feature_field_with(
                 .map(|c| {
                     let h = crate::random::counter_hash(p.orientation_seed, SIGN_STREAM, c as u64);
                     let arbitrary = if h & 1 == 0 { 1 } else { -1 };
-                    let given = p.orientation == Orientation::Given;
-                    (c, if given { 1 } else { arbitrary })
+                    (c, kept[c].unwrap_or(arbitrary))
                 })
                 .collect();
             let t = Instant::now();
@@ -276,7 +294,7 @@ pub fn feature_field_with(
             let raw = upd.field(&curves)?;
             (signed, raw)
         }
-        Orientation::Greedy => greedy(&sys, &curves, &mut timings, progress)?,
+        Orientation::Greedy => greedy(&sys, &curves, &kept, &mut timings, progress)?,
     };
     progress(1.0);
     let mut vectors = raw;
@@ -315,23 +333,33 @@ fn check_vertices(mesh: &Mesh, curves: &[Polyline]) -> Result<(), FeatureFieldEr
     Ok(())
 }
 
+/// §4.1's greedy orientation, starting from the curves whose sign is `kept` (all at once),
+/// or from the longest curve (+1) when none is.
 fn greedy(
     sys: &FieldSystem,
     curves: &[Polyline],
+    kept: &[Option<i8>],
     timings: &mut FieldTimings,
     progress: &(dyn Fn(f32) + Sync),
 ) -> Result<(Signed, Vec<Vec3>), FeatureFieldError> {
     let mesh = sys.mesh;
-    let lengths: Vec<f32> = curves.iter().map(|c| polyline_length(mesh, c)).collect();
-    let mut first = 0;
-    for c in 1..curves.len() {
-        if lengths[c] > lengths[first] {
-            first = c;
+    let mut order: Signed = (0..curves.len())
+        .filter_map(|c| kept[c].map(|s| (c, s)))
+        .collect();
+    if order.is_empty() {
+        let lengths: Vec<f32> = curves.iter().map(|c| polyline_length(mesh, c)).collect();
+        let mut first = 0;
+        for c in 1..curves.len() {
+            if lengths[c] > lengths[first] {
+                first = c;
+            }
         }
+        order.push((first, 1));
     }
-    let mut order = vec![(first, 1i8)];
     let mut oriented = vec![false; curves.len()];
-    oriented[first] = true;
+    for &(c, _) in &order {
+        oriented[c] = true;
+    }
     let t = Instant::now();
     let mut upd = sys.updater();
     upd.add(curves, &order)?;
@@ -696,16 +724,19 @@ pub struct OrientedField {
 
 /// The field node: the field of §4, and for the log and the report the paper's comparison
 /// (Fig. 3, Fig. 6), the singularities of the same curves arbitrarily oriented.
+/// `fixed[i]`: `curves[i]` keeps its direction (see [`feature_field_with`]).
 pub fn node(
     mesh: &Mesh,
     curves: &[Polyline],
+    fixed: &[bool],
     p: &FeatureFieldParams,
     progress: &(dyn Fn(f32) + Sync),
 ) -> Result<OrientedField, Failure> {
     // The arbitrary orientation's solve (for the report's comparison) is one factorization:
     // about as long as a greedy step, so a small share at the end.
     let share = |f: f32| progress(0.95 * f);
-    let (mut field, t) = feature_field_with(mesh, curves, p, &share).map_err(Failure::input)?;
+    let (mut field, t) =
+        feature_field_with(mesh, curves, fixed, p, &share).map_err(Failure::input)?;
     if p.rotation != 0.0 {
         rotate_about_normals(&mut field.vectors, mesh.vertex_normals(), p.rotation);
     }
@@ -996,6 +1027,50 @@ mod tests {
     }
 
     #[test]
+    fn a_fixed_curve_keeps_its_direction_and_greedy_orients_the_rest_around_it() {
+        // Three rows, the longest and the top one drawn left to right, the middle one right
+        // to left. Greedy alone starts from the longest (+x everywhere); with the middle row
+        // fixed, every row must follow it (−x everywhere).
+        let mesh = unit_grid(31);
+        let row = |y: f32, from: f32, to: f32| {
+            let pts = polyline(|t| Vec3::new(from + (to - from) * t, y, 0.0), 4);
+            trace(&mesh, &pts, false)
+        };
+        let curves = vec![row(0.2, 0.1, 0.9), row(0.5, 0.7, 0.3), row(0.8, 0.3, 0.7)];
+        let x_at_middles = |f: &FeatureField| -> Vec<f32> {
+            curves
+                .iter()
+                .map(|c| f.vectors[c.vertices[c.vertices.len() / 2] as usize].x)
+                .collect()
+        };
+        let p = FeatureFieldParams::default();
+        let free = feature_field(&mesh, &curves, &p).unwrap().0;
+        let x = x_at_middles(&free);
+        assert!(x.iter().all(|&x| x > 0.9), "greedy alone: {x:?}");
+        let fixed = [false, true, false];
+        let f = feature_field_with(&mesh, &curves, &fixed, &p, &|_| {})
+            .unwrap()
+            .0;
+        let x = x_at_middles(&f);
+        assert!(x.iter().all(|&x| x < -0.9), "middle row fixed: {x:?}");
+        // The fixed row is oriented first, along its own order.
+        assert_eq!(f.curves[0].1, 1);
+        assert_eq!(f.curves[0].0.vertices, curves[1].vertices);
+        // Arbitrary signs leave a fixed curve as drawn too, whatever the seed.
+        for seed in 0..8 {
+            let a = FeatureFieldParams {
+                orientation: Orientation::Arbitrary,
+                orientation_seed: seed,
+                ..Default::default()
+            };
+            let f = feature_field_with(&mesh, &curves, &fixed, &a, &|_| {})
+                .unwrap()
+                .0;
+            assert_eq!(f.curves[1].1, 1, "seed {seed}");
+        }
+    }
+
+    #[test]
     fn a_rotation_turns_the_node_s_field_about_the_normals() {
         let mesh = unit_grid(21);
         let curves = vec![trace(
@@ -1003,12 +1078,12 @@ mod tests {
             &polyline(|t| Vec3::new(0.1 + 0.8 * t, 0.3 + 0.2 * t, 0.0), 4),
             false,
         )];
-        let plain = node(&mesh, &curves, &FeatureFieldParams::default(), &|_| {}).unwrap();
+        let plain = node(&mesh, &curves, &[], &FeatureFieldParams::default(), &|_| {}).unwrap();
         let turned = FeatureFieldParams {
             rotation: 90.0,
             ..Default::default()
         };
-        let rotated = node(&mesh, &curves, &turned, &|_| {}).unwrap();
+        let rotated = node(&mesh, &curves, &[], &turned, &|_| {}).unwrap();
         let n = mesh.vertex_normals()[0];
         let mut compared = 0;
         for (a, b) in plain.field.vectors.iter().zip(&rotated.field.vectors) {

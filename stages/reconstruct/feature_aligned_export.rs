@@ -11,7 +11,8 @@
 //!   `comparison.png` (aligned above, unaligned below: the paper's Fig. 7 pairs);
 //! - `lines.obj`: the shape's feature curves as OBJ polylines (`l`), in groups `ridge`,
 //!   `valley`, `crease`, `user`, oriented as the field follows them; it can be edited and given
-//!   back as `extract.curves_file`;
+//!   back as `extract.curves_file`, and lines moved into a group that also names `fixed`
+//!   (`g user fixed`) keep their direction there (fixed curves are written so);
 //! - `lines_preview.png`: the mesh with its curves drawn (red ridges and creases, blue
 //!   valleys, green user curves);
 //! - `field.png`: the vector field as a line-integral convolution (streaks along the field;
@@ -20,6 +21,7 @@
 
 use crate::check::{ParamError, check_range};
 use crate::export::encode_png;
+use crate::extract::shape_features::FIXED_GROUP;
 use crate::geom::Mesh;
 use crate::geom::edge_refine::Refined;
 use crate::render::up_axis::UpAxis;
@@ -122,12 +124,14 @@ impl FeatureAlignedExportParams {
 }
 
 /// A feature curve to draw and export: a vertex path of the input mesh, its kind (0 ridge,
-/// 1 valley, 2 crease, 3 user) and its orientation (+1: along its vertex order).
+/// 1 valley, 2 crease, 3 user), its orientation (+1: along its vertex order) and whether the
+/// user fixed that orientation.
 pub struct DrawnCurve<'a> {
     pub vertices: &'a [u32],
     pub closed: bool,
     pub kind: u8,
     pub sign: i8,
+    pub fixed: bool,
 }
 
 /// Everything the export draws on.
@@ -324,7 +328,8 @@ pub fn streaks(mesh: &Mesh, field: &[Vec3], steps: usize) -> Vec<[f32; 4]> {
 }
 
 /// The curves as OBJ polylines on the input mesh's vertices, grouped by kind, each written in
-/// the direction the field follows it.
+/// the direction the field follows it; curves the user fixed in a group that also names
+/// [`FIXED_GROUP`], so they stay fixed when the file is given back.
 fn lines_obj(mesh: &Mesh, curves: &[DrawnCurve]) -> String {
     use std::fmt::Write;
     let mut s = String::from(
@@ -343,24 +348,33 @@ fn lines_obj(mesh: &Mesh, curves: &[DrawnCurve]) -> String {
     }
     let index = |v: u32| used.binary_search(&v).expect("listed") + 1;
     for (k, name) in KIND_NAMES.iter().enumerate() {
-        let mut group = curves.iter().filter(|c| c.kind as usize == k).peekable();
-        if group.peek().is_none() {
-            continue;
-        }
-        let _ = writeln!(s, "g {name}");
-        for c in group {
-            let mut ids: Vec<usize> = c.vertices.iter().map(|&v| index(v)).collect();
-            if c.sign < 0 {
-                ids.reverse();
+        for fixed in [false, true] {
+            let mut group = curves
+                .iter()
+                .filter(|c| c.kind as usize == k && c.fixed == fixed)
+                .peekable();
+            if group.peek().is_none() {
+                continue;
             }
-            if c.closed && ids.len() > 2 {
-                ids.push(ids[0]);
+            match fixed {
+                false => writeln!(s, "g {name}"),
+                true => writeln!(s, "g {name} {FIXED_GROUP}"),
             }
-            s.push('l');
-            for i in ids {
-                let _ = write!(s, " {i}");
+            .expect("writing to a String");
+            for c in group {
+                let mut ids: Vec<usize> = c.vertices.iter().map(|&v| index(v)).collect();
+                if c.sign < 0 {
+                    ids.reverse();
+                }
+                if c.closed && ids.len() > 2 {
+                    ids.push(ids[0]);
+                }
+                s.push('l');
+                for i in ids {
+                    let _ = write!(s, " {i}");
+                }
+                s.push('\n');
             }
-            s.push('\n');
         }
     }
     s
@@ -866,19 +880,23 @@ mod tests {
                 closed: false,
                 kind: 2,
                 sign: -1,
+                fixed: false,
             },
             DrawnCurve {
                 vertices: &[3, 4],
                 closed: false,
                 kind: 1,
                 sign: 1,
+                fixed: true,
             },
         ];
         let s = lines_obj(&mesh, &curves);
         let read = crate::extract::shape_features::read_curves_file("l.obj", s.as_bytes()).unwrap();
         assert_eq!(read.len(), 2);
-        // Kinds are written in order ridge, valley, crease, user: the valley first.
+        // Kinds are written in order ridge, valley, crease, user: the valley first, and it
+        // stays fixed.
         assert_eq!(read[0].points, vec![[0.0, 1.0, 0.0], [1.0, 1.0, 0.0]]);
+        assert_eq!((read[0].fixed, read[1].fixed), (true, false));
         assert_eq!(
             read[1].points,
             vec![[2.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]

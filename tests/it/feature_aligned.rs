@@ -312,3 +312,64 @@ fn an_edited_lines_obj_given_back_keeps_its_directions() {
         "the edited line came back as before"
     );
 }
+
+/// An edited lines.obj given back with the edited line in a `fixed` group keeps that line's
+/// direction under the default greedy orientation (which orients the other lines around it),
+/// and writes it in a `fixed` group again, so the next round trip keeps it too.
+#[test]
+fn a_line_moved_into_a_fixed_group_keeps_its_direction_under_greedy_orientation() {
+    let cache = tempfile::tempdir().unwrap();
+    let first = run("feature_aligned.toml", &["compare=false"], cache.path()).unwrap();
+    let out = materialized(&first, "reconstruct");
+    let text = std::fs::read_to_string(out.path().join("lines.obj")).unwrap();
+    let lines = obj_lines(&text);
+    assert!(lines.len() >= 2, "{} lines", lines.len());
+    let mut by_length: Vec<usize> = (0..lines.len()).collect();
+    by_length.sort_by_key(|&i| std::cmp::Reverse(lines[i].len()));
+    let chosen = by_length[1];
+    // The chosen line leaves its group, turned round, for a `fixed` group at the end.
+    let (mut edited, mut moved, mut k) = (String::new(), String::new(), 0);
+    for l in text.lines() {
+        match l.strip_prefix("l ") {
+            Some(ids) => {
+                if k == chosen {
+                    let mut ids: Vec<&str> = ids.split_whitespace().collect();
+                    ids.reverse();
+                    moved = format!("g user fixed\nl {}\n", ids.join(" "));
+                } else {
+                    edited += &format!("{l}\n");
+                }
+                k += 1;
+            }
+            None => edited += &format!("{l}\n"),
+        }
+    }
+    edited += &moved;
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "lines.obj", edited.as_bytes());
+    let sets = [
+        "compare=false",
+        "extract.features=\"curves\"",
+        &format!("extract.curves_file={path:?}"),
+    ];
+    let again = run("feature_aligned.toml", &sets, cache.path()).unwrap();
+    let out = materialized(&again, "reconstruct");
+    let back_text = std::fs::read_to_string(out.path().join("lines.obj")).unwrap();
+    let back = obj_lines(&back_text);
+    let mut turned = lines[chosen].clone();
+    turned.reverse();
+    let at = back.iter().position(|l| *l == turned);
+    assert!(at.is_some(), "the fixed line is not back as edited");
+    // It is written under a group naming `fixed`, and it is the only such line.
+    let mut group_fixed = Vec::new();
+    let mut in_fixed = false;
+    for l in back_text.lines() {
+        if let Some(g) = l.strip_prefix("g ") {
+            in_fixed = g.split_whitespace().any(|n| n == "fixed");
+        } else if l.starts_with("l ") {
+            group_fixed.push(in_fixed);
+        }
+    }
+    let fixed_lines: Vec<usize> = (0..group_fixed.len()).filter(|&i| group_fixed[i]).collect();
+    assert_eq!(fixed_lines, [at.unwrap()], "lines written as fixed");
+}

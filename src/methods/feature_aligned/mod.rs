@@ -84,7 +84,13 @@ impl Method for FeatureAligned {
             (mesh, shape),
             |ctx, p, (mesh, shape)| {
                 let progress = |f| ctx.progress.set(f);
-                Ok(feature_field::node(&mesh, &shape.curves, p, &progress)?)
+                Ok(feature_field::node(
+                    &mesh,
+                    &shape.curves,
+                    &shape.fixed,
+                    p,
+                    &progress,
+                )?)
             },
         );
         let refined = dag.node(
