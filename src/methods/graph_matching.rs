@@ -133,6 +133,7 @@ impl Method for GraphMatchingMethod {
             },
         );
         let nodes = GraphMatchingNodes {
+            mesh,
             parameterize: hierarchy,
             field,
             synthesize: colours,

@@ -30,13 +30,15 @@
 use super::charts::{EdgeOffsets, unfolded_discs_with};
 use super::{Item, Run, ScoreFailure};
 use crate::artifact::feature_aligned::OrientedField;
+use crate::geom::Mesh;
 use crate::geom::edge_refine::Refined;
+use crate::geom::poly_mesh::PolyMesh;
 use crate::image::Image;
 use crate::pipeline::Handle;
 use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
 use crate::stages::field::feature_field::carry_field;
 use crate::stages::field::sweep_field::SweepField;
-use crate::stages::parameterize::sqrt2_subdivision::Sqrt2Hierarchy;
+use crate::stages::parameterize::sqrt2_subdivision::{Sqrt2Hierarchy, area_spread};
 use crate::stages::reconstruct::feature_aligned_export::{
     ExemplarLookup, ExemplarSampling, nearest_corner,
 };
@@ -49,6 +51,7 @@ use texsyn_core::math::PureMath;
 /// The nodes of a graph-matching run that its score reads.
 #[derive(Clone, Copy)]
 pub struct GraphMatchingNodes {
+    pub mesh: Handle<Mesh>,
     pub parameterize: Handle<Sqrt2Hierarchy>,
     pub field: Handle<SweepField>,
     pub synthesize: Handle<GraphMatching>,
@@ -94,6 +97,22 @@ pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Item, Sco
     item.extra.insert(
         "texels_per_edge".into(),
         serde_json::json!(mesh.mean_edge_length() * scale),
+    );
+    // §3.2.2, Fig. 6: the face areas' spread before and after adaptive pre-subdivision (the
+    // hierarchy's coarsest level), so a sweep over parameterize.area_factor tabulates it.
+    let input = PolyMesh::from_mesh(&run.view(nodes.mesh)?);
+    let coarse = h.level(0);
+    item.extra.insert(
+        "area_spread_input".into(),
+        serde_json::json!(area_spread(&input)),
+    );
+    item.extra.insert(
+        "area_spread".into(),
+        serde_json::json!(area_spread(&coarse)),
+    );
+    item.extra.insert(
+        "coarse_faces".into(),
+        serde_json::json!(coarse.face_count()),
     );
     score_vertex_colours(run, &mut item, &mesh, &out.colours, step, ex)?;
     Ok(item)

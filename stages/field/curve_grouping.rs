@@ -45,21 +45,30 @@ use texsyn_core::math::PureMath;
 pub const SPAN: usize = 4;
 
 /// Joins and breaks `curves` (see the module doc). `join_distance` is in object units,
-/// `break_angle` in degrees.
+/// `break_angle` in degrees. `fixed[i]` (missing: false) says `curves[i]`'s direction is the
+/// user's: two fixed curves are joined only where their directions run on through the join
+/// (spokes drawn outward from one centre stay apart even where two are collinear).
 pub fn group_and_break(
     mesh: &Mesh,
     curves: &[Polyline],
+    fixed: &[bool],
     join_distance: f32,
     break_angle: f32,
 ) -> Vec<Polyline> {
     let n = mesh.vertex_count();
-    let mut work: Vec<Polyline> = curves
+    let (mut work, mut direction): (Vec<Polyline>, Vec<Option<bool>>) = curves
         .iter()
-        .filter(|c| c.vertices.len() >= 2 && c.vertices.iter().all(|&v| (v as usize) < n))
-        .cloned()
-        .collect();
+        .enumerate()
+        .filter(|(_, c)| c.vertices.len() >= 2 && c.vertices.iter().all(|&v| (v as usize) < n))
+        .map(|(i, c)| {
+            (
+                c.clone(),
+                fixed.get(i).copied().unwrap_or(false).then_some(true),
+            )
+        })
+        .unzip();
     let cos_limit = break_angle.to_radians().cos_pure();
-    join_all(mesh, &mut work, join_distance, cos_limit);
+    join_all(mesh, &mut work, &mut direction, join_distance, cos_limit);
     work.iter()
         .flat_map(|c| break_curve(mesh, c, cos_limit))
         .filter(|c| c.vertices.len() >= 2)
@@ -130,7 +139,15 @@ pub fn fixed_signs(
 }
 
 /// Joins curve ends one pair at a time, smallest gap first, until no pair qualifies.
-fn join_all(mesh: &Mesh, curves: &mut Vec<Polyline>, join_distance: f32, cos_limit: f32) {
+/// `direction[i]`: for a curve holding fixed pieces, whether they run along its vertex order
+/// (`None`: no fixed piece); kept up to date through joins.
+fn join_all(
+    mesh: &Mesh,
+    curves: &mut Vec<Polyline>,
+    direction: &mut Vec<Option<bool>>,
+    join_distance: f32,
+    cos_limit: f32,
+) {
     let mean_edge = mesh.mean_edge_length();
     let mut search = Dijkstra::new(mesh.vertex_count(), u32::MAX);
     loop {
@@ -183,6 +200,12 @@ fn join_all(mesh: &Mesh, curves: &mut Vec<Polyline>, join_distance: f32, cos_lim
         });
         let mut joined = false;
         for &(d, i, ei, j, ej) in &cand {
+            // The joined curve runs along i towards its end ei, then along j from its end ej.
+            let along_i = direction[i].map(|f| f == (ei == 1));
+            let along_j = direction[j].map(|f| f == (ej == 0));
+            if i != j && along_i.is_some() && along_j.is_some() && along_i != along_j {
+                continue;
+            }
             let (a, b) = (end_vertex(&curves[i], ei), end_vertex(&curves[j], ej));
             let limit = 3.0 * d as f64 + 3.0 * mean_edge as f64;
             let Some(path) = shortest_path_in(mesh, &mut search, a, b, limit) else {
@@ -203,6 +226,7 @@ fn join_all(mesh: &Mesh, curves: &mut Vec<Polyline>, join_distance: f32, cos_lim
                     vertices: seq,
                     closed: true,
                 };
+                direction[i] = along_i;
             } else {
                 let mut other = curves[j].vertices.clone();
                 if ej == 1 {
@@ -214,7 +238,9 @@ fn join_all(mesh: &Mesh, curves: &mut Vec<Polyline>, join_distance: f32, cos_lim
                     vertices: seq,
                     closed: false,
                 };
+                direction[i] = along_i.or(along_j);
                 curves.remove(j);
+                direction.remove(j);
             }
             joined = true;
             break;

@@ -78,7 +78,7 @@ use texsyn_core::math::PureMath;
 
 /// The `feature_field` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("feature_field", 1);
+    texsyn_core::algorithm::Algorithm::new("feature_field", 2);
 
 /// Stream of `counter_hash` for arbitrary curve signs.
 const SIGN_STREAM: u64 = 0x5167_0001;
@@ -217,16 +217,19 @@ pub enum FeatureFieldError {
     Params(#[from] ParamError),
 }
 
-/// §4.1 preprocessing with the thresholds of `p` (see [`super::curve_grouping`]).
+/// §4.1 preprocessing with the thresholds of `p` (see [`super::curve_grouping`]); `fixed` as
+/// in [`feature_field_with`].
 pub fn preprocess_curves(
     mesh: &Mesh,
     curves: &[Polyline],
+    fixed: &[bool],
     p: &FeatureFieldParams,
 ) -> Vec<Polyline> {
     let (lo, hi) = mesh.bounds();
     group_and_break(
         mesh,
         curves,
+        fixed,
         p.join_distance * (hi - lo).length(),
         p.break_angle,
     )
@@ -261,16 +264,16 @@ pub fn feature_field_with(
     p.validate()?;
     check_vertices(mesh, curves)?;
     let originals = curves;
-    let curves = preprocess_curves(mesh, curves, p);
-    if curves.is_empty() {
-        return Err(FeatureFieldError::NoCurves);
-    }
     let fixed: Vec<bool> = match p.orientation {
         Orientation::Given => vec![true; originals.len()],
         _ => (0..originals.len())
             .map(|i| fixed.get(i).copied().unwrap_or(false))
             .collect(),
     };
+    let curves = preprocess_curves(mesh, curves, &fixed, p);
+    if curves.is_empty() {
+        return Err(FeatureFieldError::NoCurves);
+    }
     let kept = fixed_signs(&curves, originals, &fixed);
     let mut timings = FieldTimings::default();
     let t = Instant::now();
@@ -1071,6 +1074,41 @@ mod tests {
     }
 
     #[test]
+    fn fixed_spokes_drawn_outward_stay_apart_and_keep_their_directions() {
+        // Two collinear spokes drawn outward from one centre: free, §4.1 joins them into one
+        // line (one direction through the centre); fixed, they stay two curves and the field
+        // points away from the centre on both sides.
+        let mesh = unit_grid(31);
+        let spoke = |to: f32| {
+            let pts = polyline(|t| Vec3::new(0.5 + (to - 0.5) * t, 0.5, 0.0), 4);
+            trace(&mesh, &pts, false)
+        };
+        let curves = vec![spoke(0.1), spoke(0.9)];
+        let p = FeatureFieldParams::default();
+        let free = feature_field(&mesh, &curves, &p).unwrap().0;
+        assert_eq!(free.curves.len(), 1, "free spokes are joined");
+        let f = feature_field_with(&mesh, &curves, &[true, true], &p, &|_| {})
+            .unwrap()
+            .0;
+        assert_eq!(f.curves.len(), 2, "fixed spokes stay apart");
+        let x_at = |x: f32| {
+            let v = (0..mesh.vertex_count())
+                .min_by(|&a, &b| {
+                    let d = |v: usize| mesh.positions[v].distance(Vec3::new(x, 0.5, 0.0));
+                    d(a).total_cmp(&d(b))
+                })
+                .unwrap();
+            f.vectors[v].x
+        };
+        assert!(
+            x_at(0.25) < -0.9 && x_at(0.75) > 0.9,
+            "{} {}",
+            x_at(0.25),
+            x_at(0.75)
+        );
+    }
+
+    #[test]
     fn a_rotation_turns_the_node_s_field_about_the_normals() {
         let mesh = unit_grid(21);
         let curves = vec![trace(
@@ -1241,7 +1279,7 @@ mod tests {
             ..FeatureFieldParams::default()
         };
         // Gap of three edges (0.075 = 0.053 of the diagonal): joined, through the row.
-        let out = preprocess_curves(&mesh, &[row(20, 2..11), row(20, 13..26)], &p);
+        let out = preprocess_curves(&mesh, &[row(20, 2..11), row(20, 13..26)], &[], &p);
         assert_eq!(out.len(), 1, "{out:?}");
         let mut v = out[0].vertices.clone();
         if v[0] > v[1] {
@@ -1249,14 +1287,14 @@ mod tests {
         }
         assert_eq!(v, row(20, 2..26).vertices);
         // Far apart (16 edges): not joined.
-        let out = preprocess_curves(&mesh, &[row(20, 2..11), row(20, 27..36)], &p);
+        let out = preprocess_curves(&mesh, &[row(20, 2..11), row(20, 27..36)], &[], &p);
         assert_eq!(out.len(), 2);
         // Close but perpendicular ends: not joined.
         let column = Polyline {
             vertices: (22..35).map(|y| y * 41 + 12).collect(),
             closed: false,
         };
-        let out = preprocess_curves(&mesh, &[row(20, 2..11), column], &p);
+        let out = preprocess_curves(&mesh, &[row(20, 2..11), column], &[], &p);
         assert_eq!(out.len(), 2);
         // An L: broken at the corner, which both pieces keep.
         let corner = 5 * 41 + 20;
@@ -1268,6 +1306,7 @@ mod tests {
                 vertices: l,
                 closed: false,
             }],
+            &[],
             &p,
         );
         assert_eq!(out.len(), 2, "{out:?}");
@@ -1286,7 +1325,7 @@ mod tests {
             ),
             false,
         );
-        assert_eq!(preprocess_curves(&mesh, &[arc], &p).len(), 1);
+        assert_eq!(preprocess_curves(&mesh, &[arc], &[], &p).len(), 1);
     }
 
     #[test]
