@@ -244,6 +244,11 @@ pub fn run_all(runs: usize) -> Result<String> {
         // Its own section (the tables of how cost grows), without the goal table.
         return scaling::section(repo, data.as_deref());
     }
+    if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("graph_matching") {
+        graph_matching::rows(repo, runs, &mut rows)?;
+        notes.push("TEXSYN_BENCH_ONLY=graph_matching: only the graph-matching rows".into());
+        return Ok(table(runs, &rows, "", &notes));
+    }
     if std::env::var("TEXSYN_BENCH_ONLY").as_deref() == Ok("feature_aligned") {
         feature_aligned::rows(repo, runs, &mut rows)?;
         notes.push("TEXSYN_BENCH_ONLY=feature_aligned: only the feature-aligned rows".into());

@@ -545,7 +545,30 @@ pub fn build_hierarchy(
         return Err(SubdivisionError::Scale { scale });
     }
     check_mesh(mesh)?;
-    let input = PolyMesh::from_mesh(mesh);
+    hierarchy_of(PolyMesh::from_mesh(mesh), scale, p)
+}
+
+/// [`build_hierarchy`] from a polygon mesh as it is: the quadrilaterals of earlier √2 steps
+/// stay quadrilaterals (valence-4 vertices, as the paper's meshes have after subdivision,
+/// §3.2.1), where a triangle mesh's vertices have about six neighbours.
+pub fn build_hierarchy_from_polygons(
+    mesh: PolyMesh,
+    scale: f32,
+    p: &SubdivisionParams,
+) -> Result<Sqrt2Hierarchy, SubdivisionError> {
+    p.validate()?;
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(SubdivisionError::Scale { scale });
+    }
+    check_mesh(&mesh.to_triangles())?;
+    hierarchy_of(mesh, scale, p)
+}
+
+fn hierarchy_of(
+    input: PolyMesh,
+    scale: f32,
+    p: &SubdivisionParams,
+) -> Result<Sqrt2Hierarchy, SubdivisionError> {
     let mut h = Sqrt2Hierarchy {
         level_face_start: vec![0],
         face_start: vec![0],
