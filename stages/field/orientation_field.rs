@@ -77,10 +77,31 @@ pub struct FieldParams {
     pub axis: Option<[f32; 3]>,
     /// 1, 2 or 4: the texture looks the same turned by a half (2) or a quarter (4) turn, so
     /// the field is relaxed only up to that turn ([`super::symmetric_field`]): anchors, or
-    /// with none the projected `axis` as a soft guide. Default: 1. Left out of the node's key
-    /// at 1.
+    /// with none a soft `guide`. Default: 1. Left out of the node's key at 1.
     #[serde(skip_serializing_if = "is_one")]
     pub symmetry: u32,
+    /// What a symmetric field without anchors follows: "flow" (the default field, symmetry
+    /// 1's, taken up to the symmetry) or "axis" (`axis` projected on the surface). Default:
+    /// flow. Left out of the node's key at its default.
+    #[serde(skip_serializing_if = "SymmetricGuide::is_flow")]
+    pub guide: SymmetricGuide,
+}
+
+/// See [`FieldParams::guide`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SymmetricGuide {
+    /// The default flow: along tubes and round handles, where it already runs smoothly.
+    #[default]
+    Flow,
+    /// The projected axis: straight courses across a shape the flow bends through.
+    Axis,
+}
+
+impl SymmetricGuide {
+    fn is_flow(&self) -> bool {
+        *self == SymmetricGuide::Flow
+    }
 }
 
 fn is_one(x: &u32) -> bool {
@@ -96,6 +117,7 @@ impl Default for FieldParams {
             sources: Vec::new(),
             axis: None,
             symmetry: 1,
+            guide: SymmetricGuide::Flow,
         }
     }
 }
@@ -155,6 +177,11 @@ impl FieldParams {
                 "symmetry = {} is not one of 1, 2 or 4",
                 self.symmetry
             )));
+        }
+        if self.guide != SymmetricGuide::Flow && (self.symmetry == 1 || !self.anchors.is_empty()) {
+            return Err(FieldError::Other(
+                "guide = \"axis\" guides a symmetric field without anchors (symmetry 2 or 4, no anchors): remove guide, or set symmetry and remove the anchors".into(),
+            ));
         }
         if self.symmetry > 1 && self.isotropic {
             return Err(FieldError::Other(
@@ -226,7 +253,18 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
             }
             anchors.push((v, d));
         }
-        field = super::symmetric_field::symmetric_field(mesh, params.symmetry, &anchors, axis)
+        // Without anchors the guide is the default flow (symmetry 1's field), taken up to the
+        // symmetry: it already runs along tubes and round handles, where a straight axis
+        // projected on the surface turns across them.
+        let guide = match params.guide {
+            _ if !anchors.is_empty() => Vec::new(),
+            SymmetricGuide::Flow => {
+                let (lo, hi) = extremes_along(mesh, &referenced, axis);
+                flow(mesh, &cotan_weights(mesh), &[lo], &[hi])?
+            }
+            SymmetricGuide::Axis => normals.iter().map(|&nv| axis - axis.dot(nv) * nv).collect(),
+        };
+        field = super::symmetric_field::symmetric_field(mesh, params.symmetry, &anchors, &guide)
             .map_err(|e| FieldError::Other(e.to_string()))?;
     } else {
         let mut sinks = Vec::new();
@@ -263,14 +301,7 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
                     "vertex {v} is both a sink and a source"
                 )));
             }
-            let mut fixed: Vec<(u32, Vec<f64>)> = sources.iter().map(|&v| (v, vec![0.0])).collect();
-            fixed.extend(sinks.iter().map(|&v| (v, vec![1.0])));
-            let phi = harmonic_interpolate(mesh, &weights, &fixed, 1).map_err(solve_err)?;
-            field = vertex_gradients(mesh, &phi)
-                .iter()
-                .zip(normals)
-                .map(|(g, &nv)| tangent(g.as_vec3(), nv))
-                .collect();
+            field = flow(mesh, &weights, &sources, &sinks)?;
             if !anchors.is_empty() {
                 // Turn the flow by a harmonically interpolated angle. Angles are measured
                 // in each vertex's own (flow, normal × flow) frame.
@@ -317,6 +348,25 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
         }
     }
     Ok(field)
+}
+
+/// The flow out of `sources` into `sinks` (§3): the gradient of the harmonic function that is
+/// 0 at the sources and 1 at the sinks, as unit tangents (zero where it vanishes).
+fn flow(
+    mesh: &Mesh,
+    weights: &[(u32, u32, f64)],
+    sources: &[u32],
+    sinks: &[u32],
+) -> Result<Vec<Vec3>, FieldError> {
+    let mut fixed: Vec<(u32, Vec<f64>)> = sources.iter().map(|&v| (v, vec![0.0])).collect();
+    fixed.extend(sinks.iter().map(|&v| (v, vec![1.0])));
+    let phi = harmonic_interpolate(mesh, weights, &fixed, 1)
+        .map_err(|e| FieldError::Other(e.to_string()))?;
+    Ok(vertex_gradients(mesh, &phi)
+        .iter()
+        .zip(mesh.vertex_normals())
+        .map(|(g, &nv)| tangent(g.as_vec3(), nv))
+        .collect())
 }
 
 /// The unit projection of `d` into the plane with normal `n`, or zero if it vanishes.
@@ -524,6 +574,14 @@ pub fn node(mesh: &Mesh, params: &FieldParams, method: &str) -> Result<Vec<Vec3>
         m.singular_triangles,
         m.index_abs_total
     );
+    if params.symmetry > 1 {
+        // What the rest of the pipeline sees: one vector per vertex, combed.
+        let c = super::symmetric_field::measure(mesh, &field, 1);
+        tracing::info!(
+            "field as combed (one vector per vertex): mean turn between neighbours {:.2}°",
+            c.mean_turn_deg
+        );
+    }
     Ok(field)
 }
 
@@ -741,6 +799,51 @@ mod tests {
             }
         }
         Mesh::new(p, t)
+    }
+
+    /// Without anchors a four-fold field follows the default flow up to a quarter turn: along
+    /// the arc, not along the x axis projected on it (which crosses the arc at 45° halfway up
+    /// each side).
+    #[test]
+    fn a_four_fold_field_without_anchors_runs_along_the_tube_as_the_flow_does() {
+        let (rings, segments) = (61, 24);
+        let m = arc_tube(rings, segments);
+        // The least cosine between the field and the arc, up to a quarter turn.
+        let worst = |guide: SymmetricGuide| {
+            let params = FieldParams {
+                symmetry: 4,
+                guide,
+                ..Default::default()
+            };
+            let f = orientation_field(&m, &params).unwrap();
+            check_unit_tangent(&m, &f);
+            let mut worst: f32 = 1.0;
+            for r in 0..rings {
+                let psi = std::f32::consts::PI * r as f32 / (rings - 1) as f32;
+                if !(0.15..=0.85).contains(&(psi / std::f32::consts::PI)) {
+                    continue;
+                }
+                let along = Vec3::new(psi.sin_pure(), psi.cos_pure(), 0.0);
+                for s in 0..segments {
+                    let v = (r * segments + s) as usize;
+                    let across = m.vertex_normals()[v].cross(along);
+                    worst = worst.min(f[v].dot(along).abs().max(f[v].dot(across).abs()));
+                }
+            }
+            worst
+        };
+        let flow = worst(SymmetricGuide::Flow);
+        assert!(flow > 0.95, "guided by the flow: {flow}");
+        // The axis guide pulls the field towards x, off the arc on its slopes.
+        let axis = worst(SymmetricGuide::Axis);
+        assert!(axis < 0.9, "guided by the axis: {axis}");
+        // The axis guide means nothing without symmetry, and is refused there.
+        let p = FieldParams {
+            guide: SymmetricGuide::Axis,
+            ..Default::default()
+        };
+        let e = orientation_field(&m, &p).unwrap_err().to_string();
+        assert!(e.contains("guide"), "{e}");
     }
 
     /// The default field on a mesh big enough for the iterative solver (AMG-preconditioned

@@ -12,17 +12,19 @@
 //! smallest rotation from u's normal to v's, in v's frame). Its minimizer is one sparse SPD
 //! solve (2 real unknowns per vertex):
 //! - Anchors given: their z fixed (the direction only up to its symmetry), the rest harmonic.
-//! - Nothing given: the smoothest field that follows the projected `axis` softly: the energy
-//!   plus λ Σ_v A_v |z_v − q_v|², q_v the N-th power of the axis's projection (its length
-//!   squared as weight, so it says nothing where the axis is normal to the surface), and
-//!   λ = (4 / bounding-box diagonal)²: the field may turn over a quarter of the shape's size,
-//!   not faster.
+//! - Nothing given: the smoothest field that follows a `guide` field softly (the caller's
+//!   default flow, see `orientation_field`): the energy plus λ Σ_v A_v |z_v − q_v|², q_v the
+//!   N-th power of the guide's vector (its length squared as weight, so a zero vector says
+//!   nothing), and λ = (4 / bounding-box diagonal)²: the field may turn over a quarter of the
+//!   shape's size, not faster. Guided by the flow raised to the N-th power, the field keeps the
+//!   flow's course (along a tube, round a handle) and drops only what the symmetry makes moot:
+//!   the flow's turns by multiples of 2π/N.
 //!
-//! A direction is then read back as θ = arg(z)/N and **combed**: breadth-first from the lowest
-//! vertex of every piece, each vertex takes the one of its N directions nearest its
-//! predecessor's, so neighbours agree except across the few edges around the field's
-//! singularities, where the rest of texsyn (per-edge offsets, §4.2.2) needs one vector per
-//! vertex and nothing else.
+//! A direction is then read back as θ = arg(z)/N and **combed**: grown over a spanning tree
+//! of the smoothest edges (Prim's order, smallest turn first), each vertex takes the one of
+//! its N directions nearest its tree parent's, so neighbours agree except across edges where
+//! the field turns most, around its singularities; the rest of texsyn (per-edge offsets,
+//! §4.2.2) needs one vector per vertex and nothing else.
 //!
 //! [`measure`] reports, for any field and any N: the mean turn between neighbours up to the
 //! symmetry, its smooth energy, and the singular triangles with their total |index|.
@@ -32,7 +34,6 @@ use crate::geom::laplacian::cotan_weights;
 use crate::linalg::{IterativeParams, SolveError, solve_spd};
 use glam::{DQuat, DVec3, Vec3};
 use serde::Serialize;
-use std::collections::VecDeque;
 use std::f64::consts::{PI, TAU};
 use texsyn_core::math::PureMath;
 
@@ -84,13 +85,13 @@ fn reduce(x: f64, n: u32) -> f64 {
 }
 
 /// The smoothest N-direction field (see the module doc), combed: one unit tangent per vertex
-/// (zero for vertices of no triangle). `anchors` are (vertex, direction); `axis` guides the
-/// field when there are none.
+/// (zero for vertices of no triangle). `anchors` are (vertex, direction); `guide` (one vector
+/// per vertex, missing ones zero) guides the field when there are none.
 pub fn symmetric_field(
     mesh: &Mesh,
     n_sym: u32,
     anchors: &[(u32, Vec3)],
-    axis: Vec3,
+    guide: &[Vec3],
 ) -> Result<Vec<Vec3>, SolveError> {
     let n = mesh.vertex_count();
     let f = frames(mesh);
@@ -154,10 +155,10 @@ pub fn symmetric_field(
         let diagonal = (hi - lo).length() as f64;
         let lambda = (4.0 / diagonal.max(1e-30)).powi(2);
         let area = vertex_areas(mesh);
-        let a = axis.as_dvec3();
         for v in 0..n {
             let u = unknown[v];
-            let t = a - a.dot(f.normal[v]) * f.normal[v];
+            let g = guide.get(v).map_or(DVec3::ZERO, |g| g.as_dvec3());
+            let t = g - g.dot(f.normal[v]) * f.normal[v];
             let weight = lambda * area[v];
             diag[u] += weight;
             let (s, c) = (nf * angle_of(v, t)).sin_cos_pure();
@@ -206,44 +207,60 @@ fn vertex_areas(mesh: &Mesh) -> Vec<f64> {
     a
 }
 
-/// Breadth-first from the lowest vertex of every piece, each vertex's direction turned by the
-/// multiple of 2π/N that brings it nearest its predecessor's (compared in 3D, the
-/// predecessor's projected into its tangent plane).
+/// Combing: each vertex's direction turned by the multiple of 2π/N that brings it nearest a
+/// combed neighbour's (compared in 3D, the neighbour's projected into its tangent plane),
+/// grown from the lowest vertex of every piece along the smoothest edges first (Prim's order:
+/// the edge whose best match turns least is taken next; ties by vertex ids). The edges left
+/// out of that tree, where neighbours may hold directions a multiple of 2π/N apart, are then
+/// the ones across which the field turns most, which gathers them near the singularities;
+/// breadth-first growth would instead leave them wherever its wavefronts meet.
 fn comb(mesh: &Mesh, f: &Frames, theta: &[f64], n_sym: u32) -> Vec<Vec3> {
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
     let n = mesh.vertex_count();
     let adj = mesh.adjacency();
     let dir = |v: usize, a: f64| {
         let (s, c) = a.sin_cos_pure();
         c * f.e1[v] + s * f.e2[v]
     };
+    // u's representative nearest `to`, with 1 − its cosine to it (0: no turn).
+    let nearest = |u: usize, to: DVec3| {
+        (0..n_sym)
+            .map(|k| {
+                let d = dir(u, theta[u] + k as f64 * TAU / n_sym as f64);
+                (d, d.dot(to))
+            })
+            .fold((DVec3::ZERO, f64::NEG_INFINITY), |b, x| {
+                if x.1 > b.1 { x } else { b }
+            })
+    };
     let mut out = vec![DVec3::ZERO; n];
     let mut seen = vec![false; n];
-    let mut queue = VecDeque::new();
+    // (turn, vertex, from): 1 − cos ≥ 0, so its bits order as the number does.
+    let mut heap: BinaryHeap<Reverse<(u64, u32, u32)>> = BinaryHeap::new();
     for root in 0..n {
         if seen[root] || adj.neighbors(root).is_empty() {
             continue;
         }
         seen[root] = true;
         out[root] = dir(root, theta[root]);
-        queue.push_back(root);
-        while let Some(v) = queue.pop_front() {
+        let push = |heap: &mut BinaryHeap<_>, out: &[DVec3], seen: &[bool], v: usize| {
             for &u in adj.neighbors(v) {
-                let u = u as usize;
-                if seen[u] {
-                    continue;
+                if !seen[u as usize] {
+                    let turn = (1.0 - nearest(u as usize, out[v]).1).max(0.0);
+                    heap.push(Reverse((turn.to_bits(), u, v as u32)));
                 }
-                seen[u] = true;
-                let (best, _) = (0..n_sym)
-                    .map(|k| {
-                        let d = dir(u, theta[u] + k as f64 * TAU / n_sym as f64);
-                        (d, d.dot(out[v]))
-                    })
-                    .fold((DVec3::ZERO, f64::NEG_INFINITY), |b, x| {
-                        if x.1 > b.1 { x } else { b }
-                    });
-                out[u] = best;
-                queue.push_back(u);
             }
+        };
+        push(&mut heap, &out, &seen, root);
+        while let Some(Reverse((_, u, v))) = heap.pop() {
+            let u = u as usize;
+            if seen[u] {
+                continue;
+            }
+            seen[u] = true;
+            out[u] = nearest(u, out[v as usize]).0;
+            push(&mut heap, &out, &seen, u);
         }
     }
     out.iter().map(|d| d.as_vec3()).collect()
@@ -345,7 +362,7 @@ mod tests {
         // sheet; as 4-directions they are the same and the field is constant.
         let mesh = grid(9, 0.125);
         let anchors = [(0, Vec3::X), (80, Vec3::Y)];
-        let f4 = symmetric_field(&mesh, 4, &anchors, Vec3::X).unwrap();
+        let f4 = symmetric_field(&mesh, 4, &anchors, &[]).unwrap();
         let m4 = measure(&mesh, &f4, 4);
         assert!(m4.mean_turn_deg < 1e-3, "{m4:?}");
         assert_eq!(m4.singular_triangles, 0);
@@ -356,7 +373,7 @@ mod tests {
         // Combed: neighbours hold the same representative, not only the same 4-direction.
         assert!(measure(&mesh, &f4, 1).mean_turn_deg < 1e-3);
         // A two-fold field cannot identify them: it turns.
-        let f2 = symmetric_field(&mesh, 2, &anchors, Vec3::X).unwrap();
+        let f2 = symmetric_field(&mesh, 2, &anchors, &[]).unwrap();
         assert!(measure(&mesh, &f2, 2).mean_turn_deg > 1.0);
     }
 
@@ -393,19 +410,20 @@ mod tests {
     #[test]
     fn on_a_torus_a_four_fold_field_is_smooth_and_free_of_singularities() {
         // A torus has χ = 0: a field along its rings exists with no singularity. The
-        // axis-guided 4-field finds one as smooth as that (the guide, x, would have
+        // 4-field guided by the projected x axis finds one as smooth as that (the guide, x, would have
         // singularities where x is normal to the surface).
         let mesh = torus(48, 16, 0.3);
-        let f = symmetric_field(&mesh, 4, &[], Vec3::X).unwrap();
+        let projected: Vec<Vec3> = mesh
+            .vertex_normals()
+            .iter()
+            .map(|n| Vec3::X - Vec3::X.dot(*n) * *n)
+            .collect();
+        let f = symmetric_field(&mesh, 4, &[], &projected).unwrap();
         for (d, n) in f.iter().zip(mesh.vertex_normals()) {
             assert!((d.length() - 1.0).abs() < 1e-4 && d.dot(*n).abs() < 1e-4);
         }
         let m = measure(&mesh, &f, 4);
-        let projected: Vec<Vec3> = mesh
-            .vertex_normals()
-            .iter()
-            .map(|n| (Vec3::X - Vec3::X.dot(*n) * *n).normalize_or_zero())
-            .collect();
+        let projected: Vec<Vec3> = projected.iter().map(|p| p.normalize_or_zero()).collect();
         let guide = measure(&mesh, &projected, 4);
         assert!(
             m.energy < guide.energy && m.index_abs_total < guide.index_abs_total,
