@@ -48,6 +48,18 @@ fn from_csr(start: &[u32], vertices: &[u32], closed: &[u8]) -> Vec<Polyline> {
         .collect()
 }
 
+/// An optional array of 0/1 flags: all false when absent (written only when one is set).
+fn optional_flags(a: &Artifact, name: &str, len: usize) -> Result<Vec<bool>, ArtifactError> {
+    if !a.array_names().contains(&name) {
+        return Ok(vec![false; len]);
+    }
+    let flags: &[u8] = a.array(name)?;
+    if flags.iter().any(|&f| f > 1) {
+        return Err(inconsistent(format!("{name} flags are not 0 or 1")));
+    }
+    Ok(flags.iter().map(|&f| f == 1).collect())
+}
+
 /// Metadata: the source; arrays `start`, `vertices`, `closed`, `kinds`, and `fixed` (one
 /// byte per curve) only when some curve is fixed, so that curves without the flag keep the
 /// bytes (and hashes) they had before the flag existed.
@@ -77,11 +89,7 @@ impl Format for ShapeFeatures {
         let kinds: &[u8] = a.array("kinds")?;
         let kinds: Option<Vec<CurveKind>> =
             kinds.iter().map(|&k| CurveKind::from_code(k)).collect();
-        let fixed: Vec<bool> = if a.array_names().contains(&"fixed") {
-            a.array::<u8>("fixed")?.iter().map(|&f| f != 0).collect()
-        } else {
-            vec![false; closed.len()]
-        };
+        let fixed = optional_flags(a, "fixed", closed.len())?;
         match kinds {
             Some(kinds)
                 if curves_ok(start, vertices, None)
@@ -183,13 +191,19 @@ impl Format for OrientedField {
             singularities: f.singularities,
             arbitrary_singularities: self.arbitrary_singularities,
         };
-        ArtifactWriter::new(Self::KIND, &meta)
+        let fixed: Vec<u8> = f.fixed.iter().map(|&x| x as u8).collect();
+        let w = ArtifactWriter::new(Self::KIND, &meta)
             .array("vectors", &f.vectors)
             .array("start", &start)
             .array("vertices", &vertices)
             .array("closed", &closed)
-            .array("signs", &signs)
-            .finish()
+            .array("signs", &signs);
+        // Only when some curve is fixed: fields without fixed curves keep their bytes.
+        if f.fixed.contains(&true) {
+            w.array("fixed", &fixed).finish()
+        } else {
+            w.finish()
+        }
     }
     fn decode(a: &Artifact) -> Result<OrientedField, ArtifactError> {
         let m: FieldMeta = a.meta()?;
@@ -198,9 +212,11 @@ impl Format for OrientedField {
         let vertices: &[u32] = a.array("vertices")?;
         let closed: &[u8] = a.array("closed")?;
         let signs: &[i8] = a.array("signs")?;
+        let fixed = optional_flags(a, "fixed", signs.len())?;
         let ok = curves_ok(start, vertices, Some(vectors.len()))
             && closed.len() + 1 == start.len()
             && signs.len() == closed.len()
+            && fixed.len() == signs.len()
             && signs.iter().all(|s| matches!(s, 1 | -1))
             && vectors.iter().all(|v| v.is_finite());
         if !ok {
@@ -214,6 +230,7 @@ impl Format for OrientedField {
             field: FeatureField {
                 vectors: vectors.to_vec(),
                 curves,
+                fixed,
                 singularities: m.singularities,
                 zero_vectors: 0,
             },

@@ -27,7 +27,7 @@ use texsyn_core::algorithm::Failure;
 
 /// The `shape_features` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("shape_features", 2);
+    texsyn_core::algorithm::Algorithm::new("shape_features", 3);
 
 /// `auto` picks `crease` when the median crease is at least this long (a fraction of the
 /// bounding-box diagonal). Measured on the shared meshes at the default 30°: fandisk's 34

@@ -48,13 +48,18 @@ pub const SPAN: usize = 4;
 /// `break_angle` in degrees. `fixed[i]` (missing: false) says `curves[i]`'s direction is the
 /// user's: two fixed curves are joined only where their directions run on through the join
 /// (spokes drawn outward from one centre stay apart even where two are collinear).
+///
+/// Returns each resulting curve with the sign that keeps the fixed curves it holds running
+/// their own way (+1: its vertex order), `None` for a curve that holds none. Joining reverses
+/// whole curves and breaking keeps order, so a piece of a fixed curve, or a join of one with
+/// free curves and bridging paths, has one such sign.
 pub fn group_and_break(
     mesh: &Mesh,
     curves: &[Polyline],
     fixed: &[bool],
     join_distance: f32,
     break_angle: f32,
-) -> Vec<Polyline> {
+) -> Vec<(Polyline, Option<i8>)> {
     let n = mesh.vertex_count();
     let (mut work, mut direction): (Vec<Polyline>, Vec<Option<bool>>) = curves
         .iter()
@@ -70,8 +75,14 @@ pub fn group_and_break(
     let cos_limit = break_angle.to_radians().cos_pure();
     join_all(mesh, &mut work, &mut direction, join_distance, cos_limit);
     work.iter()
-        .flat_map(|c| break_curve(mesh, c, cos_limit))
-        .filter(|c| c.vertices.len() >= 2)
+        .zip(&direction)
+        .flat_map(|(c, d)| {
+            let sign = d.map(|along| if along { 1 } else { -1 });
+            break_curve(mesh, c, cos_limit)
+                .into_iter()
+                .map(move |piece| (piece, sign))
+        })
+        .filter(|(c, _)| c.vertices.len() >= 2)
         .collect()
 }
 
@@ -99,43 +110,6 @@ fn end_vertex(c: &Polyline, end: usize) -> u32 {
             .last()
             .expect("curves have at least two vertices")
     }
-}
-
-/// The consecutive vertex pairs of `c`, the closing pair of a loop included.
-fn directed_edges(c: &Polyline) -> impl Iterator<Item = (u32, u32)> + '_ {
-    let v = &c.vertices;
-    let closing = (c.closed && v.len() > 2).then(|| (v[v.len() - 1], v[0]));
-    v.windows(2).map(|w| (w[0], w[1])).chain(closing)
-}
-
-/// The direction each preprocessed curve keeps because it runs along fixed input curves
-/// (`fixed[i]` for `originals[i]`): +1 where most of its edges that lie on a fixed curve run
-/// as they do there, −1 where most run against, `None` where it shares no edge with one.
-/// Joining and breaking keep every input vertex and its order up to reversing a whole piece,
-/// so a piece of a fixed curve, or a join of one with free curves and bridging paths, is
-/// found by its edges; a tie keeps the piece's own order.
-pub fn fixed_signs(
-    preprocessed: &[Polyline],
-    originals: &[Polyline],
-    fixed: &[bool],
-) -> Vec<Option<i8>> {
-    let on_fixed: std::collections::HashSet<(u32, u32)> = originals
-        .iter()
-        .zip(fixed)
-        .filter(|(_, f)| **f)
-        .flat_map(|(c, _)| directed_edges(c))
-        .collect();
-    preprocessed
-        .iter()
-        .map(|c| {
-            let (mut along, mut against) = (0usize, 0usize);
-            for (a, b) in directed_edges(c) {
-                along += on_fixed.contains(&(a, b)) as usize;
-                against += on_fixed.contains(&(b, a)) as usize;
-            }
-            (along + against > 0).then_some(if along >= against { 1 } else { -1 })
-        })
-        .collect()
 }
 
 /// Joins curve ends one pair at a time, smallest gap first, until no pair qualifies.
@@ -380,39 +354,51 @@ fn break_curve(mesh: &Mesh, c: &Polyline, cos_limit: f32) -> Vec<Polyline> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geom::primitives::grid;
 
-    fn open(v: &[u32]) -> Polyline {
+    fn open(v: Vec<u32>) -> Polyline {
         Polyline {
-            vertices: v.to_vec(),
+            vertices: v,
             closed: false,
         }
     }
 
     #[test]
-    fn pieces_follow_the_fixed_curves_they_run_along() {
-        let originals = [open(&[0, 1, 2, 3, 4]), open(&[10, 11, 12])];
-        let fixed = [true, false];
-        let pieces = [
-            open(&[2, 1, 0]),                 // a broken-off piece, reversed
-            open(&[2, 3, 4]),                 // one as drawn
-            open(&[12, 11, 10]),              // a free curve
-            open(&[4, 3, 2, 20, 10, 11, 12]), // a join: two fixed edges against, free ones
+    fn pieces_keep_the_directions_of_the_fixed_curves_they_hold() {
+        // A 21×21 grid (vertex = 21·y + x). Row 10 drawn as two fixed halves: outward from
+        // its middle (they stay apart) or both left to right (joined, one direction); an L of
+        // row 3 and column 15 fixed (broken at the corner, both pieces along it); a free row.
+        let g = grid(21, 0.05);
+        let row = |y: u32, xs: Vec<u32>| open(xs.into_iter().map(|x| 21 * y + x).collect());
+        let out =
+            |curves: &[Polyline], fixed: &[bool]| group_and_break(&g, curves, fixed, 0.02, 60.0);
+
+        let outward = [
+            row(10, (10..=18).collect()),
+            row(10, (2..=10).rev().collect()),
         ];
-        let s = fixed_signs(&pieces, &originals, &fixed);
-        assert_eq!(s, [Some(-1), Some(1), None, Some(-1)]);
-        // A loop's closing edge counts.
-        let loop_ = Polyline {
-            vertices: vec![5, 6, 7],
-            closed: true,
-        };
-        let originals = [loop_.clone()];
-        let turned = Polyline {
-            vertices: vec![7, 6, 5],
-            closed: true,
-        };
-        assert_eq!(
-            fixed_signs(&[loop_, turned], &originals, &[true]),
-            [Some(1), Some(-1)]
-        );
+        let r = out(&outward, &[true, true]);
+        assert_eq!(r.len(), 2, "outward spokes stay apart");
+        assert!(r.iter().all(|(_, s)| *s == Some(1)));
+        // Free, the same two are one line.
+        assert_eq!(out(&outward, &[false, false]).len(), 1);
+
+        let along = [row(10, (10..=18).collect()), row(10, (2..=10).collect())];
+        let r = out(&along, &[true, false]);
+        assert_eq!(r.len(), 1, "a fixed and a free half join");
+        let (c, s) = &r[0];
+        let first = c.vertices.iter().position(|&v| v == 21 * 10 + 11).unwrap();
+        let second = c.vertices.iter().position(|&v| v == 21 * 10 + 12).unwrap();
+        // The fixed half runs left to right: the joined curve's sign must say so.
+        assert_eq!(*s == Some(1), first < second, "{c:?} {s:?}");
+        assert!(s.is_some());
+
+        let mut l = row(3, (2..=15).collect());
+        l.vertices.extend((4..=17).map(|y| 21 * y + 15));
+        let r = out(&[l, row(18, (2..=18).collect())], &[true]);
+        assert_eq!(r.len(), 3, "{r:?}");
+        assert_eq!(r[0].1, Some(1));
+        assert_eq!(r[1].1, Some(1));
+        assert_eq!(r[2].1, None, "the free row");
     }
 }

@@ -62,7 +62,7 @@
 //! faer runs sequentially (as in [`crate::linalg::SpdSolver`]), and the only rayon use is
 //! per-vertex / per-curve / per-triangle maps, so results are identical for any thread count.
 
-use super::curve_grouping::{fixed_signs, group_and_break};
+use super::curve_grouping::group_and_break;
 use crate::check::{ParamError, check_range};
 use crate::extract::crease_lines::{Polyline, polyline_length};
 use crate::geom::Mesh;
@@ -179,6 +179,8 @@ pub struct FeatureField {
     /// The curves after preprocessing, in the order they were oriented, each with its sign
     /// (+1: along its vertex order).
     pub curves: Vec<(Polyline, i8)>,
+    /// Per curve: it holds a curve the user fixed, so its sign is theirs.
+    pub fixed: Vec<bool>,
     /// Triangles holding a singularity ([`count_singularities`]).
     pub singularities: u32,
     /// Vertices where the projected field vanished (left zero).
@@ -218,13 +220,13 @@ pub enum FeatureFieldError {
 }
 
 /// §4.1 preprocessing with the thresholds of `p` (see [`super::curve_grouping`]); `fixed` as
-/// in [`feature_field_with`].
+/// in [`feature_field_with`]. Each curve comes with the sign its fixed pieces keep, if any.
 pub fn preprocess_curves(
     mesh: &Mesh,
     curves: &[Polyline],
     fixed: &[bool],
     p: &FeatureFieldParams,
-) -> Vec<Polyline> {
+) -> Vec<(Polyline, Option<i8>)> {
     let (lo, hi) = mesh.bounds();
     group_and_break(
         mesh,
@@ -263,18 +265,19 @@ pub fn feature_field_with(
 ) -> Result<(FeatureField, FieldTimings), FeatureFieldError> {
     p.validate()?;
     check_vertices(mesh, curves)?;
-    let originals = curves;
     let fixed: Vec<bool> = match p.orientation {
-        Orientation::Given => vec![true; originals.len()],
-        _ => (0..originals.len())
+        Orientation::Given => vec![true; curves.len()],
+        _ => (0..curves.len())
             .map(|i| fixed.get(i).copied().unwrap_or(false))
             .collect(),
     };
-    let curves = preprocess_curves(mesh, curves, &fixed, p);
+    let (curves, kept): (Vec<Polyline>, Vec<Option<i8>>) =
+        preprocess_curves(mesh, curves, &fixed, p)
+            .into_iter()
+            .unzip();
     if curves.is_empty() {
         return Err(FeatureFieldError::NoCurves);
     }
-    let kept = fixed_signs(&curves, originals, &fixed);
     let mut timings = FieldTimings::default();
     let t = Instant::now();
     let sys = FieldSystem::new(mesh, p.alpha)?;
@@ -307,6 +310,11 @@ pub fn feature_field_with(
     );
     let zero_vectors = vectors.iter().filter(|v| **v == Vec3::ZERO).count() as u32;
     let singularities = count_singularities(mesh, &vectors);
+    let fixed = match p.orientation {
+        // Every curve keeps its direction there, but none was marked fixed.
+        Orientation::Given => vec![false; order.len()],
+        _ => order.iter().map(|&(c, _)| kept[c].is_some()).collect(),
+    };
     let curves = order
         .into_iter()
         .map(|(c, s)| (curves[c].clone(), s))
@@ -315,6 +323,7 @@ pub fn feature_field_with(
         FeatureField {
             vectors,
             curves,
+            fixed,
             singularities,
             zero_vectors,
         },
@@ -753,7 +762,9 @@ pub fn node(
                 orientation: Orientation::Arbitrary,
                 ..p.clone()
             };
-            let (f, _) = feature_field(mesh, curves, &arbitrary).map_err(Failure::input)?;
+            // The same curves (fixed ones kept as drawn, joined alike), signs seeded.
+            let (f, _) = feature_field_with(mesh, curves, fixed, &arbitrary, &|_| {})
+                .map_err(Failure::input)?;
             f.singularities
         }
     };
@@ -1279,7 +1290,12 @@ mod tests {
             ..FeatureFieldParams::default()
         };
         // Gap of three edges (0.075 = 0.053 of the diagonal): joined, through the row.
-        let out = preprocess_curves(&mesh, &[row(20, 2..11), row(20, 13..26)], &[], &p);
+        let pieces = |curves: &[Polyline]| -> Vec<Polyline> {
+            let out = preprocess_curves(&mesh, curves, &[], &p);
+            assert!(out.iter().all(|(_, s)| s.is_none()), "nothing was fixed");
+            out.into_iter().map(|(c, _)| c).collect()
+        };
+        let out = pieces(&[row(20, 2..11), row(20, 13..26)]);
         assert_eq!(out.len(), 1, "{out:?}");
         let mut v = out[0].vertices.clone();
         if v[0] > v[1] {
@@ -1287,28 +1303,23 @@ mod tests {
         }
         assert_eq!(v, row(20, 2..26).vertices);
         // Far apart (16 edges): not joined.
-        let out = preprocess_curves(&mesh, &[row(20, 2..11), row(20, 27..36)], &[], &p);
+        let out = pieces(&[row(20, 2..11), row(20, 27..36)]);
         assert_eq!(out.len(), 2);
         // Close but perpendicular ends: not joined.
         let column = Polyline {
             vertices: (22..35).map(|y| y * 41 + 12).collect(),
             closed: false,
         };
-        let out = preprocess_curves(&mesh, &[row(20, 2..11), column], &[], &p);
+        let out = pieces(&[row(20, 2..11), column]);
         assert_eq!(out.len(), 2);
         // An L: broken at the corner, which both pieces keep.
         let corner = 5 * 41 + 20;
         let mut l = row(5, 5..21).vertices;
         l.extend((6..21).map(|y| y * 41 + 20));
-        let out = preprocess_curves(
-            &mesh,
-            &[Polyline {
-                vertices: l,
-                closed: false,
-            }],
-            &[],
-            &p,
-        );
+        let out = pieces(&[Polyline {
+            vertices: l,
+            closed: false,
+        }]);
         assert_eq!(out.len(), 2, "{out:?}");
         assert_eq!(*out[0].vertices.last().unwrap(), corner);
         assert_eq!(out[1].vertices[0], corner);
@@ -1325,7 +1336,7 @@ mod tests {
             ),
             false,
         );
-        assert_eq!(preprocess_curves(&mesh, &[arc], &[], &p).len(), 1);
+        assert_eq!(pieces(&[arc]).len(), 1);
     }
 
     #[test]

@@ -34,7 +34,7 @@ use texsyn_core::math::PureMath;
 
 /// The `orientation_field` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("orientation_field", 2);
+    texsyn_core::algorithm::Algorithm::new("orientation_field", 3);
 
 /// A place on the mesh: a position (snapped to the nearest vertex) or a vertex index.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -190,7 +190,7 @@ impl FieldParams {
         }
         if self.symmetry > 1 && !(self.sinks.is_empty() && self.sources.is_empty()) {
             return Err(FieldError::Other(format!(
-                "symmetry = {} relaxes anchors (or follows the axis) up to a 1/{} turn; sinks and sources make a flow, a field of symmetry 1: remove them or set symmetry = 1",
+                "symmetry = {} relaxes anchors (or follows its guide) up to a 1/{} turn; sinks and sources make a flow, a field of symmetry 1: remove them or set symmetry = 1",
                 self.symmetry, self.symmetry
             )));
         }
@@ -260,7 +260,15 @@ pub fn orientation_field(mesh: &Mesh, params: &FieldParams) -> Result<Vec<Vec3>,
             _ if !anchors.is_empty() => Vec::new(),
             SymmetricGuide::Flow => {
                 let (lo, hi) = extremes_along(mesh, &referenced, axis);
-                flow(mesh, &cotan_weights(mesh), &[lo], &[hi])?
+                if lo == hi {
+                    return Err(FieldError::Other(format!(
+                        "the mesh does not extend along field.axis (one vertex, {lo}, is both ends of it): give another axis, or guide = \"axis\""
+                    )));
+                }
+                // Pieces the flow does not reach (no source or sink on them) take a
+                // neighbour's direction or the projected axis, as symmetry 1's field does.
+                let f = flow(mesh, &cotan_weights(mesh), &[lo], &[hi])?;
+                fill_from_neighbours(mesh, &referenced, f, axis)
             }
             SymmetricGuide::Axis => normals.iter().map(|&nv| axis - axis.dot(nv) * nv).collect(),
         };

@@ -3,9 +3,7 @@
 //! the numbers a user compares between runs), handed to [`export_feature_aligned`].
 
 use crate::analyse_exemplar::texture_feature_lines::{TextureFeatures, feature_overlay};
-use crate::extract::crease_lines::Polyline;
 use crate::extract::shape_features::ShapeFeatures;
-use crate::field::curve_grouping::fixed_signs;
 use crate::field::feature_field::{FeatureField, OrientedField, carry_field};
 use crate::geom::Mesh;
 use crate::geom::edge_refine::Refined;
@@ -65,7 +63,7 @@ pub fn node(
 
 /// The oriented curves with a kind each: the kind of the extracted curve their first vertex
 /// lay on (preprocessing joins and breaks curves but keeps their vertices); fixed where they
-/// run along a curve the user fixed.
+/// hold a curve the user fixed.
 fn drawn_curves<'a>(shape: &ShapeFeatures, field: &'a FeatureField) -> Vec<DrawnCurve<'a>> {
     let mut kind_of = std::collections::BTreeMap::new();
     for (c, k) in shape.curves.iter().zip(&shape.kinds) {
@@ -74,18 +72,16 @@ fn drawn_curves<'a>(shape: &ShapeFeatures, field: &'a FeatureField) -> Vec<Drawn
         }
     }
     let kind = |vertices: &[u32]| vertices.iter().find_map(|v| kind_of.get(v).copied());
-    let pieces: Vec<Polyline> = field.curves.iter().map(|(c, _)| c.clone()).collect();
-    let fixed = fixed_signs(&pieces, &shape.curves, &shape.fixed);
     field
         .curves
         .iter()
-        .zip(fixed)
-        .map(|((c, sign), fixed)| DrawnCurve {
+        .zip(&field.fixed)
+        .map(|((c, sign), &fixed)| DrawnCurve {
             vertices: &c.vertices,
             closed: c.closed,
             kind: kind(&c.vertices).unwrap_or(3),
             sign: *sign,
-            fixed: fixed.is_some(),
+            fixed,
         })
         .collect()
 }
