@@ -122,7 +122,10 @@ pub(super) fn rows(repo: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<()> 
                     graph_matching(&input, &table1(Search::Coherent, true), &|_| {})
                 });
                 let s = out?.stats;
+                // The goals were set for the donkey's rows; the elephant's rows compare with
+                // the paper only.
                 let goal_scale = object.scales[0].0;
+                let has_goal = object.mesh == "cow.obj";
                 rows.push(Row {
                     what: format!(
                         "graph matching, Table 1, {}: {} after {} √2 steps, {faces}, {vertices} vertices, 1/ē = {}, one pass, 3×3 region, every vertex matched, coherent search (default), {}×{} marble1.png, scale {scale}",
@@ -132,8 +135,12 @@ pub(super) fn rows(repo: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<()> 
                         "{t:.2} s; {} matches, {:.2e} vertex comparisons with averaging, {:.2e} without",
                         s.matches, s.comparisons as f64, s.comparisons_without_averaging as f64
                     ),
-                    goal: format!("< 5 s at scale {goal_scale} (paper, P4 3 GHz, exact: {paper})"),
-                    verdict: if scale == goal_scale {
+                    goal: if has_goal {
+                        format!("< 5 s at scale {goal_scale} (paper, P4 3 GHz, exact: {paper})")
+                    } else {
+                        format!("(no goal; paper, P4 3 GHz, exact: {paper})")
+                    },
+                    verdict: if has_goal && scale == goal_scale {
                         verdict_below(t, 5.0)
                     } else {
                         "—".into()
@@ -176,8 +183,16 @@ pub(super) fn rows(repo: &Path, runs: usize, rows: &mut Vec<Row>) -> Result<()> 
                         "{t:.2} s with averaging ({:.2e} comparisons), {t_plain:.2} s without ({:.2e})",
                         s.comparisons as f64, s.comparisons_without_averaging as f64
                     ),
-                    goal: format!("< 60 s (paper: {paper} with averaging)"),
-                    verdict: verdict_below(t, 60.0),
+                    goal: if has_goal {
+                        format!("< 60 s (paper: {paper} with averaging)")
+                    } else {
+                        format!("(no goal; paper: {paper} with averaging)")
+                    },
+                    verdict: if has_goal {
+                        verdict_below(t, 60.0)
+                    } else {
+                        "—".into()
+                    },
                 });
             }
         }
