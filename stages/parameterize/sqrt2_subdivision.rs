@@ -540,11 +540,7 @@ pub fn build_hierarchy(
     scale: f32,
     p: &SubdivisionParams,
 ) -> Result<Sqrt2Hierarchy, SubdivisionError> {
-    p.validate()?;
-    if !(scale.is_finite() && scale > 0.0) {
-        return Err(SubdivisionError::Scale { scale });
-    }
-    check_mesh(mesh)?;
+    check_inputs(mesh, scale, p)?;
     hierarchy_of(PolyMesh::from_mesh(mesh), scale, p)
 }
 
@@ -556,12 +552,17 @@ pub fn build_hierarchy_from_polygons(
     scale: f32,
     p: &SubdivisionParams,
 ) -> Result<Sqrt2Hierarchy, SubdivisionError> {
+    check_inputs(&mesh.to_triangles(), scale, p)?;
+    hierarchy_of(mesh, scale, p)
+}
+
+/// The parameters, the scale and the mesh (as triangles), before anything is built.
+fn check_inputs(mesh: &Mesh, scale: f32, p: &SubdivisionParams) -> Result<(), SubdivisionError> {
     p.validate()?;
     if !(scale.is_finite() && scale > 0.0) {
         return Err(SubdivisionError::Scale { scale });
     }
-    check_mesh(&mesh.to_triangles())?;
-    hierarchy_of(mesh, scale, p)
+    check_mesh(mesh)
 }
 
 fn hierarchy_of(

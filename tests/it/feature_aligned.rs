@@ -258,66 +258,11 @@ fn obj_lines(text: &str) -> Vec<Vec<[String; 3]>> {
         .collect()
 }
 
-/// An edited lines.obj given back with `field.orientation = "given"` keeps the edit: a line
-/// the user turned round comes back turned round (the greedy step would re-orient it).
-#[test]
-fn an_edited_lines_obj_given_back_keeps_its_directions() {
-    let cache = tempfile::tempdir().unwrap();
-    let first = run("feature_aligned.toml", &["compare=false"], cache.path()).unwrap();
-    let out = materialized(&first, "reconstruct");
-    let text = std::fs::read_to_string(out.path().join("lines.obj")).unwrap();
-    let lines = obj_lines(&text);
-    assert!(lines.len() >= 2, "{} lines", lines.len());
-    // Turn the second longest line round (greedy orientation starts from the longest, §4.1,
-    // and would keep that one's direction whatever it is).
-    let mut by_length: Vec<usize> = (0..lines.len()).collect();
-    by_length.sort_by_key(|&i| std::cmp::Reverse(lines[i].len()));
-    let chosen = by_length[1];
-    let mut edited = String::new();
-    let mut k = 0;
-    for l in text.lines() {
-        match l.strip_prefix("l ") {
-            Some(ids) if k == chosen => {
-                let mut ids: Vec<&str> = ids.split_whitespace().collect();
-                ids.reverse();
-                edited += &format!("l {}\n", ids.join(" "));
-                k += 1;
-            }
-            Some(_) => {
-                edited += &format!("{l}\n");
-                k += 1;
-            }
-            None => edited += &format!("{l}\n"),
-        }
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let path = write(dir.path(), "lines.obj", edited.as_bytes());
-    let sets = [
-        "compare=false",
-        "extract.features=\"curves\"",
-        &format!("extract.curves_file={path:?}"),
-        "field.orientation=\"given\"",
-    ];
-    let again = run("feature_aligned.toml", &sets, cache.path()).unwrap();
-    let out = materialized(&again, "reconstruct");
-    let back = obj_lines(&std::fs::read_to_string(out.path().join("lines.obj")).unwrap());
-    let mut turned = lines[chosen].clone();
-    turned.reverse();
-    assert!(
-        back.contains(&turned),
-        "the edited line is not back as edited"
-    );
-    assert!(
-        !back.contains(&lines[chosen]),
-        "the edited line came back as before"
-    );
-}
-
-/// An edited lines.obj given back with the edited line in a `fixed` group keeps that line's
-/// direction under the default greedy orientation (which orients the other lines around it),
-/// and writes it in a `fixed` group again, so the next round trip keeps it too.
-#[test]
-fn a_line_moved_into_a_fixed_group_keeps_its_direction_under_greedy_orientation() {
+/// Runs feature_aligned.toml, turns the second longest line of its lines.obj round (greedy
+/// orientation starts from the longest, §4.1, and would keep that one's direction whatever
+/// it is), in place or moved into a `g user fixed` group at the end, and gives the file back
+/// with `extra` settings. Returns the line as first written and the second run's lines.obj.
+fn edit_and_give_back(into_fixed_group: bool, extra: &[&str]) -> (Vec<[String; 3]>, String) {
     let cache = tempfile::tempdir().unwrap();
     let first = run("feature_aligned.toml", &["compare=false"], cache.path()).unwrap();
     let out = materialized(&first, "reconstruct");
@@ -327,7 +272,6 @@ fn a_line_moved_into_a_fixed_group_keeps_its_direction_under_greedy_orientation(
     let mut by_length: Vec<usize> = (0..lines.len()).collect();
     by_length.sort_by_key(|&i| std::cmp::Reverse(lines[i].len()));
     let chosen = by_length[1];
-    // The chosen line leaves its group, turned round, for a `fixed` group at the end.
     let (mut edited, mut moved, mut k) = (String::new(), String::new(), 0);
     for l in text.lines() {
         match l.strip_prefix("l ") {
@@ -335,7 +279,12 @@ fn a_line_moved_into_a_fixed_group_keeps_its_direction_under_greedy_orientation(
                 if k == chosen {
                     let mut ids: Vec<&str> = ids.split_whitespace().collect();
                     ids.reverse();
-                    moved = format!("g user fixed\nl {}\n", ids.join(" "));
+                    let turned = format!("l {}\n", ids.join(" "));
+                    if into_fixed_group {
+                        moved = format!("g user fixed\n{turned}");
+                    } else {
+                        edited += &turned;
+                    }
                 } else {
                     edited += &format!("{l}\n");
                 }
@@ -347,16 +296,38 @@ fn a_line_moved_into_a_fixed_group_keeps_its_direction_under_greedy_orientation(
     edited += &moved;
     let dir = tempfile::tempdir().unwrap();
     let path = write(dir.path(), "lines.obj", edited.as_bytes());
-    let sets = [
-        "compare=false",
-        "extract.features=\"curves\"",
-        &format!("extract.curves_file={path:?}"),
-    ];
+    let file = format!("extract.curves_file={path:?}");
+    let mut sets = vec!["compare=false", "extract.features=\"curves\"", &file];
+    sets.extend(extra);
     let again = run("feature_aligned.toml", &sets, cache.path()).unwrap();
     let out = materialized(&again, "reconstruct");
-    let back_text = std::fs::read_to_string(out.path().join("lines.obj")).unwrap();
+    let back = std::fs::read_to_string(out.path().join("lines.obj")).unwrap();
+    (lines[chosen].clone(), back)
+}
+
+/// An edited lines.obj given back with `field.orientation = "given"` keeps the edit: a line
+/// the user turned round comes back turned round (the greedy step would re-orient it).
+#[test]
+fn an_edited_lines_obj_given_back_keeps_its_directions() {
+    let (line, back) = edit_and_give_back(false, &["field.orientation=\"given\""]);
+    let back = obj_lines(&back);
+    let mut turned = line.clone();
+    turned.reverse();
+    assert!(
+        back.contains(&turned),
+        "the edited line is not back as edited"
+    );
+    assert!(!back.contains(&line), "the edited line came back as before");
+}
+
+/// An edited lines.obj given back with the edited line in a `fixed` group keeps that line's
+/// direction under the default greedy orientation (which orients the other lines around it),
+/// and writes it in a `fixed` group again, so the next round trip keeps it too.
+#[test]
+fn a_line_moved_into_a_fixed_group_keeps_its_direction_under_greedy_orientation() {
+    let (line, back_text) = edit_and_give_back(true, &[]);
     let back = obj_lines(&back_text);
-    let mut turned = lines[chosen].clone();
+    let mut turned = line;
     turned.reverse();
     let at = back.iter().position(|l| *l == turned);
     assert!(at.is_some(), "the fixed line is not back as edited");
