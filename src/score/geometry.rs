@@ -29,7 +29,9 @@ use crate::stages::reconstruct::displacement::grid_mesh;
 use crate::stages::synthesize::geometry_texture::{
     GeometrySynthParams, TexelControls, sample_frame_maps, texel_controls,
 };
-use crate::stages::synthesize::surface_metric::{MAX_STRETCH, surface_metrics};
+use crate::stages::synthesize::surface_metric::{
+    MAX_STRETCH, share_at_max_stretch, surface_metrics,
+};
 use std::collections::HashMap;
 use std::path::Path;
 use texsyn_core::math::PureMath;
@@ -224,20 +226,17 @@ fn surface_item(
     }
     // How unevenly the geometry image samples the surface, which the surface metric has to
     // undo (and which no per-texel scale can).
-    let mut stretch: Vec<f32> = surface_metrics(&gi).iter().map(|m| m.stretch()).collect();
+    let metrics = surface_metrics(&gi);
+    let mut stretch: Vec<f32> = metrics.iter().map(|m| m.stretch()).collect();
     stretch.sort_unstable_by(f32::total_cmp);
     if !stretch.is_empty() {
         let at = |q: f64| stretch[((stretch.len() - 1) as f64 * q).round() as usize] as f64;
-        let clamped = stretch
-            .iter()
-            .filter(|&&l| l as f64 >= MAX_STRETCH - 1e-3)
-            .count();
         item.extra.insert(
             "stretch".into(),
             serde_json::json!({
                 "median": round3(at(0.5)),
                 "p90": round3(at(0.9)),
-                "at_max": round3(clamped as f64 / stretch.len() as f64),
+                "at_max": round3(share_at_max_stretch(&metrics)),
             }),
         );
         item.notes.push(format!(

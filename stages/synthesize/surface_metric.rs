@@ -138,6 +138,20 @@ pub fn surface_metrics(gi: &GeometryImage) -> Vec<SurfaceMetric> {
     surface_metrics_clamped(gi, MAX_STRETCH)
 }
 
+/// The share of `metrics` stretched to [`MAX_STRETCH`] (within 10⁻³): where a geometry image
+/// samples the surface so unevenly that the metric no longer undoes it, and a sample's fine
+/// lines fall between texels along the long direction.
+pub fn share_at_max_stretch(metrics: &[SurfaceMetric]) -> f64 {
+    if metrics.is_empty() {
+        return 0.0;
+    }
+    let at_max = metrics
+        .iter()
+        .filter(|m| m.stretch() as f64 >= MAX_STRETCH - 1e-3)
+        .count();
+    at_max as f64 / metrics.len() as f64
+}
+
 /// [`surface_metrics`] with the stretch clamped to `max_stretch` (see
 /// [`SurfaceMetric::from_metric_clamped`]).
 pub fn surface_metrics_clamped(gi: &GeometryImage, max_stretch: f64) -> Vec<SurfaceMetric> {
@@ -170,6 +184,18 @@ pub fn surface_metrics_clamped(gi: &GeometryImage, max_stretch: f64) -> Vec<Surf
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_share_at_max_stretch_counts_the_clamped_texels() {
+        // λ⁴ is the ratio of the metric's eigenvalues: 10⁴ is λ = 10, clamped; 16 is λ = 2.
+        let clamped = SurfaceMetric::from_metric(1.0, 0.0, 1e4);
+        let mild = SurfaceMetric::from_metric(16.0, 0.0, 1.0);
+        let flat = SurfaceMetric::from_metric(1.0, 0.0, 1.0);
+        assert_eq!(share_at_max_stretch(&[]), 0.0);
+        assert_eq!(share_at_max_stretch(&[clamped, clamped]), 1.0);
+        assert_eq!(share_at_max_stretch(&[clamped, mild, flat, mild]), 0.25);
+        assert_eq!(share_at_max_stretch(&[mild, flat]), 0.0);
+    }
 
     fn apply(m: &[f32; 4], v: Vec2) -> Vec2 {
         Vec2::new(m[0] * v.x + m[1] * v.y, m[2] * v.x + m[3] * v.y)
