@@ -157,13 +157,13 @@ impl<'a> AppearanceSpaceRef<'a> {
 /// The largest sample side an appearance space holds (coordinates stay exact in `f32`).
 pub const MAX_SIDE: u32 = 1 << 14;
 
-/// The stack levels a sample of `w × h` gets: spacings up to `min(w, h) / 4`. The coarsest
-/// level's neighbourhood (5×5 appearance taps around 3×3 neighbourhood taps, `± 3 h`) then spans
-/// one and a half times the sample's shorter side, so synthesis starts from a level that sees the
-/// sample's largest structures whole and places them before finer levels fill them in; with
-/// spacings only up to `min / 8` the coarsest level saw half a blob and the result came out as
-/// fragments (on a flat sheet the nearest-patch ratio went from 0.65 to 0.49 with the deeper
-/// stack). Every tap is at most `2 h = min / 2` from a texel, which one mirroring keeps inside.
+/// The stack levels a sample of `w × h` gets: the coarsest spacing `h` is the largest power of
+/// two with `4 h ≤ min(w, h)`, so it lies between an eighth and a quarter of the shorter side.
+/// The coarsest level's neighbourhood (5×5 appearance taps around 3×3 neighbourhood taps,
+/// `± 3 h`) then spans 0.75 to 1.5 times the shorter side: synthesis starts from a level that
+/// sees the sample's largest structures whole and places them as whole runs before finer levels
+/// fill them in (BENCHMARKS.md, "Appearance synthesis: a deeper stack"). Every tap is at most
+/// `2 h ≤ min / 2` from its texel, which one mirroring keeps inside.
 pub fn stack_levels(w: u32, h: u32) -> usize {
     let mut levels = 1;
     while (1u32 << levels) * 4 <= w.min(h) {
@@ -407,13 +407,11 @@ pub const TAPS_3X3: [(i64, i64); 9] = [
 /// nearest neighbourhood vectors: a shortlist of `4k` from the first [`SEARCH_DIMS`]
 /// components, ranked by the full vectors (ties by index).
 ///
-/// At the coarsest level (`step` a quarter of the shorter side) the interior is `2 step` wide,
-/// so a texel inside it has no far candidate and its set is itself `k` times: there correction
-/// chooses only among the coordinates its neighbours' runs propose, which lays the largest
-/// structures out as whole runs. Shrinking the gap to half the interior there gives every
-/// texel candidates but did not help (rhombus sheet 0.824 against 0.797 above its floor of
-/// 0.691, square sheet 0.488 either way), though the search would be cheaper (the node at
-/// 128²: 1.6 s against 1.9 s; 1.05 s without the coarsest level).
+/// At the coarsest level the interior can be as narrow as `2 step` (a side of `4 step`), and
+/// then a texel inside it has no far candidate and its set is itself `k` times: correction
+/// there only chooses among the coordinates its neighbours' runs propose, which lays the
+/// largest structures out as whole runs. Shrinking the gap to fit the interior would give
+/// every texel candidates, and measured worse on a stretched sheet (BENCHMARKS.md).
 fn coherence_sets(neigh: &[f32], w: usize, h: usize, step: i64, k: usize) -> Vec<u32> {
     let n = w * h;
     if k == 1 {

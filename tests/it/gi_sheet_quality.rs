@@ -17,8 +17,8 @@
 //! Even a perfect result scores more than 0 there: the sample laid out verbatim under each
 //! patch's map (the field's turn included) and read back scores 0.691 / 1.163 (ratio /
 //! gradient; the surface row's `floor`, which `texsyn score` reports). So the rhombus is held
-//! to the relief goal: a ratio within 0.15 of the floor (0.106 measured) with the bar's
-//! coverage, offset and gradient.
+//! to the relief goal: a ratio within 0.15 of the floor (0.106 measured), coverage ≥ 0.4 and a
+//! gradient ratio ≥ 0.8 × the floor's, with the bar's largest offset.
 
 use crate::common;
 use common::cli::{succeeded, texsyn};
@@ -160,9 +160,10 @@ fn the_rhombus_floor_comes_from_the_stretch_alone() {
     );
 }
 
-/// On the rhombus the appearance synthesizer comes within 0.15 of the floor along the surface
-/// (0.106 measured) with the bar's coverage, largest offset and gradient, which the template
-/// synthesizer loses (its coverage and gradient 0.247 / 0.501 against 0.585 / 1.096).
+/// On the rhombus the appearance synthesizer meets the relief goal along the surface: a ratio
+/// within 0.15 of the floor (0.106 measured), coverage ≥ 0.4, gradient ratio ≥ 0.8 × the
+/// floor's (1.096 against 0.93), and the bar's largest offset; the template synthesizer loses
+/// coverage and gradient there (0.247 / 0.501 against 0.585 / 1.096).
 #[test]
 fn on_a_rhombus_the_appearance_synthesizer_comes_near_the_floor() {
     let e2 = [0.5, 0.75f64.sqrt()];
@@ -171,7 +172,11 @@ fn on_a_rhombus_the_appearance_synthesizer_comes_near_the_floor() {
     let floor_ratio = floor["ratio"].as_f64().expect("a floor");
     assert!(coverage >= 0.4, "coverage {coverage}: {surface}");
     assert!(offset <= 0.15, "largest offset {offset}: {surface}");
-    assert!(gradient >= 0.8, "gradient ratio {gradient}: {surface}");
+    let floor_gradient = floor["gradient_ratio"].as_f64().expect("a floor");
+    assert!(
+        gradient >= 0.8 * floor_gradient,
+        "gradient ratio {gradient}: {surface}, floor {floor}"
+    );
     assert!(ratio <= floor_ratio + 0.15, "{surface}, floor {floor}");
     let (_, template, _) = sheet_scores([1.0, 0.0], e2, &["synthesize.algorithm=\"template\""]);
     let [_, t_coverage, _, t_gradient] = measures(&template);
