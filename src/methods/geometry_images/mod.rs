@@ -143,8 +143,8 @@ fn stretch_warning(share: f64, p: &geometry_image::GeometryImageParams) -> Optio
     let advice = if p.stretch_iterations > 0 {
         format!(
             "try fewer parameterize.stretch_iterations (now {}; 2 took a human figure from 46 % \
-             to 2 %): fewer iterations even out the surface area per texel less but stretch \
-             less",
+             to 2 %): fewer iterations stretch less but even out the surface area per texel \
+             less, so thin parts such as legs get fewer texels",
             p.stretch_iterations
         )
     } else {
