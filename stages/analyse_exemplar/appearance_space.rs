@@ -424,22 +424,45 @@ fn coherence_sets(neigh: &[f32], w: usize, h: usize, step: i64, k: usize) -> Vec
     } else {
         pca.project_all(neigh)
     };
-    let tree = KdTree::build(&reduced, dims);
+    let m = interior_margin(w as u32, h as u32, step as u32) as i64;
+    let (xs, ys) = (m..w as i64 - m, m..h as i64 - m);
+    let gap = 2 * step;
+    // Only interior texels are candidates, so only they enter the tree (in increasing index,
+    // so that ties still go to the smaller texel index).
+    let interior: Vec<u32> = (0..n as u32)
+        .filter(|&u| {
+            let (ux, uy) = ((u as usize % w) as i64, (u as usize / w) as i64);
+            xs.contains(&ux) && ys.contains(&uy)
+        })
+        .collect();
+    let points: Vec<f32> = interior
+        .iter()
+        .flat_map(|&u| &reduced[u as usize * dims..(u as usize + 1) * dims])
+        .copied()
+        .collect();
+    let tree = KdTree::build(&points, dims);
     let tree = tree.as_ref();
     let mut out = vec![0u32; n * k];
     out.par_chunks_mut(k).enumerate().for_each(|(t, set)| {
         let (x, y) = ((t % w) as i64, (t / w) as i64);
-        let far = |u: u32| {
-            let (ux, uy) = ((u as usize % w) as i64, (u as usize / w) as i64);
-            let m = interior_margin(w as u32, h as u32, step as u32) as i64;
-            let inside = (m..w as i64 - m).contains(&ux) && (m..h as i64 - m).contains(&uy);
-            inside && ((ux - x).abs() >= 2 * step || (uy - y).abs() >= 2 * step)
+        let far = |i: u32| {
+            let u = interior[i as usize] as usize;
+            let (ux, uy) = ((u % w) as i64, (u / w) as i64);
+            (ux - x).abs() >= gap || (uy - y).abs() >= gap
         };
-        let shortlist = tree.nearest(&reduced[t * dims..(t + 1) * dims], 4 * k, far);
+        let shortlist: Vec<u32> = if far_candidate_exists(x, y, &xs, &ys, gap) {
+            tree.nearest(&reduced[t * dims..(t + 1) * dims], 4 * k, far)
+                .into_iter()
+                .map(|(i, _)| interior[i as usize])
+                .collect()
+        } else {
+            // The search would visit every texel to find none.
+            Vec::new()
+        };
         let me = &neigh[t * NEIGHBOURHOOD_DIMS..(t + 1) * NEIGHBOURHOOD_DIMS];
         let mut ranked: Vec<(f32, u32)> = shortlist
             .iter()
-            .map(|&(u, _)| {
+            .map(|&u| {
                 let u0 = u as usize * NEIGHBOURHOOD_DIMS;
                 (squared_distance(me, &neigh[u0..u0 + NEIGHBOURHOOD_DIMS]), u)
             })
@@ -452,6 +475,18 @@ fn coherence_sets(neigh: &[f32], w: usize, h: usize, step: i64, k: usize) -> Vec
         }
     });
     out
+}
+
+/// Whether some texel of the interior `xs × ys` lies at least `gap` from `(x, y)` in x or in y.
+fn far_candidate_exists(
+    x: i64,
+    y: i64,
+    xs: &std::ops::Range<i64>,
+    ys: &std::ops::Range<i64>,
+    gap: i64,
+) -> bool {
+    let reaches = |r: &std::ops::Range<i64>, c: i64| c - gap >= r.start || c + gap < r.end;
+    !xs.is_empty() && !ys.is_empty() && (reaches(xs, x) || reaches(ys, y))
 }
 
 #[cfg(test)]
@@ -533,6 +568,22 @@ mod tests {
                     if (6..42).contains(&ux) && (6..42).contains(&uy) {
                         assert_eq!(ux % 8, x % 8, "candidate {ux},{uy} of {x},{y}");
                     }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_far_candidate_exists_exactly_where_a_scan_finds_one() {
+        for (w, h, gap, margin) in [(64i64, 64i64, 32, 16), (40, 24, 8, 4), (16, 16, 8, 8)] {
+            let (xs, ys) = (margin..w - margin, margin..h - margin);
+            for y in 0..h {
+                for x in 0..w {
+                    let scan = ys.clone().any(|uy| {
+                        xs.clone()
+                            .any(|ux| (ux - x).abs() >= gap || (uy - y).abs() >= gap)
+                    });
+                    assert_eq!(far_candidate_exists(x, y, &xs, &ys, gap), scan, "{x},{y}");
                 }
             }
         }
