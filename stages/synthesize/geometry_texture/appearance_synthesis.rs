@@ -39,7 +39,11 @@
 //! correction passes already see both sides of every cut.
 //!
 //! Departures: coordinates are clamped inside the sample (samples are not assumed to tile);
-//! beyond an open side or a corner a tap is predicted from the texel itself; the appearance
+//! a tap beyond an open side or a corner has no neighbour to predict it, so it is left out of
+//! the distance (predicting it from the texel itself pulls border texels towards whatever they
+//! hold: the crack network of the tests broke into 11.2 components on average over 5 seeds
+//! instead of 8.4, most of the extra ones stubs along the sides);
+//! the appearance
 //! space ([`crate::analyse_exemplar::appearance_space`], its own cached node) is the sample's
 //! at the variants' middle scale, and the orientation and scale variants are not read (the
 //! map `M` does their work continuously).
@@ -202,6 +206,7 @@ fn correct(
     let me = lv.coords[t];
     let mut query = [0.0f32; NEIGHBOURHOOD_DIMS];
     let mut bases: [Option<(usize, [f32; 2])>; 9] = [None; 9];
+    let mut open = [false; 9];
     let centre = 4 * APPEARANCE_DIMS;
     let margin = interior_margin(s.width as u32, s.height as u32, al.spacing) as f64;
     for (o, (&g, &(dx, dy))) in tap_offsets(m, lv.lift).iter().zip(&TAPS_3X3).enumerate() {
@@ -221,17 +226,28 @@ fn correct(
                     u[1] as f64 - step * sy + h * dy as f64,
                 )
             }
-            None => s.clamp(me[0] as f64 + h * dx as f64, me[1] as f64 + h * dy as f64),
+            None => {
+                open[o] = true;
+                s.clamp(me[0] as f64 + h * dx as f64, me[1] as f64 + h * dy as f64)
+            }
         };
         let a = s.index(at) * NEIGHBOURHOOD_DIMS + centre;
         query[o * APPEARANCE_DIMS..(o + 1) * APPEARANCE_DIMS]
             .copy_from_slice(&al.neighbourhoods[a..a + APPEARANCE_DIMS]);
     }
+    // Taps beyond an open side or a corner compare nothing (see the module docs).
+    let any_open = open.iter().any(|&b| b);
     let dist = |u: usize| {
-        squared_distance(
-            &query,
-            &al.neighbourhoods[u * NEIGHBOURHOOD_DIMS..(u + 1) * NEIGHBOURHOOD_DIMS],
-        )
+        let cand = &al.neighbourhoods[u * NEIGHBOURHOOD_DIMS..(u + 1) * NEIGHBOURHOOD_DIMS];
+        if !any_open {
+            return squared_distance(&query, cand);
+        }
+        let mut d = 0.0;
+        for (o, _) in open.iter().enumerate().filter(|(_, b)| !**b) {
+            let r = o * APPEARANCE_DIMS..(o + 1) * APPEARANCE_DIMS;
+            d += squared_distance(&query[r.clone()], &cand[r]);
+        }
+        d
     };
     // A candidate keeps the sub-texel remainder of the coordinate it was proposed from, so a
     // coherent run advances by `M g` exactly, not by whole texels (which repeats texels into
@@ -536,6 +552,12 @@ mod tests {
     /// `sample` synthesized at the defaults over an undistorted `n × n` square with a constant
     /// field: one grid step is one sample texel along x.
     fn on_flat_square(sample: &TexelImage, n: u32) -> TexelImage {
+        let seed = GeometrySynthParams::default().seed;
+        on_flat_square_seeded(sample, n, &[seed]).remove(0)
+    }
+
+    /// [`on_flat_square`] once per seed, the sample analysed once.
+    fn on_flat_square_seeded(sample: &TexelImage, n: u32, seeds: &[u64]) -> Vec<TexelImage> {
         let owned = variants_of(sample);
         let variants = owned.as_ref();
         let nn = (n * n) as usize;
@@ -551,9 +573,18 @@ mod tests {
             dir: vec![Vec2::Y; nn],
             rel_scale: vec![1.0; nn],
         };
-        let p = GeometrySynthParams::default();
-        let space = space_of(&variants, &p);
-        synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {}).unwrap()
+        let space = space_of(&variants, &GeometrySynthParams::default());
+        seeds
+            .iter()
+            .map(|&seed| {
+                let p = GeometrySynthParams {
+                    seed,
+                    ..Default::default()
+                };
+                synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {})
+                    .unwrap()
+            })
+            .collect()
     }
 
     fn space_of(variants: &TexelVariantsRef<'_>, p: &GeometrySynthParams) -> AppearanceSpace {
@@ -666,48 +697,55 @@ mod tests {
         sizes
     }
 
-    /// The crack sample and its synthesis over a flat 129² square at the defaults.
-    fn cracks_synthesized() -> (TexelImage, TexelImage) {
+    /// The crack sample and its syntheses over a flat 129² square at the defaults, seeds 0–4.
+    fn cracks_synthesized() -> (TexelImage, Vec<TexelImage>) {
         let sample = cracks();
-        let out = on_flat_square(&sample, 129);
-        (sample, out)
+        let outs = on_flat_square_seeded(&sample, 129, &[0, 1, 2, 3, 4]);
+        (sample, outs)
     }
 
     #[test]
     fn a_crack_network_stays_mostly_one_network() {
         // Coordinates copy runs of the sample, so a crack continues across a patch instead of
-        // breaking into fragments: the largest crack component holds at least half the crack
-        // texels (measured 0.91 at seed 0, 0.50–0.84 at seeds 1–4; a texel-by-texel
+        // breaking into fragments: at every seed the largest crack component holds at least
+        // 80 % of the crack texels (measured 0.92–1.00 at seeds 0–4; with 4 candidates per set
+        // and the open sides' taps predicted from the texel itself 0.50–0.91; a texel-by-texel
         // synthesizer leaves specks), and the crack share is the sample's within 1.5×.
-        let (sample, out) = cracks_synthesized();
-        let sizes = crack_component_sizes(&out);
-        let total: usize = sizes.iter().sum();
-        let largest = sizes.iter().copied().max().unwrap_or(0);
-        assert!(2 * largest >= total, "components {sizes:?}");
+        let (sample, outs) = cracks_synthesized();
         let share = |img: &TexelImage| {
             img.data.chunks_exact(3).filter(|t| t[2] > 0.5).count() as f64
                 / (img.width * img.height) as f64
         };
-        let (a, b) = (share(&sample), share(&out));
-        assert!(b > a / 1.5 && b < a * 1.5, "crack share {b} against {a}");
+        for (seed, out) in outs.iter().enumerate() {
+            let sizes = crack_component_sizes(out);
+            let total: usize = sizes.iter().sum();
+            let largest = sizes.iter().copied().max().unwrap_or(0);
+            assert!(5 * largest >= 4 * total, "seed {seed}: components {sizes:?}");
+            let (a, b) = (share(&sample), share(out));
+            assert!(
+                b > a / 1.5 && b < a * 1.5,
+                "seed {seed}: crack share {b} against {a}"
+            );
+        }
     }
 
     #[test]
-    #[ignore = "not met: 9 components at seed 0 (8–14 at seeds 1–4) against the ~3.6 the bar allows"]
+    #[ignore = "not met: the median over seeds 0–4 is 4 components (3–5) against the ~3.6 the bar allows"]
     fn crack_components_per_area_are_within_twice_the_samples() {
-        let (sample, out) = cracks_synthesized();
+        // The bar holds for the median run, not a lucky seed.
+        let (sample, outs) = cracks_synthesized();
         let density = |img: &TexelImage| {
             crack_components(img) as f64 / (img.width as f64 * img.height as f64)
         };
-        let (want, got) = (density(&sample), density(&out));
-        eprintln!(
-            "crack components: sample {} ({want:.2e}/texel), synthesized {} ({got:.2e}/texel)",
-            crack_components(&sample),
-            crack_components(&out)
-        );
+        let want = density(&sample);
+        let mut got: Vec<f64> = outs.iter().map(density).collect();
+        got.sort_by(f64::total_cmp);
+        let counts: Vec<usize> = outs.iter().map(crack_components).collect();
         assert!(
-            got <= 2.0 * want,
-            "{got:.2e} per texel against the sample's {want:.2e}"
+            got[got.len() / 2] <= 2.0 * want,
+            "median {:.2e} per texel against the sample's {want:.2e} ({} components; per seed {counts:?})",
+            got[got.len() / 2],
+            crack_components(&sample)
         );
     }
 }
