@@ -581,8 +581,7 @@ mod tests {
                     seed,
                     ..Default::default()
                 };
-                synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {})
-                    .unwrap()
+                synthesize_appearance(&gi, &field, &variants, &space.view(), &p, &|_| {}).unwrap()
             })
             .collect()
     }
@@ -720,7 +719,10 @@ mod tests {
             let sizes = crack_component_sizes(out);
             let total: usize = sizes.iter().sum();
             let largest = sizes.iter().copied().max().unwrap_or(0);
-            assert!(5 * largest >= 4 * total, "seed {seed}: components {sizes:?}");
+            assert!(
+                5 * largest >= 4 * total,
+                "seed {seed}: components {sizes:?}"
+            );
             let (a, b) = (share(&sample), share(out));
             assert!(
                 b > a / 1.5 && b < a * 1.5,
