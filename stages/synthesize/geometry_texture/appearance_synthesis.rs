@@ -40,12 +40,11 @@
 //!
 //! Departures: coordinates are clamped inside the sample (samples are not assumed to tile);
 //! a tap beyond an open side or a corner has no neighbour to predict it, so it is left out of
-//! the distance (predicting it from the texel itself pulls border texels towards whatever they
-//! hold: the crack network of the tests broke into 11.2 components on average over 5 seeds
-//! instead of 8.4, most of the extra ones stubs along the sides);
-//! the appearance
-//! space ([`crate::analyse_exemplar::appearance_space`], its own cached node) is the sample's
-//! at the variants' middle scale, and the orientation and scale variants are not read (the
+//! the distance (predicted from the texel itself, it would pull border texels towards whatever
+//! they hold: at `appearance_k = 4` the crack network of the tests then breaks into 11.2
+//! components on average over 5 seeds against 8.4, the extra ones stubs along the sides); the
+//! appearance space ([`crate::analyse_exemplar::appearance_space`], its own cached node) is
+//! the sample's at the variants' middle scale, and the orientation and scale variants are not read (the
 //! map `M` does their work continuously).
 //! Thread count does not change the result: each sub-pass reads only the coordinates the
 //! previous one left.
@@ -696,10 +695,14 @@ mod tests {
         sizes
     }
 
-    /// The crack sample and its syntheses over a flat 129² square at the defaults, seeds 0–4.
+    /// The seeds the crack tests synthesize with.
+    const CRACK_SEEDS: [u64; 5] = [0, 1, 2, 3, 4];
+
+    /// The crack sample and its syntheses over a flat 129² square at the defaults, one per
+    /// seed of [`CRACK_SEEDS`].
     fn cracks_synthesized() -> (TexelImage, Vec<TexelImage>) {
         let sample = cracks();
-        let outs = on_flat_square_seeded(&sample, 129, &[0, 1, 2, 3, 4]);
+        let outs = on_flat_square_seeded(&sample, 129, &CRACK_SEEDS);
         (sample, outs)
     }
 
@@ -707,15 +710,15 @@ mod tests {
     fn a_crack_network_stays_mostly_one_network() {
         // Coordinates copy runs of the sample, so a crack continues across a patch instead of
         // breaking into fragments: at every seed the largest crack component holds at least
-        // 80 % of the crack texels (measured 0.92–1.00 at seeds 0–4; with 4 candidates per set
-        // and the open sides' taps predicted from the texel itself 0.50–0.91; a texel-by-texel
+        // 80 % of the crack texels (measured 0.92–1.00 at seeds 0–4; 4 candidates per set with
+        // the open sides' taps predicted from the texel itself give 0.50–0.91; a texel-by-texel
         // synthesizer leaves specks), and the crack share is the sample's within 1.5×.
         let (sample, outs) = cracks_synthesized();
         let share = |img: &TexelImage| {
             img.data.chunks_exact(3).filter(|t| t[2] > 0.5).count() as f64
                 / (img.width * img.height) as f64
         };
-        for (seed, out) in outs.iter().enumerate() {
+        for (seed, out) in CRACK_SEEDS.iter().zip(&outs) {
             let sizes = crack_component_sizes(out);
             let total: usize = sizes.iter().sum();
             let largest = sizes.iter().copied().max().unwrap_or(0);

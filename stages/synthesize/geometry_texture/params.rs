@@ -27,9 +27,9 @@ pub struct GeometrySynthParams {
     /// `appearance` only: entries of each k-coherence candidate set (the texel itself and
     /// `k − 1` similar ones), 1..=8. Default: 8 (against 4: the crack network of
     /// `appearance_synthesis.rs`'s tests breaks into 4.0 components on average over 5 seeds
-    /// instead of 8.4, and the shipped dragons' ratios come 0.015 and 0.04 nearer their
-    /// floors, for 0.03–0.08 of their gradient ratios; synthesis takes 1.4 s instead of 0.8 s
-    /// at 257²).
+    /// instead of 8.4; the shipped dragons' ratios come 0.009 and 0.018 nearer their floors,
+    /// for 0.049 and 0.083 of their gradient ratios, and the cow's moves 0.007 away;
+    /// synthesis takes 1.4 s instead of 0.8 s at 257²).
     pub appearance_k: u32,
     /// `appearance` only: how much better (a factor `1 + appearance_coherence` on the
     /// neighbourhood distance) a candidate that continues no neighbour's run must match than
