@@ -2,6 +2,7 @@
 pub mod geometry_texture;
 pub mod graph_matching;
 pub mod jump_walk;
+pub mod occurrence;
 pub mod solid;
 pub mod surface_metric;
 pub mod synth2d;

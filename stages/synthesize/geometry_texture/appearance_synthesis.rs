@@ -29,7 +29,9 @@
 //!    sets of the coordinates the neighbours imply for the texel (`− 2^l M g`), each keeping
 //!    that coordinate's sub-texel remainder. The nearest candidate neighbourhood wins (the
 //!    texel's current coordinate on ties; a candidate that continues no neighbour's run pays
-//!    the factor `1 + appearance_coherence`).
+//!    the factor `1 + appearance_coherence`, and one whose `h × h` block of the sample the
+//!    level already copies beyond its share the occurrence factor of Kopf et al. 2007 §3.3,
+//!    [`crate::synthesize::occurrence`], counted before each sub-pass).
 //!
 //! Geometry-image cuts (Lai et al. §4.2.2): a neighbour beyond a side sample with a confirmed
 //! mate is read across the cut ([`LevelGrid::neighbour`]); coordinates are frame-free, so
@@ -61,6 +63,7 @@ use crate::analyse_exemplar::texel_variants::TexelVariantsRef;
 use crate::geom::geometry_image::{GeometryImage, TexelImage};
 use crate::image::knn::squared_distance;
 use crate::random::{counter_hash, counter_unit};
+use crate::synthesize::occurrence::BlockUse;
 use rayon::prelude::*;
 use texsyn_core::math::PureMath;
 
@@ -189,13 +192,45 @@ fn tap_offsets(m: &[f32; 4], lift: f64) -> [(i64, i64); 9] {
     out
 }
 
+/// The factors a candidate's neighbourhood distance is weighed with.
+#[derive(Clone, Copy)]
+struct Weights {
+    /// `1 + appearance_coherence`, on a candidate that continues no neighbour's run.
+    incoherent: f32,
+    /// `appearance_occupancy`, per share its block of the sample is copied beyond its own.
+    occupancy: f32,
+}
+
+/// How often the coordinates of `lv` copy each `spacing`-square block of the sample, against
+/// a share proportional to the block's texels: the use of a synthesis that spread over the
+/// whole sample evenly. Only the interior can be copied, so at coarse levels, where the
+/// interior is a small part of the sample, every block in it is over that share and the
+/// penalty spreads the coarse layout hardest, which is where a repeat would show most. (A
+/// share of the interior texels alone, so that the penalty is as strong at every level, left
+/// the crack network of the tests in a median of 4 pieces at weight 2 or 4 and 3 at 8,
+/// against 2 with this share at weight 2.)
+fn block_use(lv: &Level, s: &Sample, spacing: u32) -> BlockUse {
+    let (w, h) = (s.width as usize, s.height as usize);
+    BlockUse::new(
+        w,
+        h,
+        spacing as usize,
+        lv.coords.iter().map(|&u| {
+            let i = s.index(u);
+            (i % w, i / w)
+        }),
+        (0..h).flat_map(|y| (0..w).map(move |x| (x, y))),
+    )
+}
+
 /// The corrected coordinate of texel `t` of `lv` (see the module docs, step 3).
 fn correct(
     lv: &Level,
     s: &Sample,
     al: &AppearanceLevel<'_>,
     k: usize,
-    penalty: f32,
+    weights: Weights,
+    occupancy: &BlockUse,
     t: usize,
 ) -> [f32; 2] {
     let (i, j) = lv.grid.coords(t as u32);
@@ -254,8 +289,10 @@ fn correct(
     // The texel's own coordinate competes only inside the interior; outside it (a run that
     // left it), the first proposal, or the interior texel nearest, takes its place.
     let own = s.index(me);
+    let w = s.width as usize;
+    let over = |u: usize| occupancy.factor(u % w, u / w, weights.occupancy);
     let mut best = if s.inside(me[0] as f64, me[1] as f64, margin) {
-        (dist(own), own, s.remainder(me))
+        (dist(own) * over(own), own, s.remainder(me))
     } else {
         let m = margin as f32;
         let (wf, hf) = ((s.width - 1) as f32 - m, (s.height - 1) as f32 - m);
@@ -267,13 +304,16 @@ fn correct(
         for (e, &u) in al.candidates[base * k..(base + 1) * k].iter().enumerate() {
             let u = u as usize;
             // The coherent candidate (the base itself) is favoured by `1 + coherence`.
-            let d = if e == 0 { dist(u) } else { dist(u) * penalty };
+            let d = if e == 0 {
+                dist(u)
+            } else {
+                dist(u) * weights.incoherent
+            } * over(u);
             if d < best.0 {
                 best = (d, u, rem);
             }
         }
     }
-    let w = s.width as usize;
     s.clamp(
         (best.1 % w) as f64 + best.2[0] as f64,
         (best.1 / w) as f64 + best.2[1] as f64,
@@ -324,7 +364,10 @@ pub fn synthesize_appearance(
     let lift = footprints[footprints.len() / 2];
     let nl = grid_levels(n0).min(total - lift).max(1);
     let k = meta.k as usize;
-    let penalty = 1.0 + p.appearance_coherence;
+    let weights = Weights {
+        incoherent: 1.0 + p.appearance_coherence,
+        occupancy: p.appearance_occupancy,
+    };
     let s = Sample {
         width: meta.width as i32,
         height: meta.height as i32,
@@ -385,13 +428,14 @@ pub fn synthesize_appearance(
         let passes = p.appearance_passes * if coarser.is_none() { 2 } else { 1 };
         for _ in 0..passes {
             for &(pi, pj) in &SUB_PASSES {
+                let occupancy = block_use(&lv, &s, al.spacing);
                 let rows: Vec<usize> = (pi..n).step_by(2).collect();
                 let fixed: Vec<Vec<[f32; 2]>> = rows
                     .par_iter()
                     .map(|&i| {
                         (pj..n)
                             .step_by(2)
-                            .map(|j| correct(&lv, &s, al, k, penalty, i * n + j))
+                            .map(|j| correct(&lv, &s, al, k, weights, &occupancy, i * n + j))
                             .collect()
                     })
                     .collect();
@@ -695,8 +739,9 @@ mod tests {
         sizes
     }
 
-    /// The seeds the crack tests synthesize with.
-    const CRACK_SEEDS: [u64; 5] = [0, 1, 2, 3, 4];
+    /// The seeds the crack tests synthesize with: enough that a median says how the
+    /// synthesizer does, not how one seed fell.
+    const CRACK_SEEDS: [u64; 12] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11];
 
     /// The crack sample and its syntheses over a flat 129² square at the defaults, one per
     /// seed of [`CRACK_SEEDS`].
@@ -710,9 +755,10 @@ mod tests {
     fn a_crack_network_stays_mostly_one_network() {
         // Coordinates copy runs of the sample, so a crack continues across a patch instead of
         // breaking into fragments: at every seed the largest crack component holds at least
-        // 80 % of the crack texels (measured 0.92–1.00 at seeds 0–4; 4 candidates per set with
-        // the open sides' taps predicted from the texel itself give 0.50–0.91; a texel-by-texel
-        // synthesizer leaves specks), and the crack share is the sample's within 1.5×.
+        // 80 % of the crack texels (measured 0.92–1.00 over the 12 seeds; 4 candidates per set
+        // with the open sides' taps predicted from the texel itself and no occurrence penalty
+        // give 0.50–0.91 at seeds 0–4; a texel-by-texel synthesizer leaves specks), and the
+        // crack share is the sample's within 1.5×.
         let (sample, outs) = cracks_synthesized();
         let share = |img: &TexelImage| {
             img.data.chunks_exact(3).filter(|t| t[2] > 0.5).count() as f64
@@ -735,9 +781,10 @@ mod tests {
     }
 
     #[test]
-    #[ignore = "not met: the median over seeds 0–4 is 4 components (3–5) against the ~3.6 the bar allows"]
     fn crack_components_per_area_are_within_twice_the_samples() {
-        // The bar holds for the median run, not a lucky seed.
+        // The bar, for the median run, not a lucky seed: about 3.6 components over the
+        // 129² square. Measured over the 12 seeds: 1–6, median 2; without the occurrence
+        // penalty 3–10, median 5 (the sample is one component).
         let (sample, outs) = cracks_synthesized();
         let density = |img: &TexelImage| {
             crack_components(img) as f64 / (img.width as f64 * img.height as f64)
@@ -746,6 +793,7 @@ mod tests {
         let mut got: Vec<f64> = outs.iter().map(density).collect();
         got.sort_by(f64::total_cmp);
         let counts: Vec<usize> = outs.iter().map(crack_components).collect();
+        eprintln!("crack components per seed: {counts:?}");
         assert!(
             got[got.len() / 2] <= 2.0 * want,
             "median {:.2e} per texel against the sample's {want:.2e} ({} components; per seed {counts:?})",

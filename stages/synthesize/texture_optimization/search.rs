@@ -5,6 +5,7 @@ use super::candidates::{Candidates, Level};
 use super::params::TextureOptimizationParams;
 use super::patches::{Patches, SampleInfo};
 use crate::image::knn::squared_distance;
+use crate::synthesize::occurrence::BlockUse;
 use rayon::prelude::*;
 
 /// Nearest candidates in PCA space re-ranked by the full distance; more for samples whose grid
@@ -26,27 +27,20 @@ pub(super) fn occurrence_penalty(z: &[u32], cands: &Candidates, weight: f32) -> 
     if weight == 0.0 || n == 0 {
         return vec![1.0; n];
     }
-    let ny = n / cands.nx;
-    let (bx, by) = (
-        cands.nx.div_ceil(HISTOGRAM_BLOCK),
-        ny.div_ceil(HISTOGRAM_BLOCK),
-    );
-    let block = |c: usize| (c / cands.nx / HISTOGRAM_BLOCK) * bx + (c % cands.nx) / HISTOGRAM_BLOCK;
-    let mut used = vec![0u32; bx * by];
-    for &c in z {
-        used[block(c as usize)] += 1;
-    }
+    let nx = cands.nx;
+    let at = |c: usize| (c % nx, c / nx);
     // A block's fair share is proportional to the candidates it holds.
-    let mut size = vec![0u32; bx * by];
-    for c in 0..n {
-        size[block(c)] += 1;
-    }
-    let per_candidate = z.len() as f32 / n as f32;
+    let blocks = BlockUse::new(
+        nx,
+        n / nx,
+        HISTOGRAM_BLOCK,
+        z.iter().map(|&c| at(c as usize)),
+        (0..n).map(at),
+    );
     (0..n)
         .map(|c| {
-            let b = block(c);
-            let fair = (size[b] as f32 * per_candidate).max(1.0);
-            1.0 + weight * (used[b] as f32 / fair - 1.0).max(0.0)
+            let (x, y) = at(c);
+            blocks.factor(x, y, weight)
         })
         .collect()
 }
