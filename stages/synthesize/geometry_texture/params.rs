@@ -39,10 +39,13 @@ pub struct GeometrySynthParams {
     /// `appearance` only: weight of the occurrence penalty (Kopf et al. 2007 §3.3): a
     /// candidate whose block of the sample (one stack spacing square) is already copied more
     /// than its fair share pays the factor `1 + weight · (use / share − 1)`, 0..=10. Default:
-    /// 2 (against 0, over 12 seeds the crack network of `appearance_synthesis.rs`'s tests
-    /// breaks into a median of 2 components instead of 5, relief_cow scores 0.935 / 0.614 /
-    /// 0.896 instead of 0.973 / 0.539 / 0.787 at density offset 0, mean of seeds 1 and 2; the
-    /// cow's flat stretches between bumps are no longer copied over and over).
+    /// 1. Against 0: over 12 seeds the crack network of `appearance_synthesis.rs`'s tests
+    /// breaks into a median of 3 components instead of 5; at density offset 0 relief_cow
+    /// scores 0.888 / 0.605 / 0.861 instead of 0.971 / 0.545 / 0.783 and dragon_knot 0.753 /
+    /// 0.604 / 0.966 instead of 0.805 / 0.573 / 1.077; the undistorted square sheet of
+    /// `tests/it/gi_sheet_quality.rs` loses (0.539 against 0.461: more seams, where nothing
+    /// else rewards spreading). At 2 the shapes score about the same, the square 0.569, and
+    /// the rhombus keeps its gradient goal by 0.002 only.
     pub appearance_occupancy: f32,
     /// `appearance` only: jitter amplitude per level, in units of the level's stack spacing,
     /// rounded to whole texels, 0..=2 (Lefebvre & Hoppe 2005 §3.1, their `r`). Default: 0 (the
@@ -160,7 +163,7 @@ impl Default for GeometrySynthParams {
             appearance_passes: 8,
             appearance_k: 8,
             appearance_coherence: 0.1,
-            appearance_occupancy: 2.0,
+            appearance_occupancy: 1.0,
             jitter: 0.0,
             seed: 0,
             boundary_passes: 2,
