@@ -56,8 +56,27 @@ impl BlockUse {
     /// `1 + weight · max(0, use / fair − 1)` for the block holding `(x, y)`.
     #[inline]
     pub fn factor(&self, x: usize, y: usize, weight: f32) -> f32 {
-        let b = (y / self.block) * self.columns + x / self.block;
+        self.block_factor((y / self.block) * self.columns + x / self.block, weight)
+    }
+
+    #[inline]
+    fn block_factor(&self, b: usize, weight: f32) -> f32 {
         1.0 + weight * (self.used[b] as f32 / self.fair[b] - 1.0).max(0.0)
+    }
+
+    /// [`Self::factor`] of every position of the `width × height` exemplar, row by row: one
+    /// lookup per match tried instead of the block arithmetic.
+    pub fn factors(&self, width: usize, height: usize, weight: f32) -> Vec<f32> {
+        let per_block: Vec<f32> = (0..self.used.len())
+            .map(|b| self.block_factor(b, weight))
+            .collect();
+        (0..height)
+            .flat_map(|y| {
+                let row = (y / self.block) * self.columns;
+                let per_block = &per_block;
+                (0..width).map(move |x| per_block[row + x / self.block])
+            })
+            .collect()
     }
 }
 
@@ -77,6 +96,10 @@ mod tests {
         assert_eq!(b.factor(2, 2, 2.0), 1.0 + 2.0 * (3.0 / 2.0 - 1.0));
         assert_eq!(b.factor(3, 0, 2.0), 1.0);
         assert_eq!(b.factor(1, 1, 0.0), 1.0);
+        let all = b.factors(4, 4, 2.0);
+        for k in 0..16 {
+            assert_eq!(all[k], b.factor(k % 4, k / 4, 2.0), "position {k}");
+        }
     }
 
     #[test]

@@ -230,7 +230,7 @@ fn correct(
     al: &AppearanceLevel<'_>,
     k: usize,
     weights: Weights,
-    occupancy: &BlockUse,
+    occupancy: &[f32],
     t: usize,
 ) -> [f32; 2] {
     let (i, j) = lv.grid.coords(t as u32);
@@ -290,7 +290,7 @@ fn correct(
     // left it), the first proposal, or the interior texel nearest, takes its place.
     let own = s.index(me);
     let w = s.width as usize;
-    let over = |u: usize| occupancy.factor(u % w, u / w, weights.occupancy);
+    let over = |u: usize| occupancy[u];
     let mut best = if s.inside(me[0] as f64, me[1] as f64, margin) {
         (dist(own) * over(own), own, s.remainder(me))
     } else {
@@ -428,7 +428,11 @@ pub fn synthesize_appearance(
         let passes = p.appearance_passes * if coarser.is_none() { 2 } else { 1 };
         for _ in 0..passes {
             for &(pi, pj) in &SUB_PASSES {
-                let occupancy = block_use(&lv, &s, al.spacing);
+                let occupancy = block_use(&lv, &s, al.spacing).factors(
+                    s.width as usize,
+                    s.height as usize,
+                    weights.occupancy,
+                );
                 let rows: Vec<usize> = (pi..n).step_by(2).collect();
                 let fixed: Vec<Vec<[f32; 2]>> = rows
                     .par_iter()

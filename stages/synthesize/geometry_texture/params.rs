@@ -38,8 +38,8 @@ pub struct GeometrySynthParams {
     pub appearance_coherence: f32,
     /// `appearance` only: weight of the occurrence penalty (Kopf et al. 2007 §3.3): a
     /// candidate whose block of the sample (one stack spacing square) is already copied more
-    /// than its fair share pays the factor `1 + weight · (use / share − 1)`, 0..=10. Default:
-    /// 1. Against 0: over 12 seeds the crack network of `appearance_synthesis.rs`'s tests
+    /// than its fair share pays the factor `1 + weight · (use / share − 1)`, 0..=10. Default
+    /// 1; against 0, over 12 seeds the crack network of `appearance_synthesis.rs`'s tests
     /// breaks into a median of 3 components instead of 5; at density offset 0 relief_cow
     /// scores 0.888 / 0.605 / 0.861 instead of 0.971 / 0.545 / 0.783 and dragon_knot 0.753 /
     /// 0.604 / 0.966 instead of 0.805 / 0.573 / 1.077; the undistorted square sheet of
