@@ -1,12 +1,15 @@
 //! How much more than its fair share each block of an exemplar is copied, and the factor on a
 //! match's distance that follows: J. Kopf et al., "Solid texture synthesis from 2D exemplars"
 //! (SIGGRAPH 2007) §3.3, which re-weights a match by how far its source is over-represented
-//! so that rarely used parts of the exemplar stay in play. Counting blocks rather than single
-//! texels: there are more exemplar texels than matches, so a single texel's count says nothing.
+//! so that rarely used parts of the exemplar stay in play. Blocks rather than single texels:
+//! where there are more exemplar texels than matches a single texel's count says nothing, and
+//! a copied run spreads its use over neighbouring texels anyway.
 
 /// Use counts of the `block × block` blocks of a `width × height` exemplar, against each
 /// block's fair share.
 pub struct BlockUse {
+    width: usize,
+    height: usize,
     block: usize,
     columns: usize,
     used: Vec<u32>,
@@ -46,6 +49,8 @@ impl BlockUse {
             .map(|&s| (s as f32 * per_position).max(1.0))
             .collect();
         BlockUse {
+            width,
+            height,
             block,
             columns,
             used: counts,
@@ -64,9 +69,10 @@ impl BlockUse {
         1.0 + weight * (self.used[b] as f32 / self.fair[b] - 1.0).max(0.0)
     }
 
-    /// [`Self::factor`] of every position of the `width × height` exemplar, row by row: one
-    /// lookup per match tried instead of the block arithmetic.
-    pub fn factors(&self, width: usize, height: usize, weight: f32) -> Vec<f32> {
+    /// [`Self::factor`] of every position of the exemplar, row by row: one lookup per match
+    /// tried instead of the block arithmetic.
+    pub fn factors(&self, weight: f32) -> Vec<f32> {
+        let (width, height) = (self.width, self.height);
         let per_block: Vec<f32> = (0..self.used.len())
             .map(|b| self.block_factor(b, weight))
             .collect();
@@ -96,7 +102,7 @@ mod tests {
         assert_eq!(b.factor(2, 2, 2.0), 1.0 + 2.0 * (3.0 / 2.0 - 1.0));
         assert_eq!(b.factor(3, 0, 2.0), 1.0);
         assert_eq!(b.factor(1, 1, 0.0), 1.0);
-        let all = b.factors(4, 4, 2.0);
+        let all = b.factors(2.0);
         for k in 0..16 {
             assert_eq!(all[k], b.factor(k % 4, k / 4, 2.0), "position {k}");
         }

@@ -21,15 +21,17 @@ pub struct GeometrySynthParams {
     pub algorithm: SynthAlgorithm,
     /// `appearance` only: correction passes per level, 1..=8, each of 4 sub-passes (Lefebvre &
     /// Hoppe 2005 §3.2); the coarsest level runs twice as many. Default: 8 (on the flat
-    /// sheet of `tests/it/gi_sheet_quality.rs`, ratio 0.78 / 0.68 / 0.65 at 2 / 4 / 8 passes,
-    /// and the seams between the coarse levels' blocks still show at 2).
+    /// sheet of `tests/it/gi_sheet_quality.rs`, ratio 0.78 / 0.68 / 0.65 at 2 / 4 / 8 passes
+    /// with 4 candidates per set and no occurrence penalty, and the seams between the coarse
+    /// levels' blocks still show at 2).
     pub appearance_passes: u32,
     /// `appearance` only: entries of each k-coherence candidate set (the texel itself and
-    /// `k − 1` similar ones), 1..=8. Default: 8 (against 4: the crack network of
-    /// `appearance_synthesis.rs`'s tests breaks into 4.0 components on average over 5 seeds
-    /// instead of 8.4; the shipped dragons' ratios come 0.009 and 0.018 nearer their floors,
-    /// for 0.049 and 0.083 of their gradient ratios, and the cow's moves 0.007 away;
-    /// synthesis takes 1.4 s instead of 0.8 s at 257²).
+    /// `k − 1` similar ones), 1..=8. Default: 8 (against 4, both without the occurrence
+    /// penalty: the crack network of `appearance_synthesis.rs`'s tests breaks into 4.0
+    /// components on average over 5 seeds instead of 8.4; the shipped dragons' ratios come
+    /// 0.009 and 0.018 nearer their floors, for 0.049 and 0.083 of their gradient ratios, and
+    /// the cow's moves 0.007 away; synthesis takes 1.4 s instead of 0.8 s at 257², measured
+    /// in one session).
     pub appearance_k: u32,
     /// `appearance` only: how much better (a factor `1 + appearance_coherence` on the
     /// neighbourhood distance) a candidate that continues no neighbour's run must match than
