@@ -762,9 +762,9 @@ mod tests {
     fn a_crack_network_stays_mostly_one_network() {
         // Coordinates copy runs of the sample, so a crack continues across a patch instead of
         // breaking into fragments: at every seed the largest crack component holds at least
-        // 80 % of the crack texels (measured 0.94–1.00 over the 12 seeds; with 4 candidates
-        // per set and no occurrence penalty 0.50–0.91 at seeds 0–4; a texel-by-texel
-        // synthesizer leaves specks), and the crack share is the sample's within 1.5×.
+        // 80 % of the crack texels (measured 0.94–1.00 over the 12 seeds; BENCHMARKS.md has
+        // the weaker settings that fail it; a texel-by-texel synthesizer leaves specks), and
+        // the crack share is the sample's within 1.5×.
         let (sample, outs) = cracks_synthesized();
         let share = |img: &TexelImage| {
             img.data.chunks_exact(3).filter(|t| t[2] > 0.5).count() as f64
