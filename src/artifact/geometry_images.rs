@@ -284,7 +284,7 @@ mod tests {
         assert!(TexelVariantsRef::from_arrays(bad, |n| art.raw_array(n).ok()).is_err());
         // Without the per-texel structures: the k-coherent sets come back, and a short one is
         // an error.
-        let lean = build_texel_variants_with(&stripes(40, 7.0), &p, false, &|_| {}).unwrap();
+        let lean = build_texel_variants_with(&stripes(40, 7.0), &p, false, true, &|_| {}).unwrap();
         let art = round_trip(&lean);
         let r = TexelVariants::view(&art).unwrap();
         assert!(r.try_set(0, 0, Template::Causal).is_none());

@@ -23,11 +23,11 @@
 //! them; here each level has its own basis, fitted to that level's (coarser, more blurred)
 //! neighbourhoods, as its Gaussian stack matches at that level. The candidate sets are searched
 //! in the first [`SEARCH_DIMS`] principal components of the neighbourhood vectors (a shortlist
-//! of `4k`), then ranked by the full vectors. Every level is analysed, whatever level synthesis
+//! of `4k`, found approximately: [`SEARCH_EPS`]), then ranked by the full vectors. Every level is analysed, whatever level synthesis
 //! starts at, so the cached space serves any field and density.
 
 use crate::geom::geometry_image::TexelImage;
-use crate::image::knn::{KdTree, squared_distance};
+use crate::image::knn::{KdTree, KdTreeRef, squared_distance};
 use crate::image::neighbourhood::mirror;
 use crate::image::pca::{Pca, PcaParams};
 use rayon::prelude::*;
@@ -39,13 +39,18 @@ pub const APPEARANCE_DIMS: usize = 8;
 pub const NEIGHBOURHOOD_DIMS: usize = 9 * APPEARANCE_DIMS;
 /// Principal components of the neighbourhood vectors the candidate search runs in.
 pub const SEARCH_DIMS: usize = 8;
+/// The shortlist search is approximate (Arya & Mount): its i-th point is within `1 + eps` of
+/// the true i-th nearest distance. The shortlist is ranked by the full vectors anyway, and
+/// exact search took 174 s for a 512² sample against 23 s (BENCHMARKS.md, "Appearance
+/// analysis of large samples").
+pub const SEARCH_EPS: f32 = 1.0;
 /// At most this many vectors (a regular subsample) fit each PCA basis.
 const PCA_FIT_SAMPLES: usize = 16384;
 
 /// The `appearance_space` node's algorithm and version (part of its key; bump on any change of
 /// output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("appearance_space", 3);
+    texsyn_core::algorithm::Algorithm::new("appearance_space", 4);
 
 /// The sizes of an appearance space: the sample's, its channels, its stack levels and the
 /// entries of each k-coherence set.
@@ -403,9 +408,13 @@ pub const TAPS_3X3: [(i64, i64); 9] = [
 ];
 
 /// Per texel, itself and the `k − 1` texels of the interior ([`interior_margin`]; at least
-/// `2 step` away in x or y) with the
-/// nearest neighbourhood vectors: a shortlist of `4k` from the first [`SEARCH_DIMS`]
-/// components, ranked by the full vectors (ties by index).
+/// `2 step` away in x or y) with the nearest neighbourhood vectors: a shortlist of `4k` from
+/// the first [`SEARCH_DIMS`] components (within [`SEARCH_EPS`]), ranked by the full vectors
+/// (ties by index).
+///
+/// The search skips the kd-tree's subtrees whose texels all lie within the gap (at coarse
+/// levels a texel's nearest neighbourhoods are mostly its spatial neighbours, which used to be
+/// measured one by one), and starts from the left neighbour's shortlist moved one texel.
 ///
 /// At the coarsest level the interior can be as narrow as `2 step` (a side of `4 step`), and
 /// then a texel inside it has no far candidate and its set is itself `k` times: correction
@@ -442,39 +451,106 @@ fn coherence_sets(neigh: &[f32], w: usize, h: usize, step: i64, k: usize) -> Vec
         .collect();
     let tree = KdTree::build(&points, dims);
     let tree = tree.as_ref();
+    let boxes = node_boxes(&tree, |i| {
+        let u = interior[i as usize] as usize;
+        ((u % w) as i64, (u / w) as i64)
+    });
+    let iw = xs.end - xs.start;
     let mut out = vec![0u32; n * k];
-    out.par_chunks_mut(k).enumerate().for_each(|(t, set)| {
-        let (x, y) = ((t % w) as i64, (t / w) as i64);
-        let far = |i: u32| {
-            let u = interior[i as usize] as usize;
-            let (ux, uy) = ((u % w) as i64, (u / w) as i64);
-            (ux - x).abs() >= gap || (uy - y).abs() >= gap
-        };
-        let shortlist: Vec<u32> = if far_candidate_exists(x, y, &xs, &ys, gap) {
-            tree.nearest(&reduced[t * dims..(t + 1) * dims], 4 * k, far)
-                .into_iter()
-                .map(|(i, _)| interior[i as usize])
-                .collect()
-        } else {
-            // The search would visit every texel to find none.
-            Vec::new()
-        };
-        let me = &neigh[t * NEIGHBOURHOOD_DIMS..(t + 1) * NEIGHBOURHOOD_DIMS];
-        let mut ranked: Vec<(f32, u32)> = shortlist
-            .iter()
-            .map(|&u| {
-                let u0 = u as usize * NEIGHBOURHOOD_DIMS;
-                (squared_distance(me, &neigh[u0..u0 + NEIGHBOURHOOD_DIMS]), u)
-            })
-            .collect();
-        ranked.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        set[0] = t as u32;
-        for (s, slot) in set[1..].iter_mut().enumerate() {
-            // Too few far texels (a tiny sample): repeat the texel itself.
-            *slot = ranked.get(s).map_or(t as u32, |r| r.1);
+    // Rows in parallel, each row from left to right: a texel's search starts from its left
+    // neighbour's results moved one texel right (the sets of neighbouring texels are mostly
+    // each other's shifted), which gives it a tight bound at once; the results are exact
+    // whatever the seeds.
+    out.par_chunks_mut(w * k).enumerate().for_each(|(y, row)| {
+        let y = y as i64;
+        let mut found: Vec<(u32, f32)> = Vec::new();
+        let mut seeds: Vec<(u32, f32)> = Vec::new();
+        for (x, set) in row.chunks_exact_mut(k).enumerate() {
+            let x = x as i64;
+            let t = (y * w as i64 + x) as usize;
+            let far = |i: u32| {
+                let u = interior[i as usize] as usize;
+                let (ux, uy) = ((u % w) as i64, (u / w) as i64);
+                (ux - x).abs() >= gap || (uy - y).abs() >= gap
+            };
+            // A subtree whose texels all lie within the gap holds no candidate.
+            let near = |node: u32| {
+                let b = &boxes[node as usize];
+                b.x.0 > x - gap && b.x.1 < x + gap && b.y.0 > y - gap && b.y.1 < y + gap
+            };
+            let q = &reduced[t * dims..(t + 1) * dims];
+            seeds.clear();
+            seeds.extend(found.iter().filter_map(|&(i, _)| {
+                let next = (i as i64 % iw + 1 < iw).then_some(i + 1)?;
+                let p = next as usize * dims;
+                Some((next, squared_distance(q, &points[p..p + dims])))
+            }));
+            found = if far_candidate_exists(x, y, &xs, &ys, gap) {
+                tree.nearest_approx_seeded(q, 4 * k, SEARCH_EPS, far, near, &seeds)
+            } else {
+                // The search would visit every texel to find none.
+                Vec::new()
+            };
+            let me = &neigh[t * NEIGHBOURHOOD_DIMS..(t + 1) * NEIGHBOURHOOD_DIMS];
+            let mut ranked: Vec<(f32, u32)> = found
+                .iter()
+                .map(|&(i, _)| {
+                    let u = interior[i as usize];
+                    let u0 = u as usize * NEIGHBOURHOOD_DIMS;
+                    (squared_distance(me, &neigh[u0..u0 + NEIGHBOURHOOD_DIMS]), u)
+                })
+                .collect();
+            ranked.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            set[0] = t as u32;
+            for (s, slot) in set[1..].iter_mut().enumerate() {
+                // Too few far texels (a tiny sample): repeat the texel itself.
+                *slot = ranked.get(s).map_or(t as u32, |r| r.1);
+            }
         }
     });
     out
+}
+
+/// The range of texel columns `x` and rows `y` under a kd-tree node.
+struct NodeBox {
+    x: (i64, i64),
+    y: (i64, i64),
+}
+
+/// Per node of `tree`, the bounding box of the texel positions `at(point index)` under it.
+fn node_boxes(tree: &KdTreeRef<'_>, at: impl Fn(u32) -> (i64, i64)) -> Vec<NodeBox> {
+    let (nodes, ids) = (tree.nodes(), tree.ids());
+    let mut boxes: Vec<NodeBox> = (0..nodes.len())
+        .map(|_| NodeBox {
+            x: (i64::MAX, i64::MIN),
+            y: (i64::MAX, i64::MIN),
+        })
+        .collect();
+    // Children come after their parent, so a reverse walk has both before it reaches it.
+    for (i, nd) in nodes.iter().enumerate().rev() {
+        let mut b = NodeBox {
+            x: (i64::MAX, i64::MIN),
+            y: (i64::MAX, i64::MIN),
+        };
+        let mut add = |x: i64, y: i64| {
+            b.x = (b.x.0.min(x), b.x.1.max(x));
+            b.y = (b.y.0.min(y), b.y.1.max(y));
+        };
+        if nd.axis == u32::MAX {
+            for &id in &ids[nd.start as usize..nd.end as usize] {
+                let (x, y) = at(id);
+                add(x, y);
+            }
+        } else {
+            for c in [nd.left, nd.right] {
+                let cb = &boxes[c as usize];
+                add(cb.x.0, cb.y.0);
+                add(cb.x.1, cb.y.1);
+            }
+        }
+        boxes[i] = b;
+    }
+    boxes
 }
 
 /// Whether some texel of the interior `xs × ys` lies at least `gap` from `(x, y)` in x or in y.

@@ -95,6 +95,14 @@ fn distance_within(a: &[f32], b: &[f32], bound: f32) -> Option<f32> {
     (s <= bound).then_some(s)
 }
 
+/// What one query searches with: the bound's scale (`(1 + eps)²`, less a little slack), the
+/// points it may return and the nodes it need not enter.
+struct Search<F, E> {
+    scale: f32,
+    filter: F,
+    excluded: E,
+}
+
 /// A bounded, sorted list of the best candidates so far.
 struct Best {
     k: usize,
@@ -117,16 +125,22 @@ impl Best {
         }
     }
 
+    /// Keeps `(id, d)` if it is among the `k` best so far; a point offered again (a seed the
+    /// search reaches) is kept once.
     #[inline]
     fn offer(&mut self, id: u32, d: f32) {
         let c = (id, d);
-        if self.items.len() == self.k {
-            if !Self::worse(self.items[self.k - 1], c) {
-                return;
-            }
-            self.items.pop();
+        let full = self.items.len() == self.k;
+        if full && !Self::worse(self.items[self.k - 1], c) {
+            return;
         }
         let pos = self.items.partition_point(|&x| !Self::worse(x, c));
+        if pos > 0 && self.items[pos - 1].0 == id {
+            return;
+        }
+        if full {
+            self.items.pop();
+        }
         self.items.insert(pos, c);
     }
 }
@@ -344,8 +358,68 @@ impl<'a> KdTreeRef<'a> {
         // distance never prunes a cell holding a point at exactly the k-th distance.
         let scale = (1.0 + eps.max(0.0)).powi(2) * (1.0 - 1e-5);
         let mut off = vec![0.0f32; self.dim];
-        self.search(0, query, 0.0, &mut off, scale, &filter, &mut best);
+        let search = Search {
+            scale,
+            filter,
+            excluded: |_| false,
+        };
+        self.search(0, query, 0.0, &mut off, &search, &mut best);
         best.items
+    }
+
+    /// As [`Self::nearest_approx`], with two ways to find the same result sooner:
+    /// - `seeds`, `(index, squared distance to query)` pairs offered before the search starts
+    ///   (those that pass `filter`), so that it starts from a tight bound: e.g. the previous
+    ///   query's results, moved along with the query. The distance must be
+    ///   [`squared_distance`] of `query` and that point, as the search would measure it.
+    /// - `excluded(node)`: a node for which it holds is not entered. It is the caller's promise
+    ///   that no point under that node (its `start..end` of [`Self::ids`]) passes `filter`.
+    ///   Where the points that fail the filter cluster in the tree (a texel's spatial
+    ///   neighbours, which are also its nearest in feature space), whole subtrees of them are
+    ///   skipped instead of measured one by one.
+    ///
+    /// With `eps = 0` the result is exactly [`Self::nearest`]'s.
+    pub fn nearest_approx_seeded(
+        &self,
+        query: &[f32],
+        k: usize,
+        eps: f32,
+        filter: impl Fn(u32) -> bool,
+        excluded: impl Fn(u32) -> bool,
+        seeds: &[(u32, f32)],
+    ) -> Vec<(u32, f32)> {
+        assert_eq!(query.len(), self.dim, "query dimension");
+        let mut best = Best {
+            k,
+            items: Vec::with_capacity(k + 1),
+        };
+        if k == 0 || self.nodes.is_empty() {
+            return best.items;
+        }
+        for &(id, d) in seeds {
+            if filter(id) {
+                best.offer(id, d);
+            }
+        }
+        let scale = (1.0 + eps.max(0.0)).powi(2) * (1.0 - 1e-5);
+        let mut off = vec![0.0f32; self.dim];
+        let search = Search {
+            scale,
+            filter,
+            excluded,
+        };
+        self.search(0, query, 0.0, &mut off, &search, &mut best);
+        best.items
+    }
+
+    /// The nodes, in pre-order (node 0 is the root); a node's points are `ids[start..end]`.
+    pub fn nodes(&self) -> &'a [KdNode] {
+        self.nodes
+    }
+
+    /// The original index of each point, in tree order.
+    pub fn ids(&self) -> &'a [u32] {
+        self.ids
     }
 
     /// The single nearest point (approximate as in [`Self::nearest_approx`], no filter), as
@@ -368,21 +442,27 @@ impl<'a> KdTreeRef<'a> {
             k: 1,
             items: Vec::with_capacity(2),
         };
-        self.search(0, query, 0.0, scratch, scale, &|_| true, &mut best);
+        let search = Search {
+            scale,
+            filter: |_| true,
+            excluded: |_| false,
+        };
+        self.search(0, query, 0.0, scratch, &search, &mut best);
         best.items.first().copied()
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn search(
         &self,
         node: u32,
         q: &[f32],
         rd: f32,
         off: &mut [f32],
-        scale: f32,
-        filter: &impl Fn(u32) -> bool,
+        search: &Search<impl Fn(u32) -> bool, impl Fn(u32) -> bool>,
         best: &mut Best,
     ) {
+        if (search.excluded)(node) {
+            return;
+        }
         let nd = self.nodes[node as usize];
         if nd.axis == u32::MAX {
             let dim = self.dim;
@@ -390,7 +470,7 @@ impl<'a> KdTreeRef<'a> {
                 let bound = best.bound();
                 if let Some(d) = distance_within(q, &self.points[i * dim..(i + 1) * dim], bound) {
                     let id = self.ids[i];
-                    if filter(id) {
+                    if (search.filter)(id) {
                         best.offer(id, d);
                     }
                 }
@@ -404,12 +484,12 @@ impl<'a> KdTreeRef<'a> {
         } else {
             (nd.right, nd.left)
         };
-        self.search(near, q, rd, off, scale, filter, best);
+        self.search(near, q, rd, off, search, best);
         let old = off[axis];
         let new_rd = rd - old * old + diff * diff;
-        if new_rd * scale <= best.bound() {
+        if new_rd * search.scale <= best.bound() {
             off[axis] = diff;
-            self.search(far, q, new_rd, off, scale, filter, best);
+            self.search(far, q, new_rd, off, search, best);
             off[axis] = old;
         }
     }
@@ -521,6 +601,65 @@ mod tests {
                 let got = tree.as_ref().nearest(&q, k, filter);
                 let want = brute(&points, dim, &q, k, filter);
                 prop_assert_eq!(got, want);
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(100))]
+        /// Points on a grid whose first coordinate follows position (as a texel's spatial
+        /// neighbours are also its nearest in feature space), a query that must skip a window
+        /// around its own position: seeds (some passing, some not, some the answer itself) and
+        /// subtrees skipped by their bounding boxes change nothing.
+        #[test]
+        fn seeds_and_excluded_subtrees_give_the_exact_result(
+            seed in any::<u64>(),
+            side in 4usize..24,
+            k in 1usize..16,
+            gap in 1i64..6,
+            seeds in proptest::collection::vec((any::<u32>(), any::<bool>()), 0..20),
+        ) {
+            let mut s = seed | 1;
+            let mut next = || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s };
+            let dim = 3;
+            let n = side * side;
+            let at = |i: u32| ((i as usize % side) as i64, (i as usize / side) as i64);
+            let points: Vec<f32> = (0..n as u32).flat_map(|i| {
+                let (x, y) = at(i);
+                [x as f32 + y as f32 * 0.3, (next() % 7) as f32, (next() % 1000) as f32 / 250.0]
+            }).collect();
+            let tree = KdTree::build(&points, dim);
+            let tree = tree.as_ref();
+            // Per node, the box of the positions under it.
+            let boxes: Vec<(i64, i64, i64, i64)> = tree.nodes().iter().map(|nd| {
+                tree.ids()[nd.start as usize..nd.end as usize].iter().fold(
+                    (i64::MAX, i64::MIN, i64::MAX, i64::MIN),
+                    |b, &i| { let (x, y) = at(i); (b.0.min(x), b.1.max(x), b.2.min(y), b.3.max(y)) },
+                )
+            }).collect();
+            for t in 0..4u32 {
+                let me = (next() % n as u64) as u32;
+                let (x, y) = at(me);
+                let q = &points[me as usize * dim..(me as usize + 1) * dim];
+                let far = |i: u32| { let (ux, uy) = at(i); (ux - x).abs() >= gap || (uy - y).abs() >= gap };
+                let near = |node: u32| {
+                    let b = boxes[node as usize];
+                    b.0 > x - gap && b.1 < x + gap && b.2 > y - gap && b.3 < y + gap
+                };
+                let want = brute(&points, dim, q, k, far);
+                let mut given: Vec<(u32, f32)> = seeds.iter().map(|&(r, answer)| {
+                    let i = if answer && !want.is_empty() {
+                        want[r as usize % want.len()].0
+                    } else {
+                        r % n as u32
+                    };
+                    (i, squared_distance(q, &points[i as usize * dim..(i as usize + 1) * dim]))
+                }).collect();
+                let turn = t as usize % given.len().max(1);
+                given.rotate_left(turn);
+                let got = tree.nearest_approx_seeded(q, k, 0.0, far, near, &given);
+                prop_assert_eq!(&got, &want);
+                prop_assert_eq!(&tree.nearest_approx_seeded(q, k, 0.0, far, |_| false, &[]), &want);
             }
         }
     }

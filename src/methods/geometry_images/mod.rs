@@ -8,7 +8,8 @@
 //! ```
 //!
 //! With `synthesize.algorithm = "appearance"` (the default) the variants feed a second
-//! analysis node, the sample's appearance space, which synthesize reads too.
+//! analysis node, the sample's appearance space, which synthesize reads too; the variants then
+//! leave out the sample's k-coherent sets, which only the template synthesizer reads.
 //!
 //! The sample is a mesh (a region of it is cut out and its relief extracted, §4.1) or an
 //! image read as a height field (§5; a colour photograph by its luma). Texel values are
@@ -40,7 +41,7 @@ use crate::stages::extract::{self};
 use crate::stages::field::param_field::{self};
 use crate::stages::parameterize::geometry_image::{self};
 use crate::stages::reconstruct::relief_export::{self};
-use crate::stages::synthesize::geometry_texture::Search;
+use crate::stages::synthesize::geometry_texture::{Search, SynthAlgorithm};
 use crate::stages::synthesize::surface_metric::{
     MAX_STRETCH, share_at_max_stretch, surface_metrics,
 };
@@ -90,6 +91,7 @@ impl Method for GeometryImages {
         let key = VariantsKey {
             variants: c.analyse_exemplar.clone(),
             per_texel: c.synthesize.search == Search::PerTexel,
+            coherent: c.synthesize.algorithm == SynthAlgorithm::Template,
         };
         let variants = dag.node(
             NodeSpec::of(Stage::AnalyseExemplar, variants::NODE),

@@ -74,15 +74,17 @@ pub use templates::{Template, coarse_taps, coarse_window, feature_dim, template_
 
 /// The `texel_variants` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("texel_variants", 2);
+    texsyn_core::algorithm::Algorithm::new("texel_variants", 3);
 
-/// The analysis node's key: `[analyse_exemplar]`, and whether synthesis searches per texel
+/// The analysis node's key: `[analyse_exemplar]`, whether synthesis searches per texel
 /// (`synthesize.search = "per_texel"`), which alone needs the per-texel search structures
-/// (nearly all of the variant set's size and build time).
+/// (nearly all of the variant set's size and build time), and whether it reads the sample's
+/// k-coherent sets (the template synthesizer; the appearance synthesizer has its own).
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct VariantsKey {
     pub variants: TexelVariantParams,
     pub per_texel: bool,
+    pub coherent: bool,
 }
 
 /// The analyse-exemplar node: the sample's texel variants.
@@ -91,7 +93,7 @@ pub fn node(
     key: &VariantsKey,
     progress: &dyn Fn(f32),
 ) -> Result<TexelVariants, texsyn_core::algorithm::Failure> {
-    build_texel_variants_with(sample, &key.variants, key.per_texel, progress)
+    build_texel_variants_with(sample, &key.variants, key.per_texel, key.coherent, progress)
         .map_err(texsyn_core::algorithm::Failure::input)
 }
 
@@ -178,7 +180,7 @@ mod tests {
             levels: 1,
             ..Default::default()
         };
-        let owned = build_texel_variants_with(&sample, &p, false, &|_| {}).unwrap();
+        let owned = build_texel_variants_with(&sample, &p, false, true, &|_| {}).unwrap();
         let v = owned.as_ref();
         assert!(!v.meta.per_texel && v.try_set(0, 0, Template::Causal).is_none());
         // Quarter turns at the sample's own scale copy texels exactly: each variant texel is
@@ -216,7 +218,7 @@ mod tests {
             levels: 1,
             ..Default::default()
         };
-        let owned = build_texel_variants_with(&sample, &p, false, &|_| {}).unwrap();
+        let owned = build_texel_variants_with(&sample, &p, false, true, &|_| {}).unwrap();
         let v = owned.as_ref();
         let ks = v.kset(0);
         let k = v.coherent_k();

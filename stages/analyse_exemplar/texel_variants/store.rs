@@ -54,6 +54,8 @@ pub struct VariantsMeta {
     pub sets: Vec<SetMeta>,
     /// Whether the per-texel search structures (PCA bases, kd-trees) were built.
     pub per_texel: bool,
+    /// Whether the k-coherent sets were searched (else every entry is none).
+    pub coherent: bool,
     /// Per level of the sample pyramid ([`TexelVariantParams::kset_levels`]), its size and
     /// where its k-coherent sets (`coherent_k` texel indices per texel) start in `kset`.
     pub ksets: Vec<LevelMeta>,

@@ -226,6 +226,11 @@ pub enum GeometryTextureError {
     )]
     NoPerTexelSets,
     #[error(
+        "geometry texture: the template synthesizer needs the sample's k-coherent sets, which \
+         this variant set was built without"
+    )]
+    NoCoherentSets,
+    #[error(
         "geometry texture: the appearance space has {channels} channels and {k}-entry candidate \
          sets, which disagree with the variants' channels or synthesize.appearance_k"
     )]

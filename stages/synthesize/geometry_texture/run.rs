@@ -174,6 +174,9 @@ pub(super) fn synthesize_impl(
     if p.search == Search::PerTexel && !variants.meta.per_texel {
         return Err(GeometryTextureError::NoPerTexelSets);
     }
+    if !variants.meta.coherent {
+        return Err(GeometryTextureError::NoCoherentSets);
+    }
     let maps: Vec<_> = (0..variants.variant_count() * nl)
         .map(|vl| variants.sample_map(vl / nl, vl % nl))
         .collect();
@@ -484,5 +487,22 @@ mod tests {
                 );
             }
         }
+        // A variant set built for the appearance synthesizer (without the search structures
+        // the template synthesizer reads) is refused, naming what it lacks.
+        use crate::analyse_exemplar::texel_variants::build_texel_variants_with;
+        let p = GeometrySynthParams::default();
+        let lean = build_texel_variants_with(&sample, &vp, false, false, &|_| {}).unwrap();
+        assert!(lean.kset.iter().all(|&e| e == u32::MAX));
+        let err = synthesize_impl(&gi, &field, &lean.as_ref(), &p, &|_| {}, true).unwrap_err();
+        assert!(matches!(err, GeometryTextureError::NoCoherentSets), "{err}");
+        let per_texel = GeometrySynthParams {
+            search: Search::PerTexel,
+            ..p
+        };
+        let err = synthesize_impl(&gi, &field, &lean.as_ref(), &per_texel, &|_| {}, true);
+        assert!(matches!(
+            err.unwrap_err(),
+            GeometryTextureError::NoPerTexelSets
+        ));
     }
 }
