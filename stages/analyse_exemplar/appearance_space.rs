@@ -234,14 +234,7 @@ pub fn node(
     k: u32,
 ) -> Result<AppearanceSpace, texsyn_core::algorithm::Failure> {
     let sample = base_sample(variants);
-    let side = 8..=MAX_SIDE;
-    if !side.contains(&sample.width) || !side.contains(&sample.height) {
-        return Err(texsyn_core::algorithm::Failure::input(format!(
-            "the appearance synthesizer needs a sample of 8 to {MAX_SIDE} texels a side, got \
-             {}×{}",
-            sample.width, sample.height
-        )));
-    }
+    check_sides(sample.width, sample.height).map_err(texsyn_core::algorithm::Failure::input)?;
     if (1..=8).contains(&k) {
         Ok(AppearanceSpace::build(
             &sample,
@@ -252,6 +245,19 @@ pub fn node(
         Err(texsyn_core::algorithm::Failure::input(format!(
             "synthesize.appearance_k must be 1 to 8, got {k}"
         )))
+    }
+}
+
+/// Whether a `w × h` sample fits the appearance synthesizer: 8 to [`MAX_SIDE`] texels a side.
+pub fn check_sides(w: u32, h: u32) -> Result<(), String> {
+    let side = 8..=MAX_SIDE;
+    if side.contains(&w) && side.contains(&h) {
+        Ok(())
+    } else {
+        Err(format!(
+            "the sample is {w}×{h} texels: the appearance synthesizer needs 8 to {MAX_SIDE} \
+             texels a side"
+        ))
     }
 }
 

@@ -236,6 +236,7 @@ pub fn node(
         tracing::warn!("{w}");
     }
     let t = h.texels;
-    fits(t.width, t.height).map_err(|e| Failure::input(format!("the sample: {e}")))?;
+    fits(t.width, t.height)
+        .map_err(|e| Failure::input(format!("the sample {}: {e}", path.display())))?;
     Ok(t)
 }

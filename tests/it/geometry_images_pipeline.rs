@@ -202,19 +202,33 @@ fn bad_inputs_are_named() {
             ),
         ],
     );
-    // A sample too small for the template.
+    // A sample too small for the appearance synthesizer (the default): the error names its size
+    // and the least one.
     let cache = tempfile::tempdir().unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let tiny = dir.path().join("tiny.png");
-    image::GrayImage::from_fn(6, 6, |x, y| image::Luma([((x * 40 + y * 7) % 255) as u8]))
-        .save(&tiny)
+    let image_of = |side: u32, name: &str| {
+        let path = dir.path().join(name);
+        image::GrayImage::from_fn(side, side, |x, y| {
+            image::Luma([((x * 40 + y * 7 + x * y) % 255) as u8])
+        })
+        .save(&path)
         .unwrap();
-    let e = err(run(
-        "relief_cow.toml",
-        &[&format!("inputs.sample={}", tiny.display())],
-        cache.path(),
-    ));
-    assert!(e.contains("too small") || e.contains("at least"), "{e}");
+        format!("inputs.sample={}", path.display())
+    };
+    let tiny = image_of(6, "tiny.png");
+    let e = err(run("relief_cow.toml", &[&tiny], cache.path()));
+    assert!(
+        e.contains("tiny.png") && e.contains("6×6") && e.contains("8 to"),
+        "{e}"
+    );
+    // A sample too small for the template synthesizer's variants (each level of each variant
+    // needs candidates for its templates) is refused by it, naming the size it needs, and
+    // synthesized by the appearance synthesizer, which needs only its own stack.
+    let small = image_of(24, "small.png");
+    let template = "synthesize.algorithm=\"template\"";
+    let e = err(run("relief_cow.toml", &[&small, template], cache.path()));
+    assert!(e.contains("small.png") && e.contains("at least"), "{e}");
+    run("relief_cow.toml", &[&small], cache.path()).expect("the appearance synthesizer runs");
 }
 
 /// The DAG of a config (nothing runs), or the error a user would see.

@@ -3,7 +3,7 @@
 
 use crate::config::{Config, check_range};
 use crate::methods::MethodError;
-use crate::stages::analyse_exemplar::texel_variants::{TexelVariantParams, check_sample_size};
+use crate::stages::analyse_exemplar::texel_variants::TexelVariantParams;
 use crate::stages::extract::height_field::is_image_path;
 use crate::stages::extract::{ExtractMethod, ExtractParams};
 use crate::stages::field::param_field::ParamFieldParams;
@@ -72,11 +72,13 @@ pub(super) fn checked(
     } else {
         // A mesh sample gives extract.size² texels: check them against the variants now.
         let size = c.extract.size;
-        check_sample_size(size, size, &c.analyse_exemplar).map_err(|e| {
-            let m = format!(
-                "{e} (extract.size = {size}: raise it, or lower analyse_exemplar.scales, \
-                 .levels, .template or .boundary_template)"
-            );
+        super::sample_fits(size, size, &c).map_err(|e| {
+            let more = if super::counts_candidates(&c) {
+                ", or lower analyse_exemplar.scales, .levels, .template or .boundary_template"
+            } else {
+                ""
+            };
+            let m = format!("{e} (extract.size = {size}: raise it{more})");
             config.invalid("extract.size", &m)
         })?;
         let per_texel = c.synthesize.search == Search::PerTexel;

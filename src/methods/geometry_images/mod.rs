@@ -33,6 +33,7 @@ use crate::geom::geometry_image::TexelImage;
 use crate::image::Image;
 use crate::pipeline::{Dag, Handle, NodeSpec, Stage};
 use crate::score::geometry::GeometryImageNodes;
+use crate::stages::analyse_exemplar::appearance_space;
 use crate::stages::analyse_exemplar::texel_variants::{
     self as variants, VariantsKey, check_sample_size,
 };
@@ -166,14 +167,31 @@ fn stretch_warning(share: f64, p: &geometry_image::GeometryImageParams) -> Optio
     ))
 }
 
-/// An image sample read as a height field (§5), checked against the variants once read.
+/// Whether synthesis reads the variants' candidate structures (the template synthesizer, or a
+/// per-texel search).
+pub(super) fn counts_candidates(c: &GeometryImagesConfig) -> bool {
+    c.synthesize.algorithm == SynthAlgorithm::Template || c.synthesize.search == Search::PerTexel
+}
+
+/// Whether a `w × h` sample suits the chosen synthesizer: the template synthesizer needs
+/// candidates at every level of every variant ([`check_sample_size`]), the appearance
+/// synthesizer only its appearance space's sides, so it takes much smaller samples.
+pub(super) fn sample_fits(w: u32, h: u32, c: &GeometryImagesConfig) -> Result<(), String> {
+    if counts_candidates(c) {
+        check_sample_size(w, h, &c.analyse_exemplar).map_err(|e| e.to_string())
+    } else {
+        appearance_space::check_sides(w, h)
+    }
+}
+
+/// An image sample read as a height field (§5), checked against the synthesizer once read.
 fn image_sample(
     dag: &mut Dag,
     path: &Path,
     c: &GeometryImagesConfig,
 ) -> Result<Handle<TexelImage>, MethodError> {
     let img = import::<Image>(dag, "import.sample", path, "inputs.sample")?;
-    let (path, variants) = (path.to_owned(), c.analyse_exemplar.clone());
+    let (path, c2) = (path.to_owned(), c.clone());
     let key = HeightFieldKey {
         height_scale: c.extract.height_scale,
         strict_grey: c.extract.strict_grey,
@@ -183,7 +201,7 @@ fn image_sample(
         key,
         img,
         move |_, key, img| {
-            let fits = |w, h| check_sample_size(w, h, &variants).map_err(|e| e.to_string());
+            let fits = |w, h| sample_fits(w, h, &c2);
             Ok(height_field::node(&path, img, key, fits)?)
         },
     ))

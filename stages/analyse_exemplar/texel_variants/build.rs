@@ -281,9 +281,14 @@ pub fn build_texel_variants_with(
             channel: i as u32 % c,
         });
     }
-    check_sample_size(sample.width, sample.height, params)?;
+    // Without the template synthesizer's structures no candidates are counted, and every
+    // level of every variant has at least one texel whatever the sample's size.
+    let counted = per_texel || coherent;
+    if counted {
+        check_sample_size(sample.width, sample.height, params)?;
+    }
     if let Some((scale, k, l, side, count)) =
-        shortfall(sample.width, sample.height, params, FEW_CANDIDATES)
+        shortfall(sample.width, sample.height, params, FEW_CANDIDATES).filter(|_| counted)
     {
         tracing::warn!(
             target: "texsyn::texel_variants",
