@@ -41,8 +41,8 @@ pub const NEIGHBOURHOOD_DIMS: usize = 9 * APPEARANCE_DIMS;
 pub const SEARCH_DIMS: usize = 8;
 /// The shortlist search is approximate (Arya & Mount): its i-th point is within `1 + eps` of
 /// the true i-th nearest distance. The shortlist is ranked by the full vectors anyway, and
-/// exact search took 174 s for a 512² sample against 23 s (BENCHMARKS.md, "Appearance
-/// analysis of large samples").
+/// with exact search the node took 174 s for a 512² sample against 27 s (BENCHMARKS.md,
+/// "Appearance analysis of large samples").
 pub const SEARCH_EPS: f32 = 1.0;
 /// At most this many vectors (a regular subsample) fit each PCA basis.
 const PCA_FIT_SAMPLES: usize = 16384;
@@ -248,15 +248,15 @@ pub fn node(
     }
 }
 
-/// Whether a `w × h` sample fits the appearance synthesizer: 8 to [`MAX_SIDE`] texels a side.
+/// Whether a `w × h` sample fits the appearance synthesizer, which analyses its central
+/// square: 8 to [`MAX_SIDE`] texels on the shorter side.
 pub fn check_sides(w: u32, h: u32) -> Result<(), String> {
-    let side = 8..=MAX_SIDE;
-    if side.contains(&w) && side.contains(&h) {
+    if (8..=MAX_SIDE).contains(&w.min(h)) {
         Ok(())
     } else {
         Err(format!(
-            "the sample is {w}×{h} texels: the appearance synthesizer needs 8 to {MAX_SIDE} \
-             texels a side"
+            "{w}×{h} texels, but the appearance synthesizer needs 8 to {MAX_SIDE} texels on the \
+             shorter side"
         ))
     }
 }
@@ -465,8 +465,9 @@ fn coherence_sets(neigh: &[f32], w: usize, h: usize, step: i64, k: usize) -> Vec
     let mut out = vec![0u32; n * k];
     // Rows in parallel, each row from left to right: a texel's search starts from its left
     // neighbour's results moved one texel right (the sets of neighbouring texels are mostly
-    // each other's shifted), which gives it a tight bound at once; the results are exact
-    // whatever the seeds.
+    // each other's shifted), which gives it a tight bound at once. An approximate search's
+    // results depend on the seeds (an exact one's would not), so they are made in this order
+    // whatever the thread count, and a change to the seeding changes the node's output.
     out.par_chunks_mut(w * k).enumerate().for_each(|(y, row)| {
         let y = y as i64;
         let mut found: Vec<(u32, f32)> = Vec::new();

@@ -210,14 +210,19 @@ pub fn height_field_image(
     Ok(HeightFieldImage { texels, warning })
 }
 
-/// The key of an image sample's extraction: its height scale alone (the other `[extract]`
-/// keys are for mesh samples).
+/// The key of an image sample's extraction: its height scale (the other `[extract]` keys are
+/// for mesh samples), and what its size is checked against.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct HeightFieldKey {
     pub height_scale: f32,
     /// Left out when false: configs that do not set it keep their keys.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub strict_grey: bool,
+    /// The variants whose candidates the size is checked against (the template synthesizer);
+    /// left out when none (the appearance synthesizer, which checks the sides alone), so that a
+    /// cached extraction never skips a check the run needs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub template_variants: Option<crate::analyse_exemplar::texel_variants::TexelVariantParams>,
 }
 
 /// The extract node of an image sample (§5; a colour image by its luma, with a warning,

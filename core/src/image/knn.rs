@@ -367,7 +367,7 @@ impl<'a> KdTreeRef<'a> {
         best.items
     }
 
-    /// As [`Self::nearest_approx`], with two ways to find the same result sooner:
+    /// As [`Self::nearest_approx`], with two ways to find the result sooner:
     /// - `seeds`, `(index, squared distance to query)` pairs offered before the search starts
     ///   (those that pass `filter`), so that it starts from a tight bound: e.g. the previous
     ///   query's results, moved along with the query. The distance must be
@@ -378,7 +378,9 @@ impl<'a> KdTreeRef<'a> {
     ///   neighbours, which are also its nearest in feature space), whole subtrees of them are
     ///   skipped instead of measured one by one.
     ///
-    /// With `eps = 0` the result is exactly [`Self::nearest`]'s.
+    /// With `eps = 0` the result is exactly [`Self::nearest`]'s. With `eps > 0` skipping
+    /// excluded nodes changes nothing, but seeds do: a different bound prunes differently, so
+    /// the result is as approximate as [`Self::nearest_approx`]'s but not always the same.
     pub fn nearest_approx_seeded(
         &self,
         query: &[f32],
@@ -660,6 +662,11 @@ mod tests {
                 let got = tree.nearest_approx_seeded(q, k, 0.0, far, near, &given);
                 prop_assert_eq!(&got, &want);
                 prop_assert_eq!(&tree.nearest_approx_seeded(q, k, 0.0, far, |_| false, &[]), &want);
+                // Approximate: skipping excluded subtrees still changes nothing.
+                prop_assert_eq!(
+                    tree.nearest_approx_seeded(q, k, 0.5, far, near, &[]),
+                    tree.nearest_approx(q, k, 0.5, far)
+                );
             }
         }
     }

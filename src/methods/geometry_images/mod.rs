@@ -91,8 +91,8 @@ impl Method for GeometryImages {
         };
         let key = VariantsKey {
             variants: c.analyse_exemplar.clone(),
-            per_texel: c.synthesize.search == Search::PerTexel,
-            coherent: c.synthesize.algorithm == SynthAlgorithm::Template,
+            per_texel: counts_candidates(&c) && c.synthesize.search == Search::PerTexel,
+            coherent: counts_candidates(&c) && c.synthesize.search == Search::KCoherence,
         };
         let variants = dag.node(
             NodeSpec::of(Stage::AnalyseExemplar, variants::NODE),
@@ -167,10 +167,11 @@ fn stretch_warning(share: f64, p: &geometry_image::GeometryImageParams) -> Optio
     ))
 }
 
-/// Whether synthesis reads the variants' candidate structures (the template synthesizer, or a
-/// per-texel search).
+/// Whether synthesis reads the variants' candidate structures: the template synthesizer does
+/// (its k-coherent sets, or its per-texel search structures with `search = "per_texel"`), the
+/// appearance synthesizer reads neither.
 pub(super) fn counts_candidates(c: &GeometryImagesConfig) -> bool {
-    c.synthesize.algorithm == SynthAlgorithm::Template || c.synthesize.search == Search::PerTexel
+    c.synthesize.algorithm == SynthAlgorithm::Template
 }
 
 /// Whether a `w × h` sample suits the chosen synthesizer: the template synthesizer needs
@@ -195,6 +196,7 @@ fn image_sample(
     let key = HeightFieldKey {
         height_scale: c.extract.height_scale,
         strict_grey: c.extract.strict_grey,
+        template_variants: counts_candidates(c).then(|| c.analyse_exemplar.clone()),
     };
     Ok(dag.node(
         NodeSpec::of(Stage::Extract, height_field::NODE),

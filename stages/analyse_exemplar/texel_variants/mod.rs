@@ -36,7 +36,8 @@
 //!   coarse levels produce.
 //! - Only texels whose whole template lies inside the level are candidates (no padding, so no
 //!   invented neighbourhoods). [`check_sample_size`] rejects samples that leave a level of some
-//!   variant without candidates and names the size needed; [`build_texel_variants`] warns when
+//!   variant without candidates and names the size needed (when the set is built for the
+//!   template synthesizer, which reads candidates); [`build_texel_variants`] warns when
 //!   one keeps fewer than [`FEW_CANDIDATES`] (a 64² sample does, at the third level of its
 //!   scaled-down variants; 127² is enough for the defaults).
 //! - Feature vectors weight geometric channels (dx, dy, dn) equally and colour channels (r, g, b)

@@ -174,7 +174,7 @@ pub(super) fn synthesize_impl(
     if p.search == Search::PerTexel && !variants.meta.per_texel {
         return Err(GeometryTextureError::NoPerTexelSets);
     }
-    if !variants.meta.coherent {
+    if p.search == Search::KCoherence && !variants.meta.coherent {
         return Err(GeometryTextureError::NoCoherentSets);
     }
     let maps: Vec<_> = (0..variants.variant_count() * nl)
