@@ -346,25 +346,7 @@ impl<'a> KdTreeRef<'a> {
         eps: f32,
         filter: impl Fn(u32) -> bool,
     ) -> Vec<(u32, f32)> {
-        assert_eq!(query.len(), self.dim, "query dimension");
-        let mut best = Best {
-            k,
-            items: Vec::with_capacity(k + 1),
-        };
-        if k == 0 || self.nodes.is_empty() {
-            return best.items;
-        }
-        // Bounds are compared with a little slack so float rounding in the incremental cell
-        // distance never prunes a cell holding a point at exactly the k-th distance.
-        let scale = (1.0 + eps.max(0.0)).powi(2) * (1.0 - 1e-5);
-        let mut off = vec![0.0f32; self.dim];
-        let search = Search {
-            scale,
-            filter,
-            excluded: |_| false,
-        };
-        self.search(0, query, 0.0, &mut off, &search, &mut best);
-        best.items
+        self.nearest_approx_seeded(query, k, eps, filter, |_| false, &[])
     }
 
     /// As [`Self::nearest_approx`], with two ways to find the result sooner:
@@ -403,6 +385,8 @@ impl<'a> KdTreeRef<'a> {
                 best.offer(id, d);
             }
         }
+        // Bounds are compared with a little slack so float rounding in the incremental cell
+        // distance never prunes a cell holding a point at exactly the k-th distance.
         let scale = (1.0 + eps.max(0.0)).powi(2) * (1.0 - 1e-5);
         let mut off = vec![0.0f32; self.dim];
         let search = Search {
