@@ -97,12 +97,15 @@ fn estimates_are_within_twice_the_measured_peak() {
             52 * 2048 * 2048 + (32 << 20),
         ),
         (
-            // Geometry-image texel variants: 8 orientations, 3 scales (4^-1 + 1 + 4).
+            // Geometry-image texel variants with the template synthesizer's per-texel search
+            // structures: 8 orientations, 3 scales (4^-1 + 1 + 4).
             &[
                 "run",
                 "configs/dragon_knot.toml",
                 "--set",
                 "analyse_exemplar.scales=3",
+                "--set",
+                "synthesize.algorithm=\"template\"",
                 "--set",
                 "synthesize.search=\"per_texel\"",
             ],
@@ -162,7 +165,8 @@ fn oversized_runs_are_refused_naming_a_value_that_fits() {
         "{err}"
     );
     // And for a geometry-image sample's per-texel variants (5.9 GB measured at 256² with 5
-    // scales; the default k-coherence search needs no such structures and no check).
+    // scales; only the template synthesizer's per-texel search builds them, so only it is
+    // checked).
     let out = texsyn(
         &[
             "run",
@@ -173,6 +177,8 @@ fn oversized_runs_are_refused_naming_a_value_that_fits() {
             "extract.size=256",
             "--set",
             "analyse_exemplar.scales=5",
+            "--set",
+            "synthesize.algorithm=\"template\"",
             "--set",
             "synthesize.search=\"per_texel\"",
         ],

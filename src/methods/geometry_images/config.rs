@@ -81,7 +81,7 @@ pub(super) fn checked(
             let m = format!("{e} (extract.size = {size}: raise it{more})");
             config.invalid("extract.size", &m)
         })?;
-        let per_texel = c.synthesize.search == Search::PerTexel;
+        let per_texel = super::counts_candidates(&c) && c.synthesize.search == Search::PerTexel;
         crate::methods::check_variant_memory(config, size, &c.analyse_exemplar, per_texel)?;
     }
     Ok((c, gp))
