@@ -123,12 +123,28 @@ impl Method for GraphMatchingMethod {
         );
         dag.node(
             NodeSpec::of(Stage::Reconstruct, vertex_colour_export::NODE),
-            c.reconstruct.clone(),
-            (mesh, hierarchy, colours),
-            |ctx, p, (mesh, h, out)| {
+            vertex_colour_export::ExportKey {
+                scale: c.parameterize.scale,
+                reconstruct: c.reconstruct.clone(),
+            },
+            (mesh, hierarchy, colours, exemplar, field),
+            |ctx, key, (mesh, h, out, exemplar, field)| {
                 let progress = |f| ctx.progress.set(f);
                 let colours = &out.level_colours;
-                let files = vertex_colour_export::node(&mesh, &h, colours, p, &progress)?;
+                let copied = vertex_colour_export::CopiedFrom {
+                    sources: &out.sources,
+                    exemplar,
+                    field: &field.orientation,
+                    scale: key.scale,
+                };
+                let files = vertex_colour_export::node(
+                    &mesh,
+                    &h,
+                    colours,
+                    Some(copied),
+                    &key.reconstruct,
+                    &progress,
+                )?;
                 Ok(Bundle::from(files))
             },
         );
@@ -139,6 +155,7 @@ impl Method for GraphMatchingMethod {
             synthesize: colours,
             exemplar,
             scale: c.parameterize.scale,
+            atlas_lookup: (c.reconstruct.atlas_size > 0).then_some(c.reconstruct.lookup),
         };
         Ok((dag, Box::new(nodes)))
     }

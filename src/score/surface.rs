@@ -42,7 +42,8 @@ use crate::stages::parameterize::sqrt2_subdivision::{Sqrt2Hierarchy, area_spread
 use crate::stages::reconstruct::feature_aligned_export::{
     ExemplarLookup, ExemplarSampling, nearest_corner,
 };
-use crate::stages::synthesize::graph_matching::GraphMatching;
+use crate::stages::reconstruct::patch_lookup::PatchFrames;
+use crate::stages::synthesize::graph_matching::{GraphMatching, texture_axes};
 use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
@@ -58,16 +59,21 @@ pub struct GraphMatchingNodes {
     pub exemplar: Handle<Image>,
     /// `parameterize.scale`: exemplar texels per object unit.
     pub scale: f32,
+    /// `reconstruct.lookup` when the run bakes an atlas (`reconstruct.atlas_size` > 0), so the
+    /// score sees what the atlas holds; `None`: no atlas.
+    pub atlas_lookup: Option<ExemplarSampling>,
 }
 
 impl super::Planned for GraphMatchingNodes {
     fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
-        Ok(vec![graph_matching(run, self)?])
+        graph_matching(run, self)
     }
 }
 
-/// Graph matching at `nodes.scale` texels per unit.
-pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Item, ScoreFailure> {
+/// Graph matching at `nodes.scale` texels per unit: the finest level's vertex colours and,
+/// when the run bakes an atlas, the texture that atlas holds (the exemplar read inside each
+/// copied patch, the nearest corner's colour across seams), through the same discs.
+pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Vec<Item>, ScoreFailure> {
     let scale = nodes.scale;
     let h = run.view(nodes.parameterize)?;
     let field = run.view(nodes.field)?;
@@ -114,8 +120,51 @@ pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Item, Sco
         "coarse_faces".into(),
         serde_json::json!(coarse.face_count()),
     );
+    let baked = nodes.atlas_lookup.map(|sampling| {
+        let mut baked = Item::new(
+            format!("the baked atlas (the exemplar read inside each copied patch), {DISCS_NOTE}"),
+            "inputs.exemplar",
+        );
+        baked.extra = item.extra.clone();
+        (baked, sampling)
+    });
     score_vertex_colours(run, &mut item, &mesh, &out.colours, step, ex)?;
-    Ok(item)
+    let mut items = vec![item];
+    if let Some((mut baked, sampling)) = baked {
+        if out.sources.len() != n {
+            return Err(ScoreFailure::new(
+                "internal error: sources and hierarchy disagree on the vertex count",
+            ));
+        }
+        let axes = texture_axes(&normals, &field.orientation[..n], scale);
+        let lookup =
+            ExemplarLookup::new(&mesh, &out.sources, ex, sampling).with_frames(PatchFrames {
+                positions: &mesh.positions,
+                axes,
+            });
+        baked.extra.insert(
+            "looked_up_share".into(),
+            serde_json::json!(lookup.looked_up_share()),
+        );
+        let colours = &out.colours;
+        let shade = |f: usize, b: Vec3| {
+            let (tri, l) = (mesh.triangles[f], b.to_array());
+            let c = (lookup.colour(f, tri, l))
+                .or_else(|| lookup.across_seam(tri, l))
+                .unwrap_or_else(|| Vec3::from(colours[tri[nearest_corner(l)] as usize]));
+            [c.x, c.y, c.z, 1.0]
+        };
+        score_surface(
+            run,
+            &mut baked,
+            &mesh,
+            shade,
+            |_, from, to| step(from, to),
+            ex,
+        )?;
+        items.push(baked);
+    }
+    Ok(items)
 }
 
 /// The nodes of a feature-aligned run that its score reads: `synthesize` holds the aligned
@@ -180,7 +229,7 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
         }
         // What textured.glb's atlas holds: the exemplar looked up inside each patch, the
         // nearest corner's colour across seams.
-        let lookup = ExemplarLookup::new(&refined, &out.source, ex, nodes.lookup);
+        let lookup = ExemplarLookup::new(&refined.mesh, &out.source, ex, nodes.lookup);
         let colours = &out.colours;
         let shade = |f: usize, b: Vec3| {
             let (tri, l) = (mesh.triangles[f], b.to_array());

@@ -29,6 +29,8 @@ use crate::render::{VertexColorShader, ViewOptions, render_views};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+pub use super::patch_lookup::{ExemplarLookup, ExemplarSampling, nearest_corner};
+
 /// The `feature_aligned_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
     texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 4);
@@ -53,43 +55,6 @@ pub struct FeatureAlignedExportParams {
     /// ([`ExemplarLookup`]). Default: bilinear. Left out of the node's key at the default.
     #[serde(skip_serializing_if = "ExemplarSampling::is_bilinear")]
     pub lookup: ExemplarSampling,
-}
-
-/// How an address between exemplar texels is read.
-///
-/// Addresses inside a patch fall between texels wherever the patch is shifted or turned
-/// against the exemplar's grid (almost everywhere on a surface), and a bilinear read there
-/// averages up to four texels: at a half-texel offset it is a 2×2 box filter. Measured along
-/// the surface (`texsyn score`, gradient ratio / nearest-patch ratio): on a flat sheet with
-/// one straight curve and wood2, bilinear keeps 0.53 of the exemplar's gradient energy
-/// (ratio 1.15), nearest 0.92 (0.85); on fandisk with brick 0.51 → 0.90 at a ratio of
-/// 0.80 → 0.88, where nearest reads show the exemplar's texel staircase wherever the field
-/// turns a patch against its grid. Nearest copies the exemplar's texels themselves, as the
-/// discrete pass gives each vertex one; bilinear is the smoother resampling.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ExemplarSampling {
-    /// The four texels around the address, weighted by distance.
-    #[default]
-    Bilinear,
-    /// The texel nearest the address.
-    Nearest,
-}
-
-impl ExemplarSampling {
-    pub fn is_bilinear(&self) -> bool {
-        *self == ExemplarSampling::Bilinear
-    }
-
-    /// The exemplar's colour at `at` (texel centres at whole numbers, clamped at the border).
-    pub fn read(self, exemplar: crate::image::ImageView, at: glam::Vec2) -> [f32; 4] {
-        match self {
-            ExemplarSampling::Bilinear => exemplar.sample(at),
-            ExemplarSampling::Nearest => {
-                exemplar.get_clamped(at.x.round() as i64, at.y.round() as i64)
-            }
-        }
-    }
 }
 
 impl Default for FeatureAlignedExportParams {
@@ -183,7 +148,7 @@ pub fn export_feature_aligned(
         "textured.ply".to_string(),
         crate::geom::io::write_ply(mesh, Some(&colours)),
     )];
-    let lookup = ExemplarLookup::new(r.refined, r.source, r.exemplar.view(), p.lookup);
+    let lookup = ExemplarLookup::new(&r.refined.mesh, r.source, r.exemplar.view(), p.lookup);
     tracing::info!(
         "atlas: {:.1} % of the refined triangles lie in one exemplar patch and are looked up in the exemplar; the rest copy their nearest corner's colour",
         100.0 * lookup.looked_up_share()
@@ -415,112 +380,6 @@ fn glb(
     let glb =
         super::textured_export::per_triangle_atlas_glb("feature_aligned", input, &atlas, &png);
     Ok((glb, Some(png)))
-}
-
-/// Where the atlas looks the exemplar up instead of interpolating vertex colours: the refined
-/// triangles whose three corners copied their colours from one exemplar patch. Such corners'
-/// addresses are one similarity map of their positions (the patch's frame, §5.1), so the
-/// addresses interpolated across the triangle are the patch's own texels, finer than the
-/// vertex spacing. A triangle counts as one patch's when each of its edges is as long in the
-/// exemplar as on the surface, at the run's texel scale (the median ratio over all edges,
-/// which lie inside patches far more often than across seams), within 25 % and 0.1 texel:
-/// two patches' addresses differ by whole texels, while one patch's frame only foreshortens
-/// edges a little where the surface bends away from the patch's tangent plane.
-pub struct ExemplarLookup<'a> {
-    source: &'a [[f32; 2]],
-    exemplar: Option<crate::image::ImageView<'a>>,
-    sampling: ExemplarSampling,
-    /// Per refined triangle: its corners copied one patch.
-    one_patch: Vec<bool>,
-}
-
-impl<'a> ExemplarLookup<'a> {
-    pub fn new(
-        refined: &Refined,
-        source: &'a [[f32; 2]],
-        exemplar: crate::image::ImageView<'a>,
-        sampling: ExemplarSampling,
-    ) -> Self {
-        let m = &refined.mesh;
-        let none = ExemplarLookup {
-            source,
-            exemplar: None,
-            sampling,
-            one_patch: Vec::new(),
-        };
-        if source.len() != m.positions.len() {
-            return none;
-        }
-        let valid = |v: u32| source[v as usize][0] > -0.5;
-        let edge = |a: u32, b: u32| {
-            let (sa, sb) = (source[a as usize], source[b as usize]);
-            let texels = glam::Vec2::new(sa[0] - sb[0], sa[1] - sb[1]).length();
-            (
-                texels,
-                m.positions[a as usize].distance(m.positions[b as usize]),
-            )
-        };
-        let mut ratios: Vec<f32> = m
-            .triangles
-            .iter()
-            .filter(|t| t.iter().all(|&v| valid(v)))
-            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-            .map(|(a, b)| edge(a, b))
-            .filter(|&(_, len)| len > 0.0)
-            .map(|(texels, len)| texels / len)
-            .collect();
-        if ratios.is_empty() {
-            return none;
-        }
-        let mid = ratios.len() / 2;
-        let scale = *ratios.select_nth_unstable_by(mid, f32::total_cmp).1;
-        let fits =
-            |(texels, len): (f32, f32)| (texels - len * scale).abs() <= 0.1 + 0.25 * len * scale;
-        let one_patch = m
-            .triangles
-            .iter()
-            .map(|t| {
-                t.iter().all(|&v| valid(v))
-                    && [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]
-                        .into_iter()
-                        .all(|(a, b)| fits(edge(a, b)))
-            })
-            .collect::<Vec<bool>>();
-        ExemplarLookup {
-            source,
-            exemplar: Some(exemplar),
-            sampling,
-            one_patch,
-        }
-    }
-
-    /// The share of refined triangles looked up in the exemplar.
-    pub fn looked_up_share(&self) -> f64 {
-        let n = self.one_patch.iter().filter(|&&b| b).count();
-        n as f64 / self.one_patch.len().max(1) as f64
-    }
-
-    /// The colour at barycentrics `l` (summing to 1) of refined triangle `t` (corners `tri`)
-    /// when its corners copied one patch; `None` across a seam.
-    pub fn colour(&self, t: usize, tri: [u32; 3], l: [f32; 3]) -> Option<Vec3> {
-        let exemplar = self.exemplar?;
-        if !self.one_patch[t] {
-            return None;
-        }
-        let mut at = glam::Vec2::ZERO;
-        for k in 0..3 {
-            at += glam::Vec2::from(self.source[tri[k] as usize]) * l[k];
-        }
-        let c = self.sampling.read(exemplar, at);
-        Some(Vec3::new(c[0], c[1], c[2]))
-    }
-}
-
-/// The corner of largest barycentric weight (the first of equals).
-pub fn nearest_corner(l: [f32; 3]) -> usize {
-    (0..3)
-        .max_by(|&a, &b| l[a].total_cmp(&l[b]).then(b.cmp(&a)))
-        .unwrap_or(0)
 }
 
 /// The refined mesh's colours seen from the input mesh: a point of input triangle `f`, given by
@@ -781,13 +640,13 @@ mod tests {
             .collect();
         let colours = looked_up(&source, &exemplar);
         let lookup = ExemplarLookup::new(
-            &refined,
+            &refined.mesh,
             &source,
             exemplar.view(),
             ExemplarSampling::Bilinear,
         );
         assert!(
-            lookup.one_patch.iter().all(|&b| b),
+            (0..refined.mesh.triangles.len()).all(|t| lookup.one_patch(t)),
             "every triangle lies in the one patch"
         );
         let shader = RefinedColours::new(&input, &refined, &colours, lookup);
@@ -811,7 +670,7 @@ mod tests {
             .collect();
         let colours = looked_up(&source, &exemplar);
         let blues = |sampling| {
-            let lookup = ExemplarLookup::new(&refined, &source, exemplar.view(), sampling);
+            let lookup = ExemplarLookup::new(&refined.mesh, &source, exemplar.view(), sampling);
             let shader = RefinedColours::new(&input, &refined, &colours, lookup);
             shade_points(&shader, &input)
                 .into_iter()
@@ -851,12 +710,14 @@ mod tests {
             .collect();
         let colours = looked_up(&source, &exemplar);
         let lookup = ExemplarLookup::new(
-            &refined,
+            &refined.mesh,
             &source,
             exemplar.view(),
             ExemplarSampling::Bilinear,
         );
-        let seams = lookup.one_patch.iter().filter(|&&b| !b).count();
+        let seams = (0..refined.mesh.triangles.len())
+            .filter(|&t| !lookup.one_patch(t))
+            .count();
         assert!(
             seams > 0,
             "the triangles across x = 0.5 are not one patch's"

@@ -1,39 +1,56 @@
 //! Graph matching's texture on the user's own mesh. Bangay & Morkel ("Graph Matching with
 //! Subdivision Surfaces for Texture Synthesis on Surfaces", §3) colour the vertices of the
 //! finest √2 level and leave "conversion to a texture map" to other work (§3.5); a user wants
-//! the mesh they gave textured. Here the finest level's vertex colours are baked into an atlas
-//! of the input mesh's triangles ([`crate::render::build_atlas`], one region per triangle).
+//! the mesh they gave textured. Here the finest level's texture is baked into an atlas of the
+//! input mesh's triangles ([`crate::render::build_atlas`], one region per triangle).
 //!
-//! A point of an input triangle takes the colour of the nearest point of the finest level's
-//! surface (its quads split into triangles), interpolated from that triangle's corners. With
-//! `smooth = false` (the default) the finest level lies on the input's own piecewise-flat
-//! surface, so the nearest point is the point itself and the atlas shows exactly what the
-//! vertex-coloured finest mesh shows; with smoothing it is the point's projection onto the
-//! smoothed surface. The nearest triangle is found through a uniform grid of cells about two
-//! finest edges wide, searched ring by ring until the block searched holds the nearest point
-//! found: a point on the finest surface ends in its own cell.
+//! A point of an input triangle is found on the nearest point of the finest level's surface
+//! (its quads split into triangles). With `smooth = false` (the default) the finest level lies
+//! on the input's own piecewise-flat surface, so the nearest point is the point itself; with
+//! smoothing it is the point's projection onto the smoothed surface. Every vertex there read
+//! its colour at an exemplar address (the match plus its offset in the region, §3.3.1), so
+//! inside a finest triangle whose corners copied one patch the atlas reads the exemplar at
+//! the address interpolated across it ([`super::patch_lookup`]): the exemplar's own detail
+//! at the atlas's density, not the vertex spacing's. Across a seam between patches (where a
+//! graph cut (§3.4) or a later match left neighbours from different places) each corner's
+//! patch is continued to the point through its frame and the reads are blended; a corner
+//! without an address (a colour only interpolated from a coarser level) leaves the nearest
+//! corner's colour, and without addresses at all the corners' colours are interpolated.
+//!
+//! The nearest triangle is found through a uniform grid of cells about two finest edges wide,
+//! searched ring by ring until the block searched holds the nearest point found: a point on
+//! the finest surface ends in its own cell.
 
+use super::patch_lookup::{ExemplarLookup, nearest_corner};
 use crate::geom::Mesh;
 use crate::graph::Csr;
 use crate::render::shader::SurfaceShader;
 use glam::{IVec3, Vec3};
 use texsyn_core::math::PureMath;
 
-/// The finest level's colours seen from the input mesh, for baking.
+/// The finest level's texture seen from the input mesh, for baking.
 pub struct FinestColours<'a> {
     input: &'a Mesh,
     finest: &'a Mesh,
     colours: &'a [[f32; 3]],
+    lookup: Option<ExemplarLookup<'a>>,
     grid: TriangleGrid,
 }
 
 impl<'a> FinestColours<'a> {
-    /// `finest`: the finest level triangulated; `colours`: one per vertex of it.
-    pub fn new(input: &'a Mesh, finest: &'a Mesh, colours: &'a [[f32; 3]]) -> Self {
+    /// `finest`: the finest level triangulated; `colours`: one per vertex of it; `lookup`:
+    /// the exemplar addresses they were read at (`None`: colours interpolated).
+    pub fn new(
+        input: &'a Mesh,
+        finest: &'a Mesh,
+        colours: &'a [[f32; 3]],
+        lookup: Option<ExemplarLookup<'a>>,
+    ) -> Self {
         FinestColours {
             input,
             finest,
             colours,
+            lookup,
             grid: TriangleGrid::new(finest),
         }
     }
@@ -50,6 +67,14 @@ impl SurfaceShader for FinestColours<'_> {
             return Vec3::splat(0.5);
         };
         let tri = self.finest.triangles[t as usize];
+        if let Some(lookup) = &self.lookup {
+            if let Some(c) =
+                (lookup.colour(t as usize, tri, l)).or_else(|| lookup.across_seam(tri, l))
+            {
+                return c;
+            }
+            return Vec3::from(self.colours[tri[nearest_corner(l)] as usize]);
+        }
         (0..3)
             .map(|k| Vec3::from(self.colours[tri[k] as usize]) * l[k])
             .sum()
@@ -271,7 +296,7 @@ mod tests {
         let refined = crate::geom::edge_refine::refine_edges(&input, 0.2, 100_000).unwrap();
         let colour = |p: Vec3| [p.x / 3.0, p.y / 3.0, 0.5];
         let colours: Vec<[f32; 3]> = refined.mesh.positions.iter().map(|&p| colour(p)).collect();
-        let shader = FinestColours::new(&input, &refined.mesh, &colours);
+        let shader = FinestColours::new(&input, &refined.mesh, &colours, None);
         for i in 0..200u64 {
             let (u, v) = (
                 crate::random::counter_unit(5, 0, i),
@@ -288,6 +313,59 @@ mod tests {
             let p = t[0] * bary.x + t[1] * bary.y + t[2] * bary.z;
             let got = shader.albedo(f, bary);
             let want = Vec3::from(colour(p));
+            assert!(
+                (got - want).abs().max_element() < 1e-4,
+                "at {p}: {got} instead of {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn inside_copied_patches_a_point_reads_the_exemplar_at_its_own_address() {
+        // The finer mesh copied one patch laid at 8 texels per unit: every point of the input
+        // must read the exemplar (red, green = address / 64) at 8 × its position + (4, 4),
+        // however far it lies from a vertex of the finer mesh.
+        use super::super::patch_lookup::{ExemplarLookup, ExemplarSampling, PatchFrames};
+        let input = primitives::grid(4, 1.0);
+        let refined = crate::geom::edge_refine::refine_edges(&input, 0.5, 100_000).unwrap();
+        let address = |p: Vec3| glam::Vec2::new(4.0 + 8.0 * p.x, 4.0 + 8.0 * p.y);
+        let sources: Vec<[f32; 2]> = (refined.mesh.positions.iter())
+            .map(|&p| address(p).to_array())
+            .collect();
+        let colours = vec![[0.0f32; 3]; sources.len()];
+        let ramp = crate::image::Image::from_fn(64, 64, |x, y| {
+            [x as f32 / 64.0, y as f32 / 64.0, 0.5, 1.0]
+        });
+        let frames = PatchFrames {
+            positions: &refined.mesh.positions,
+            axes: vec![[Vec3::X * 8.0, Vec3::Y * 8.0]; sources.len()],
+        };
+        let lookup = ExemplarLookup::new(
+            &refined.mesh,
+            &sources,
+            ramp.view(),
+            ExemplarSampling::Bilinear,
+        )
+        .with_frames(frames);
+        assert_eq!(lookup.looked_up_share(), 1.0);
+        let shader = FinestColours::new(&input, &refined.mesh, &colours, Some(lookup));
+        for i in 0..200u64 {
+            let (u, v) = (
+                crate::random::counter_unit(6, 0, i),
+                crate::random::counter_unit(6, 1, i),
+            );
+            let (u, v) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
+            let f = (i as usize * 5) % input.triangles.len();
+            let bary = Vec3::new(1.0 - u - v, u, v);
+            let t = input.triangles[f].map(|k| input.positions[k as usize]);
+            let p = t[0] * bary.x + t[1] * bary.y + t[2] * bary.z;
+            let a = address(p);
+            let want = Vec3::new(a.x / 64.0, a.y / 64.0, 0.5);
+            let got = shader.albedo(f, bary);
             assert!(
                 (got - want).abs().max_element() < 1e-4,
                 "at {p}: {got} instead of {want}"

@@ -6,6 +6,7 @@ pub mod feature_aligned_report;
 pub mod finest_level_bake;
 pub mod jump_blend;
 pub mod jump_export;
+pub mod patch_lookup;
 pub mod relief_export;
 pub mod solid_colour;
 pub mod textured_export;

@@ -7,9 +7,9 @@
 //!   with a colour per vertex; vertex ids are the hierarchy's, so the input's vertices keep
 //!   theirs.
 //! - `textured.glb`, `textured.obj` + `textured.mtl` and `textured_atlas.png`: the user's own
-//!   mesh (the input, before any subdivision) with the finest level's colours baked into an
-//!   atlas of its triangles ([`super::finest_level_bake`]), what a user opens in any viewer or
-//!   DCC tool. With `atlas_size = 0`: `textured.glb` is the finest level with `COLOR_0`
+//!   mesh (the input, before any subdivision) with the finest level's texture baked into an
+//!   atlas of its triangles ([`super::finest_level_bake`]: the exemplar read inside each
+//!   copied patch, at the atlas's density), what a user opens in any viewer or DCC tool. With `atlas_size = 0`: `textured.glb` is the finest level with `COLOR_0`
 //!   (converted to linear, as glTF wants) and no atlas or OBJ is written.
 //! - `preview.png`: three views, drawn by texsyn's rasterizer.
 //! - with `displacement > 0`: `displaced.obj` and `displaced.ply`, the finest mesh moved along
@@ -19,6 +19,7 @@
 //! - with `level_previews`: `level_NN.png`, every level as it was when synthesized, so a
 //!   user can see the texture grow.
 
+use super::patch_lookup::{ExemplarLookup, ExemplarSampling, PatchFrames};
 use crate::check::{ParamError, check_range};
 use crate::export::encode_png;
 use crate::geom::Mesh;
@@ -31,7 +32,7 @@ use texsyn_core::algorithm::Failure;
 
 /// The `vertex_colour_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("vertex_colour_export", 2);
+    texsyn_core::algorithm::Algorithm::new("vertex_colour_export", 3);
 
 /// `[reconstruct]` of the graph-matching method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -53,6 +54,11 @@ pub struct VertexColourExportParams {
     /// 64..=8192; 0 bakes none (`textured.glb` is then the vertex-coloured finest level).
     /// Default: 2048.
     pub atlas_size: u32,
+    /// How the atlas reads the exemplar between texels inside a copied patch:
+    /// `"bilinear"` (default) or `"nearest"` ([`ExemplarSampling`]). Left out of the node's
+    /// key at the default.
+    #[serde(skip_serializing_if = "ExemplarSampling::is_bilinear")]
+    pub lookup: ExemplarSampling,
 }
 
 impl Default for VertexColourExportParams {
@@ -63,6 +69,7 @@ impl Default for VertexColourExportParams {
             displacement: 0.0,
             level_previews: false,
             atlas_size: 2048,
+            lookup: ExemplarSampling::Bilinear,
         }
     }
 }
@@ -82,10 +89,30 @@ impl VertexColourExportParams {
     }
 }
 
+/// What the reconstruct node reads besides its inputs: its parameters and the texture scale
+/// (level-0 texels per object unit) the patches were laid at, which the bake continues them
+/// with across seams.
+#[derive(Debug, Clone, Serialize)]
+pub struct ExportKey {
+    pub scale: f32,
+    pub reconstruct: VertexColourExportParams,
+}
+
 /// A level of the hierarchy with its colours (one per vertex of the level).
 pub struct ColouredLevel<'a> {
     pub mesh: PolyMesh,
     pub colours: &'a [[f32; 3]],
+}
+
+/// Where the finest level's colours were read: per vertex, the exemplar address (NaN where a
+/// colour was only interpolated), the exemplar, and the frame each patch was laid in (the
+/// field per vertex and `scale` texels per unit).
+#[derive(Clone, Copy)]
+pub struct CopiedFrom<'a> {
+    pub sources: &'a [[f32; 2]],
+    pub exemplar: crate::image::ImageView<'a>,
+    pub field: &'a [Vec3],
+    pub scale: f32,
 }
 
 fn rgba(c: &[[f32; 3]]) -> Vec<[f32; 4]> {
@@ -97,6 +124,7 @@ fn rgba(c: &[[f32; 3]]) -> Vec<[f32; 4]> {
 pub fn export_vertex_colours(
     input: &Mesh,
     levels: &[ColouredLevel],
+    copied: Option<CopiedFrom>,
     p: &VertexColourExportParams,
     progress: &dyn Fn(f32),
 ) -> Vec<(String, Vec<u8>)> {
@@ -128,7 +156,26 @@ pub fn export_vertex_colours(
     };
     match atlas {
         Some(atlas) => {
-            let shader = super::finest_level_bake::FinestColours::new(input, &tri, finest.colours);
+            let lookup = copied.map(|c| {
+                let axes = crate::synthesize::graph_matching::texture_axes(
+                    &finest.mesh.vertex_normals(),
+                    c.field,
+                    c.scale,
+                );
+                let frames = PatchFrames {
+                    positions: &tri.positions,
+                    axes,
+                };
+                ExemplarLookup::new(&tri, c.sources, c.exemplar, p.lookup).with_frames(frames)
+            });
+            if let Some(l) = &lookup {
+                tracing::info!(
+                    "atlas: {:.1} % of the finest level's triangles lie in one copied patch and read the exemplar; the rest take their nearest corner's colour",
+                    100.0 * l.looked_up_share()
+                );
+            }
+            let shader =
+                super::finest_level_bake::FinestColours::new(input, &tri, finest.colours, lookup);
             let png = encode_png(&crate::render::bake(&atlas, input, &shader), false);
             let glb = super::textured_export::per_triangle_atlas_glb(
                 "graph_matching",
@@ -234,6 +281,7 @@ pub fn node(
     input: &Mesh,
     h: &crate::parameterize::sqrt2_subdivision::Sqrt2Hierarchy,
     level_colours: &[[f32; 3]],
+    copied: Option<CopiedFrom>,
     p: &VertexColourExportParams,
     progress: &dyn Fn(f32),
 ) -> Result<Vec<(String, Vec<u8>)>, Failure> {
@@ -250,7 +298,13 @@ pub fn node(
         });
         start += n;
     }
-    Ok(export_vertex_colours(input, &levels, p, progress))
+    let finest = levels.last().map_or(0, |l| l.colours.len());
+    if let Some(c) = copied
+        && (c.sources.len() != finest || c.field.len() < finest)
+    {
+        return Err(Failure::internal("sources and the finest level disagree"));
+    }
+    Ok(export_vertex_colours(input, &levels, copied, p, progress))
 }
 
 #[cfg(test)]

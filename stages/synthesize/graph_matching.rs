@@ -74,7 +74,7 @@ use texsyn_core::max_flow::MaxFlow;
 
 /// The `graph_matching` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("graph_matching", 4);
+    texsyn_core::algorithm::Algorithm::new("graph_matching", 5);
 
 /// How the best texel is searched.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -248,7 +248,8 @@ pub struct GraphMatching {
     pub colours: Vec<[f32; 3]>,
     /// Level `l`'s colours (its vertices, ids `< level_vertices[l]`), levels concatenated.
     pub level_colours: Vec<[f32; 3]>,
-    /// The finest texel each vertex's colour was copied from; NaN for colours only
+    /// The exemplar address (finest texels, between texels: the match plus the vertex's
+    /// offset, clamped to the exemplar) each vertex's colour was read at; NaN for colours only
     /// interpolated from a coarser level.
     pub sources: Vec<[f32; 2]>,
     pub stats: MatchStats,
@@ -506,6 +507,22 @@ impl<'a> Level<'a> {
         let m = m as usize;
         self.stack.texels[self.stack.texel(m, self.level_start[m], a.x, a.y)]
     }
+}
+
+/// Per vertex, the map from a surface offset `d` to the texel offset a patch is laid with
+/// (§3.3.1): `(d · right, −d · up) · scale`, `up` the field on the tangent plane and
+/// `right = up × n`, as [`Level::step`] reads an edge (without its length correction).
+pub fn texture_axes(normals: &[Vec3], field: &[Vec3], scale: f32) -> Vec<[Vec3; 2]> {
+    normals
+        .iter()
+        .zip(field)
+        .map(|(&nrm, &o)| {
+            let t = (o - o.dot(nrm) * nrm)
+                .try_normalize()
+                .unwrap_or_else(|| any_tangent(nrm));
+            [t.cross(nrm) * scale, -t * scale]
+        })
+        .collect()
 }
 
 fn any_tangent(n: Vec3) -> Vec3 {
@@ -852,9 +869,11 @@ impl MatchCtx<'_, '_> {
                 state.colours[v] = texel[i];
                 state.coloured[v] = true;
                 state.colour_level[v] = level.stack_level[v];
-                // The texel actually read (reads are clamped to the exemplar).
+                // The address read, kept between texels (the read takes its nearest texel of
+                // the vertex's stack level, clamped to the exemplar): a bake interpolates these
+                // inside one copied patch, and coherent search continues from them.
                 let (w, h) = level.stack.size();
-                let a = (q + r.offset[i]).round();
+                let a = q + r.offset[i];
                 state.sources[v] = [
                     a.x.clamp(0.0, w as f32 - 1.0),
                     a.y.clamp(0.0, h as f32 - 1.0),
