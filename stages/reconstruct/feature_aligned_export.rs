@@ -33,7 +33,7 @@ pub use super::patch_lookup::{ExemplarLookup, ExemplarSampling, nearest_corner};
 
 /// The `feature_aligned_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 4);
+    texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 5);
 
 /// `[reconstruct]` of the feature-aligned method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -148,9 +148,11 @@ pub fn export_feature_aligned(
         "textured.ply".to_string(),
         crate::geom::io::write_ply(mesh, Some(&colours)),
     )];
-    let lookup = ExemplarLookup::new(&r.refined.mesh, r.source, r.exemplar.view(), p.lookup);
+    // Patches are laid in their sample's frame (§5.1), which the addresses themselves give.
+    let lookup = ExemplarLookup::new(&r.refined.mesh, r.source, r.exemplar.view(), p.lookup)
+        .with_fitted_frames(&r.refined.mesh);
     tracing::info!(
-        "atlas: {:.1} % of the refined triangles lie in one exemplar patch and are looked up in the exemplar; the rest copy their nearest corner's colour",
+        "atlas: {:.1} % of the refined triangles lie in one exemplar patch and are looked up in the exemplar; across the rest each corner's patch is continued and blended",
         100.0 * lookup.looked_up_share()
     );
     let (glb, atlas_png) = glb(r.input, r.refined, &colours, lookup, p.atlas_size)?;
@@ -524,7 +526,9 @@ impl crate::render::SurfaceShader for RefinedColours<'_> {
         let sum = (l[0] + l[1] + l[2]).max(1e-12);
         let l = l.map(|x| x / sum);
         let tri = self.refined.mesh.triangles[t as usize];
-        if let Some(c) = self.lookup.colour(t as usize, tri, l) {
+        if let Some(c) =
+            (self.lookup.colour(t as usize, tri, l)).or_else(|| self.lookup.across_seam(tri, l))
+        {
             return c;
         }
         let c = self.colours[tri[nearest_corner(l)] as usize];
@@ -698,10 +702,12 @@ mod tests {
     }
 
     #[test]
-    fn across_a_seam_between_patches_the_atlas_copies_a_corner_and_never_blends() {
+    fn across_a_seam_the_atlas_blends_each_corner_s_patch_continued_to_the_point() {
         // Vertices right of x = 0.5 copied another patch, 20 texels further in the exemplar.
-        // A point takes one patch's address (within a texel: the nearest corner's), never a
-        // mix of the two (about 10 texels off both).
+        // Across the seam a point reads each corner's patch continued to it (frames fitted to
+        // the addresses) and blends them: both patches agree on the address's y, which must
+        // come out exact, and x lies between the two patches' (0 and 20 texels off the left
+        // one's). A corner's own colour, not continued, is up to a texel off in y.
         let (input, refined) = two_triangles();
         let exemplar = ramp();
         let shift = |p: Vec3| if p.x > 0.5 { 20.0 } else { 0.0 };
@@ -714,7 +720,8 @@ mod tests {
             &source,
             exemplar.view(),
             ExemplarSampling::Bilinear,
-        );
+        )
+        .with_fitted_frames(&refined.mesh);
         let seams = (0..refined.mesh.triangles.len())
             .filter(|&t| !lookup.one_patch(t))
             .count();
@@ -723,13 +730,19 @@ mod tests {
             "the triangles across x = 0.5 are not one patch's"
         );
         let shader = RefinedColours::new(&input, &refined, &colours, lookup);
+        let mut blended = 0;
         for (p, got) in shade_points(&shader, &input) {
-            let x = got.x * 64.0 - address(p).x;
+            let (x, y) = (got.x * 64.0 - address(p).x, got.y * 64.0 - address(p).y);
+            assert!(y.abs() < 0.02, "at {p}: {y} texels off in y");
             assert!(
-                x.abs() < 1.0 || (x - 20.0).abs() < 1.0,
-                "at {p}: address {x} texels off the left patch's (0) and the right's (20)"
+                (-0.02..=20.02).contains(&x),
+                "at {p}: address {x} texels off the left patch's, outside the two patches'"
             );
+            if (1.0..19.0).contains(&x) {
+                blended += 1;
+            }
         }
+        assert!(blended > 0, "no point blends the two patches");
     }
 
     #[test]

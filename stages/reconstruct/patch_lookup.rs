@@ -76,7 +76,82 @@ pub struct PatchFrames<'a> {
     pub axes: Vec<[Vec3; 2]>,
 }
 
+impl<'a> PatchFrames<'a> {
+    /// Each vertex's frame fitted to the patch it copied: the linear map of the tangent
+    /// plane that best carries the edges of its one-patch triangles (`one_patch`) onto their
+    /// address differences (least squares). Where the vertex lies in no such triangle, or
+    /// they span no plane, its axes are NaN and [`ExemplarLookup::across_seam`] does not
+    /// continue its patch. The fit needs no convention of how the synthesis laid its
+    /// patches (field, handedness, principal angle, scale): it reads them off the addresses.
+    pub fn fitted(mesh: &'a Mesh, source: &[[f32; 2]], one_patch: &[bool]) -> Self {
+        let n = mesh.positions.len();
+        let normals = mesh.vertex_normals();
+        let basis: Vec<(Vec3, Vec3)> = (normals.iter())
+            .map(|&nrm| {
+                let nrm = nrm.try_normalize().unwrap_or(Vec3::Z);
+                let t1 = nrm.any_orthonormal_vector();
+                (t1, nrm.cross(t1))
+            })
+            .collect();
+        // Per vertex: Σ p pᵀ (symmetric: xx, xy, yy) and Σ s pᵀ (2×2), p the edge in the
+        // tangent basis, s its address difference.
+        let mut m = vec![[0.0f64; 3]; n];
+        let mut b = vec![[0.0f64; 4]; n];
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            if !one_patch.get(t).copied().unwrap_or(false) {
+                continue;
+            }
+            for k in 0..3 {
+                let v = tri[k] as usize;
+                let (t1, t2) = basis[v];
+                for u in [tri[(k + 1) % 3] as usize, tri[(k + 2) % 3] as usize] {
+                    let d = mesh.positions[u] - mesh.positions[v];
+                    let (px, py) = (d.dot(t1) as f64, d.dot(t2) as f64);
+                    let sx = (source[u][0] - source[v][0]) as f64;
+                    let sy = (source[u][1] - source[v][1]) as f64;
+                    m[v][0] += px * px;
+                    m[v][1] += px * py;
+                    m[v][2] += py * py;
+                    b[v][0] += sx * px;
+                    b[v][1] += sx * py;
+                    b[v][2] += sy * px;
+                    b[v][3] += sy * py;
+                }
+            }
+        }
+        let axes = (0..n)
+            .map(|v| {
+                let [xx, xy, yy] = m[v];
+                let det = xx * yy - xy * xy;
+                // Edges along one line (or none) fix no map of the plane; NaN sums fail too.
+                let spans_plane = det > 1e-12 * (xx + yy) * (xx + yy);
+                if !spans_plane {
+                    return [Vec3::NAN; 2];
+                }
+                // A = B M⁻¹, M⁻¹ = [yy −xy; −xy xx] / det.
+                let row = |bx: f64, by: f64| {
+                    let (a0, a1) = ((bx * yy - by * xy) / det, (by * xx - bx * xy) / det);
+                    let (t1, t2) = basis[v];
+                    t1 * a0 as f32 + t2 * a1 as f32
+                };
+                [row(b[v][0], b[v][1]), row(b[v][2], b[v][3])]
+            })
+            .collect();
+        PatchFrames {
+            positions: &mesh.positions,
+            axes,
+        }
+    }
+}
+
 impl<'a> ExemplarLookup<'a> {
+    /// Reads across seams continue each corner's patch with frames fitted to the addresses
+    /// themselves ([`PatchFrames::fitted`]).
+    pub fn with_fitted_frames(self, mesh: &'a Mesh) -> Self {
+        let frames = PatchFrames::fitted(mesh, self.source, &self.one_patch);
+        self.with_frames(frames)
+    }
+
     /// `source`: per vertex of `mesh`, the exemplar address its colour was copied from
     /// (negative or NaN where it has none).
     pub fn new(
@@ -203,6 +278,9 @@ impl ExemplarLookup<'_> {
             }
             let d = p - frames.positions[v];
             let [ax, ay] = frames.axes[v];
+            if !ax.is_finite() || !ay.is_finite() {
+                return None;
+            }
             let at = glam::Vec2::new(s[0] + d.dot(ax), s[1] + d.dot(ay));
             let c = self.sampling.read(exemplar, at);
             sum += Vec3::new(c[0], c[1], c[2]) * l[k];
