@@ -39,9 +39,7 @@ use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatures;
 use crate::stages::field::feature_field::carry_field;
 use crate::stages::field::sweep_field::SweepField;
 use crate::stages::parameterize::sqrt2_subdivision::{Sqrt2Hierarchy, area_spread};
-use crate::stages::reconstruct::feature_aligned_export::{
-    ExemplarLookup, ExemplarSampling, nearest_corner,
-};
+use crate::stages::reconstruct::feature_aligned_export::{ExemplarLookup, ExemplarSampling};
 use crate::stages::reconstruct::patch_lookup::PatchFrames;
 use crate::stages::synthesize::graph_matching::{GraphMatching, texture_axes};
 use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
@@ -153,10 +151,8 @@ pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Vec<Item>
         );
         let colours = &out.colours;
         let shade = |f: usize, b: Vec3| {
-            let (tri, l) = (mesh.triangles[f], b.to_array());
-            let c = (lookup.colour(f, tri, l))
-                .or_else(|| lookup.across_seam(tri, l))
-                .unwrap_or_else(|| Vec3::from(colours[tri[nearest_corner(l)] as usize]));
+            let vertex = |v: u32| Vec3::from(colours[v as usize]);
+            let c = lookup.texture_colour(f, mesh.triangles[f], b.to_array(), vertex);
             [c.x, c.y, c.z, 1.0]
         };
         score_surface(
@@ -238,10 +234,8 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
             .with_fitted_frames(&refined.mesh);
         let colours = &out.colours;
         let shade = |f: usize, b: Vec3| {
-            let (tri, l) = (mesh.triangles[f], b.to_array());
-            let c = (lookup.colour(f, tri, l))
-                .or_else(|| lookup.across_seam(tri, l))
-                .unwrap_or_else(|| Vec3::from(colours[tri[nearest_corner(l)] as usize]));
+            let vertex = |v: u32| Vec3::from(colours[v as usize]);
+            let c = lookup.texture_colour(f, mesh.triangles[f], b.to_array(), vertex);
             [c.x, c.y, c.z, 1.0]
         };
         let mut item = Item::new(format!("{what}, {DISCS_NOTE}"), "inputs.exemplar");

@@ -29,7 +29,7 @@ use crate::render::{VertexColorShader, ViewOptions, render_views};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-pub use super::patch_lookup::{ExemplarLookup, ExemplarSampling, nearest_corner};
+pub use super::patch_lookup::{ExemplarLookup, ExemplarSampling};
 
 /// The `feature_aligned_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
@@ -526,13 +526,11 @@ impl crate::render::SurfaceShader for RefinedColours<'_> {
         let sum = (l[0] + l[1] + l[2]).max(1e-12);
         let l = l.map(|x| x / sum);
         let tri = self.refined.mesh.triangles[t as usize];
-        if let Some(c) =
-            (self.lookup.colour(t as usize, tri, l)).or_else(|| self.lookup.across_seam(tri, l))
-        {
-            return c;
-        }
-        let c = self.colours[tri[nearest_corner(l)] as usize];
-        Vec3::new(c[0], c[1], c[2])
+        let vertex = |v: u32| {
+            let c = self.colours[v as usize];
+            Vec3::new(c[0], c[1], c[2])
+        };
+        self.lookup.texture_colour(t as usize, tri, l, vertex)
     }
 }
 

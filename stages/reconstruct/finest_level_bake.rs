@@ -21,7 +21,7 @@
 //! searched ring by ring until the block searched holds the nearest point found: a point on
 //! the finest surface ends in its own cell.
 
-use super::patch_lookup::{ExemplarLookup, nearest_corner};
+use super::patch_lookup::ExemplarLookup;
 use crate::geom::Mesh;
 use crate::graph::Csr;
 use crate::render::shader::SurfaceShader;
@@ -68,12 +68,8 @@ impl SurfaceShader for FinestColours<'_> {
         };
         let tri = self.finest.triangles[t as usize];
         if let Some(lookup) = &self.lookup {
-            if let Some(c) =
-                (lookup.colour(t as usize, tri, l)).or_else(|| lookup.across_seam(tri, l))
-            {
-                return c;
-            }
-            return Vec3::from(self.colours[tri[nearest_corner(l)] as usize]);
+            let vertex = |v: u32| Vec3::from(self.colours[v as usize]);
+            return lookup.texture_colour(t as usize, tri, l, vertex);
         }
         (0..3)
             .map(|k| Vec3::from(self.colours[tri[k] as usize]) * l[k])

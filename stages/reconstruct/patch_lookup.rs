@@ -251,6 +251,22 @@ impl<'a> ExemplarLookup<'a> {
 }
 
 impl ExemplarLookup<'_> {
+    /// What an atlas holds at barycentrics `l` of triangle `t` (corners `tri`): the exemplar
+    /// at the interpolated address inside one patch ([`Self::colour`]), the corners' patches
+    /// continued and blended across a seam ([`Self::across_seam`]), else the colour of the
+    /// nearest corner (`vertex_colour`), so a seam without addresses stays a line.
+    pub fn texture_colour(
+        &self,
+        t: usize,
+        tri: [u32; 3],
+        l: [f32; 3],
+        vertex_colour: impl Fn(u32) -> Vec3,
+    ) -> Vec3 {
+        (self.colour(t, tri, l))
+            .or_else(|| self.across_seam(tri, l))
+            .unwrap_or_else(|| vertex_colour(tri[nearest_corner(l)]))
+    }
+
     /// The colour at barycentrics `l` of a triangle whose corners copied different patches,
     /// when the lookup has [`PatchFrames`]: each corner's patch continued to the point (its
     /// address plus the point's offset from it through its frame), read, and weighted by
