@@ -40,8 +40,8 @@ use crate::stages::field::feature_field::carry_field;
 use crate::stages::field::sweep_field::SweepField;
 use crate::stages::parameterize::sqrt2_subdivision::{Sqrt2Hierarchy, area_spread};
 use crate::stages::reconstruct::feature_aligned_export::{ExemplarLookup, ExemplarSampling};
-use crate::stages::reconstruct::patch_lookup::PatchFrames;
-use crate::stages::synthesize::graph_matching::{GraphMatching, texture_axes};
+use crate::stages::reconstruct::finest_level_bake::finest_lookup;
+use crate::stages::synthesize::graph_matching::{GraphMatching, texture_frame};
 use crate::stages::synthesize::texture_optimization::SurfaceSynthesis;
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
@@ -89,7 +89,9 @@ pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Vec<Item>
     }
     // The synthesis's frame per vertex: "up" is the field projected on the tangent plane,
     // and an edge maps to (right, −up) texels at its own length.
-    let frames = frames(&normals, &field.orientation[..n]);
+    let frames: Vec<(Vec3, Vec3)> = (normals.iter().zip(&field.orientation[..n]))
+        .map(|(&nrm, &o)| texture_frame(nrm, o))
+        .collect();
     let step = |from: usize, to: usize| {
         let d = mesh.positions[to] - mesh.positions[from];
         let (up, right) = frames[from];
@@ -135,16 +137,18 @@ pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Vec<Item>
                 "internal error: sources and hierarchy disagree on the vertex count",
             ));
         }
-        let axes = texture_axes(&normals, &field.orientation[..n], scale);
-        // The field's frames, not fitted ones: every vertex has one, where a fit needs
-        // one-patch triangles around the vertex, which graph matching's small patches often
-        // leave none of (fitted frames scored the cow 0.906 / 0.770 against 0.877 / 0.685:
-        // more seams fell back to flat corner colours).
-        let lookup =
-            ExemplarLookup::new(&mesh, &out.sources, ex, sampling).with_frames(PatchFrames {
-                positions: &mesh.positions,
-                axes,
-            });
+        // The synthesis's own frames, as the atlas reads them (a frame fitted to the
+        // addresses needs one-patch triangles around its vertex, which graph matching's
+        // small patches often leave none of).
+        let lookup = finest_lookup(
+            &mesh,
+            &normals,
+            &field.orientation[..n],
+            scale,
+            &out.sources,
+            ex,
+            sampling,
+        );
         baked.extra.insert(
             "looked_up_share".into(),
             serde_json::json!(lookup.looked_up_share()),

@@ -33,7 +33,7 @@ pub use super::patch_lookup::{ExemplarLookup, ExemplarSampling};
 
 /// The `feature_aligned_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 5);
+    texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 6);
 
 /// `[reconstruct]` of the feature-aligned method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

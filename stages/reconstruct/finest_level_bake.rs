@@ -21,12 +21,33 @@
 //! searched ring by ring until the block searched holds the nearest point found: a point on
 //! the finest surface ends in its own cell.
 
-use super::patch_lookup::ExemplarLookup;
+use super::patch_lookup::{ExemplarLookup, ExemplarSampling, PatchFrames};
 use crate::geom::Mesh;
 use crate::graph::Csr;
 use crate::render::shader::SurfaceShader;
 use glam::{IVec3, Vec3};
 use texsyn_core::math::PureMath;
+
+/// Where graph matching's finest level (`finest`, triangulated, with the hierarchy's vertex
+/// `normals`) copied its colours: `sources` read in `exemplar`, each patch continued across
+/// seams through the texture frame its vertex was matched in (the `field`, `scale` texels
+/// per unit). The atlas and the score both read the texture through this.
+pub fn finest_lookup<'a>(
+    finest: &'a Mesh,
+    normals: &[Vec3],
+    field: &[Vec3],
+    scale: f32,
+    sources: &'a [[f32; 2]],
+    exemplar: crate::image::ImageView<'a>,
+    sampling: ExemplarSampling,
+) -> ExemplarLookup<'a> {
+    let axes = crate::synthesize::graph_matching::texture_axes(normals, field, scale);
+    let frames = PatchFrames {
+        positions: &finest.positions,
+        axes,
+    };
+    ExemplarLookup::new(finest, sources, exemplar, sampling).with_frames(frames)
+}
 
 /// The finest level's texture seen from the input mesh, for baking.
 pub struct FinestColours<'a> {
@@ -67,7 +88,7 @@ impl SurfaceShader for FinestColours<'_> {
             return Vec3::splat(0.5);
         };
         let tri = self.finest.triangles[t as usize];
-        if let Some(lookup) = &self.lookup {
+        if let Some(lookup) = self.lookup.as_ref().filter(|l| l.is_active()) {
             let vertex = |v: u32| Vec3::from(self.colours[v as usize]);
             return lookup.texture_colour(t as usize, tri, l, vertex);
         }
@@ -321,7 +342,6 @@ mod tests {
         // The finer mesh copied one patch laid at 8 texels per unit: every point of the input
         // must read the exemplar (red, green = address / 64) at 8 × its position + (4, 4),
         // however far it lies from a vertex of the finer mesh.
-        use super::super::patch_lookup::{ExemplarLookup, ExemplarSampling, PatchFrames};
         let input = primitives::grid(4, 1.0);
         let refined = crate::geom::edge_refine::refine_edges(&input, 0.5, 100_000).unwrap();
         let address = |p: Vec3| glam::Vec2::new(4.0 + 8.0 * p.x, 4.0 + 8.0 * p.y);

@@ -6,8 +6,10 @@
 //! copied from. Inside a triangle whose corners copied one patch, the addresses interpolated
 //! across it are that patch's own texels, so an atlas can hold the exemplar's detail at its
 //! own texel density instead of the vertex spacing's (as jump maps give each triangle
-//! exemplar coordinates). Across a seam between patches there is no address to interpolate:
-//! the nearest corner's colour keeps the seam a sharp line instead of a blend.
+//! exemplar coordinates). Across a seam between patches there is no one address to
+//! interpolate: each corner's patch is continued to the point through that corner's frame
+//! (the synthesis's, or one fitted to the addresses) and the reads are blended, so a seam is
+//! a short blend of textures that keep their detail, not a jagged edge of flat colours.
 
 use crate::geom::Mesh;
 use glam::Vec3;
@@ -67,6 +69,8 @@ pub struct ExemplarLookup<'a> {
     one_patch: Vec<bool>,
     /// How each vertex's patch continues around it, for reads across seams.
     frames: Option<PatchFrames<'a>>,
+    /// Texels per unit length: the median over the edges between vertices with addresses.
+    scale: f32,
 }
 
 /// Per vertex, the linear map from a surface offset to an exemplar offset that the vertex's
@@ -123,8 +127,9 @@ impl<'a> PatchFrames<'a> {
             .map(|v| {
                 let [xx, xy, yy] = m[v];
                 let det = xx * yy - xy * xy;
-                // Edges along one line (or none) fix no map of the plane; NaN sums fail too.
-                let spans_plane = det > 1e-12 * (xx + yy) * (xx + yy);
+                // Edges along one line (or none, or only slivers) fix no map of the plane, and
+                // address noise would blow up across them; NaN sums fail too.
+                let spans_plane = det > 1e-3 * (xx + yy) * (xx + yy);
                 if !spans_plane {
                     return [Vec3::NAN; 2];
                 }
@@ -147,8 +152,16 @@ impl<'a> PatchFrames<'a> {
 impl<'a> ExemplarLookup<'a> {
     /// Reads across seams continue each corner's patch with frames fitted to the addresses
     /// themselves ([`PatchFrames::fitted`]).
+    /// A fitted axis more than 4 times longer or shorter than the lookup's texel scale (the
+    /// median over all edges) is not a patch's frame but a poor fit, and is left out.
     pub fn with_fitted_frames(self, mesh: &'a Mesh) -> Self {
-        let frames = PatchFrames::fitted(mesh, self.source, &self.one_patch);
+        let mut frames = PatchFrames::fitted(mesh, self.source, &self.one_patch);
+        let (lo, hi) = (0.25 * self.scale, 4.0 * self.scale);
+        for axes in &mut frames.axes {
+            if axes.iter().any(|a| !(lo..=hi).contains(&a.length())) {
+                *axes = [Vec3::NAN; 2];
+            }
+        }
         self.with_frames(frames)
     }
 
@@ -167,6 +180,7 @@ impl<'a> ExemplarLookup<'a> {
             sampling,
             one_patch: Vec::new(),
             frames: None,
+            scale: 0.0,
         };
         if source.len() != m.positions.len() {
             return none;
@@ -212,6 +226,7 @@ impl<'a> ExemplarLookup<'a> {
             sampling,
             one_patch,
             frames: None,
+            scale,
         }
     }
 
@@ -221,6 +236,12 @@ impl<'a> ExemplarLookup<'a> {
             self.frames = Some(frames);
         }
         self
+    }
+
+    /// Whether the lookup reads the exemplar at all (addresses of the mesh's size, and some
+    /// triangle with three).
+    pub fn is_active(&self) -> bool {
+        self.exemplar.is_some()
     }
 
     /// Whether triangle `t`'s corners copied one patch (false when nothing is looked up).
@@ -270,15 +291,9 @@ impl ExemplarLookup<'_> {
     /// The colour at barycentrics `l` of a triangle whose corners copied different patches,
     /// when the lookup has [`PatchFrames`]: each corner's patch continued to the point (its
     /// address plus the point's offset from it through its frame), read, and weighted by
-    /// `l`, so the seam is a short blend of textures that each keep their detail instead of a
-    /// blend of flat vertex colours or a hard step. `None` without frames or when a corner
-    /// has no address.
-    ///
-    /// Measured on graph matching's cow (`texsyn score`, the baked item, ratio / gradient
-    /// ratio): the nearest corner's flat colour 0.934 / 0.857, with its jagged cell outlines
-    /// along every seam; the nearest corner's patch continued 0.893 / 0.729, still a step at
-    /// the cell borders; this blend 0.877 / 0.685, no step, the detail softened only on seam
-    /// triangles.
+    /// `l`, so the seam is a short blend of textures that each keep their detail, with no
+    /// step and no flat vertex colour. A corner without an address or a frame is left out
+    /// and the others' weights renormalized; `None` without frames or when no corner is left.
     pub fn across_seam(&self, tri: [u32; 3], l: [f32; 3]) -> Option<Vec3> {
         let (exemplar, frames) = (self.exemplar?, self.frames.as_ref()?);
         let p: Vec3 = (0..3)
@@ -288,21 +303,17 @@ impl ExemplarLookup<'_> {
         let mut weight = 0.0;
         for k in 0..3 {
             let v = tri[k] as usize;
-            let s = self.source[v];
-            if !has_address(s) {
-                return None;
+            let (s, [ax, ay]) = (self.source[v], frames.axes[v]);
+            if !has_address(s) || !ax.is_finite() || !ay.is_finite() {
+                continue;
             }
             let d = p - frames.positions[v];
-            let [ax, ay] = frames.axes[v];
-            if !ax.is_finite() || !ay.is_finite() {
-                return None;
-            }
             let at = glam::Vec2::new(s[0] + d.dot(ax), s[1] + d.dot(ay));
             let c = self.sampling.read(exemplar, at);
             sum += Vec3::new(c[0], c[1], c[2]) * l[k];
             weight += l[k];
         }
-        (weight > 0.0).then(|| sum / weight)
+        (weight > 1e-6).then(|| sum / weight)
     }
 }
 
@@ -321,15 +332,17 @@ pub fn nearest_corner(l: [f32; 3]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Vec2;
 
     /// An exemplar whose red and green are its texel address / 64, so a read tells where it
-    /// was made.
+    /// was made, and whose blue is a one-texel checkerboard, which tells a blend of reads
+    /// from a read of blended addresses.
     fn ramp() -> crate::image::Image {
-        crate::image::Image::from_fn(64, 64, |x, y| [x as f32 / 64.0, y as f32 / 64.0, 0.5, 1.0])
+        crate::image::Image::from_fn(64, 64, |x, y| {
+            [x as f32 / 64.0, y as f32 / 64.0, ((x + y) % 2) as f32, 1.0]
+        })
     }
 
-    /// Two triangles of a unit square, one texel per 1/16 unit along x and y.
+    /// Two triangles of a unit square.
     fn square() -> Mesh {
         let p = vec![
             Vec3::new(0.0, 0.0, 0.0),
@@ -340,56 +353,101 @@ mod tests {
         Mesh::new(p, vec![[0, 1, 2], [0, 2, 3]])
     }
 
-    fn frames(m: &Mesh) -> PatchFrames<'_> {
-        PatchFrames {
-            positions: &m.positions,
-            axes: vec![[Vec3::X * 16.0, Vec3::Y * 16.0]; m.positions.len()],
-        }
-    }
-
     #[test]
     fn across_a_seam_each_corner_s_patch_is_continued_to_the_point_and_blended() {
         let (m, ex) = (square(), ramp());
-        // Corner 2 copied a patch shifted by (20, 4) texels from the others'.
+        // Corners 0, 1 and 3 copied one patch at 16 texels per unit; corner 2 another,
+        // turned a quarter and 8 texels per unit.
         let source = [[10.0, 10.0], [26.0, 10.0], [46.0, 30.0], [10.0, 26.0]];
-        let lookup = ExemplarLookup::new(&m, &source, ex.view(), ExemplarSampling::Bilinear)
-            .with_frames(frames(&m));
+        let mut axes = vec![[Vec3::X * 16.0, Vec3::Y * 16.0]; 4];
+        axes[2] = [Vec3::Y * 8.0, -Vec3::X * 8.0];
+        let frames = PatchFrames {
+            positions: &m.positions,
+            axes,
+        };
+        let lookup = ExemplarLookup::new(&m, &source, ex.view(), ExemplarSampling::Nearest)
+            .with_frames(frames);
         assert!(
             !lookup.one_patch(0) && !lookup.one_patch(1),
-            "both triangles touch corner 2"
+            "both touch corner 2"
         );
         assert_eq!(lookup.colour(0, m.triangles[0], [0.2, 0.3, 0.5]), None);
-        let read = |a: Vec2| Vec3::new(a.x / 64.0, a.y / 64.0, 0.5);
+        let read = |x: f32, y: f32| {
+            let (x, y) = (x.round(), y.round());
+            Vec3::new(x / 64.0, y / 64.0, (x + y).rem_euclid(2.0))
+        };
         // At a corner: that corner's own address.
         let at_corner = lookup.across_seam(m.triangles[0], [0.0, 0.0, 1.0]).unwrap();
-        assert!(
-            (at_corner - read(Vec2::new(46.0, 30.0)))
-                .abs()
-                .max_element()
-                < 1e-5
-        );
-        // Between corners: each corner's address moved by the point's offset from it, blended
-        // by the barycentrics. The point (0.75, 0.5): corners 0 and 1 agree on (22, 18),
-        // corner 2 continues its own patch to (42, 22).
+        assert!((at_corner - read(46.0, 30.0)).abs().max_element() < 1e-6);
+        // At (0.75, 0.5): corners 0 and 1 continue to (22, 18), corner 2 through its own
+        // frame by (−0.25, −0.5) to (42, 32); the reads are blended by the barycentrics (a
+        // read of the blended address, (32, 25), would have blue 1, not 0).
         let l = [0.25, 0.25, 0.5];
         let got = lookup.across_seam(m.triangles[0], l).unwrap();
-        let want = read(Vec2::new(22.0, 18.0)) * 0.5 + read(Vec2::new(42.0, 22.0)) * 0.5;
+        let want = read(22.0, 18.0) * 0.5 + read(42.0, 32.0) * 0.5;
         assert!(
-            (got - want).abs().max_element() < 1e-5,
+            (got - want).abs().max_element() < 1e-6,
             "{got} against {want}"
         );
-        // Without frames there is nothing to continue; a corner without an address stops it.
-        let plain = ExemplarLookup::new(&m, &source, ex.view(), ExemplarSampling::Bilinear);
+        // Without frames there is nothing to continue. A corner without an address is left
+        // out and the others renormalized.
+        let plain = ExemplarLookup::new(&m, &source, ex.view(), ExemplarSampling::Nearest);
         assert_eq!(plain.across_seam(m.triangles[0], l), None);
+        // (A third triangle without corner 2 keeps the lookup in use.)
+        let m = Mesh::new(m.positions.clone(), vec![[0, 1, 2], [0, 2, 3], [0, 1, 3]]);
         let missing = [
             [10.0, 10.0],
             [26.0, 10.0],
             [f32::NAN, f32::NAN],
             [10.0, 26.0],
         ];
-        let lookup = ExemplarLookup::new(&m, &missing, ex.view(), ExemplarSampling::Bilinear)
-            .with_frames(frames(&m));
-        assert_eq!(lookup.across_seam(m.triangles[0], l), None);
+        let frames = PatchFrames {
+            positions: &m.positions,
+            axes: vec![[Vec3::X * 16.0, Vec3::Y * 16.0]; 4],
+        };
+        let lookup = ExemplarLookup::new(&m, &missing, ex.view(), ExemplarSampling::Nearest)
+            .with_frames(frames);
+        assert!(lookup.is_active());
+        let got = lookup.across_seam(m.triangles[0], l).unwrap();
+        assert!((got - read(22.0, 18.0)).abs().max_element() < 1e-6, "{got}");
+    }
+
+    #[test]
+    fn fitted_frames_recover_a_sheared_mirrored_map_and_leave_lone_vertices_out() {
+        // An irregular mesh on a tilted plane copied through one sheared, mirrored, unequally
+        // scaled map: every vertex in a triangle must get that map back; a vertex in no
+        // triangle gets none.
+        let (u, v) = (Vec3::new(1.0, 0.0, 0.5).normalize(), Vec3::Y);
+        let plane = [
+            [0.0, 0.0],
+            [1.0, 0.1],
+            [0.3, 0.9],
+            [1.2, 1.1],
+            [0.6, 0.4],
+            [2.0, 2.0],
+        ];
+        let positions: Vec<Vec3> = plane.iter().map(|p| u * p[0] + v * p[1]).collect();
+        let map = |p: Vec3| {
+            let (a, b) = (p.dot(u), p.dot(v));
+            [5.0 + 12.0 * a + 3.0 * b, 40.0 + 2.0 * a - 7.0 * b]
+        };
+        let source: Vec<[f32; 2]> = positions.iter().map(|&p| map(p)).collect();
+        let m = Mesh::new(positions, vec![[0, 1, 4], [1, 3, 4], [3, 2, 4], [2, 0, 4]]);
+        let frames = PatchFrames::fitted(&m, &source, &[true; 4]);
+        for k in 0..5 {
+            let [ax, ay] = frames.axes[k];
+            for d in [u, v, u - v * 0.3] {
+                let want = map(m.positions[k] + d);
+                let got = [source[k][0] + d.dot(ax), source[k][1] + d.dot(ay)];
+                assert!(
+                    (got[0] - want[0]).abs() < 1e-3 && (got[1] - want[1]).abs() < 1e-3,
+                    "vertex {k}: {got:?} against {want:?}"
+                );
+            }
+        }
+        assert!(frames.axes[5][0].is_nan(), "vertex 5 lies in no triangle");
+        let none = PatchFrames::fitted(&m, &source, &[false; 4]);
+        assert!(none.axes.iter().all(|a| a[0].is_nan()));
     }
 
     #[test]
@@ -402,7 +460,7 @@ mod tests {
         // (0.75, 0.5) is address (22, 18), read at its nearest texel.
         let c = lookup.colour(0, m.triangles[0], [0.25, 0.25, 0.5]).unwrap();
         assert!(
-            (c - Vec3::new(22.0 / 64.0, 18.0 / 64.0, 0.5))
+            (c - Vec3::new(22.0 / 64.0, 18.0 / 64.0, 0.0))
                 .abs()
                 .max_element()
                 < 1e-6

@@ -9,8 +9,9 @@
 //! - `textured.glb`, `textured.obj` + `textured.mtl` and `textured_atlas.png`: the user's own
 //!   mesh (the input, before any subdivision) with the finest level's texture baked into an
 //!   atlas of its triangles ([`super::finest_level_bake`]: the exemplar read inside each
-//!   copied patch, at the atlas's density), what a user opens in any viewer or DCC tool. With `atlas_size = 0`: `textured.glb` is the finest level with `COLOR_0`
-//!   (converted to linear, as glTF wants) and no atlas or OBJ is written.
+//!   copied patch, at the atlas's density), what a user opens in any viewer or DCC tool.
+//!   With `atlas_size = 0`: `textured.glb` is the finest level with `COLOR_0` (converted to
+//!   linear, as glTF wants) and no atlas or OBJ is written.
 //! - `preview.png`: three views, drawn by texsyn's rasterizer.
 //! - with `displacement > 0`: `displaced.obj` and `displaced.ply`, the finest mesh moved along
 //!   its normals by `displacement · (value − 0.5)`, value = the mean of R, G and B (a grey
@@ -19,7 +20,7 @@
 //! - with `level_previews`: `level_NN.png`, every level as it was when synthesized, so a
 //!   user can see the texture grow.
 
-use super::patch_lookup::{ExemplarLookup, ExemplarSampling, PatchFrames};
+use super::patch_lookup::ExemplarSampling;
 use crate::check::{ParamError, check_range};
 use crate::export::encode_png;
 use crate::geom::Mesh;
@@ -32,7 +33,7 @@ use texsyn_core::algorithm::Failure;
 
 /// The `vertex_colour_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("vertex_colour_export", 3);
+    texsyn_core::algorithm::Algorithm::new("vertex_colour_export", 4);
 
 /// `[reconstruct]` of the graph-matching method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -54,7 +55,7 @@ pub struct VertexColourExportParams {
     /// 64..=8192; 0 bakes none (`textured.glb` is then the vertex-coloured finest level).
     /// Default: 2048.
     pub atlas_size: u32,
-    /// How the atlas reads the exemplar between texels inside a copied patch:
+    /// How the atlas reads the exemplar between texels (inside a copied patch and across seams):
     /// `"bilinear"` (default) or `"nearest"` ([`ExemplarSampling`]). Left out of the node's
     /// key at the default.
     #[serde(skip_serializing_if = "ExemplarSampling::is_bilinear")]
@@ -156,21 +157,15 @@ pub fn export_vertex_colours(
     };
     match atlas {
         Some(atlas) => {
+            let normals = finest.mesh.vertex_normals();
             let lookup = copied.map(|c| {
-                let axes = crate::synthesize::graph_matching::texture_axes(
-                    &finest.mesh.vertex_normals(),
-                    c.field,
-                    c.scale,
-                );
-                let frames = PatchFrames {
-                    positions: &tri.positions,
-                    axes,
-                };
-                ExemplarLookup::new(&tri, c.sources, c.exemplar, p.lookup).with_frames(frames)
+                super::finest_level_bake::finest_lookup(
+                    &tri, &normals, c.field, c.scale, c.sources, c.exemplar, p.lookup,
+                )
             });
             if let Some(l) = &lookup {
                 tracing::info!(
-                    "atlas: {:.1} % of the finest level's triangles lie in one copied patch and read the exemplar; the rest take their nearest corner's colour",
+                    "atlas: {:.1} % of the finest level's triangles lie in one copied patch and read the exemplar; across the rest each corner's patch is continued and blended",
                     100.0 * l.looked_up_share()
                 );
             }

@@ -44,7 +44,7 @@
 //!   exemplar); uncoloured vertices copied to read clamped texels.
 //!   `coherent` (the default) evaluates the same metric at a few candidates only, in the manner
 //!   of Ashikhmin (2001): for each coloured region vertex the `Q` that would continue its own
-//!   source texel, `P`'s own source, and `random_candidates` seeded random texels.
+//!   source address, `P`'s own source, and `random_candidates` seeded random texels.
 //! - Transfer (§3.4): graph cut over the region. `P` is tied to the texture terminal, coloured
 //!   vertices on the region's border (ring `k`) to the surface terminal, both with infinite
 //!   weight; region edges weigh `M(A,B)·exp(−(x_A² + x_B²)/(σ r²))` (eq. 1) with
@@ -431,13 +431,7 @@ impl<'a> Level<'a> {
         let mut k = vec![1u8; n];
         let mut capped = CappedRegions::default();
         for v in 0..n {
-            let nrm = normals[v];
-            let o = input.field.orientation[v];
-            let t = (o - o.dot(nrm) * nrm)
-                .try_normalize()
-                .unwrap_or_else(|| any_tangent(nrm));
-            up[v] = t;
-            right[v] = t.cross(nrm);
+            (up[v], right[v]) = texture_frame(normals[v], input.field.orientation[v]);
             let m = if p.anti_aliasing {
                 level_of(ebar[v])
             } else {
@@ -509,18 +503,25 @@ impl<'a> Level<'a> {
     }
 }
 
-/// Per vertex, the map from a surface offset `d` to the texel offset a patch is laid with
-/// (§3.3.1): `(d · right, −d · up) · scale`, `up` the field on the tangent plane and
-/// `right = up × n`, as [`Level::step`] reads an edge (without its length correction).
+/// A vertex's texture frame (§3.3.1): `up`, the field `o` projected on the tangent plane of
+/// normal `nrm` (any tangent where it vanishes), and `right = up × n`.
+pub fn texture_frame(nrm: Vec3, o: Vec3) -> (Vec3, Vec3) {
+    let t = (o - o.dot(nrm) * nrm)
+        .try_normalize()
+        .unwrap_or_else(|| any_tangent(nrm));
+    (t, t.cross(nrm))
+}
+
+/// Per vertex, the map from a surface offset `d` to the texel offset a patch is laid with:
+/// `(d · right, −d · up) · scale` in [`texture_frame`], as [`Level::step`] reads an edge
+/// (without its length correction).
 pub fn texture_axes(normals: &[Vec3], field: &[Vec3], scale: f32) -> Vec<[Vec3; 2]> {
     normals
         .iter()
         .zip(field)
         .map(|(&nrm, &o)| {
-            let t = (o - o.dot(nrm) * nrm)
-                .try_normalize()
-                .unwrap_or_else(|| any_tangent(nrm));
-            [t.cross(nrm) * scale, -t * scale]
+            let (up, right) = texture_frame(nrm, o);
+            [right * scale, -up * scale]
         })
         .collect()
 }
@@ -1065,9 +1066,18 @@ mod tests {
             // A triangle grid has 6 neighbours per vertex: 1 + 6 + 12 vertices within 2 edges
             // (a quad mesh's would be (k+1)² + k² = 13).
             assert_eq!(region.verts.len(), 19);
+            // The frames a bake continues patches with map surface offsets the same way.
+            let axes = texture_axes(&level.mesh.vertex_normals(), &field.orientation, 7.0);
+            let [ax, ay] = axes[centre as usize];
             for (i, &v) in region.verts.iter().enumerate() {
                 let want = at(v as usize) - planted;
                 assert!(region.offset[i].distance(want) < 1e-3, "{search:?} {v}");
+                let d = mesh.positions[v as usize] - mesh.positions[centre as usize];
+                let o = Vec2::new(d.dot(ax), d.dot(ay));
+                assert!(
+                    o.distance(want) < 1e-3,
+                    "texture_axes at {v}: {o} against {want}"
+                );
             }
             let q = ctx.search(&region, &mut state, 0);
             assert_eq!(q, planted, "{search:?}");
