@@ -605,26 +605,12 @@ mod tests {
             .collect()
     }
 
-    /// The atlas shader's colours at 400 random points of the input mesh, with the point.
+    /// The atlas shader's colours at 400 seeded points of the input mesh, with the point.
     fn shade_points(shader: &RefinedColours, input: &Mesh) -> Vec<(Vec3, Vec3)> {
         use crate::render::SurfaceShader;
-        (0..400u64)
-            .map(|i| {
-                let (u, v) = (
-                    crate::random::counter_unit(3, 0, i),
-                    crate::random::counter_unit(3, 1, i),
-                );
-                let (u, v) = if u + v > 1.0 {
-                    (1.0 - u, 1.0 - v)
-                } else {
-                    (u, v)
-                };
-                let bary = Vec3::new(1.0 - u - v, u, v);
-                let f = (i % 2) as usize;
-                let t = input.triangles[f].map(|k| input.positions[k as usize]);
-                let p = t[0] * bary.x + t[1] * bary.y + t[2] * bary.z;
-                (p, shader.albedo(f, bary))
-            })
+        let points = super::super::finest_level_bake::tests::seeded_points(input, 3, 400);
+        (points.into_iter())
+            .map(|(f, bary, p)| (p, shader.albedo(f, bary)))
             .collect()
     }
 

@@ -255,7 +255,7 @@ pub fn closest_point_barycentrics(p: Vec3, [a, b, c]: [Vec3; 3]) -> [f32; 3] {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::geom::primitives;
 
@@ -314,20 +314,7 @@ mod tests {
         let colour = |p: Vec3| [p.x / 3.0, p.y / 3.0, 0.5];
         let colours: Vec<[f32; 3]> = refined.mesh.positions.iter().map(|&p| colour(p)).collect();
         let shader = FinestColours::new(&input, &refined.mesh, &colours, None);
-        for i in 0..200u64 {
-            let (u, v) = (
-                crate::random::counter_unit(5, 0, i),
-                crate::random::counter_unit(5, 1, i),
-            );
-            let (u, v) = if u + v > 1.0 {
-                (1.0 - u, 1.0 - v)
-            } else {
-                (u, v)
-            };
-            let f = (i as usize * 7) % input.triangles.len();
-            let bary = Vec3::new(1.0 - u - v, u, v);
-            let t = input.triangles[f].map(|k| input.positions[k as usize]);
-            let p = t[0] * bary.x + t[1] * bary.y + t[2] * bary.z;
+        for (f, bary, p) in seeded_points(&input, 5, 200) {
             let got = shader.albedo(f, bary);
             let want = Vec3::from(colour(p));
             assert!(
@@ -365,20 +352,7 @@ mod tests {
         .with_frames(frames);
         assert_eq!(lookup.looked_up_share(), 1.0);
         let shader = FinestColours::new(&input, &refined.mesh, &colours, Some(lookup));
-        for i in 0..200u64 {
-            let (u, v) = (
-                crate::random::counter_unit(6, 0, i),
-                crate::random::counter_unit(6, 1, i),
-            );
-            let (u, v) = if u + v > 1.0 {
-                (1.0 - u, 1.0 - v)
-            } else {
-                (u, v)
-            };
-            let f = (i as usize * 5) % input.triangles.len();
-            let bary = Vec3::new(1.0 - u - v, u, v);
-            let t = input.triangles[f].map(|k| input.positions[k as usize]);
-            let p = t[0] * bary.x + t[1] * bary.y + t[2] * bary.z;
+        for (f, bary, p) in seeded_points(&input, 6, 200) {
             let a = address(p);
             let want = Vec3::new(a.x / 64.0, a.y / 64.0, 0.5);
             let got = shader.albedo(f, bary);
@@ -387,5 +361,27 @@ mod tests {
                 "at {p}: {got} instead of {want}"
             );
         }
+    }
+
+    /// `n` seeded points of `mesh`, spread over its triangles in turn: (triangle,
+    /// barycentrics, position).
+    pub(crate) fn seeded_points(mesh: &Mesh, seed: u64, n: u64) -> Vec<(usize, Vec3, Vec3)> {
+        (0..n)
+            .map(|i| {
+                let (u, v) = (
+                    crate::random::counter_unit(seed, 0, i),
+                    crate::random::counter_unit(seed, 1, i),
+                );
+                let (u, v) = if u + v > 1.0 {
+                    (1.0 - u, 1.0 - v)
+                } else {
+                    (u, v)
+                };
+                let f = i as usize % mesh.triangles.len();
+                let bary = Vec3::new(1.0 - u - v, u, v);
+                let t = mesh.triangles[f].map(|k| mesh.positions[k as usize]);
+                (f, bary, t[0] * bary.x + t[1] * bary.y + t[2] * bary.z)
+            })
+            .collect()
     }
 }
