@@ -2,14 +2,16 @@
 //! feature-aligned texturing (Xu et al.), by resampling their colours into the exemplar's
 //! frame along the field each synthesis itself reads the surface with.
 //!
-//! Graph matching makes one colour per vertex of the finest √2-subdivision level and bakes no
-//! texture (§3.5). Its synthesis reads the surface through one texture-space step per edge
+//! Graph matching makes one colour per vertex of the finest √2-subdivision level (the paper
+//! leaves texture maps to other work, §3.5; texsyn bakes one from the copied addresses). Its
+//! synthesis reads the surface through one texture-space step per edge
 //! (`Level::step` in stages/synthesize/graph_matching.rs): the edge projected onto the
 //! vertex's (right, −up) frame of the sweep field, kept at its length, times `scale` texels
 //! per unit. The same step, summed outward from 64 seeded vertices over the finest level's
 //! triangulated edges, unfolds discs of the surface into exemplar texels
 //! ([`super::charts::unfolded_discs`]); their triangles are filled by interpolating the
-//! vertex colours, and the discs are scored against the exemplar. So the picture is the
+//! vertex colours, and, for a second item, with what the baked atlas holds
+//! ([`finest_lookup`]); the discs are scored against the exemplar. So the picture is the
 //! texture as the method lays it out, at one texel per exemplar texel.
 //!
 //! Feature-aligned texturing's texture optimization (§5) reads a vertex's neighbourhood in
