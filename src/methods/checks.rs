@@ -21,7 +21,8 @@ pub(crate) fn exemplar_size(config: &Config, path: &Path) -> Option<((u32, u32),
 /// bounding box and the exemplar's width ([`automatic_scale`]), before any node is keyed, so
 /// a key holds the number used and a given number keys as before. When the mesh or the
 /// exemplar cannot be read, the scale is left at 0: their import nodes fail first and name
-/// the problem.
+/// the problem. Returns the mesh when the scale was resolved from it, so a method can fit
+/// the scale to its own budget too.
 ///
 /// [`automatic_scale`]: crate::stages::parameterize::automatic_scale
 pub(crate) fn resolve_scale(
@@ -29,25 +30,21 @@ pub(crate) fn resolve_scale(
     scale: &mut f32,
     mesh: &Path,
     exemplar: &Path,
-) -> Result<(), MethodError> {
+) -> Option<crate::geom::Mesh> {
     if *scale > 0.0 {
-        return Ok(());
+        return None;
     }
-    let Some(((width, _), _)) = exemplar_size(config, exemplar) else {
-        return Ok(());
-    };
+    let ((width, _), _) = exemplar_size(config, exemplar)?;
     let path = config.resolve(mesh);
     let read = texsyn_core::geom::io::read_regular_file(&path).ok();
-    let Some(mesh) = read.and_then(|b| crate::geom::io::read_mesh_bytes(&path, &b).ok()) else {
-        return Ok(());
-    };
+    let mesh = read.and_then(|b| crate::geom::io::read_mesh_bytes(&path, &b).ok())?;
     *scale = crate::stages::parameterize::automatic_scale(&mesh, width);
     tracing::info!(
         "parameterize.scale = \"auto\": {:.4} exemplar texels per unit (the exemplar's {width} texels span a quarter of {}'s bounding-box diagonal)",
         *scale,
         path.display()
     );
-    Ok(())
+    Some(mesh)
 }
 
 /// Refuses, before any work, a parameter whose estimated memory is over the budget

@@ -67,7 +67,7 @@ impl Method for GraphMatchingMethod {
     fn plan(&self, config: &Config) -> Result<(Dag, Box<dyn Planned>), MethodError> {
         let mut c: GraphMatchingConfig = config.parse()?;
         let (mesh, exemplar) = (&c.inputs.mesh, &c.inputs.exemplar);
-        super::resolve_scale(config, &mut c.parameterize.scale, mesh, exemplar)?;
+        super::resolve_scale(config, &mut c.parameterize.scale, mesh, exemplar);
         c.analyse_exemplar.validate().map_err(|e| config.param(e))?;
         c.parameterize.validate().map_err(|e| config.param(e))?;
         c.field.validate().map_err(|e| config.param(e))?;

@@ -344,3 +344,38 @@ fn a_line_moved_into_a_fixed_group_keeps_its_direction_under_greedy_orientation(
     let fixed_lines: Vec<usize> = (0..group_fixed.len()).filter(|&i| group_fixed[i]).collect();
     assert_eq!(fixed_lines, [at.unwrap()], "lines written as fixed");
 }
+
+/// `parameterize.scale = "auto"` is lowered until the refined mesh fits
+/// `parameterize.max_vertices`, where a refusal would leave the user to find a number; a scale
+/// the user gives is kept and refused with the budget named.
+#[test]
+fn auto_scale_is_lowered_to_fit_the_vertex_budget_and_a_given_scale_is_refused() {
+    let config = repo().join("configs/feature_aligned.toml");
+    let budget = "parameterize.max_vertices=20000";
+    let plan = common::plan_config(&config, &[], &["parameterize.scale=\"auto\"", budget]);
+    let plan = plan.unwrap();
+    let node = (plan.dag.nodes.iter())
+        .find(|n| n.name == "parameterize")
+        .unwrap();
+    let scale = node.params_json["scale"].as_f64().unwrap() as f32;
+    let assets = repo().join("configs/assets");
+    let mesh = texsyn::geom::io::read_mesh(&assets.join("fandisk.off")).unwrap();
+    let (width, _) = image::image_dimensions(assets.join("brick.png")).unwrap();
+    let (lo, hi) = mesh.bounds();
+    let rule = width as f32 / (0.25 * (hi - lo).length());
+    assert!(scale < 0.5 * rule, "scale {scale}, the rule's {rule}");
+    let p = texsyn::stages::parameterize::edge_refinement::RefineParams {
+        scale,
+        edge: 1.0,
+        max_vertices: 20_000,
+    };
+    let refined = texsyn::stages::parameterize::edge_refinement::node(&mesh, &p).unwrap();
+    assert!(refined.mesh.vertex_count() > 20_000 / 6);
+
+    let cache = tempfile::tempdir().unwrap();
+    let given = format!("parameterize.scale={rule}");
+    let Err(err) = run_config(&config, &[], &[&given, budget], cache.path()) else {
+        panic!("scale {rule} refined within 20,000 vertices");
+    };
+    assert!(err.contains("parameterize.max_vertices"), "{err}");
+}

@@ -6,7 +6,7 @@ use crate::methods::MethodError;
 use crate::stages::analyse_exemplar::texture_feature_lines::TextureFeatureParams;
 use crate::stages::extract::shape_features::ShapeFeatureParams;
 use crate::stages::field::feature_field::FeatureFieldParams;
-use crate::stages::parameterize::edge_refinement::RefineParams;
+use crate::stages::parameterize::edge_refinement::{self, RefineParams};
 use crate::stages::reconstruct::feature_aligned_export::FeatureAlignedExportParams;
 use crate::stages::synthesize::texture_optimization::{self as opt, TextureOptimizationParams};
 use serde::{Deserialize, Serialize};
@@ -56,8 +56,11 @@ pub struct Inputs {
 pub(super) fn checked(config: &Config) -> Result<FeatureAlignedConfig, MethodError> {
     let mut c: FeatureAlignedConfig = config.parse()?;
     let (mesh, exemplar) = (&c.inputs.mesh, &c.inputs.exemplar);
-    crate::methods::resolve_scale(config, &mut c.parameterize.scale, mesh, exemplar)?;
+    let auto = crate::methods::resolve_scale(config, &mut c.parameterize.scale, mesh, exemplar);
     c.parameterize.validate().map_err(|e| config.param(e))?;
+    if let Some(mesh) = auto {
+        fit_auto_scale(&mesh, &mut c.parameterize);
+    }
     c.extract.validate().map_err(|e| config.param(e))?;
     c.analyse_exemplar.validate().map_err(|e| config.param(e))?;
     c.field.validate().map_err(|e| config.param(e))?;
@@ -65,6 +68,25 @@ pub(super) fn checked(config: &Config) -> Result<FeatureAlignedConfig, MethodErr
     c.reconstruct.validate().map_err(|e| config.param(e))?;
     crate::methods::checks::check_preview_memory(config, c.reconstruct.preview_size)?;
     Ok(c)
+}
+
+/// Lowers an automatic scale until the refined mesh should fit `parameterize.max_vertices`
+/// ([`edge_refinement::largest_scale_within_budget`]): "auto" asks for a texture of a sensible
+/// size, and a refusal would leave the user to find the number "auto" stands for. A scale
+/// the user gives is never changed; its refinement names the budget when it does not fit.
+fn fit_auto_scale(mesh: &crate::geom::Mesh, p: &mut RefineParams) {
+    let Some(fitted) = edge_refinement::largest_scale_within_budget(mesh, p.scale, p) else {
+        return;
+    };
+    if fitted < p.scale {
+        tracing::info!(
+            "parameterize.scale = \"auto\": lowered from {:.4} to {:.4} texels per unit, so the refined mesh fits parameterize.max_vertices = {} (the exemplar then spans more than a quarter of the diagonal)",
+            p.scale,
+            fitted,
+            p.max_vertices
+        );
+        p.scale = fitted;
+    }
 }
 
 /// Refuses a synthesis patch that does not fit the exemplar (read from its header; an
