@@ -20,7 +20,7 @@ use crate::config::Config;
 use crate::geom::Mesh;
 use crate::image::Image;
 use crate::pipeline::{Dag, NodeSpec, Stage};
-use crate::score::surface::GraphMatchingNodes;
+use crate::score::surface::{BakedAtlas, GraphMatchingNodes};
 use crate::stages::analyse_exemplar::gaussian_stack::{self, StackParams};
 use crate::stages::field::sweep_field::{self, SweepFieldParams};
 use crate::stages::parameterize::sqrt2_subdivision::{self, SubdivisionParams};
@@ -155,7 +155,10 @@ impl Method for GraphMatchingMethod {
             synthesize: colours,
             exemplar,
             scale: c.parameterize.scale,
-            atlas_lookup: (c.reconstruct.atlas_size > 0).then_some(c.reconstruct.lookup),
+            atlas: (c.reconstruct.atlas_size > 0).then_some(BakedAtlas {
+                size: c.reconstruct.atlas_size,
+                sampling: c.reconstruct.lookup,
+            }),
         };
         Ok((dag, Box::new(nodes)))
     }

@@ -59,14 +59,28 @@ pub struct GraphMatchingNodes {
     pub exemplar: Handle<Image>,
     /// `parameterize.scale`: exemplar texels per object unit.
     pub scale: f32,
-    /// `reconstruct.lookup` when the run bakes an atlas (`reconstruct.atlas_size` > 0), so the
-    /// score sees what the atlas holds; `None`: no atlas.
-    pub atlas_lookup: Option<ExemplarSampling>,
+    /// The atlas the run bakes, so the score sees what it holds; `None`: no atlas
+    /// (`reconstruct.atlas_size = 0`).
+    pub atlas: Option<BakedAtlas>,
+}
+
+/// Graph matching's baked atlas as the run asks for it.
+#[derive(Clone, Copy)]
+pub struct BakedAtlas {
+    /// `reconstruct.atlas_size`: the export falls back to vertex colours when the input
+    /// mesh's triangles do not fit it, and then there is no baked texture to score.
+    pub size: u32,
+    /// `reconstruct.lookup`.
+    pub sampling: ExemplarSampling,
 }
 
 impl super::Planned for GraphMatchingNodes {
-    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
-        graph_matching(run, self)
+    fn score(
+        &self,
+        run: &Run<'_>,
+        not_scored: &mut Vec<String>,
+    ) -> Result<Vec<Item>, ScoreFailure> {
+        graph_matching(run, self, not_scored)
     }
 }
 
@@ -74,7 +88,13 @@ impl super::Planned for GraphMatchingNodes {
 /// when the run bakes an atlas, the texture that atlas holds (the exemplar read inside each
 /// copied patch, each corner's patch continued and blended across seams), through the same
 /// discs.
-pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Vec<Item>, ScoreFailure> {
+/// When the atlas cannot be built (the export wrote vertex colours instead), the reason goes
+/// to `not_scored`.
+pub fn graph_matching(
+    run: &Run,
+    nodes: &GraphMatchingNodes,
+    not_scored: &mut Vec<String>,
+) -> Result<Vec<Item>, ScoreFailure> {
     let scale = nodes.scale;
     let h = run.view(nodes.parameterize)?;
     let field = run.view(nodes.field)?;
@@ -109,7 +129,8 @@ pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Vec<Item>
     );
     // §3.2.2, Fig. 6: the face areas' spread before and after adaptive pre-subdivision (the
     // hierarchy's coarsest level), so a sweep over parameterize.area_factor tabulates it.
-    let input = PolyMesh::from_mesh(&run.view(nodes.mesh)?);
+    let input_mesh = run.view(nodes.mesh)?;
+    let input = PolyMesh::from_mesh(&input_mesh);
     let coarse = h.level(0);
     item.extra.insert(
         "area_spread_input".into(),
@@ -123,7 +144,17 @@ pub fn graph_matching(run: &Run, nodes: &GraphMatchingNodes) -> Result<Vec<Item>
         "coarse_faces".into(),
         serde_json::json!(coarse.face_count()),
     );
-    let baked = nodes.atlas_lookup.map(|sampling| {
+    let atlas = nodes.atlas.filter(|a| {
+        let built = crate::render::build_atlas(&input_mesh, a.size);
+        if let Err(e) = &built {
+            not_scored.push(format!(
+                "the baked atlas: reconstruct.atlas_size: {e}; the run wrote vertex colours instead"
+            ));
+        }
+        built.is_ok()
+    });
+    let baked = atlas.map(|a| {
+        let sampling = a.sampling;
         let mut baked = Item::new(
             format!("the baked atlas (the exemplar read inside each copied patch), {DISCS_NOTE}"),
             "inputs.exemplar",
