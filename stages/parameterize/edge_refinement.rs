@@ -51,34 +51,44 @@ impl RefineParams {
 }
 
 /// Vertices per unit area that [`refine_edges`] makes, for edges of at most 1 unit: at
-/// least [`FEWEST_PER_AREA`], since a triangle with edges ≤ 1 has area ≤ √3/4 and a closed
-/// mesh has half as many vertices as triangles; usually at most [`MOST_PER_AREA`], since
-/// halving stops once an edge is at most the limit, so edges end between half of it and all
-/// of it (an equilateral mesh of edge ½ has 4.6). Measured on the shared meshes at 100–300
-/// texels per unit: 2.6–5.0, and above 6 where splitting skinny faces makes skinnier ones.
+/// least this, since a triangle with edges ≤ 1 has area ≤ √3/4 and a closed mesh has half as
+/// many vertices as triangles. (Measured on the shared meshes at 100–300 texels per unit:
+/// 2.6–5.0, and above 6 where splitting skinny faces makes skinnier ones; a needle of
+/// almost no area makes far more, so no area estimate can say that a scale fits.)
 const FEWEST_PER_AREA: f64 = 1.15;
-const MOST_PER_AREA: f64 = 6.0;
 
-/// A scale at most `scale` whose refinement fits `p.max_vertices`, close to the largest:
-/// `scale` itself when the area estimate says it fits even at [`MOST_PER_AREA`]; otherwise
-/// found by refining, starting from the largest scale that fits at [`FEWEST_PER_AREA`] and
-/// lowering by the overshoot each refusal reports. `None` when even the input's vertices do
-/// not fit. Cost: a few refinements up to the budget, only for a scale that may not fit.
+/// Refusals before giving up; each lowers the scale by at least a tenth.
+const MAX_TRIES: usize = 64;
+
+/// A scale at most `scale` whose refinement fits `p.max_vertices`, close to the largest.
+/// Every answer is checked by refining: the first try is the largest scale that can fit by
+/// the area bound [`FEWEST_PER_AREA`] (or, when the input alone fills the budget, the largest
+/// at which no edge is split), and each refusal lowers it by the overshoot it reports. `None`
+/// when no tried scale fits. Cost: at least one refinement up to the budget (0.1–1 s at a
+/// million vertices), paid wherever the scale is resolved (`run`, `plan`, `score`).
 pub fn largest_scale_within_budget(mesh: &Mesh, scale: f32, p: &RefineParams) -> Option<f32> {
     let area: f64 = (0..mesh.face_count())
         .map(|f| 0.5 * mesh.face_normal_unnormalized(f).length() as f64)
         .sum();
-    let room = p.max_vertices as f64 - mesh.vertex_count() as f64;
-    if room <= 0.0 {
-        return None;
-    }
+    let room = (p.max_vertices as f64 - mesh.vertex_count() as f64).max(0.0);
     let texels2 = area / (p.edge as f64 * p.edge as f64);
-    let fits_at = |per_area: f64| (room / (per_area * texels2)).sqrt() as f32;
-    if scale <= fits_at(MOST_PER_AREA) {
-        return Some(scale);
-    }
-    let mut s = scale.min(fits_at(FEWEST_PER_AREA));
-    for _ in 0..64 {
+    let by_area = (room / (FEWEST_PER_AREA * texels2)).sqrt() as f32;
+    let longest = (mesh.triangles.iter())
+        .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+        .map(|(a, b)| mesh.positions[a as usize].distance(mesh.positions[b as usize]))
+        .fold(0.0f32, f32::max);
+    // A hair below `edge / longest`, so that rounding in `edge / scale` splits nothing.
+    let unsplit = if longest > 0.0 {
+        p.edge / longest * (1.0 - 1e-5)
+    } else {
+        f32::INFINITY
+    };
+    // NaN (no area and no room) compares false in `max`, which keeps `unsplit`.
+    let mut s = scale.min(by_area.max(unsplit));
+    for _ in 0..MAX_TRIES {
+        if !(s.is_finite() && s > 0.0) {
+            return None;
+        }
         match refine_edges(mesh, p.edge / s, p.max_vertices as usize) {
             Err(RefineError::TooManyVertices { have, adding, .. }) => {
                 // At least the refused count is needed; vertices grow with the scale².
@@ -89,7 +99,7 @@ pub fn largest_scale_within_budget(mesh: &Mesh, scale: f32, p: &RefineParams) ->
             _ => return Some(s),
         }
     }
-    Some(s)
+    None
 }
 
 /// The parameterize node: the refined mesh, each edge at most `edge / scale` long.
@@ -137,19 +147,49 @@ mod tests {
         }
     }
 
-    /// A scale that fits is kept; a mesh with more vertices than the budget has no scale.
+    /// A scale that fits is kept. Meshes whose area says nothing of their refinement (a
+    /// needle, a sheet squashed to almost no height) still get a scale that refines within
+    /// the budget: each answer is checked, not estimated. A mesh that alone fills the budget
+    /// gets the largest scale that splits none of its edges, which the node accepts.
     #[test]
-    fn a_scale_that_fits_is_kept_and_a_mesh_over_the_budget_has_none() {
-        let mesh = icosphere(1);
+    fn every_answer_refines_within_the_budget_even_where_the_area_misleads() {
         let p = RefineParams {
             max_vertices: 20_000,
             ..RefineParams::default()
         };
-        assert_eq!(largest_scale_within_budget(&mesh, 5.0, &p), Some(5.0));
-        let p = RefineParams {
+        assert_eq!(
+            largest_scale_within_budget(&icosphere(1), 5.0, &p),
+            Some(5.0)
+        );
+        let mut squashed = crate::geom::primitives::grid(40, 1.0);
+        for v in &mut squashed.positions {
+            v.y *= 1e-3;
+        }
+        let needle = cuboid(Vec3::new(100.0, 0.01, 0.01));
+        for (mesh, scale, budget) in [(&squashed, 10.0, 20_000), (&needle, 5.0, 1000)] {
+            let p = RefineParams {
+                max_vertices: budget,
+                ..p
+            };
+            assert!(refine_edges(mesh, p.edge / scale, budget as usize).is_err());
+            let fitted = largest_scale_within_budget(mesh, scale, &p).unwrap();
+            assert!(fitted < scale);
+            refine_edges(mesh, p.edge / fitted, budget as usize)
+                .unwrap_or_else(|e| panic!("scale {fitted}: {e}"));
+        }
+        let full = RefineParams {
             max_vertices: 10,
             ..p
         };
-        assert_eq!(largest_scale_within_budget(&mesh, 5.0, &p), None);
+        let mesh = icosphere(1);
+        let s = largest_scale_within_budget(&mesh, 5.0, &full).unwrap();
+        let same = refine_edges(&mesh, full.edge / s, 10).unwrap();
+        assert_eq!(same.mesh.vertex_count(), mesh.vertex_count());
+        let finer = refine_edges(&mesh, full.edge / (1.01 * s), 10);
+        assert!(
+            finer.is_err(),
+            "scale {s}: {:?}",
+            finer.map(|r| r.mesh.vertex_count())
+        );
     }
 }

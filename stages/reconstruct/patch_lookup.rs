@@ -22,12 +22,12 @@ use serde::{Deserialize, Serialize};
 /// averages up to four texels: at a half-texel offset it is a 2×2 box filter. Measured along
 /// the surface (`texsyn score`, gradient ratio / nearest-patch ratio): on a flat sheet with
 /// one straight curve and wood2, bilinear keeps 0.53 of the exemplar's gradient energy
-/// (ratio 1.15), nearest 0.92 (0.85); on fandisk with brick 0.51 → 0.90 at a ratio of
-/// 0.80 → 0.88, where nearest reads show the exemplar's texel staircase wherever the field
-/// turns a patch against its grid. Nearest copies the exemplar's texels themselves, as the
-/// discrete pass gives each vertex one; bilinear is the smoother resampling. Bicubic lies
-/// between: fandisk 0.62 at a ratio of 0.82, the cow's graph-matching atlas 0.82 at 0.92
-/// (bilinear 0.69 at 0.88, nearest 1.01 at 0.98).
+/// (ratio 1.15), nearest 0.92 (0.85); on fandisk with brick bilinear keeps 0.47 at a ratio of
+/// 0.78 and nearest 0.92 at 0.88, where nearest reads show the exemplar's texel staircase
+/// wherever the field turns a patch against its grid. Nearest copies the exemplar's texels
+/// themselves, as the discrete pass gives each vertex one; bilinear is the smoother
+/// resampling. Bicubic lies between: fandisk 0.62 at a ratio of 0.82, the cow's
+/// graph-matching atlas 0.82 at 0.92 (bilinear 0.69 at 0.88, nearest 1.01 at 0.98).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ExemplarSampling {
@@ -73,12 +73,13 @@ fn catmull_rom(t: f32) -> [f32; 4] {
 fn bicubic(exemplar: crate::image::ImageView, at: glam::Vec2) -> [f32; 4] {
     let (x0, y0) = (at.x.floor(), at.y.floor());
     let (wx, wy) = (catmull_rom(at.x - x0), catmull_rom(at.y - y0));
-    let (x0, y0) = (x0 as i64 - 1, y0 as i64 - 1);
+    // `as` saturates a huge or infinite address; the steps from it saturate too.
+    let (x0, y0) = ((x0 as i64).saturating_sub(1), (y0 as i64).saturating_sub(1));
     let mut sum = [0.0f32; 4];
     let (mut lo, mut hi) = ([f32::INFINITY; 4], [f32::NEG_INFINITY; 4]);
     for (j, wy) in wy.iter().enumerate() {
         for (i, wx) in wx.iter().enumerate() {
-            let c = exemplar.get_clamped(x0 + i as i64, y0 + j as i64);
+            let c = exemplar.get_clamped(x0.saturating_add(i as i64), y0.saturating_add(j as i64));
             for k in 0..4 {
                 sum[k] += wx * wy * c[k];
                 lo[k] = lo[k].min(c[k]);
@@ -514,22 +515,46 @@ mod tests {
             assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-6, "{t}: {w:?}");
         }
         let grey = |v: f32| [v, v, v, 1.0];
-        let ramp = crate::image::Image::from_fn(8, 3, |x, _| grey(x as f32 / 8.0));
-        let step = crate::image::Image::from_fn(8, 3, |x, _| grey(if x < 4 { 0.0 } else { 1.0 }));
-        let read = |img: &crate::image::Image, s: ExemplarSampling, x: f32| {
-            s.read(img.view(), glam::Vec2::new(x, 1.0))[0]
+        // Each profile runs along x and, transposed, along y, read off the other axis's
+        // texel centres: a read that mixes up the axes, or the rows, fails one of the two.
+        let along = |f: fn(u32) -> f32| {
+            [
+                crate::image::Image::from_fn(8, 4, move |x, _| grey(f(x))),
+                crate::image::Image::from_fn(4, 8, move |_, y| grey(f(y))),
+            ]
         };
+        let reads = |imgs: &[crate::image::Image; 2], s: ExemplarSampling, t: f32| {
+            [
+                s.read(imgs[0].view(), glam::Vec2::new(t, 1.37))[0],
+                s.read(imgs[1].view(), glam::Vec2::new(1.37, t))[0],
+            ]
+        };
+        let ramp = along(|x| x as f32 / 8.0);
+        let step = along(|x| if x < 4 { 0.0 } else { 1.0 });
         for x in [2.0f32, 2.3, 3.5, 4.75] {
-            let got = read(&ramp, ExemplarSampling::Bicubic, x);
-            assert!((got - x / 8.0).abs() < 1e-5, "ramp at {x}: {got}");
+            for got in reads(&ramp, ExemplarSampling::Bicubic, x) {
+                assert!((got - x / 8.0).abs() < 1e-5, "ramp at {x}: {got}");
+            }
         }
-        assert_eq!(read(&step, ExemplarSampling::Bicubic, 3.0), 0.0);
-        assert_eq!(read(&step, ExemplarSampling::Bicubic, 4.0), 1.0);
-        let bilinear = read(&step, ExemplarSampling::Bilinear, 3.25);
-        let bicubic = read(&step, ExemplarSampling::Bicubic, 3.25);
-        assert!((bilinear - 0.25).abs() < 1e-6, "{bilinear}");
-        assert!((0.0..0.23).contains(&bicubic), "{bicubic}");
+        let bicubic = |t| reads(&step, ExemplarSampling::Bicubic, t);
+        assert_eq!(bicubic(3.0), [0.0, 0.0]);
+        assert_eq!(bicubic(4.0), [1.0, 1.0]);
+        for (bilinear, bicubic) in reads(&step, ExemplarSampling::Bilinear, 3.25)
+            .into_iter()
+            .zip(bicubic(3.25))
+        {
+            assert!((bilinear - 0.25).abs() < 1e-6, "{bilinear}");
+            assert!((0.0..0.23).contains(&bicubic), "{bicubic}");
+        }
         // Past the step the cubic overshoots below 0 and is kept at the texels' range.
-        assert_eq!(read(&step, ExemplarSampling::Bicubic, 2.5), 0.0);
+        assert_eq!(bicubic(2.5), [0.0, 0.0]);
+        // The range is the sixteen texels', not the nearest four's: with the four outer
+        // corners lit, a read at the centre is (w₋₁ + w₂)² = 1/64, where the middle 2×2 is
+        // all zero.
+        let corners = crate::image::Image::from_fn(4, 4, |x, y| {
+            grey(if x % 3 == 0 && y % 3 == 0 { 1.0 } else { 0.0 })
+        });
+        let centre = ExemplarSampling::Bicubic.read(corners.view(), glam::Vec2::new(1.5, 1.5));
+        assert!((centre[0] - 1.0 / 64.0).abs() < 1e-6, "{centre:?}");
     }
 }

@@ -91,11 +91,13 @@ impl<'a> ImageView<'a> {
         let y0 = p.y.floor();
         let fx = p.x - x0;
         let fy = p.y - y0;
+        // `as` saturates a huge or infinite address; the neighbour saturates too.
         let (x0, y0) = (x0 as i64, y0 as i64);
+        let (x1, y1) = (x0.saturating_add(1), y0.saturating_add(1));
         let a = self.get_clamped(x0, y0);
-        let b = self.get_clamped(x0 + 1, y0);
-        let c = self.get_clamped(x0, y0 + 1);
-        let d = self.get_clamped(x0 + 1, y0 + 1);
+        let b = self.get_clamped(x1, y0);
+        let c = self.get_clamped(x0, y1);
+        let d = self.get_clamped(x1, y1);
         let mut out = [0.0; 4];
         for k in 0..4 {
             let top = a[k] + (b[k] - a[k]) * fx;

@@ -70,7 +70,7 @@ pub(super) fn checked(config: &Config) -> Result<FeatureAlignedConfig, MethodErr
     Ok(c)
 }
 
-/// Lowers an automatic scale until the refined mesh should fit `parameterize.max_vertices`
+/// Lowers an automatic scale until the refined mesh fits `parameterize.max_vertices`
 /// ([`edge_refinement::largest_scale_within_budget`]): "auto" asks for a texture of a sensible
 /// size, and a refusal would leave the user to find the number "auto" stands for. A scale
 /// the user gives is never changed; its refinement names the budget when it does not fit.
