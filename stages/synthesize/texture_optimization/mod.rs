@@ -19,11 +19,13 @@
 //!   cover it say it should be: `E(z_p + R·(s_qp, t_qp))`, the exemplar bilinearly looked up at
 //!   the vertex's exact offset `(s, t)` in the sample's frame, rotated onto the exemplar.
 //!
-//! A vertex `q`'s offset in sample `p`'s patch is `((q − p)·u_p, (q − p)·v_p) / texel_size` with
-//! `u_p` the field projected into `p`'s tangent plane and `v_p = n_p × u_p`; the patch holds
-//! the vertices found by a breadth-first walk over edges from `p` that stay within a Euclidean
-//! distance `(w/2)·√2` texels of `p` (so the walk follows the surface and does not jump across
-//! thin gaps) and whose offsets satisfy `|s|, |t| ≤ w/2`.
+//! Sample `p`'s patch is unfolded in its frame (`u_p` the field projected into `p`'s tangent
+//! plane, `v_p = n_p × u_p`) by a breadth-first walk over edges from `p` that stay within a
+//! Euclidean distance `(w/2)·√2` texels of `p` (so the walk follows the surface and does not
+//! jump across thin gaps): each edge steps a vertex's offset `(s, t)` by its own length over
+//! `texel_size`, in its direction in the frame carried to the edge's first end, and the frame
+//! turns with the normal along the edge (a discrete exponential map; `patches.rs` says why
+//! not a projection onto `p`'s plane). The patch holds the vertices with `|s|, |t| ≤ w/2`.
 //!
 //! The samples X† (§5.1, after Chen et al. 2009) are picked greedily in a priority order: a
 //! vertex becomes a sample unless an earlier sample lies within `r·w` texels of it (r =
@@ -151,7 +153,7 @@ pub use run::texture_optimization;
 
 /// The `texture_optimization` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("texture_optimization", 2);
+    texsyn_core::algorithm::Algorithm::new("texture_optimization", 3);
 
 #[cfg(test)]
 mod tests {

@@ -91,6 +91,23 @@ pub(super) struct Frames<'a> {
     pub(super) v: &'a [Vec3],
 }
 
+/// A vertex's place in a patch: its offset from the sample in texels, and the sample's frame
+/// carried to it.
+#[derive(Clone, Copy)]
+struct Carried {
+    at: glam::Vec2,
+    u: Vec3,
+    v: Vec3,
+}
+
+/// Each sample's patch, unfolded from the sample outward over the edges (a discrete
+/// exponential map, as `texsyn score` unfolds its discs): an edge steps the offset by its own
+/// length, in the direction it has in the frame carried to its first end, and the frame turns
+/// with the normal from one end to the other. Projecting each vertex onto the sample's
+/// tangent plane instead shortens every offset across a crease by the cosine of the turn, so
+/// a patch reaching over a 60–80° crease (fandisk's) laid a column of the far face's vertices
+/// on almost one exemplar texel: the narrow faces showed the exemplar streaked across them.
+/// On a plane both agree.
 pub(super) fn gather_patches(
     mesh: &Mesh,
     frames: &Frames,
@@ -104,25 +121,35 @@ pub(super) fn gather_patches(
     let half = level.extent() * 0.5;
     let radius = half * std::f32::consts::SQRT_2 * texel_size * 1.001;
     let r2 = radius * radius;
+    let unit = |x: Vec3| x.try_normalize().unwrap_or(Vec3::Z);
+    let none = Carried {
+        at: glam::Vec2::ZERO,
+        u: Vec3::ZERO,
+        v: Vec3::ZERO,
+    };
     let per_sample: Vec<(Vec<u32>, Vec<[f32; 2]>)> = samples
         .par_iter()
         .map_init(
-            || (vec![u32::MAX; n], VecDeque::new()),
-            |(stamp, queue), &p| {
+            || (vec![u32::MAX; n], vec![none; n], VecDeque::new()),
+            |(stamp, carried, queue), &p| {
                 let p = p as usize;
-                let (np, up, vp) = (frames.normals[p], frames.u[p], frames.v[p]);
+                let np = frames.normals[p];
                 let mut verts = Vec::new();
                 let mut offs = Vec::new();
                 queue.clear();
                 queue.push_back(p);
                 // Samples are distinct vertices, so a sample's own index marks its visits.
                 stamp[p] = p as u32;
+                carried[p] = Carried {
+                    at: glam::Vec2::ZERO,
+                    u: frames.u[p],
+                    v: frames.v[p],
+                };
                 while let Some(a) = queue.pop_front() {
-                    let d = pos[a] - pos[p];
-                    let o = [d.dot(up) / texel_size, d.dot(vp) / texel_size];
-                    if o[0].abs() <= half && o[1].abs() <= half {
+                    let c = carried[a];
+                    if c.at.x.abs() <= half && c.at.y.abs() <= half {
                         verts.push(a as u32);
-                        offs.push(o);
+                        offs.push(c.at.to_array());
                     }
                     for &b in adj.neighbors(a) {
                         let b = b as usize;
@@ -133,6 +160,18 @@ pub(super) fn gather_patches(
                             continue;
                         }
                         stamp[b] = p as u32;
+                        let d = pos[b] - pos[a];
+                        let dir = glam::Vec2::new(d.dot(c.u), d.dot(c.v));
+                        let step = dir.normalize_or_zero() * (d.length() / texel_size);
+                        let turn = glam::Quat::from_rotation_arc(
+                            unit(frames.normals[a]),
+                            unit(frames.normals[b]),
+                        );
+                        carried[b] = Carried {
+                            at: c.at + step,
+                            u: turn * c.u,
+                            v: turn * c.v,
+                        };
                         queue.push_back(b);
                     }
                 }
@@ -190,4 +229,48 @@ pub(super) struct SampleInfo {
     pub(super) lambda: Vec<f32>,
     /// Curve distance in texels of constrained samples that have candidates; None otherwise.
     pub(super) constraint: Vec<Option<f32>>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sheet bent by 60° along the line x = 0: a patch of a sample on the flat half reaches
+    /// over the crease with the far half unfolded, at the offsets its vertices have along the
+    /// surface. A projection onto the sample's plane would put the far vertex at 1 + 2·cos 60°
+    /// = 2 texels instead of 3.
+    #[test]
+    fn a_patch_over_a_crease_is_unfolded_not_projected() {
+        let (half, bend) = (10usize, 60f32.to_radians());
+        let mut mesh = crate::geom::primitives::grid(2 * half + 1, 0.5);
+        for p in &mut mesh.positions {
+            let x = p.x - half as f32 * 0.5;
+            *p = if x <= 0.0 {
+                Vec3::new(x, p.y, 0.0)
+            } else {
+                Vec3::new(x * bend.cos(), p.y, x * bend.sin())
+            };
+        }
+        let field = vec![Vec3::X; mesh.vertex_count()];
+        let (normals, u, v) = tangent_frames(&mesh, &field);
+        let frames = Frames {
+            normals: &normals,
+            u: &u,
+            v: &v,
+        };
+        // Grid vertex (i, j) is at index j·n + i; x = 0 is column `half`, 0.5 apart.
+        let n = 2 * half + 1;
+        let (sample, far) = (half * n + half - 2, half * n + half + 4);
+        let level = Level { w: 9, step: 1.0 };
+        let patches = gather_patches(&mesh, &frames, &[sample as u32], level, 1.0);
+        let at = |q: usize| {
+            let e = (patches.vertex.iter())
+                .position(|&x| x as usize == q)
+                .expect("in the patch");
+            patches.offset[e]
+        };
+        assert_eq!(at(sample), [0.0, 0.0]);
+        let [s, t] = at(far);
+        assert!((s - 3.0).abs() < 0.05 && t.abs() < 0.05, "({s}, {t})");
+    }
 }
