@@ -219,11 +219,20 @@ pub struct FeatureAlignedNodes {
     pub scale: f32,
     /// `reconstruct.lookup`: how the atlas reads the exemplar, so the score sees what it holds.
     pub lookup: ExemplarSampling,
+    /// The input mesh and `reconstruct.atlas_size`: without an atlas (size 0, or triangles
+    /// the atlas cannot hold) the run writes the refined mesh's vertex colours, and those are
+    /// what is scored.
+    pub mesh: Handle<Mesh>,
+    pub atlas_size: u32,
 }
 
 impl super::Planned for FeatureAlignedNodes {
-    fn score(&self, run: &Run<'_>, _: &mut Vec<String>) -> Result<Vec<Item>, ScoreFailure> {
-        feature_aligned(run, self)
+    fn score(
+        &self,
+        run: &Run<'_>,
+        not_scored: &mut Vec<String>,
+    ) -> Result<Vec<Item>, ScoreFailure> {
+        feature_aligned(run, self, not_scored)
     }
 }
 
@@ -236,8 +245,26 @@ impl super::Planned for FeatureAlignedNodes {
 ///
 /// The field's vectors are carried from the input mesh onto the refined one, as synthesis
 /// carried them.
-pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Item>, ScoreFailure> {
+///
+/// Without an atlas the refined mesh's vertex colours are scored, interpolated across its
+/// triangles, as textured.glb's `COLOR_0` shows them; why goes to `not_scored`.
+pub fn feature_aligned(
+    run: &Run,
+    nodes: &FeatureAlignedNodes,
+    not_scored: &mut Vec<String>,
+) -> Result<Vec<Item>, ScoreFailure> {
     let scale = nodes.scale;
+    let baked = match nodes.atlas_size {
+        0 => Err("reconstruct.atlas_size = 0".to_string()),
+        size => crate::render::build_atlas(&run.view(nodes.mesh)?, size)
+            .map_err(|e| format!("reconstruct.atlas_size: {e}")),
+    };
+    if let Err(why) = &baked {
+        not_scored.push(format!(
+            "the atlas: {why}; the run wrote the refined mesh's vertex colours, scored instead"
+        ));
+    }
+    let baked = baked.is_ok();
     let refined = run.view(nodes.parameterize)?;
     let field = run.view(nodes.field)?;
     let tf = run.view(nodes.analyse_exemplar)?;
@@ -272,10 +299,20 @@ pub fn feature_aligned(run: &Run, nodes: &FeatureAlignedNodes) -> Result<Vec<Ite
         let colours = &out.colours;
         let shade = |f: usize, b: Vec3| {
             let vertex = |v: u32| Vec3::from(colours[v as usize]);
-            let c = lookup.texture_colour(f, mesh.triangles[f], b.to_array(), vertex);
+            let c = if baked {
+                lookup.texture_colour(f, mesh.triangles[f], b.to_array(), vertex)
+            } else {
+                let t = mesh.triangles[f];
+                (0..3).map(|k| b[k] * vertex(t[k])).sum()
+            };
             [c.x, c.y, c.z, 1.0]
         };
-        let mut item = Item::new(format!("{what}, {DISCS_NOTE}"), "inputs.exemplar");
+        let holds = if baked {
+            "as the atlas holds it"
+        } else {
+            "as the vertex colours hold it"
+        };
+        let mut item = Item::new(format!("{what} {holds}, {DISCS_NOTE}"), "inputs.exemplar");
         // Where the principal line should run: along the field (texture optimization lays the
         // exemplar's `principal_angle` along it), measured on the surface; the exemplar's own
         // measure at its principal angle is the floor.

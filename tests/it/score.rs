@@ -445,6 +445,37 @@ fn feature_aligned_stripes_follow_the_field_on_a_sheet_and_a_cylinder() {
         bilinear.1 < nearest.1,
         "bilinear {bilinear:?}, nearest {nearest:?}"
     );
+    // Without an atlas the run writes vertex colours, and those are scored: smoother than
+    // the nearest reads between vertices, with the reason named.
+    let v = json(&texsyn(
+        &[
+            "score",
+            "sheet.toml",
+            "--cache",
+            "c",
+            "--json",
+            "-q",
+            "--set",
+            "reconstruct.lookup=\"nearest\"",
+            "--set",
+            "compare=false",
+            "--set",
+            "reconstruct.atlas_size=0",
+        ],
+        d.path(),
+    ));
+    let item = &v["items"][0];
+    assert!(
+        item["output"].as_str().unwrap().contains("vertex colours"),
+        "{item}"
+    );
+    let plain = item["score"]["gradient_ratio"].as_f64().unwrap();
+    assert!(
+        plain < nearest.1,
+        "vertex colours {plain}, nearest {nearest:?}"
+    );
+    let reason = v["not_scored"].to_string();
+    assert!(reason.contains("reconstruct.atlas_size"), "{reason}");
 
     let cylinder = grid_obj(40, 24, true, |i, j| {
         let a = i as f32 / 40.0 * std::f32::consts::TAU;

@@ -143,7 +143,7 @@ impl Method for FeatureAligned {
                 Ok(Bundle::from(files))
             },
         );
-        let mut synthesize = vec![(aligned, "the aligned texture as the atlas holds it")];
+        let mut synthesize = vec![(aligned, "the aligned texture")];
         synthesize.extend(unaligned.map(|u| (u, "the unaligned comparison's texture")));
         let nodes = FeatureAlignedNodes {
             parameterize: refined,
@@ -153,6 +153,8 @@ impl Method for FeatureAligned {
             synthesize,
             scale: c.parameterize.scale,
             lookup: c.reconstruct.lookup,
+            mesh,
+            atlas_size: c.reconstruct.atlas_size,
         };
         Ok((dag, Box::new(nodes)))
     }

@@ -122,8 +122,10 @@
 //!   changed. Initially every vertex takes the colour its nearest sample's random patch gives
 //!   it (pieces of exemplar pasted side by side), not the mean of the random patches: the
 //!   mean is a grey blur from which the first search finds no structure to lock on to.
-//! - Vertices no patch covers (only possible with `sample_spacing > 0.5`, whose spacing exceeds
-//!   the patch half-width) take the colour and source of the nearest covered vertex in edge
+//! - Vertices no patch covers (on a plane only with `sample_spacing > 0.5`, whose spacing
+//!   exceeds the patch half-width; across creases from about 0.4, since samples are spaced by
+//!   straight distance and patches by unfolded distance, which is longer) take the colour and
+//!   source of the nearest covered vertex in edge
 //!   hops, and are counted. Vertices used by no triangle get the exemplar's mean colour and the
 //!   source `[-1, -1]`.
 //! - The field is projected into each vertex's tangent plane; where it vanishes there, an

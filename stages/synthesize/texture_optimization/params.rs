@@ -17,8 +17,8 @@ pub struct TextureOptimizationParams {
     /// level sees 30 texels, Kwatra's large-patch pass.
     pub patch: u32,
     /// The paper's `r`: samples are at most `r·w` texels apart, 0.05..=1. Default: 0.25
-    /// (the paper's value; each vertex is then covered by about 16 patches). Above 0.5 some
-    /// vertices may be covered by no patch.
+    /// (the paper's value; each vertex is then covered by about 16 patches). Above 0.5 (about
+    /// 0.4 across creases) some vertices may be covered by no patch.
     pub sample_spacing: f32,
     /// Kwatra's robust exponent `r` in `ω_p = |x_p − z_p|^(r−2)`, 0.1..=2 (2 = plain least
     /// squares). Default: 0.8 (Kwatra 2005 §3.1).
