@@ -52,20 +52,31 @@ impl RefineParams {
 
 /// Vertices per unit area that [`refine_edges`] makes, for edges of at most 1 unit: at
 /// least this, since a triangle with edges ≤ 1 has area ≤ √3/4 and a closed mesh has half as
-/// many vertices as triangles. (Measured on the shared meshes at 100–300 texels per unit:
-/// 2.6–5.0, and above 6 where splitting skinny faces makes skinnier ones; a needle of
-/// almost no area makes far more, so no area estimate can say that a scale fits.)
+/// many vertices as triangles.
 const FEWEST_PER_AREA: f64 = 1.15;
+
+/// Vertices per unit area that [`refine_edges`] usually makes at most: measured on the shared
+/// meshes at 100–300 texels per unit, 2.6–5.0, and above 6 where splitting skinny faces
+/// makes skinnier ones. Area alone misjudges a needle or a squashed sheet (little area, long
+/// edges), so the quick acceptance also counts the splits along the input's own edges.
+const MOST_PER_AREA: f64 = 6.0;
+
+/// A refinement estimated to need at most this share of the budget is accepted without
+/// refining, so planning stays cheap for the common case (a scale far inside the budget).
+const QUICK_SHARE: f64 = 0.5;
 
 /// Refusals before giving up; each lowers the scale by at least a tenth.
 const MAX_TRIES: usize = 64;
 
 /// A scale at most `scale` whose refinement fits `p.max_vertices`, close to the largest.
-/// Every answer is checked by refining: the first try is the largest scale that can fit by
-/// the area bound [`FEWEST_PER_AREA`] (or, when the input alone fills the budget, the largest
-/// at which no edge is split), and each refusal lowers it by the overshoot it reports. `None`
-/// when no tried scale fits. Cost: at least one refinement up to the budget (0.1–1 s at a
-/// million vertices), paid wherever the scale is resolved (`run`, `plan`, `score`).
+/// `scale` itself when the estimate ([`MOST_PER_AREA`] of the area, plus the splits along
+/// every input edge, each edge counted once per triangle) needs at most [`QUICK_SHARE`] of
+/// the room; otherwise every answer is checked by refining: the first try is the largest
+/// scale that can fit by the area bound [`FEWEST_PER_AREA`] (or, when the input alone fills
+/// the budget, the largest at which no edge is split), and each refusal lowers it by the
+/// overshoot it reports. `None` when no tried scale fits. Cost: nothing for a scale far
+/// inside the budget; otherwise a refinement up to the budget per try (0.1–1 s at a million
+/// vertices), paid wherever the scale is resolved (`run`, `plan`, `score`).
 pub fn largest_scale_within_budget(mesh: &Mesh, scale: f32, p: &RefineParams) -> Option<f32> {
     let area: f64 = (0..mesh.face_count())
         .map(|f| 0.5 * mesh.face_normal_unnormalized(f).length() as f64)
@@ -73,10 +84,20 @@ pub fn largest_scale_within_budget(mesh: &Mesh, scale: f32, p: &RefineParams) ->
     let room = (p.max_vertices as f64 - mesh.vertex_count() as f64).max(0.0);
     let texels2 = area / (p.edge as f64 * p.edge as f64);
     let by_area = (room / (FEWEST_PER_AREA * texels2)).sqrt() as f32;
-    let longest = (mesh.triangles.iter())
-        .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
-        .map(|(a, b)| mesh.positions[a as usize].distance(mesh.positions[b as usize]))
-        .fold(0.0f32, f32::max);
+    let edge_lengths = || {
+        (mesh.triangles.iter())
+            .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+            .map(|(a, b)| mesh.positions[a as usize].distance(mesh.positions[b as usize]))
+    };
+    let longest = edge_lengths().fold(0.0f32, f32::max);
+    let limit = (p.edge / scale) as f64;
+    let along_edges: f64 = edge_lengths()
+        .map(|l| (l as f64 / limit).ceil().max(1.0) - 1.0)
+        .sum();
+    let estimate = MOST_PER_AREA * area / (limit * limit) + along_edges;
+    if estimate.is_finite() && estimate <= QUICK_SHARE * room {
+        return Some(scale);
+    }
     // A hair below `edge / longest`, so that rounding in `edge / scale` splits nothing.
     let unsplit = if longest > 0.0 {
         p.edge / longest * (1.0 - 1e-5)
