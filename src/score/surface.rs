@@ -144,15 +144,17 @@ pub fn graph_matching(
         "coarse_faces".into(),
         serde_json::json!(coarse.face_count()),
     );
-    let atlas = nodes.atlas.filter(|a| {
-        let built = crate::render::build_atlas(&input_mesh, a.size);
-        if let Err(e) = &built {
-            not_scored.push(format!(
-                "the baked atlas: reconstruct.atlas_size: {e}; the run wrote vertex colours instead"
-            ));
-        }
-        built.is_ok()
-    });
+    let atlas = nodes
+        .atlas
+        .filter(|a| match atlas_written(&input_mesh, a.size) {
+            Ok(()) => true,
+            Err(why) => {
+                not_scored.push(format!(
+                    "the baked atlas: {why}; the run wrote vertex colours instead"
+                ));
+                false
+            }
+        });
     let baked = atlas.map(|a| {
         let sampling = a.sampling;
         let mut baked = Item::new(
@@ -254,11 +256,7 @@ pub fn feature_aligned(
     not_scored: &mut Vec<String>,
 ) -> Result<Vec<Item>, ScoreFailure> {
     let scale = nodes.scale;
-    let baked = match nodes.atlas_size {
-        0 => Err("reconstruct.atlas_size = 0".to_string()),
-        size => crate::render::build_atlas(&run.view(nodes.mesh)?, size)
-            .map_err(|e| format!("reconstruct.atlas_size: {e}")),
-    };
+    let baked = atlas_written(&run.view(nodes.mesh)?, nodes.atlas_size);
     if let Err(why) = &baked {
         not_scored.push(format!(
             "the atlas: {why}; the run wrote the refined mesh's vertex colours, scored instead"
@@ -331,6 +329,18 @@ pub fn feature_aligned(
         items.push(item);
     }
     Ok(items)
+}
+
+/// Whether an export writes an atlas of `size` for `input`, as both exports decide it: not at
+/// size 0, nor when the input's triangles do not fit (the export then writes vertex colours).
+/// The error says why, naming the key.
+fn atlas_written(input: &Mesh, size: u32) -> Result<(), String> {
+    match size {
+        0 => Err("reconstruct.atlas_size = 0".into()),
+        size => crate::render::build_atlas(input, size)
+            .map(drop)
+            .map_err(|e| format!("reconstruct.atlas_size: {e}")),
+    }
 }
 
 const DISCS_NOTE: &str = "discs unfolded along the field";

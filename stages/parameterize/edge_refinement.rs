@@ -75,8 +75,8 @@ const MAX_TRIES: usize = 64;
 /// scale that can fit by the area bound [`FEWEST_PER_AREA`] (or, when the input alone fills
 /// the budget, the largest at which no edge is split), and each refusal lowers it by the
 /// overshoot it reports. `None` when no tried scale fits. Cost: nothing for a scale far
-/// inside the budget; otherwise a refinement up to the budget per try (0.1–1 s at a million
-/// vertices), paid wherever the scale is resolved (`run`, `plan`, `score`).
+/// inside the budget; otherwise a refinement up to the budget per try, paid wherever the
+/// scale is resolved (`run`, `plan`, `score`).
 pub fn largest_scale_within_budget(mesh: &Mesh, scale: f32, p: &RefineParams) -> Option<f32> {
     let area: f64 = (0..mesh.face_count())
         .map(|f| 0.5 * mesh.face_normal_unnormalized(f).length() as f64)
@@ -169,8 +169,9 @@ mod tests {
     }
 
     /// A scale that fits is kept. Meshes whose area says nothing of their refinement (a
-    /// needle, a sheet squashed to almost no height) still get a scale that refines within
-    /// the budget: each answer is checked, not estimated. A mesh that alone fills the budget
+    /// needle, a sheet squashed to almost no height; [`MOST_PER_AREA`] of their area alone says
+    /// both fit the budget at the scales below) still get a scale that refines within the budget: the quick
+    /// acceptance counts their edges' splits, and the search checks what it returns. A mesh that alone fills the budget
     /// gets the largest scale that splits none of its edges, which the node accepts.
     #[test]
     fn every_answer_refines_within_the_budget_even_where_the_area_misleads() {
