@@ -33,7 +33,7 @@ pub use super::patch_lookup::{ExemplarLookup, ExemplarSampling};
 
 /// The `feature_aligned_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 6);
+    texsyn_core::algorithm::Algorithm::new("feature_aligned_export", 7);
 
 /// `[reconstruct]` of the feature-aligned method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -52,8 +52,8 @@ pub struct FeatureAlignedExportParams {
     /// Length of the field picture's streaks, in vertex steps each way, 1..=200. Default: 12.
     pub streak_length: u32,
     /// How the atlas reads the exemplar at an interpolated address inside one patch
-    /// ([`ExemplarLookup`]). Default: bilinear. Left out of the node's key at the default.
-    #[serde(skip_serializing_if = "ExemplarSampling::is_bilinear")]
+    /// ([`ExemplarLookup`]). Default: bicubic. Left out of the node's key at the default.
+    #[serde(skip_serializing_if = "ExemplarSampling::is_bicubic")]
     pub lookup: ExemplarSampling,
 }
 
@@ -64,7 +64,7 @@ impl Default for FeatureAlignedExportParams {
             up: UpAxis::default(),
             atlas_size: 2048,
             streak_length: 12,
-            lookup: ExemplarSampling::Bilinear,
+            lookup: ExemplarSampling::Bicubic,
         }
     }
 }

@@ -33,7 +33,7 @@ use texsyn_core::algorithm::Failure;
 
 /// The `vertex_colour_export` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("vertex_colour_export", 4);
+    texsyn_core::algorithm::Algorithm::new("vertex_colour_export", 5);
 
 /// `[reconstruct]` of the graph-matching method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -56,9 +56,9 @@ pub struct VertexColourExportParams {
     /// Default: 2048.
     pub atlas_size: u32,
     /// How the atlas reads the exemplar between texels (inside a copied patch and across seams):
-    /// `"bilinear"` (default) or `"nearest"` ([`ExemplarSampling`]). Left out of the node's
-    /// key at the default.
-    #[serde(skip_serializing_if = "ExemplarSampling::is_bilinear")]
+    /// `"bicubic"` (default), `"bilinear"` or `"nearest"` ([`ExemplarSampling`]). Left out of
+    /// the node's key at the default.
+    #[serde(skip_serializing_if = "ExemplarSampling::is_bicubic")]
     pub lookup: ExemplarSampling,
 }
 
@@ -70,7 +70,7 @@ impl Default for VertexColourExportParams {
             displacement: 0.0,
             level_previews: false,
             atlas_size: 2048,
-            lookup: ExemplarSampling::Bilinear,
+            lookup: ExemplarSampling::Bicubic,
         }
     }
 }
