@@ -146,6 +146,20 @@ impl Candidates {
         };
         (clamp(p[1], ny) * self.nx + clamp(p[0], self.nx)) as u32
     }
+    /// The candidate centred at exemplar address `p` (rounded to a pixel), if `p` is inside the
+    /// candidate rectangle: no clamping, so a patch continued past the exemplar's border is not
+    /// replaced by an unrelated one at the border.
+    pub(super) fn at(&self, p: Vec2) -> Option<u32> {
+        let ny = self.len() / self.nx;
+        let (x, y) = (
+            p.x.round() - self.margin as f32,
+            p.y.round() - self.margin as f32,
+        );
+        if !(x >= 0.0 && y >= 0.0 && x < self.nx as f32 && y < ny as f32) {
+            return None;
+        }
+        Some((y as usize * self.nx + x as usize) as u32)
+    }
     /// Whether some candidate's feature distance is within `tol` of `d`.
     pub(super) fn any_within(&self, d: f32, tol: f32) -> bool {
         let Some((_, sorted)) = &self.distance else {

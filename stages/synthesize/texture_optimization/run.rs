@@ -243,7 +243,9 @@ pub fn texture_optimization(
         }
         for it in 0..p.iterations {
             let penalty = occurrence_penalty(&z, &cands, p.histogram);
-            let new_z = search(&patches, &info, &colours, &z, &cands, level, p, &penalty);
+            let new_z = search(
+                &patches, &info, &colours, &z, &cands, level, p, &penalty, &source, rot,
+            );
             let changed = new_z != z;
             if it > 0 && !changed {
                 break;

@@ -1,7 +1,7 @@
 //! The nearest-neighbour step: every sample's best exemplar patch for the current colours,
 //! with the occurrence penalty that keeps rarely used exemplar blocks in play.
 
-use super::candidates::{Candidates, Level};
+use super::candidates::{Candidates, Level, Rot};
 use super::params::TextureOptimizationParams;
 use super::patches::{Patches, SampleInfo};
 use crate::image::knn::squared_distance;
@@ -56,6 +56,8 @@ pub(super) fn search(
     level: Level,
     p: &TextureOptimizationParams,
     penalty: &[f32],
+    source: &[[f32; 2]],
+    rot: Rot,
 ) -> Vec<u32> {
     let dim = level.dim();
     let cells_per = level.w * level.w;
@@ -155,6 +157,26 @@ pub(super) fn search(
                 if current_allowed {
                     best = (masked(cur_vec) * penalty[current], current as u32);
                 }
+                let coherent = if p.coherence > 0.0 {
+                    coherent_candidates(patches, i, source, cands, rot)
+                } else {
+                    Vec::new()
+                };
+                let pull = 1.0 - p.coherence;
+                let allowed = |c: usize| match (info.constraint[i], &cands.distance) {
+                    (Some(d), Some((dist, _))) => (dist[c] - d).abs() <= p.feature_tolerance,
+                    _ => true,
+                };
+                for c in coherent {
+                    let cu = c as usize;
+                    if !allowed(cu) {
+                        continue;
+                    }
+                    let d = masked(&cands.full[cu * dim..(cu + 1) * dim]) * penalty[cu] * pull;
+                    if d < best.0 || (d == best.0 && c < best.1) {
+                        best = (d, c);
+                    }
+                }
                 for (c, _) in found {
                     let cu = c as usize;
                     let d = masked(&cands.full[cu * dim..(cu + 1) * dim]) * penalty[cu];
@@ -166,4 +188,39 @@ pub(super) fn search(
             },
         )
         .collect()
+}
+
+/// How many of a patch's vertices propose a coherent candidate (spread over the patch).
+const COHERENT_PROPOSERS: usize = 24;
+
+/// k-coherence candidates (Ashikhmin 2001; Han et al. 2006, §4): the exemplar patches that
+/// would continue, at sample `i`'s centre, what the vertices of its patch copy now. Vertex `q`
+/// at offset `o` in the sample's frame holds exemplar address `a_q`; the patch centred at
+/// `a_q − R·o` puts that same texel on `q` and continues its neighbourhood across the sample.
+/// Distinct candidates only, at most [`COHERENT_PROPOSERS`], proposed by vertices spread
+/// evenly through the patch's entries; a proposal whose patch would reach past the
+/// exemplar's candidate rectangle is dropped rather than clamped to an unrelated patch.
+fn coherent_candidates(
+    patches: &Patches,
+    i: usize,
+    source: &[[f32; 2]],
+    cands: &Candidates,
+    rot: Rot,
+) -> Vec<u32> {
+    let (a, b) = (patches.start[i], patches.start[i + 1]);
+    let stride = (b - a).div_ceil(COHERENT_PROPOSERS).max(1);
+    let mut out: Vec<u32> = Vec::with_capacity(COHERENT_PROPOSERS);
+    for e in (a..b).step_by(stride) {
+        let src = source[patches.vertex[e] as usize];
+        if src[0] < -0.5 {
+            continue;
+        }
+        let centre = glam::Vec2::from(src) - rot.apply(patches.offset[e]);
+        if let Some(c) = cands.at(centre)
+            && !out.contains(&c)
+        {
+            out.push(c);
+        }
+    }
+    out
 }
