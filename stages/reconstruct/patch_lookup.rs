@@ -22,11 +22,11 @@ use serde::{Deserialize, Serialize};
 /// averages up to four texels: at a half-texel offset it is a 2×2 box filter. Measured along
 /// the surface (`texsyn score`, gradient ratio / nearest-patch ratio): on a flat sheet with
 /// one straight curve and wood2, bilinear keeps 0.53 of the exemplar's gradient energy
-/// (ratio 1.15), nearest 0.92 (0.85); on fandisk with brick bilinear keeps 0.50 at a ratio of
-/// 0.75 and nearest 0.98 at 0.82, where nearest reads show the exemplar's texel staircase
+/// (ratio 1.15), nearest 0.92 (0.85); on fandisk with brick bilinear keeps 0.53 at a ratio of
+/// 0.75 and nearest 1.02 at 0.81, where nearest reads show the exemplar's texel staircase
 /// wherever the field turns a patch against its grid. Nearest copies the exemplar's texels
 /// themselves, as the discrete pass gives each vertex one; bilinear is the smoother
-/// resampling. Bicubic lies between: fandisk 0.68 at a ratio of 0.78, the cow's
+/// resampling. Bicubic lies between: fandisk 0.70 at a ratio of 0.77, the cow's
 /// graph-matching atlas 0.82 at 0.92 (bilinear 0.69 at 0.88, nearest 1.01 at 0.98).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
