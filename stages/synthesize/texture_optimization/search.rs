@@ -194,12 +194,13 @@ pub(super) fn search(
 const COHERENT_PROPOSERS: usize = 24;
 
 /// k-coherence candidates (Ashikhmin 2001; Han et al. 2006, §4): the exemplar patches that
-/// would continue, at sample `i`'s centre, what the vertices of its patch copy now. Vertex `q`
+/// would continue, at sample `i`'s centre, what the vertices of its patch copy at the current
+/// iteration. Vertex `q`
 /// at offset `o` in the sample's frame holds exemplar address `a_q`; the patch centred at
 /// `a_q − R·o` puts that same texel on `q` and continues its neighbourhood across the sample.
 /// Distinct candidates only, at most [`COHERENT_PROPOSERS`], proposed by vertices spread
-/// evenly through the patch's entries; a proposal whose patch would reach past the
-/// exemplar's candidate rectangle is dropped rather than clamped to an unrelated patch.
+/// evenly through the patch's entries; a proposed centre outside the candidate rectangle is
+/// dropped rather than clamped to an unrelated patch.
 fn coherent_candidates(
     patches: &Patches,
     i: usize,
@@ -223,4 +224,59 @@ fn coherent_candidates(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::candidates::{Rgb, build_candidates};
+    use super::*;
+    use crate::graph::Csr;
+    use texsyn_core::math::PureMath;
+
+    /// A proposal continues the vertex's own address: the candidate's patch, read at the
+    /// vertex's offset through the exemplar's rotation (as the lookups read it), lands on the
+    /// address the vertex holds, within the rounding of the centre to a pixel (√2/2). A
+    /// transposed rotation misses by 2·sin(0.3)·|offset|, over 2 texels here.
+    #[test]
+    fn a_coherent_candidate_puts_the_vertex_s_own_address_back_on_it() {
+        let (w, h) = (48, 48);
+        let rgb = Rgb {
+            w,
+            h,
+            px: (0..w * h)
+                .map(|i| [(i % w) as f32 / w as f32, (i / w) as f32 / h as f32, 0.5])
+                .collect(),
+        };
+        let rot = Rot {
+            c: 0.3f32.cos_pure(),
+            s: 0.3f32.sin_pure(),
+        };
+        let cands = build_candidates(&rgb, None, Level { w: 9, step: 1.0 }, rot, 8).unwrap();
+        let offset = vec![[0.0, 0.0], [3.0, 1.0], [-3.0, 2.5], [1.5, -3.5]];
+        let source = vec![[20.0, 22.0], [25.3, 18.7], [17.2, 26.1], [27.6, 15.4]];
+        let vertex: Vec<u32> = (0..4).collect();
+        let patches = Patches {
+            start: vec![0, 4],
+            vertex: vertex.clone(),
+            offset: offset.clone(),
+            by_vertex: Csr::from_pairs(4, vertex.iter().map(|&v| (v as usize, v))),
+            entry_sample: vec![0; 4],
+        };
+        let proposed = coherent_candidates(&patches, 0, &source, &cands, rot);
+        assert_eq!(proposed.len(), 4, "{proposed:?}");
+        for (e, &c) in proposed.iter().enumerate() {
+            let read = cands.centre(c) + rot.apply(offset[e]);
+            let miss = read.distance(glam::Vec2::from(source[e]));
+            assert!(
+                miss <= 0.71,
+                "entry {e}: read at {read}, holds {:?}",
+                source[e]
+            );
+        }
+        // A vertex without an address proposes nothing, and one whose continued centre falls
+        // outside the candidate rectangle is dropped, not clamped.
+        let far = vec![[-1.0, -1.0], [47.0, 2.0], source[2], source[3]];
+        let proposed = coherent_candidates(&patches, 0, &far, &cands, rot);
+        assert_eq!(proposed.len(), 2, "{proposed:?}");
+    }
 }
