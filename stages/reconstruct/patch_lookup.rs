@@ -21,8 +21,9 @@ use serde::{Deserialize, Serialize};
 /// against the exemplar's grid (almost everywhere on a surface), and a bilinear read there
 /// averages up to four texels: at a half-texel offset it is a 2×2 box filter. Measured along
 /// the surface (`texsyn score`, gradient ratio / nearest-patch ratio): on a flat sheet with
-/// one straight curve and wood2, bilinear keeps 0.53 of the exemplar's gradient energy
-/// (ratio 1.15), nearest 0.92 (0.85); on fandisk with brick bilinear keeps 0.53 at a ratio of
+/// one straight curve and wood2 (the score test's sheet), bilinear keeps 0.53 of the
+/// exemplar's gradient energy, bicubic 0.64 and nearest 1.00 (ratios not measured there);
+/// on fandisk with brick bilinear keeps 0.53 at a ratio of
 /// 0.75 and nearest 1.02 at 0.81, where nearest reads show the exemplar's texel staircase
 /// wherever the field turns a patch against its grid. Nearest copies the exemplar's texels
 /// themselves, as the discrete pass gives each vertex one; bilinear is the smoother
