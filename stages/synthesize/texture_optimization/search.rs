@@ -148,13 +148,14 @@ pub(super) fn search(
                     }
                     _ => tree.nearest_approx(proj, search_k, p.search_eps, |_| true),
                 };
-                // The current match competes too, if it satisfies the constraint.
-                let current_allowed = match (info.constraint[i], &cands.distance) {
-                    (Some(d), Some((dist, _))) => (dist[current] - d).abs() <= p.feature_tolerance,
+                // §5.2's constraint for candidates the tree did not filter.
+                let allowed = |c: usize| match (info.constraint[i], &cands.distance) {
+                    (Some(d), Some((dist, _))) => (dist[c] - d).abs() <= p.feature_tolerance,
                     _ => true,
                 };
+                // The current match competes too, if it satisfies the constraint.
                 let mut best = (f32::INFINITY, u32::MAX);
-                if current_allowed {
+                if allowed(current) {
                     best = (masked(cur_vec) * penalty[current], current as u32);
                 }
                 let coherent = if p.coherence > 0.0 {
@@ -163,10 +164,6 @@ pub(super) fn search(
                     Vec::new()
                 };
                 let pull = 1.0 - p.coherence;
-                let allowed = |c: usize| match (info.constraint[i], &cands.distance) {
-                    (Some(d), Some((dist, _))) => (dist[c] - d).abs() <= p.feature_tolerance,
-                    _ => true,
-                };
                 for c in coherent {
                     let cu = c as usize;
                     if !allowed(cu) {
@@ -195,9 +192,9 @@ const COHERENT_PROPOSERS: usize = 24;
 
 /// k-coherence candidates (Ashikhmin 2001; Han et al. 2006, §4): the exemplar patches that
 /// would continue, at sample `i`'s centre, what the vertices of its patch copy at the current
-/// iteration. Vertex `q`
-/// at offset `o` in the sample's frame holds exemplar address `a_q`; the patch centred at
-/// `a_q − R·o` puts that same texel on `q` and continues its neighbourhood across the sample.
+/// iteration. Vertex `q` at offset `o` in the sample's frame holds exemplar address `a_q`; the
+/// patch centred at `a_q − R·o` puts that same texel on `q` and continues its neighbourhood
+/// across the sample.
 /// Distinct candidates only, at most [`COHERENT_PROPOSERS`], proposed by vertices spread
 /// evenly through the patch's entries; a proposed centre outside the candidate rectangle is
 /// dropped rather than clamped to an unrelated patch.
