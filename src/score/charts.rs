@@ -296,6 +296,54 @@ pub fn unfolded_discs_with(
     }
 }
 
+const STREAM_FLOOR_DISC: u64 = 0x5ea0_0004;
+/// The smallest exemplar side [`verbatim_discs`] lays a disc into: the disc and the two
+/// texels a bicubic read reaches past it, on either side.
+pub const VERBATIM_SIDE: u32 = 2 * (DISC_RADIUS as u32 + 2) + 1;
+
+/// The discs' floor: `charts`' mask filled with the exemplar copied verbatim, each disc from
+/// one seeded place (its centre at a sub-texel position, the whole disc inside the exemplar)
+/// and read by `read` at `place + (pixel − disc centre)`, as a flawless layout would look
+/// through the same discs when its addresses are read as `read` reads them. The disc's own
+/// frame is the exemplar's axes, so nothing turns: what the floor costs is the read between
+/// texels alone (none for whole-texel reads). `None` when a disc does not fit the exemplar.
+pub fn verbatim_discs(
+    charts: &Charts,
+    exemplar: (u32, u32),
+    seed: u64,
+    read: impl Fn(Vec2) -> [f32; 4],
+) -> Option<Image> {
+    let tile = 2 * DISC_RADIUS + 1;
+    let (w, h) = (charts.image.width as usize, charts.image.height as usize);
+    let per_row = w / (tile + 1);
+    // Centres at least a radius and two texels (the bicubic read's reach) inside.
+    let margin = DISC_RADIUS as f32 + 2.0;
+    let room = Vec2::new(exemplar.0 as f32, exemplar.1 as f32) - Vec2::splat(VERBATIM_SIDE as f32);
+    if per_row == 0 || room.min_element() < 0.0 {
+        return None;
+    }
+    let mut out = Image::new(w as u32, h as u32);
+    for (i, px) in out.pixels.iter_mut().enumerate() {
+        if !charts.mask[i] {
+            continue;
+        }
+        let (x, y) = (i % w, i / w);
+        let (tx, ty) = (x / (tile + 1), y / (tile + 1));
+        let k = (ty * per_row + tx) as u64;
+        let place = Vec2::splat(margin)
+            + room
+                * Vec2::new(
+                    counter_unit(seed, STREAM_FLOOR_DISC, 2 * k),
+                    counter_unit(seed, STREAM_FLOOR_DISC, 2 * k + 1),
+                );
+        let centre = Vec2::new((tx * (tile + 1)) as f32, (ty * (tile + 1)) as f32)
+            + Vec2::splat(DISC_RADIUS as f32 + 0.5);
+        let local = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - centre;
+        *px = read(place + local);
+    }
+    Some(out)
+}
+
 /// How visible coordinate seams are; see the module doc.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct SeamScore {
@@ -563,5 +611,66 @@ mod tests {
         )
         .unwrap();
         assert!(s.mean_rms < 1e-3 && s.queries > 1000, "{s:?}");
+    }
+
+    /// The floor's layout: each disc reads one place of the exemplar plus the pixel's offset
+    /// from the disc's centre (so neighbouring pixels read one texel apart, unturned), the
+    /// place far enough inside for the disc and a bicubic read's reach, and another place
+    /// for another disc; an exemplar smaller than that gets no floor.
+    #[test]
+    fn a_verbatim_disc_reads_one_place_of_the_exemplar_plus_its_offset() {
+        let tile = 2 * DISC_RADIUS + 1;
+        let (w, h) = (2 * (tile + 1), 2 * (tile + 1));
+        let r = DISC_RADIUS as f32;
+        let centre_of = |x: usize, y: usize| {
+            let (tx, ty) = (x / (tile + 1), y / (tile + 1));
+            Vec2::new((tx * (tile + 1)) as f32, (ty * (tile + 1)) as f32) + Vec2::splat(r + 0.5)
+        };
+        let local =
+            |x: usize, y: usize| Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - centre_of(x, y);
+        let mask: Vec<bool> = (0..w * h)
+            .map(|i| local(i % w, i / w).length() <= r)
+            .collect();
+        let charts = Charts {
+            image: Image::new(w as u32, h as u32),
+            mask,
+            discs: 4,
+        };
+        let size = (120u32, 90u32);
+        let floor = verbatim_discs(&charts, size, 7, |at| [at.x, at.y, 0.0, 1.0]).unwrap();
+        let mut places: Vec<Vec2> = Vec::new();
+        for (i, px) in floor.pixels.iter().enumerate() {
+            let (x, y) = (i % w, i / w);
+            if !charts.mask[i] {
+                assert_eq!(px[0], 0.0, "({x}, {y}) outside the mask was filled");
+                continue;
+            }
+            let place = Vec2::new(px[0], px[1]) - local(x, y);
+            let k = (y / (tile + 1)) * 2 + x / (tile + 1);
+            if places.len() <= k {
+                places.resize(k + 1, Vec2::NAN);
+            }
+            if places[k].is_nan() {
+                places[k] = place;
+            }
+            assert!(
+                place.distance(places[k]) < 1e-3,
+                "disc {k}: {place} and {}",
+                places[k]
+            );
+            let lo = r + 2.0;
+            assert!(
+                place.x >= lo
+                    && place.y >= lo
+                    && place.x <= size.0 as f32 - 1.0 - lo
+                    && place.y <= size.1 as f32 - 1.0 - lo,
+                "disc {k} at {place} reaches past the exemplar"
+            );
+        }
+        assert_eq!(places.len(), 4);
+        assert!(places[0].distance(places[1]) > 1.0, "{places:?}");
+        let small = (VERBATIM_SIDE - 1, 200);
+        assert!(verbatim_discs(&charts, small, 7, |_| [0.0; 4]).is_none());
+        assert!(verbatim_discs(&charts, (VERBATIM_SIDE, VERBATIM_SIDE), 7, |_| [0.0; 4]).is_some());
     }
 }

@@ -234,9 +234,9 @@ fn surface_item(
         item.extra.insert(
             "stretch".into(),
             serde_json::json!({
-                "median": round3(at(0.5)),
-                "p90": round3(at(0.9)),
-                "at_max": round3(share_at_max_stretch(&metrics)),
+                "median": super::round3(at(0.5)),
+                "p90": super::round3(at(0.9)),
+                "at_max": super::round3(share_at_max_stretch(&metrics)),
             }),
         );
         item.notes.push(format!(
@@ -302,8 +302,8 @@ fn floor_item(
             item.extra.insert(
                 "floor".into(),
                 serde_json::json!({
-                    "ratio": round3(f.ratio),
-                    "gradient_ratio": round3(f.gradient_ratio),
+                    "ratio": super::round3(f.ratio),
+                    "gradient_ratio": super::round3(f.gradient_ratio),
                     "patches": f.queries,
                 }),
             );
@@ -370,11 +370,6 @@ pub fn mesh_checks(mesh: &Mesh, reference: Option<&Mesh>) -> MeshChecks {
         unreferenced_vertices: used.iter().filter(|&&u| !u).count(),
         flipped_faces,
     }
-}
-
-/// `x` to three decimals (the precision the reports print), so JSON floors read cleanly.
-fn round3(x: f64) -> f64 {
-    (x * 1000.0).round() / 1000.0
 }
 
 #[cfg(test)]

@@ -23,6 +23,10 @@
 //! against the exemplar's. Whether the texture's lines follow the field is measured on the
 //! surface itself ([`super::alignment::surface_alignment`]), not on the discs.
 //!
+//! Each atlas item also reports its `floor`: the exemplar laid out verbatim in the same discs
+//! and read as the atlas reads ([`disc_floor`]), which a texture read between texels cannot
+//! beat by copying better.
+//!
 //! Limits: colours between vertices are interpolated, so where edges are longer than a
 //! texel the discs are smoother than the synthesis meant (the gradient ratio falls with the
 //! edge length); near a singularity of the field the unfolding overlaps itself, and a
@@ -201,6 +205,7 @@ pub fn graph_matching(
             shade,
             |_, from, to| step(from, to),
             ex,
+            Some(sampling),
         )?;
         items.push(baked);
     }
@@ -325,7 +330,8 @@ pub fn feature_aligned(
             .insert("alignment_deg".into(), degrees_or_null(on_surface));
         item.extra
             .insert("exemplar_alignment_deg".into(), degrees_or_null(exemplar));
-        score_surface(run, &mut item, mesh, shade, unfolding.step(), ex)?;
+        let floor = baked.then_some(nodes.lookup);
+        score_surface(run, &mut item, mesh, shade, unfolding.step(), ex, floor)?;
         items.push(item);
     }
     Ok(items)
@@ -444,12 +450,21 @@ fn score_vertex_colours(
         }
         c
     };
-    score_surface(run, item, mesh, shade, |_, from, to| step(from, to), ex)
+    score_surface(
+        run,
+        item,
+        mesh,
+        shade,
+        |_, from, to| step(from, to),
+        ex,
+        None,
+    )
 }
 
 /// Unfolds discs of `mesh` with the texel offset `step(centre, from, to)` of each edge (see
 /// [`super::charts::DiscStep`]), fills their triangles with `shade(triangle, barycentrics)`
-/// and scores them into `item`.
+/// and scores them into `item`; with `floor_read`, also the floor of an atlas read that way
+/// ([`disc_floor`]).
 fn score_surface(
     run: &Run,
     item: &mut Item,
@@ -457,6 +472,7 @@ fn score_surface(
     shade: impl Fn(usize, Vec3) -> [f32; 4] + Sync,
     mut step: impl FnMut(usize, usize, usize) -> Vec2,
     ex: crate::image::ImageView,
+    floor_read: Option<ExemplarSampling>,
 ) -> Result<(), ScoreFailure> {
     let n = mesh.positions.len();
     let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -484,7 +500,55 @@ fn score_surface(
     let charts = unfolded_discs_with(&mesh.triangles, &edges, run.params.seed, step, shade);
     item.extra
         .insert("discs".into(), serde_json::json!(charts.discs));
+    if let Some(read) = floor_read {
+        disc_floor(run, item, &charts, ex, read)?;
+    }
     run.score_into(item, charts.image.view(), Some(&charts.mask), ex)
+}
+
+/// The discs' floor into `item.extra.floor` (ratio and gradient ratio): the exemplar laid
+/// out verbatim in every disc, one seeded place per disc, and read with `read` between
+/// texels as the atlas reads its addresses ([`super::charts::verbatim_discs`]), scored over
+/// the same mask. It is what the read alone costs a flawless layout: 0 for nearest reads,
+/// and for bicubic and bilinear reads the blur of reading a noisy exemplar half a texel
+/// off, which the ratio counts as a distance (brick: 0.43 and 0.48). Not a lower bound: a
+/// blurrier texture can score a lower ratio.
+fn disc_floor(
+    run: &Run,
+    item: &mut Item,
+    charts: &super::charts::Charts,
+    ex: crate::image::ImageView,
+    read: ExemplarSampling,
+) -> Result<(), ScoreFailure> {
+    let size = (ex.width, ex.height);
+    let seed = run.params.seed;
+    let Some(floor) = super::charts::verbatim_discs(charts, size, seed, |at| read.read(ex, at))
+    else {
+        item.notes.push(format!(
+            "floor not computed: a disc and the read's reach need {0}×{0} exemplar texels",
+            super::charts::VERBATIM_SIDE
+        ));
+        return Ok(());
+    };
+    let mut scored = Item::new(String::new(), "inputs.exemplar");
+    run.score_into(&mut scored, floor.view(), Some(&charts.mask), ex)?;
+    if let Some(f) = scored.score {
+        item.extra.insert(
+            "floor".into(),
+            serde_json::json!({
+                "ratio": super::round3(f.ratio),
+                "gradient_ratio": super::round3(f.gradient_ratio),
+            }),
+        );
+        item.notes.push(
+            "floor: the ratio and gradient ratio of the exemplar laid out verbatim in the same \
+             discs and read as the atlas reads it (reconstruct.lookup): what the read between \
+             texels costs a flawless layout. Not a lower bound: a blurrier texture can score \
+             a lower ratio"
+                .into(),
+        );
+    }
+    Ok(())
 }
 
 #[cfg(test)]
