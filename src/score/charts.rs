@@ -147,6 +147,18 @@ pub struct Charts {
     pub discs: usize,
 }
 
+/// The top-left texel of disc `k`'s tile, `per_row` tiles to a row, one texel apart.
+fn tile_corner(k: usize, per_row: usize) -> (usize, usize) {
+    let pitch = 2 * DISC_RADIUS + 2;
+    ((k % per_row) * pitch, (k / per_row) * pitch)
+}
+
+/// Where disc `k`'s centre vertex lands: the middle of its tile's middle texel.
+fn disc_centre(k: usize, per_row: usize) -> Vec2 {
+    let (x0, y0) = tile_corner(k, per_row);
+    Vec2::new(x0 as f32, y0 as f32) + Vec2::splat(DISC_RADIUS as f32 + 0.5)
+}
+
 /// Unfolds [`DISCS`] discs of the surface, each around a seeded vertex, into the texel
 /// coordinates the parameterization gives (§4.2.2's edge offsets, summed outward from the
 /// centre breadth first, to [`DISC_RADIUS`] texels), rasterizes their triangles there at one
@@ -233,11 +245,8 @@ pub fn unfolded_discs_with(
                 }
             }
         }
-        let origin = Vec2::new(
-            (k % per_row * (tile + 1)) as f32,
-            (k / per_row * (tile + 1)) as f32,
-        ) + Vec2::splat(DISC_RADIUS as f32 + 0.5);
-        let (x0, y0) = ((k % per_row) * (tile + 1), (k / per_row) * (tile + 1));
+        let (x0, y0) = tile_corner(k, per_row);
+        let origin = disc_centre(k, per_row);
         let mut faces: Vec<usize> = reached
             .iter()
             .flat_map(|&v| faces_of.row(v).iter().map(|&f| f as usize))
@@ -298,7 +307,7 @@ pub fn unfolded_discs_with(
 
 const STREAM_FLOOR_DISC: u64 = 0x5ea0_0004;
 /// The smallest exemplar side [`verbatim_discs`] lays a disc into: the disc and the two
-/// texels a bicubic read reaches past it, on either side.
+/// texels a bicubic read reaches past it, on either side (one more than it needs).
 pub const VERBATIM_SIDE: u32 = 2 * (DISC_RADIUS as u32 + 2) + 1;
 
 /// The discs' floor: `charts`' mask filled with the exemplar copied verbatim, each disc from
@@ -328,17 +337,14 @@ pub fn verbatim_discs(
             continue;
         }
         let (x, y) = (i % w, i / w);
-        let (tx, ty) = (x / (tile + 1), y / (tile + 1));
-        let k = (ty * per_row + tx) as u64;
+        let k = (y / (tile + 1)) * per_row + x / (tile + 1);
         let place = Vec2::splat(margin)
             + room
                 * Vec2::new(
-                    counter_unit(seed, STREAM_FLOOR_DISC, 2 * k),
-                    counter_unit(seed, STREAM_FLOOR_DISC, 2 * k + 1),
+                    counter_unit(seed, STREAM_FLOOR_DISC, 2 * k as u64),
+                    counter_unit(seed, STREAM_FLOOR_DISC, 2 * k as u64 + 1),
                 );
-        let centre = Vec2::new((tx * (tile + 1)) as f32, (ty * (tile + 1)) as f32)
-            + Vec2::splat(DISC_RADIUS as f32 + 0.5);
-        let local = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - centre;
+        let local = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - disc_centre(k, per_row);
         *px = read(place + local);
     }
     Some(out)
@@ -622,10 +628,7 @@ mod tests {
         let tile = 2 * DISC_RADIUS + 1;
         let (w, h) = (2 * (tile + 1), 2 * (tile + 1));
         let r = DISC_RADIUS as f32;
-        let centre_of = |x: usize, y: usize| {
-            let (tx, ty) = (x / (tile + 1), y / (tile + 1));
-            Vec2::new((tx * (tile + 1)) as f32, (ty * (tile + 1)) as f32) + Vec2::splat(r + 0.5)
-        };
+        let centre_of = |x: usize, y: usize| disc_centre((y / (tile + 1)) * 2 + x / (tile + 1), 2);
         let local =
             |x: usize, y: usize| Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - centre_of(x, y);
         let mask: Vec<bool> = (0..w * h)

@@ -420,7 +420,8 @@ fn compact(v: &serde_json::Value) -> String {
         other => other.to_string(),
     }
 }
+
 /// `x` to three decimals (the precision the reports print), so JSON floors read cleanly.
-pub(super) fn round3(x: f64) -> f64 {
+fn round3(x: f64) -> f64 {
     (x * 1000.0).round() / 1000.0
 }

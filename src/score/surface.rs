@@ -24,8 +24,7 @@
 //! surface itself ([`super::alignment::surface_alignment`]), not on the discs.
 //!
 //! Each atlas item also reports its `floor`: the exemplar laid out verbatim in the same discs
-//! and read as the atlas reads ([`disc_floor`]), which a texture read between texels cannot
-//! beat by copying better.
+//! and read as the atlas reads ([`DiscFloor`]), what a flawless copy read this way scores.
 //!
 //! Limits: colours between vertices are interpolated, so where edges are longer than a
 //! texel the discs are smoother than the synthesis meant (the gradient ratio falls with the
@@ -205,7 +204,7 @@ pub fn graph_matching(
             shade,
             |_, from, to| step(from, to),
             ex,
-            Some(sampling),
+            Some(&mut DiscFloor::new(sampling)),
         )?;
         items.push(baked);
     }
@@ -288,6 +287,7 @@ pub fn feature_aligned(
         turn: (cos, sin),
     };
     let mut items = Vec::new();
+    let mut floor = DiscFloor::new(nodes.lookup);
     for &(node, what) in &nodes.synthesize {
         let out = run.view(node)?;
         if out.colours.len() != mesh.positions.len() {
@@ -330,7 +330,7 @@ pub fn feature_aligned(
             .insert("alignment_deg".into(), degrees_or_null(on_surface));
         item.extra
             .insert("exemplar_alignment_deg".into(), degrees_or_null(exemplar));
-        let floor = baked.then_some(nodes.lookup);
+        let floor = baked.then_some(&mut floor);
         score_surface(run, &mut item, mesh, shade, unfolding.step(), ex, floor)?;
         items.push(item);
     }
@@ -463,8 +463,8 @@ fn score_vertex_colours(
 
 /// Unfolds discs of `mesh` with the texel offset `step(centre, from, to)` of each edge (see
 /// [`super::charts::DiscStep`]), fills their triangles with `shade(triangle, barycentrics)`
-/// and scores them into `item`; with `floor_read`, also the floor of an atlas read that way
-/// ([`disc_floor`]).
+/// and scores them into `item`; with `floor`, also the floor of the atlas's read
+/// ([`DiscFloor`]).
 fn score_surface(
     run: &Run,
     item: &mut Item,
@@ -472,7 +472,7 @@ fn score_surface(
     shade: impl Fn(usize, Vec3) -> [f32; 4] + Sync,
     mut step: impl FnMut(usize, usize, usize) -> Vec2,
     ex: crate::image::ImageView,
-    floor_read: Option<ExemplarSampling>,
+    floor: Option<&mut DiscFloor>,
 ) -> Result<(), ScoreFailure> {
     let n = mesh.positions.len();
     let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -500,55 +500,86 @@ fn score_surface(
     let charts = unfolded_discs_with(&mesh.triangles, &edges, run.params.seed, step, shade);
     item.extra
         .insert("discs".into(), serde_json::json!(charts.discs));
-    if let Some(read) = floor_read {
-        disc_floor(run, item, &charts, ex, read)?;
+    if let Some(floor) = floor {
+        floor.add_to(run, item, &charts, ex)?;
     }
     run.score_into(item, charts.image.view(), Some(&charts.mask), ex)
 }
 
-/// The discs' floor into `item.extra.floor` (ratio and gradient ratio): the exemplar laid
-/// out verbatim in every disc, one seeded place per disc, and read with `read` between
-/// texels as the atlas reads its addresses ([`super::charts::verbatim_discs`]), scored over
-/// the same mask. It is what the read alone costs a flawless layout: 0 for nearest reads,
-/// and for bicubic and bilinear reads the blur of reading a noisy exemplar half a texel
-/// off, which the ratio counts as a distance (brick: 0.43 and 0.48). Not a lower bound: a
-/// blurrier texture can score a lower ratio.
-fn disc_floor(
-    run: &Run,
-    item: &mut Item,
-    charts: &super::charts::Charts,
-    ex: crate::image::ImageView,
+/// The discs' floor (ratio and gradient ratio): the exemplar laid out verbatim in every
+/// disc, one seeded place per disc, and read with `read` between texels as the atlas reads
+/// its addresses ([`super::charts::verbatim_discs`]), scored over the same mask. It is what
+/// the read alone costs a flawless layout: a ratio of 0 for nearest reads, and for bicubic
+/// and bilinear reads the blur of reading a noisy exemplar up to half a texel off, which the
+/// ratio counts as a distance (brick: 0.43 and 0.48). Not a lower bound: a blurrier texture,
+/// or a layout that happens to sit on whole texels, can score a lower ratio.
+///
+/// Items scored on the same discs (a feature-aligned run's aligned and unaligned results:
+/// one mesh, one unfolding, one seed, so one mask) share it: it is scored once.
+struct DiscFloor {
     read: ExemplarSampling,
-) -> Result<(), ScoreFailure> {
-    let size = (ex.width, ex.height);
-    let seed = run.params.seed;
-    let Some(floor) = super::charts::verbatim_discs(charts, size, seed, |at| read.read(ex, at))
-    else {
-        item.notes.push(format!(
-            "floor not computed: a disc and the read's reach need {0}×{0} exemplar texels",
-            super::charts::VERBATIM_SIDE
-        ));
-        return Ok(());
-    };
-    let mut scored = Item::new(String::new(), "inputs.exemplar");
-    run.score_into(&mut scored, floor.view(), Some(&charts.mask), ex)?;
-    if let Some(f) = scored.score {
-        item.extra.insert(
-            "floor".into(),
-            serde_json::json!({
-                "ratio": super::round3(f.ratio),
-                "gradient_ratio": super::round3(f.gradient_ratio),
-            }),
-        );
-        item.notes.push(
-            "floor: the ratio and gradient ratio of the exemplar laid out verbatim in the same \
-             discs and read as the atlas reads it (reconstruct.lookup): what the read between \
-             texels costs a flawless layout. Not a lower bound: a blurrier texture can score \
-             a lower ratio"
-                .into(),
-        );
+    /// What the first item got: its `floor` extra (`None`: not computed) and its note.
+    found: Option<(Option<serde_json::Value>, String)>,
+}
+
+impl DiscFloor {
+    fn new(read: ExemplarSampling) -> DiscFloor {
+        DiscFloor { read, found: None }
     }
-    Ok(())
+
+    /// Puts the floor of `charts` into `item` (`extra.floor` and a note), scoring it the
+    /// first time.
+    fn add_to(
+        &mut self,
+        run: &Run,
+        item: &mut Item,
+        charts: &super::charts::Charts,
+        ex: crate::image::ImageView,
+    ) -> Result<(), ScoreFailure> {
+        if self.found.is_none() {
+            self.found = Some(self.score(run, &item.output, charts, ex)?);
+        }
+        let (floor, note) = self.found.clone().expect("scored above");
+        if let Some(floor) = floor {
+            item.extra.insert("floor".into(), floor);
+        }
+        item.notes.push(note);
+        Ok(())
+    }
+
+    fn score(
+        &self,
+        run: &Run,
+        output: &str,
+        charts: &super::charts::Charts,
+        ex: crate::image::ImageView,
+    ) -> Result<(Option<serde_json::Value>, String), ScoreFailure> {
+        let (size, seed, read) = ((ex.width, ex.height), run.params.seed, self.read);
+        let Some(floor) = super::charts::verbatim_discs(charts, size, seed, |at| read.read(ex, at))
+        else {
+            let side = super::charts::VERBATIM_SIDE;
+            let why = format!("floor not computed: a disc needs {side}×{side} exemplar texels");
+            return Ok((None, why));
+        };
+        // Named after the item, so TEXSYN_SCORE_DUMP writes it beside the item's picture.
+        let mut scored = Item::new(format!("floor of {output}"), "inputs.exemplar");
+        run.score_into(&mut scored, floor.view(), Some(&charts.mask), ex)?;
+        let Some(f) = scored.score else {
+            return Ok((
+                None,
+                format!("floor not scored: {}", scored.notes.join("; ")),
+            ));
+        };
+        let floor = serde_json::json!({
+            "ratio": super::round3(f.ratio),
+            "gradient_ratio": super::round3(f.gradient_ratio),
+        });
+        let note = "floor: the ratio and gradient ratio of the exemplar laid out verbatim in \
+                    the same discs and read as the atlas reads it (reconstruct.lookup): what \
+                    the read between texels costs a flawless layout. Not a lower bound: a \
+                    blurrier texture can score a lower ratio";
+        Ok((Some(floor), note.into()))
+    }
 }
 
 #[cfg(test)]
