@@ -30,21 +30,36 @@ pub(crate) fn resolve_scale(
     scale: &mut f32,
     mesh: &Path,
     exemplar: &Path,
-) -> Option<crate::geom::Mesh> {
+) -> Option<AutoMesh> {
     if *scale > 0.0 {
         return None;
     }
     let ((width, _), _) = exemplar_size(config, exemplar)?;
     let path = config.resolve(mesh);
-    let read = texsyn_core::geom::io::read_regular_file(&path).ok();
-    let mesh = read.and_then(|b| crate::geom::io::read_mesh_bytes(&path, &b).ok())?;
+    let bytes = texsyn_core::geom::io::read_regular_file(&path).ok()?;
+    let mesh = crate::geom::io::read_mesh_bytes(&path, &bytes).ok()?;
     *scale = crate::stages::parameterize::automatic_scale(&mesh, width);
     tracing::info!(
         "parameterize.scale = \"auto\": {:.4} exemplar texels per unit (the exemplar's {width} texels span a quarter of {}'s bounding-box diagonal)",
         *scale,
         path.display()
     );
-    Some(mesh)
+    // What the mesh is read from: its bytes and the format its name gives.
+    let mut h = blake3::Hasher::new();
+    h.update(path.extension().unwrap_or_default().as_encoded_bytes());
+    h.update(b"\0");
+    h.update(&bytes);
+    Some(AutoMesh {
+        mesh,
+        source: crate::artifact::ContentHash(*h.finalize().as_bytes()),
+    })
+}
+
+/// The mesh an automatic scale was resolved from, with what it was read from.
+pub(crate) struct AutoMesh {
+    pub mesh: crate::geom::Mesh,
+    /// A hash of the file's bytes and its format: the mesh is a function of these.
+    pub source: crate::artifact::ContentHash,
 }
 
 /// Refuses, before any work, a parameter whose estimated memory is over the budget

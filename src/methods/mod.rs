@@ -11,6 +11,7 @@ pub mod feature_aligned;
 pub mod geometry_images;
 pub mod graph_matching;
 pub mod jump_maps;
+pub mod plan_memo;
 pub mod solid;
 pub mod synth2d;
 
@@ -20,8 +21,8 @@ mod plan;
 
 pub use crate::score::Planned;
 pub(crate) use checks::{
-    check_atlas_memory, check_memory, check_solid_memory, check_variant_memory, exemplar_size,
-    resolve_scale,
+    AutoMesh, check_atlas_memory, check_memory, check_solid_memory, check_variant_memory,
+    exemplar_size, resolve_scale,
 };
 pub use import::{Import, import};
 pub(crate) use import::{Imports, input};

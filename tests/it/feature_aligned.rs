@@ -379,3 +379,52 @@ fn auto_scale_is_lowered_to_fit_the_vertex_budget_and_a_given_scale_is_refused()
     };
     assert!(err.contains("parameterize.max_vertices"), "{err}");
 }
+
+/// The automatic scale's fit to the vertex budget refines the mesh, so it is remembered in
+/// the cache (`plan-memo`): a rerun takes the remembered scale without refining (a changed
+/// memo changes the scale the plan uses, which shows it is read), and a damaged memo is
+/// worked out again.
+#[test]
+fn the_auto_scale_s_budget_fit_is_remembered_in_the_cache() {
+    let cache = tempfile::tempdir().unwrap();
+    let config = repo().join("configs/feature_aligned.toml");
+    let (config, cache_dir) = (config.to_str().unwrap(), cache.path().to_str().unwrap());
+    let lowered_to = || {
+        let o = common::cli::succeeded(common::cli::texsyn(
+            &[
+                "graph",
+                config,
+                "--cache",
+                cache_dir,
+                "-v",
+                "--set",
+                "parameterize.scale=\"auto\"",
+                "--set",
+                "parameterize.max_vertices=20000",
+            ],
+            cache.path(),
+        ));
+        let log = common::cli::stderr(&o);
+        let line = (log.lines())
+            .find(|l| l.contains("lowered from"))
+            .unwrap_or_else(|| panic!("no fit logged: {log}"))
+            .to_owned();
+        let to = line.split(" to ").nth(1).unwrap();
+        to.split_whitespace()
+            .next()
+            .unwrap()
+            .parse::<f32>()
+            .unwrap()
+    };
+    let fitted = lowered_to();
+    let memos: Vec<_> = std::fs::read_dir(cache.path().join("plan-memo"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(memos.len(), 1, "{memos:?}");
+    let half = (fitted / 2.0 * 1e4).round() / 1e4;
+    std::fs::write(&memos[0], half.to_le_bytes()).unwrap();
+    assert_eq!(lowered_to(), half, "the remembered scale was not used");
+    std::fs::write(&memos[0], b"??").unwrap();
+    assert_eq!(lowered_to(), fitted);
+}
