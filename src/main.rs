@@ -159,7 +159,6 @@ fn real_main() -> Result<i32> {
         json: cli.json,
         jobs: cli.jobs,
     };
-    texsyn::methods::plan_memo::remember_in(g.cache_dir.join(texsyn::methods::plan_memo::MEMOS));
     match &cli.command {
         Command::Run(args) => cli::run::run(args, &g),
         Command::Sweep(args) => cli::sweep::sweep(args, &g),

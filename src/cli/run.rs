@@ -96,6 +96,12 @@ pub fn run_and_write(
     g: &Globals,
 ) -> Result<Outcome> {
     let start = Instant::now();
+    if !recheck {
+        // `--recheck` trusts nothing remembered, as it trusts no output's stat.
+        texsyn::methods::plan_memo::remember_in(
+            g.cache_dir.join(texsyn::methods::plan_memo::MEMOS),
+        );
+    }
     let plan = load_plan(config, sets)?;
     let out_dir = match out {
         Some(out) => out.to_owned(),

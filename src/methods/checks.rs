@@ -44,8 +44,11 @@ pub(crate) fn resolve_scale(
         *scale,
         path.display()
     );
-    // What the mesh is read from: its bytes and the format its name gives.
+    // What the mesh is read from: its bytes and the format its name gives, by this reader.
+    use super::import::Import;
     let mut h = blake3::Hasher::new();
+    h.update(<crate::geom::Mesh as Import>::READER.as_bytes());
+    h.update(&<crate::geom::Mesh as Import>::VERSION.to_le_bytes());
     h.update(path.extension().unwrap_or_default().as_encoded_bytes());
     h.update(b"\0");
     h.update(&bytes);

@@ -5,8 +5,10 @@
 //! function of, the version of the rule that computes it included (so a changed rule never
 //! reads an old value). It is a cache: a missing, damaged or unreadable memo is worked out
 //! again, and one that cannot be written is not written; memos are written without fsync
-//! (temporary file, then rename). Without a directory ([`remember_in`] not called: the
-//! library, its tests) nothing is remembered.
+//! (temporary file, then rename), and only into a cache folder that exists (a mistyped
+//! `--cache` is never made). Only `texsyn run` remembers ([`remember_in`]), and not with
+//! `--recheck`; every other command (`verify` above all), the library and its tests work
+//! every value out.
 
 use crate::artifact::ContentHash;
 use std::path::{Path, PathBuf};
@@ -23,28 +25,48 @@ pub fn remember_in(dir: PathBuf) {
     let _ = DIR.set(dir);
 }
 
-/// The positive finite number remembered under `key`, or `compute()`'s, which is remembered
-/// when it is positive and finite.
-pub(crate) fn positive(key: &ContentHash, compute: impl FnOnce() -> f32) -> f32 {
+/// The number remembered under `key` if `valid` takes it, else `compute()`'s, which is
+/// remembered when `valid` takes it. A memo is the number's 4 little-endian bytes.
+pub(crate) fn number(
+    key: &ContentHash,
+    valid: impl Fn(f32) -> bool,
+    compute: impl FnOnce() -> f32,
+) -> f32 {
     match DIR.get() {
-        Some(dir) => positive_in(dir, key, compute),
+        Some(dir) => number_in(dir, key, valid, compute),
         None => compute(),
     }
 }
 
-fn positive_in(dir: &Path, key: &ContentHash, compute: impl FnOnce() -> f32) -> f32 {
+fn number_in(
+    dir: &Path,
+    key: &ContentHash,
+    valid: impl Fn(f32) -> bool,
+    compute: impl FnOnce() -> f32,
+) -> f32 {
     let path = dir.join(key.to_hex());
     let read = std::fs::read(&path).ok();
     if let Some(x) = read.and_then(|b| <[u8; 4]>::try_from(b.as_slice()).ok()) {
         let x = f32::from_le_bytes(x);
-        if x.is_finite() && x > 0.0 {
+        if valid(x) {
             return x;
         }
     }
     let x = compute();
-    if x.is_finite() && x > 0.0 {
-        let tmp = dir.join(format!("{}.{}.tmp", key.to_hex(), std::process::id()));
-        let written = std::fs::create_dir_all(dir)
+    if valid(x) {
+        // Temporaries are named as the cache names its own (a leading `.tmp-` and the
+        // writer's host and process), so two writers never share one.
+        let tmp = dir.join(format!(
+            ".tmp-{}-{}",
+            crate::owner::Owner::this_tag(),
+            key.to_hex()
+        ));
+        // `create_dir`, not `create_dir_all`: the cache folder itself must already exist.
+        let made = match std::fs::create_dir(dir) {
+            Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => Err(e),
+            _ => Ok(()),
+        };
+        let written = made
             .and_then(|()| std::fs::write(&tmp, x.to_le_bytes()))
             .and_then(|()| std::fs::rename(&tmp, &path));
         if let Err(e) = written {
@@ -62,11 +84,16 @@ mod tests {
     #[test]
     fn a_memo_is_read_back_and_a_damaged_one_is_worked_out_again() {
         let d = tempfile::tempdir().unwrap();
-        let dir = d.path().join(MEMOS);
+        // No cache folder: nothing is made, and the value is still worked out.
+        let missing = d.path().join("no cache").join(MEMOS);
         let key = ContentHash::of(b"a key");
+        assert_eq!(number_in(&missing, &key, |x| x > 0.0, || 1.5), 1.5);
+        assert!(!d.path().join("no cache").exists());
+        let dir = d.path().join(MEMOS);
+        let positive = |x: f32| x.is_finite() && x > 0.0;
         let calls = std::cell::Cell::new(0);
         let get = |v: f32| {
-            positive_in(&dir, &key, || {
+            number_in(&dir, &key, positive, || {
                 calls.set(calls.get() + 1);
                 v
             })
@@ -82,7 +109,7 @@ mod tests {
         assert_eq!(calls.get(), 2);
         // A value that is not positive is returned but not remembered.
         let other = ContentHash::of(b"another key");
-        assert_eq!(positive_in(&dir, &other, || 0.0), 0.0);
+        assert_eq!(number_in(&dir, &other, positive, || 0.0), 0.0);
         assert!(!dir.join(other.to_hex()).exists());
         // Nothing but the memos is left in the folder.
         let names: Vec<_> = std::fs::read_dir(&dir)

@@ -380,30 +380,30 @@ fn auto_scale_is_lowered_to_fit_the_vertex_budget_and_a_given_scale_is_refused()
     assert!(err.contains("parameterize.max_vertices"), "{err}");
 }
 
-/// The automatic scale's fit to the vertex budget refines the mesh, so it is remembered in
-/// the cache (`plan-memo`): a rerun takes the remembered scale without refining (a changed
-/// memo changes the scale the plan uses, which shows it is read), and a damaged memo is
-/// worked out again.
+/// The automatic scale's fit to the vertex budget refines the mesh, so `texsyn run`
+/// remembers it in the cache (`plan-memo`): a rerun takes the remembered scale without
+/// refining (a changed memo changes the scale the plan uses, which shows it is read), a
+/// damaged memo is worked out again, another budget is another memo, and `--recheck` reads
+/// none.
 #[test]
 fn the_auto_scale_s_budget_fit_is_remembered_in_the_cache() {
-    let cache = tempfile::tempdir().unwrap();
+    let d = tempfile::tempdir().unwrap();
     let config = repo().join("configs/feature_aligned.toml");
-    let (config, cache_dir) = (config.to_str().unwrap(), cache.path().to_str().unwrap());
-    let lowered_to = || {
-        let o = common::cli::succeeded(common::cli::texsyn(
-            &[
-                "graph",
-                config,
-                "--cache",
-                cache_dir,
-                "-v",
-                "--set",
-                "parameterize.scale=\"auto\"",
-                "--set",
-                "parameterize.max_vertices=20000",
-            ],
-            cache.path(),
-        ));
+    let config = config.to_str().unwrap();
+    let fit = |budget: u32, extra: &[&str]| {
+        let budget = format!("parameterize.max_vertices={budget}");
+        let mut args = vec!["run", config, "--cache", "c", "--out", "o", "-v"];
+        for set in [
+            "parameterize.scale=\"auto\"",
+            &budget,
+            "compare=false",
+            "reconstruct.preview_size=64",
+            "reconstruct.atlas_size=0",
+        ] {
+            args.extend(["--set", set]);
+        }
+        args.extend(extra);
+        let o = common::cli::succeeded(common::cli::texsyn(&args, d.path()));
         let log = common::cli::stderr(&o);
         let line = (log.lines())
             .find(|l| l.contains("lowered from"))
@@ -416,15 +416,36 @@ fn the_auto_scale_s_budget_fit_is_remembered_in_the_cache() {
             .parse::<f32>()
             .unwrap()
     };
-    let fitted = lowered_to();
-    let memos: Vec<_> = std::fs::read_dir(cache.path().join("plan-memo"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    assert_eq!(memos.len(), 1, "{memos:?}");
+    let memos = || -> Vec<std::path::PathBuf> {
+        let dir = d.path().join("c/plan-memo");
+        let mut m: Vec<_> = (std::fs::read_dir(dir).unwrap())
+            .map(|e| e.unwrap().path())
+            .collect();
+        m.sort();
+        m
+    };
+    // The first run opens the cache after planning: the memo is written by the second.
+    let fitted = fit(20_000, &[]);
+    assert_eq!(fit(20_000, &[]), fitted);
+    let written = memos();
+    assert_eq!(written.len(), 1, "{written:?}");
     let half = (fitted / 2.0 * 1e4).round() / 1e4;
-    std::fs::write(&memos[0], half.to_le_bytes()).unwrap();
-    assert_eq!(lowered_to(), half, "the remembered scale was not used");
-    std::fs::write(&memos[0], b"??").unwrap();
-    assert_eq!(lowered_to(), fitted);
+    std::fs::write(&written[0], half.to_le_bytes()).unwrap();
+    assert_eq!(fit(20_000, &[]), half, "the remembered scale was not used");
+    assert_eq!(
+        fit(20_000, &["--recheck"]),
+        fitted,
+        "--recheck used the memo"
+    );
+    // Above the scale it lowers: damage.
+    std::fs::write(&written[0], (fitted * 100.0).to_le_bytes()).unwrap();
+    assert_eq!(fit(20_000, &[]), fitted);
+    std::fs::write(&written[0], b"??").unwrap();
+    assert_eq!(fit(20_000, &[]), fitted);
+    let smaller = fit(15_000, &[]);
+    assert!(
+        smaller < fitted,
+        "{smaller} within 15,000 vertices, {fitted} within 20,000"
+    );
+    assert_eq!(memos().len(), 2, "another budget, another memo");
 }

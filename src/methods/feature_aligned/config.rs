@@ -79,9 +79,9 @@ const FIT_RULE: u32 = 1;
 /// size, and a refusal would leave the user to find the number "auto" stands for. A scale
 /// the user gives is never changed; its refinement names the budget when it does not fit.
 ///
-/// Near the budget the fit refines the mesh (0.4 s for the knot, 1.8 s for the handle with
-/// crinklepaper), so its answer is remembered in the cache ([`plan_memo`]), keyed by the
-/// mesh's source, the parameters and the rule's version: a rerun plans without refining.
+/// Near the budget the fit refines the mesh (up to seconds), so `texsyn run` remembers its
+/// answer in the cache ([`plan_memo`]), keyed by the mesh's source (bytes, format and
+/// reader), the parameters and the rules' versions: a rerun plans without refining.
 ///
 /// [`plan_memo`]: crate::methods::plan_memo
 fn fit_auto_scale(auto: &crate::methods::AutoMesh, p: &mut RefineParams) {
@@ -96,7 +96,9 @@ fn fit_auto_scale(auto: &crate::methods::AutoMesh, p: &mut RefineParams) {
         h.update(&x.to_le_bytes());
     }
     let key = crate::artifact::ContentHash(*h.finalize().as_bytes());
-    let fitted = crate::methods::plan_memo::positive(&key, || {
+    // A fit is positive and never above the scale it lowers: anything else is damage.
+    let valid = |s: f32| s.is_finite() && s > 0.0 && s <= p.scale;
+    let fitted = crate::methods::plan_memo::number(&key, valid, || {
         edge_refinement::largest_scale_within_budget(&auto.mesh, p.scale, p).unwrap_or(p.scale)
     });
     if fitted < p.scale {
