@@ -10,7 +10,8 @@
 //! the centre, so the texture is upright and at the exemplar's scale across many triangles,
 //! and coloured with the §4.4 blend of the three corner sets (the `BlendShader` the bake
 //! uses), which is what a viewer of `textured.glb` sees. Only texels a triangle covers are in
-//! the mask (`patch_score_masked`).
+//! the mask (`patch_score_masked`), and not those where the unfolding tears, folds or
+//! overlaps itself ([`unfolded_discs_with`]).
 //!
 //! **Seams.** Where two triangles that share an edge have different coordinates for its
 //! ends (a coordinate seam), the OBJ shows the exemplar at two places side by side. The seam
@@ -47,6 +48,14 @@ const DISCS: usize = 64;
 /// Their radius in exemplar texels: several patches across, and small enough that the
 /// unfolding rarely meets itself.
 const DISC_RADIUS: usize = 24;
+/// How much longer or shorter than its own length an unfolded edge may be before
+/// [`unfolded_discs_with`] takes its triangle as torn: a walk that closes, even over a
+/// curved surface, keeps edges near their length; a tear spans the gap between two paths.
+/// A texel more either way is allowed as well: a walk's error below a texel is not a tear.
+pub const TORN_STRETCH: f32 = 2.0;
+/// The area in texels above which a triangle unfolded the other way round from its disc is
+/// a fold: a sliver turned over by the walk's error is not.
+const FOLDED_AREA: f32 = 0.5;
 const STREAM_DISC: u64 = 0x5ea0_0003;
 /// Samples along each seam edge.
 const SEAM_SAMPLES: usize = 8;
@@ -163,8 +172,8 @@ fn disc_centre(k: usize, per_row: usize) -> Vec2 {
 /// coordinates the parameterization gives (§4.2.2's edge offsets, summed outward from the
 /// centre breadth first, to [`DISC_RADIUS`] texels), rasterizes their triangles there at one
 /// texel per exemplar texel, coloured by `colour(face, barycentrics)`, and packs the discs
-/// in a grid of tiles one texel apart. Where the unfolding overlaps itself (the offsets
-/// around a singularity of the field do not close), the later triangle wins.
+/// in a grid of tiles one texel apart. Where the unfolding tears or overlaps itself, the
+/// texels are left out of the mask ([`unfolded_discs_with`]).
 pub fn unfolded_discs(
     triangles: &[[u32; 3]],
     offsets: &EdgeOffsets,
@@ -176,6 +185,7 @@ pub fn unfolded_discs(
         offsets,
         seed,
         |_, _, j| offsets.edge_offsets[j],
+        |_, j| offsets.edge_offsets[j].length(),
         colour,
     )
 }
@@ -190,12 +200,25 @@ pub trait DiscStep: FnMut(usize, usize, usize) -> Vec2 {}
 impl<F: FnMut(usize, usize, usize) -> Vec2> DiscStep for F {}
 
 /// [`unfolded_discs`] with the edge offsets given by `step` (see [`DiscStep`]) instead of
-/// a fixed table; `offsets.edge_offsets` is not read.
+/// a fixed table; `offsets.edge_offsets` is not read. `length(from, j)` is the texel length
+/// of the edge from `from` to `neighbors[j]`, what a walk that closes unfolds it at.
+///
+/// The walk unfolds a disc along a tree of edges, so a triangle whose corners it reached
+/// along paths that do not close (around a singularity of the field, or where a disc wider
+/// than a thin part, a leg a few texels round, wraps around it) lands torn, folded over, or
+/// on top of other triangles. None of that is the texture, and a nearest-patch score would
+/// count its shards and seams as the method's. So the mask leaves out every texel that a
+/// torn triangle (an edge unfolded [`TORN_STRETCH`] times longer or shorter than its own
+/// length, and a texel more) or a folded one (turned the other way round from most of its
+/// disc, over more than [`FOLDED_AREA`]) covers, and every texel that two triangles more
+/// than a ring apart both cover. What the mask loses shows as fewer scored patches; it
+/// depends on the geometry and the steps alone, never on the colours.
 pub fn unfolded_discs_with(
     triangles: &[[u32; 3]],
     offsets: &EdgeOffsets,
     seed: u64,
     mut step: impl DiscStep,
+    length: impl Fn(usize, usize) -> f32,
     colour: impl Fn(usize, Vec3) -> [f32; 4],
 ) -> Charts {
     let param = offsets;
@@ -220,7 +243,24 @@ pub fn unfolded_discs_with(
     let (cw, ch) = (per_row * (tile + 1), rows * (tile + 1));
     let mut pixels = vec![[0.0f32; 4]; cw * ch];
     let mut mask = vec![false; cw * ch];
+    // The triangle that last covered each texel, and whether the texel is cut out: two
+    // triangles that share no corner cover it, or a torn one does.
+    let mut owner = vec![u32::MAX; cw * ch];
+    let mut cut = vec![false; cw * ch];
     let mut coord: Vec<Option<Vec2>> = vec![None; n];
+    // Two triangles within a ring of each other: a corner of one is a corner of the other or
+    // its neighbour. Such triangles may overlap by the walk's error of a texel or so; two
+    // farther apart that cover one texel are two layers of the surface.
+    let near = |s: [u32; 3], t: [u32; 3]| {
+        s.iter().any(|&a| {
+            let (lo, hi) = (
+                param.adj_offsets[a as usize],
+                param.adj_offsets[a as usize + 1],
+            );
+            t.contains(&a)
+                || (param.neighbors[lo as usize..hi as usize].iter()).any(|b| t.contains(b))
+        })
+    };
     for (k, &(_, centre)) in order.iter().enumerate() {
         // Breadth-first unfolding from the centre.
         let mut reached = vec![centre];
@@ -253,19 +293,38 @@ pub fn unfolded_discs_with(
             .collect();
         faces.sort_unstable();
         faces.dedup();
-        for f in faces {
-            let Some(c) = triangles[f]
-                .iter()
-                .map(|&v| coord[v as usize].map(|p| p + origin))
-                .collect::<Option<Vec<Vec2>>>()
-            else {
-                continue;
-            };
+        // Each face's unfolded corners, the signed area, and whether it is torn: an edge
+        // unfolded at a length other than its own (beyond TORN_STRETCH either way).
+        let unfolded: Vec<(usize, [Vec2; 3], f32, bool)> = (faces.into_iter())
+            .filter_map(|f| {
+                let t = triangles[f];
+                let c = [0, 1, 2].map(|k| coord[t[k] as usize].map(|p| p + origin));
+                let c = [c[0]?, c[1]?, c[2]?];
+                let det = (c[1] - c[0]).perp_dot(c[2] - c[0]);
+                if det.abs() < 1e-12 || !det.is_finite() {
+                    return None;
+                }
+                let torn = (0..3).any(|k| {
+                    let (a, b) = (t[k] as usize, t[(k + 1) % 3]);
+                    let (lo, hi) = (param.adj_offsets[a] as usize, param.adj_offsets[a + 1]);
+                    let Some(j) = (lo..hi as usize).find(|&j| param.neighbors[j] == b) else {
+                        return false;
+                    };
+                    let (own, now) = (length(a, j), c[k].distance(c[(k + 1) % 3]));
+                    now > TORN_STRETCH * own + 1.0 || now * TORN_STRETCH + 1.0 < own
+                });
+                Some((f, c, det, torn))
+            })
+            .collect();
+        // The walk keeps the surface's orientation: faces unfolded the other way round are
+        // folded over (the disc past a rim, or past where geodesics meet).
+        // A sliver turned over by less than a texel's error is not a fold.
+        let positive = unfolded.iter().filter(|u| u.2 > 0.0).count();
+        let upright = 2 * positive >= unfolded.len();
+        for (f, c, det, torn) in unfolded {
+            let folded = (det > 0.0) != upright && det.abs() > 2.0 * FOLDED_AREA;
+            let cut_out = torn || folded;
             let (a, e1, e2) = (c[0], c[1] - c[0], c[2] - c[0]);
-            let det = e1.perp_dot(e2);
-            if det.abs() < 1e-12 || !det.is_finite() {
-                continue;
-            }
             let lo = c[0]
                 .min(c[1])
                 .min(c[2])
@@ -285,14 +344,27 @@ pub fn unfolded_discs_with(
                     if bary.min_element() < 0.0 {
                         continue;
                     }
-                    pixels[y * cw + x] = colour(f, bary);
-                    mask[y * cw + x] = true;
+                    let at = y * cw + x;
+                    if cut_out {
+                        cut[at] = true;
+                        continue;
+                    }
+                    let before = owner[at];
+                    if before != u32::MAX && !near(triangles[before as usize], triangles[f]) {
+                        cut[at] = true;
+                    }
+                    owner[at] = f as u32;
+                    pixels[at] = colour(f, bary);
+                    mask[at] = true;
                 }
             }
         }
         for &v in &reached {
             coord[v] = None;
         }
+    }
+    for (m, &o) in mask.iter_mut().zip(&cut) {
+        *m &= !o;
     }
     Charts {
         image: Image {
@@ -558,6 +630,133 @@ mod tests {
         let s = seam_score(&tris, &coords, ex.view(), 0);
         assert_eq!(s.seam_edges, 1, "{s:?}");
         assert!(s.seam_rms > 0.05 && s.ratio > 0.3, "{s:?}");
+    }
+
+    /// A `w` × `h` grid of unit-texel cells whose edge offsets are `place(to) − place(from)`,
+    /// plus `extra(from, to)`; unfolded with each texel coloured by the grid point it shows.
+    fn grid_discs(
+        w: u32,
+        h: u32,
+        place: impl Fn(u32, u32) -> Vec2,
+        extra: impl Fn((u32, u32), (u32, u32)) -> Vec2,
+    ) -> Charts {
+        let idx = |i: u32, j: u32| j * w + i;
+        let ij = |v: u32| (v % w, v / w);
+        let mut tris = Vec::new();
+        for j in 0..h - 1 {
+            for i in 0..w - 1 {
+                tris.push([idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)]);
+                tris.push([idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]);
+            }
+        }
+        let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); (w * h) as usize];
+        for t in &tris {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                nbrs[a as usize].push(b);
+                nbrs[b as usize].push(a);
+            }
+        }
+        let (mut adj, mut neighbors, mut offs) = (vec![0u32], Vec::new(), Vec::new());
+        for (v, list) in nbrs.iter_mut().enumerate() {
+            list.sort_unstable();
+            list.dedup();
+            let a = ij(v as u32);
+            for &n in list.iter() {
+                let b = ij(n);
+                neighbors.push(n);
+                offs.push(place(b.0, b.1) - place(a.0, a.1) + extra(a, b));
+            }
+            adj.push(neighbors.len() as u32);
+        }
+        let offsets = EdgeOffsets {
+            adj_offsets: &adj,
+            neighbors: &neighbors,
+            edge_offsets: &offs,
+        };
+        unfolded_discs(&tris, &offsets, 4, |f, bary| {
+            let p = tris[f].map(|v| {
+                let (i, j) = ij(v);
+                Vec2::new(i as f32, j as f32)
+            });
+            let q = p[0] * bary.x + p[1] * bary.y + p[2] * bary.z;
+            [q.x, q.y, 0.0, 1.0]
+        })
+    }
+
+    /// The grid points the mask keeps, per texel: (texel, point).
+    fn kept(c: &Charts) -> Vec<((usize, usize), Vec2)> {
+        let w = c.image.width as usize;
+        (0..c.mask.len())
+            .filter(|&k| c.mask[k])
+            .map(|k| {
+                let [x, y, _, _] = c.image.pixels[k];
+                ((k % w, k / w), Vec2::new(x, y))
+            })
+            .collect()
+    }
+
+    /// A strip folded back over itself at column 20 (columns 21–27 unfold onto 19–13, turned
+    /// over): neither layer of the doubled part is the surface laid out once, so no texel of
+    /// it is kept (a ring of triangles either side of the fold aside), while the single part
+    /// is.
+    #[test]
+    fn a_disc_folded_over_itself_keeps_only_its_single_layer() {
+        let fold = |i: u32, j: u32| {
+            let x = if i <= 20 { i as f32 } else { 40.0 - i as f32 };
+            Vec2::new(x, j as f32)
+        };
+        let c = grid_discs(28, 10, fold, |_, _| Vec2::ZERO);
+        let points = kept(&c);
+        let single = points.iter().filter(|(_, p)| p.x < 12.0).count();
+        assert!(
+            single > DISCS * 10 * 8,
+            "{single} texels of the single part"
+        );
+        // Within a ring of the fold the two layers may overlap by the walk's error.
+        for &(texel, p) in &points {
+            let doubled = (13.5..19.0).contains(&p.x) || p.x > 22.0;
+            assert!(!doubled, "texel {texel:?} shows {p}, in the doubled part");
+        }
+    }
+
+    /// A grid whose offsets do not close: an edge crossing column 15.5 in rows 15 and up
+    /// moves 6 texels down (a walk around the slit's end does not), as a field turning
+    /// around a singular point makes walks disagree. The slit is a seam its edges declare;
+    /// past its end, triangles the walks reach from both sides tear open, stretched 6×.
+    /// What is kept shows the grid at its own scale on either side of the slit: a step of
+    /// about one grid unit per texel.
+    #[test]
+    fn a_disc_torn_open_keeps_only_the_surface_at_its_scale() {
+        let slit = |a: (u32, u32), b: (u32, u32)| {
+            let crosses = a.1.min(b.1) >= 15 && (a.0 <= 15) != (b.0 <= 15);
+            match (crosses, b.0 > a.0) {
+                (false, _) => Vec2::ZERO,
+                (true, true) => Vec2::new(0.0, 6.0),
+                (true, false) => Vec2::new(0.0, -6.0),
+            }
+        };
+        let grid = |i: u32, j: u32| Vec2::new(i as f32, j as f32);
+        let c = grid_discs(32, 32, grid, slit);
+        let points: HashMap<(usize, usize), Vec2> = kept(&c).into_iter().collect();
+        let mut checked = 0;
+        for (&(x, y), &p) in &points {
+            for (dx, dy) in [(1, 0), (0, 1)] {
+                let Some(&q) = points.get(&(x + dx, y + dy)) else {
+                    continue;
+                };
+                if (p.x > 15.5) != (q.x > 15.5) {
+                    continue; // across the slit, whose edges say so
+                }
+                let step = (q - p).length();
+                assert!(
+                    (0.5..1.5).contains(&step),
+                    "({x}, {y}) shows {p}, its neighbour {q}"
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > DISCS * 1000, "{checked}");
     }
 
     /// A planar grid whose parameterization is the identity (offsets = the edges in

@@ -7,7 +7,8 @@
 //! synthesis reads the surface through one texture-space step per edge
 //! (`Level::step` in stages/synthesize/graph_matching.rs): the edge projected onto the
 //! vertex's (right, −up) frame of the sweep field, kept at its length, times `scale` texels
-//! per unit. The same step, summed outward from 64 seeded vertices over the finest level's
+//! per unit. That step, in the centre's frame carried outward with the surface
+//! ([`TransportedFrame`]) and summed outward from 64 seeded vertices over the finest level's
 //! triangulated edges, unfolds discs of the surface into exemplar texels
 //! ([`super::charts::unfolded_discs`]); their triangles are filled by interpolating the
 //! vertex colours, and, for a second item, with what the baked atlas holds
@@ -28,9 +29,10 @@
 //!
 //! Limits: colours between vertices are interpolated, so where edges are longer than a
 //! texel the discs are smoother than the synthesis meant (the gradient ratio falls with the
-//! edge length); near a singularity of the field the unfolding overlaps itself, and a
-//! feature-aligned disc wider than a thin part (a leg a few texels round) wraps around it
-//! and overlaps itself too (the later triangle wins).
+//! edge length); near a singularity of the field, and where a disc wider than a thin part (a
+//! leg a few texels round) wraps around it, the unfolding tears, folds or overlaps itself,
+//! and those texels are left out of the mask ([`super::charts::unfolded_discs_with`]): a
+//! small shape scores fewer patches, from its flatter places.
 
 use super::charts::{EdgeOffsets, unfolded_discs_with};
 use super::{Item, Run, ScoreFailure};
@@ -113,14 +115,19 @@ pub fn graph_matching(
         ));
     }
     // The synthesis's frame per vertex: "up" is the field projected on the tangent plane,
-    // and an edge maps to (right, −up) texels at its own length.
-    let frames: Vec<(Vec3, Vec3)> = (normals.iter().zip(&field.orientation[..n]))
-        .map(|(&nrm, &o)| texture_frame(nrm, o))
+    // and an edge maps to (right, −up) texels at its own length; a disc carries its centre's.
+    let axes: Vec<(Vec3, Vec3)> = (normals.iter().zip(&field.orientation[..n]))
+        .map(|(&nrm, &o)| {
+            let (up, right) = texture_frame(nrm, o);
+            (right, -up)
+        })
         .collect();
-    let step = |from: usize, to: usize| {
-        let d = mesh.positions[to] - mesh.positions[from];
-        let (up, right) = frames[from];
-        at_length(Vec2::new(d.dot(right), -d.dot(up)), d.length() * scale)
+    let unfolding = &TransportedFrame {
+        positions: &mesh.positions,
+        normals: &normals,
+        axes: &axes,
+        scale,
+        turn: (1.0, 0.0),
     };
     let mut item = Item::new(
         format!("the finest level's vertex colours, {DISCS_NOTE}"),
@@ -167,7 +174,7 @@ pub fn graph_matching(
         baked.extra = item.extra.clone();
         (baked, sampling)
     });
-    score_vertex_colours(run, &mut item, &mesh, &out.colours, step, ex)?;
+    score_vertex_colours(run, &mut item, &mesh, &out.colours, unfolding, ex)?;
     let mut items = vec![item];
     if let Some((mut baked, sampling)) = baked {
         if out.sources.len() != n {
@@ -202,7 +209,7 @@ pub fn graph_matching(
             &mut baked,
             &mesh,
             shade,
-            |_, from, to| step(from, to),
+            unfolding,
             ex,
             Some(&mut DiscFloor::new(sampling)),
         )?;
@@ -275,14 +282,12 @@ pub fn feature_aligned(
     let vectors = vectors.map_err(|e| ScoreFailure::new(e.to_string()))?;
     let mesh = &refined.mesh;
     let normals: Vec<Vec3> = mesh.vertex_normals().to_vec();
-    // `frames` gives (u, n × u)… as (up, right) = (u, u × n); texture optimization's second
-    // axis is n × u = −right.
-    let frames = frames(&normals, &vectors);
+    let axes = optimization_axes(&normals, &vectors);
     let (cos, sin) = (tf.principal_angle.cos_pure(), tf.principal_angle.sin_pure());
     let unfolding = TransportedFrame {
         positions: &mesh.positions,
         normals: &normals,
-        frames: &frames,
+        axes: &axes,
         scale,
         turn: (cos, sin),
     };
@@ -331,7 +336,7 @@ pub fn feature_aligned(
         item.extra
             .insert("exemplar_alignment_deg".into(), degrees_or_null(exemplar));
         let floor = baked.then_some(&mut floor);
-        score_surface(run, &mut item, mesh, shade, unfolding.step(), ex, floor)?;
+        score_surface(run, &mut item, mesh, shade, &unfolding, ex, floor)?;
         items.push(item);
     }
     Ok(items)
@@ -351,6 +356,14 @@ fn atlas_written(input: &Mesh, size: u32) -> Result<(), String> {
 
 const DISCS_NOTE: &str = "discs unfolded along the field";
 
+/// Per vertex, texture optimization's texel axes before the principal angle's turn: `u`, the
+/// field on the tangent plane, and `n × u` (= −right of [`frames`]).
+fn optimization_axes(normals: &[Vec3], field: &[Vec3]) -> Vec<(Vec3, Vec3)> {
+    (frames(normals, field).into_iter())
+        .map(|(u, right)| (u, -right))
+        .collect()
+}
+
 /// Per vertex, (up, right): the field projected on the tangent plane (any tangent where it
 /// vanishes) and `up × n`.
 fn frames(normals: &[Vec3], field: &[Vec3]) -> Vec<(Vec3, Vec3)> {
@@ -367,26 +380,33 @@ fn frames(normals: &[Vec3], field: &[Vec3]) -> Vec<(Vec3, Vec3)> {
         .collect()
 }
 
-/// Feature-aligned discs unfolded as texture optimization reads a patch, in one frame: the
-/// centre's synthesis frame (`u` the field on the tangent plane, `n × u`, turned by the
-/// principal angle onto exemplar pixel axes), carried outward along the walk by the rotation
-/// between neighbouring normals (a discrete exponential map), each edge at its own length
-/// times `scale`. Where the field turns inside a disc, the texture turns with it in the
-/// disc, as it does on the surface. Stepping every edge in its own vertex's field frame
-/// instead does not close around loops where the field turns (a few degrees per texel on the
-/// elephant's crest-line field): neighbours reached along different paths land far apart
-/// and the disc shows a scramble of texels the surface does not.
+/// Discs unfolded in one frame: the centre's synthesis frame (feature-aligned: `u` the field
+/// on the tangent plane and `n × u`, turned by the principal angle onto exemplar pixel axes,
+/// as texture optimization reads a patch; graph matching: the vertex's (right, −up)),
+/// carried outward along the walk by the rotation between neighbouring normals (a discrete
+/// exponential map), each edge at its own length times `scale`. Where the field turns inside
+/// a disc, the texture turns with it in the disc, as it does on the surface. Stepping every
+/// edge in its own vertex's field frame instead does not close around loops where the field
+/// turns (a few degrees per texel on the elephant's fields): neighbours reached along
+/// different paths land far apart and the disc shows a scramble of shards, stretched
+/// triangles at every angle, that the surface does not.
 struct TransportedFrame<'a> {
     positions: &'a [Vec3],
     normals: &'a [Vec3],
-    /// Per vertex, (u, u × n) as [`frames`] gives them.
-    frames: &'a [(Vec3, Vec3)],
+    /// Per vertex, the tangent directions the disc's texel x and y axes take there; only the
+    /// centre's are read, the rest of the disc carries them.
+    axes: &'a [(Vec3, Vec3)],
     scale: f32,
     /// cos, sin of the principal angle.
     turn: (f32, f32),
 }
 
 impl TransportedFrame<'_> {
+    /// The texel length of the edge from `from` to `to`, which every step keeps.
+    fn length(&self, from: usize, to: usize) -> f32 {
+        self.positions[from].distance(self.positions[to]) * self.scale
+    }
+
     /// The step for [`super::charts::unfolded_discs_with`]: `(centre, from, to)` to texels.
     fn step(&self) -> impl FnMut(usize, usize, usize) -> Vec2 + '_ {
         // The transported frame (u, v = n × u) of every vertex the current disc reached.
@@ -396,8 +416,7 @@ impl TransportedFrame<'_> {
             if centre != disc {
                 disc = centre;
                 carried.clear();
-                let (u, right) = self.frames[centre];
-                carried.insert(centre, (u, -right));
+                carried.insert(centre, self.axes[centre]);
             }
             let (u, v) = carried[&from];
             let turn = glam::Quat::from_rotation_arc(
@@ -430,14 +449,14 @@ fn at_length(o: Vec2, len: f32) -> Vec2 {
     if l > 0.0 { o * (len / l) } else { Vec2::ZERO }
 }
 
-/// Unfolds discs of `mesh` with the texel offset `step(from, to)` of each edge, fills their
-/// triangles with the vertex `colours` interpolated, and scores them into `item`.
+/// Unfolds discs of `mesh` in `unfolding`, fills their triangles with the vertex `colours`
+/// interpolated, and scores them into `item`.
 fn score_vertex_colours(
     run: &Run,
     item: &mut Item,
     mesh: &crate::geom::Mesh,
     colours: &[[f32; 3]],
-    step: impl Fn(usize, usize) -> Vec2,
+    unfolding: &TransportedFrame,
     ex: crate::image::ImageView,
 ) -> Result<(), ScoreFailure> {
     let shade = |f: usize, b: Vec3| {
@@ -450,32 +469,51 @@ fn score_vertex_colours(
         }
         c
     };
-    score_surface(
-        run,
-        item,
-        mesh,
-        shade,
-        |_, from, to| step(from, to),
-        ex,
-        None,
-    )
+    score_surface(run, item, mesh, shade, unfolding, ex, None)
 }
 
-/// Unfolds discs of `mesh` with the texel offset `step(centre, from, to)` of each edge (see
-/// [`super::charts::DiscStep`]), fills their triangles with `shade(triangle, barycentrics)`
-/// and scores them into `item`; with `floor`, also the floor of the atlas's read
-/// ([`DiscFloor`]).
+/// Unfolds discs of `mesh` in `unfolding`, fills their triangles with `shade(triangle,
+/// barycentrics)` and scores them into `item`; with `floor`, also the floor of the atlas's
+/// read ([`DiscFloor`]).
 fn score_surface(
     run: &Run,
     item: &mut Item,
     mesh: &crate::geom::Mesh,
     shade: impl Fn(usize, Vec3) -> [f32; 4] + Sync,
-    mut step: impl FnMut(usize, usize, usize) -> Vec2,
+    unfolding: &TransportedFrame,
     ex: crate::image::ImageView,
     floor: Option<&mut DiscFloor>,
 ) -> Result<(), ScoreFailure> {
-    let n = mesh.positions.len();
-    let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
+    let (adj, neighbors) = adjacency(mesh);
+    let edges = EdgeOffsets {
+        adj_offsets: &adj,
+        neighbors: &neighbors,
+        edge_offsets: &[],
+    };
+    let to = |j: usize| neighbors[j] as usize;
+    let mut step = unfolding.step();
+    let step = |centre, from, j| step(centre, from, to(j));
+    let length = |from, j| unfolding.length(from, to(j));
+    let charts = unfolded_discs_with(
+        &mesh.triangles,
+        &edges,
+        run.params.seed,
+        step,
+        length,
+        shade,
+    );
+    item.extra
+        .insert("discs".into(), serde_json::json!(charts.discs));
+    if let Some(floor) = floor {
+        floor.add_to(run, item, &charts, ex)?;
+    }
+    run.score_into(item, charts.image.view(), Some(&charts.mask), ex)
+}
+
+/// Every vertex's neighbours along `mesh`'s edges, sorted, in compressed form: those of `v`
+/// are `neighbors[adj[v]..adj[v + 1]]`.
+fn adjacency(mesh: &crate::geom::Mesh) -> (Vec<u32>, Vec<u32>) {
+    let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); mesh.positions.len()];
     for t in &mesh.triangles {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
@@ -490,20 +528,7 @@ fn score_surface(
         neighbors.extend_from_slice(list);
         adj.push(neighbors.len() as u32);
     }
-    let edges = EdgeOffsets {
-        adj_offsets: &adj,
-        neighbors: &neighbors,
-        edge_offsets: &[],
-    };
-    let to = |j: usize| neighbors[j] as usize;
-    let step = |centre, from, j| step(centre, from, to(j));
-    let charts = unfolded_discs_with(&mesh.triangles, &edges, run.params.seed, step, shade);
-    item.extra
-        .insert("discs".into(), serde_json::json!(charts.discs));
-    if let Some(floor) = floor {
-        floor.add_to(run, item, &charts, ex)?;
-    }
-    run.score_into(item, charts.image.view(), Some(&charts.mask), ex)
+    (adj, neighbors)
 }
 
 /// The discs' floor (ratio and gradient ratio): the exemplar laid out verbatim in every
@@ -597,11 +622,11 @@ mod tests {
         let field: Vec<Vec3> = (mesh.positions.iter())
             .map(|p| Vec3::new((0.3 * p.x).cos_pure(), (0.3 * p.x).sin_pure(), 0.0))
             .collect();
-        let frames = frames(&normals, &field);
+        let axes = optimization_axes(&normals, &field);
         let unfolding = TransportedFrame {
             positions: &mesh.positions,
             normals: &normals,
-            frames: &frames,
+            axes: &axes,
             scale: 2.0,
             turn: (1.0, 0.0),
         };
@@ -628,11 +653,11 @@ mod tests {
             .map(|p| Vec3::new(p.x, p.y, 0.0))
             .collect();
         let axis = vec![Vec3::Z; positions.len()];
-        let ring_frames = super::frames(&normals, &axis);
+        let ring_axes = optimization_axes(&normals, &axis);
         let cylinder = TransportedFrame {
             positions: &positions,
             normals: &normals,
-            frames: &ring_frames,
+            axes: &ring_axes,
             scale: 1.0,
             turn: (1.0, 0.0),
         };
