@@ -108,6 +108,10 @@ pub fn jump_maps(run: &Run, nodes: &JumpMapNodes) -> Result<Vec<Item>, ScoreFail
         ),
         "inputs.exemplar",
     );
+    item.extra.insert(
+        "cut_share".into(),
+        serde_json::json!(super::round3(charts.cut_share)),
+    );
     run.score_into(&mut item, charts.image.view(), Some(&charts.mask), ex)?;
     let seams = seam_score(&mesh.triangles, &single, ex, run.params.seed);
     item.extra.insert(
@@ -150,10 +154,13 @@ impl<'a> From<&ParamParts<'a>> for EdgeOffsets<'a> {
 /// Discs of the surface unfolded into texel coordinates, packed on one canvas.
 pub struct Charts {
     pub image: Image,
-    /// Texels that some triangle covers.
+    /// Texels that some triangle covers, less those cut out where the unfolding tears, folds
+    /// or overlaps itself ([`unfolded_discs_with`]).
     pub mask: Vec<bool>,
     /// Discs laid out.
     pub discs: usize,
+    /// Of the texels the discs' triangles cover, torn ones included, the share cut out.
+    pub cut_share: f64,
 }
 
 /// The top-left texel of disc `k`'s tile, `per_row` tiles to a row, one texel apart.
@@ -366,6 +373,7 @@ pub fn unfolded_discs_with(
     for (m, &o) in mask.iter_mut().zip(&cut) {
         *m &= !o;
     }
+    let (cut, kept) = (count(&cut), count(&mask));
     Charts {
         image: Image {
             width: cw as u32,
@@ -374,7 +382,16 @@ pub fn unfolded_discs_with(
         },
         mask,
         discs: order.len(),
+        cut_share: if cut + kept > 0 {
+            cut as f64 / (cut + kept) as f64
+        } else {
+            0.0
+        },
     }
+}
+
+fn count(flags: &[bool]) -> usize {
+    flags.iter().filter(|&&f| f).count()
 }
 
 const STREAM_FLOOR_DISC: u64 = 0x5ea0_0004;
@@ -708,6 +725,8 @@ mod tests {
         };
         let c = grid_discs(28, 10, fold, |_, _| Vec2::ZERO);
         let points = kept(&c);
+        // Of the strip's 27 columns, the 7 folded back and the 7 under them are cut out.
+        assert!((0.3..0.7).contains(&c.cut_share), "{}", c.cut_share);
         let single = points.iter().filter(|(_, p)| p.x < 12.0).count();
         assert!(
             single > DISCS * 10 * 8,
@@ -805,7 +824,7 @@ mod tests {
             let [r, g, bl] = bilinear(ex.view(), p);
             [r, g, bl, 1.0]
         });
-        assert_eq!(c.discs, DISCS);
+        assert_eq!((c.discs, c.cut_share), (DISCS, 0.0));
         let covered = c.mask.iter().filter(|&&m| m).count();
         assert!(covered > DISCS * DISC_RADIUS * DISC_RADIUS, "{covered}");
         let s = crate::image::patch_score::patch_score_masked(
@@ -837,6 +856,7 @@ mod tests {
             image: Image::new(w as u32, h as u32),
             mask,
             discs: 4,
+            cut_share: 0.0,
         };
         let size = (120u32, 90u32);
         let floor = verbatim_discs(&charts, size, 7, |at| [at.x, at.y, 0.0, 1.0]).unwrap();

@@ -504,6 +504,10 @@ fn score_surface(
     );
     item.extra
         .insert("discs".into(), serde_json::json!(charts.discs));
+    item.extra.insert(
+        "cut_share".into(),
+        serde_json::json!(super::round3(charts.cut_share)),
+    );
     if let Some(floor) = floor {
         floor.add_to(run, item, &charts, ex)?;
     }
