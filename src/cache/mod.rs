@@ -32,6 +32,10 @@ use std::time::SystemTime;
 const OBJECTS_DIR: &str = "objects-v1";
 /// Temporary objects are named `.tmp-OWNER-N` (OWNER: [`crate::owner::Owner::tag`]).
 const TMP_PREFIX: &str = ".tmp-";
+/// Plan values remembered beside the objects (`crate::methods::plan_memo`): a few bytes each,
+/// never counted or trimmed by [`Cache::gc`], whose dead writers' temporaries are removed as
+/// the objects' are.
+pub const PLAN_MEMO_DIR: &str = "plan-memo";
 
 /// A node key: the blake3 hash naming a cache object.
 pub type Key = ContentHash;
@@ -301,15 +305,16 @@ impl Cache {
         })
     }
 
-    /// Removes temporary objects whose writer is provably dead, or that are older than
+    /// Removes temporary objects and plan memos whose writer is provably dead, or that are older than
     /// [`crate::owner::STALE_AGE`] (a writer on another host or in another PID namespace);
     /// never this process's own.
     fn remove_stale_temporaries(&self) {
-        let Ok(shards) = fs::read_dir(self.root.join(OBJECTS_DIR)) else {
-            return;
-        };
-        for shard in shards.flatten() {
-            let Ok(files) = fs::read_dir(shard.path()) else {
+        let shards = fs::read_dir(self.root.join(OBJECTS_DIR))
+            .into_iter()
+            .flatten();
+        let folders = (shards.flatten().map(|s| s.path())).chain([self.root.join(PLAN_MEMO_DIR)]);
+        for folder in folders {
+            let Ok(files) = fs::read_dir(folder) else {
                 continue;
             };
             for f in files.flatten() {
@@ -508,13 +513,36 @@ mod tests {
     }
 
     /// A live writer's temporaries stay whatever their age; others of this host, boot and
-    /// namespace go once their writer is dead; the rest only past the age limit.
+    /// namespace go once their writer is dead; the rest only past the age limit. The same
+    /// holds for the plan memos' folder, whose memos stay.
     #[test]
     fn only_temporaries_of_provably_dead_writers_or_past_the_age_limit_are_removed() {
-        use crate::owner::{Owner, STALE_AGE};
         let dir = tempfile::tempdir().unwrap();
-        let shard = dir.path().join(OBJECTS_DIR).join("ab");
-        fs::create_dir_all(&shard).unwrap();
+        let memos = dir.path().join(PLAN_MEMO_DIR);
+        fs::create_dir_all(&memos).unwrap();
+        let memo = "00ff".repeat(16);
+        fs::write(memos.join(&memo), 1.0f32.to_le_bytes()).unwrap();
+        for shard in [dir.path().join(OBJECTS_DIR).join("ab"), memos] {
+            fs::create_dir_all(&shard).unwrap();
+            let mut left = stale_temporaries_removed_from(dir.path(), &shard);
+            if shard.ends_with(PLAN_MEMO_DIR) {
+                assert!(
+                    left.remove(&memo),
+                    "{}: the memo was removed",
+                    shard.display()
+                );
+            }
+            assert!(left.is_empty(), "{}: left {left:?}", shard.display());
+        }
+    }
+
+    /// Writes temporaries of live, dead and foreign writers into `shard` of the cache at
+    /// `root`, opens the cache, and returns the names left that were not expected to be.
+    fn stale_temporaries_removed_from(
+        root: &Path,
+        shard: &Path,
+    ) -> std::collections::BTreeSet<String> {
+        use crate::owner::{Owner, STALE_AGE};
         let mut child = std::process::Command::new("true").spawn().unwrap();
         let dead_pid = child.id();
         child.wait().unwrap();
@@ -545,20 +573,21 @@ mod tests {
             let f = File::options().write(true).open(shard.join(n)).unwrap();
             f.set_modified(past).unwrap();
         }
-        Cache::open(dir.path()).unwrap();
-        let mut left: Vec<String> = fs::read_dir(&shard)
+        Cache::open(root).unwrap();
+        let mut left: std::collections::BTreeSet<String> = fs::read_dir(shard)
             .unwrap()
             .map(|e| e.unwrap().file_name().into_string().unwrap())
             .collect();
-        left.sort();
         let mut expected = vec![mine, foreign_young, bare_pid];
         if cfg!(target_os = "linux") {
             expected.push(alive_old);
         } else {
             expected.push(dead);
         }
-        expected.sort();
-        assert_eq!(left, expected);
+        for e in &expected {
+            assert!(left.remove(e), "{}: {e} was removed", shard.display());
+        }
+        left
     }
 
     /// `gc` and `verify` do not create a cache that is not there.

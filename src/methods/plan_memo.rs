@@ -14,8 +14,9 @@ use crate::artifact::ContentHash;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-/// The memos' folder inside a cache.
-pub const MEMOS: &str = "plan-memo";
+/// The memos' folder inside a cache. `gc` leaves memos alone (a few bytes each, and a
+/// trimmed one costs a rerun its fit again) and removes the temporaries of dead writers.
+pub const MEMOS: &str = crate::cache::PLAN_MEMO_DIR;
 
 static DIR: OnceLock<PathBuf> = OnceLock::new();
 
