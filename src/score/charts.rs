@@ -649,13 +649,26 @@ mod tests {
         assert!(s.seam_rms > 0.05 && s.ratio > 0.3, "{s:?}");
     }
 
-    /// A `w` × `h` grid of unit-texel cells whose edge offsets are `place(to) − place(from)`,
-    /// plus `extra(from, to)`; unfolded with each texel coloured by the grid point it shows.
+    /// A `w` × `h` grid whose edge offsets are `place(to) − place(from)`, plus
+    /// `extra(from, to)`, unfolded from `seed`'s discs; each texel coloured by the grid point
+    /// it shows.
     fn grid_discs(
         w: u32,
         h: u32,
         place: impl Fn(u32, u32) -> Vec2,
         extra: impl Fn((u32, u32), (u32, u32)) -> Vec2,
+    ) -> Charts {
+        grid_discs_coloured(w, h, place, extra, 4, |grid, _| [grid.x, grid.y, 0.0, 1.0])
+    }
+
+    /// [`grid_discs`] with the seed and the colour, `colour(grid point, placed point)`, given.
+    fn grid_discs_coloured(
+        w: u32,
+        h: u32,
+        place: impl Fn(u32, u32) -> Vec2,
+        extra: impl Fn((u32, u32), (u32, u32)) -> Vec2,
+        seed: u64,
+        colour: impl Fn(Vec2, Vec2) -> [f32; 4],
     ) -> Charts {
         let idx = |i: u32, j: u32| j * w + i;
         let ij = |v: u32| (v % w, v / w);
@@ -691,13 +704,11 @@ mod tests {
             neighbors: &neighbors,
             edge_offsets: &offs,
         };
-        unfolded_discs(&tris, &offsets, 4, |f, bary| {
-            let p = tris[f].map(|v| {
-                let (i, j) = ij(v);
-                Vec2::new(i as f32, j as f32)
-            });
-            let q = p[0] * bary.x + p[1] * bary.y + p[2] * bary.z;
-            [q.x, q.y, 0.0, 1.0]
+        let at = |t: [Vec2; 3], b: Vec3| t[0] * b.x + t[1] * b.y + t[2] * b.z;
+        unfolded_discs(&tris, &offsets, seed, |f, bary| {
+            let grid = tris[f].map(|v| Vec2::new(ij(v).0 as f32, ij(v).1 as f32));
+            let placed = tris[f].map(|v| place(ij(v).0, ij(v).1));
+            colour(at(grid, bary), at(placed, bary))
         })
     }
 
@@ -783,47 +794,19 @@ mod tests {
     #[test]
     fn unfolded_discs_of_a_continuous_parameterization_are_verbatim() {
         let ex = stripes();
-        let n = 40u32;
-        let idx = |i: u32, j: u32| j * n + i;
-        let mut tris = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                tris.push([idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)]);
-                tris.push([idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]);
-            }
-        }
-        let spacing = 3.0f32;
         // Vertices at texel centres (half-integers), so the discs' texels land on them.
-        let pos = |v: u32| Vec2::new((v % n) as f32, (v / n) as f32) * spacing + Vec2::splat(2.5);
-        let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); (n * n) as usize];
-        for t in &tris {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                nbrs[a as usize].push(b);
-                nbrs[b as usize].push(a);
-            }
-        }
-        let (mut adj, mut neighbors, mut offs) = (vec![0u32], Vec::new(), Vec::new());
-        for (v, list) in nbrs.iter_mut().enumerate() {
-            list.sort_unstable();
-            list.dedup();
-            for &w in list.iter() {
-                neighbors.push(w);
-                offs.push(pos(w) - pos(v as u32));
-            }
-            adj.push(neighbors.len() as u32);
-        }
-        let offsets = EdgeOffsets {
-            adj_offsets: &adj,
-            neighbors: &neighbors,
-            edge_offsets: &offs,
-        };
-        let c = unfolded_discs(&tris, &offsets, 1, |f, b| {
-            let t = tris[f].map(pos);
-            let p = t[0] * b.x + t[1] * b.y + t[2] * b.z;
-            let [r, g, bl] = bilinear(ex.view(), p);
-            [r, g, bl, 1.0]
-        });
+        let pos = |i: u32, j: u32| Vec2::new(i as f32, j as f32) * 3.0 + Vec2::splat(2.5);
+        let c = grid_discs_coloured(
+            40,
+            40,
+            pos,
+            |_, _| Vec2::ZERO,
+            1,
+            |_, p| {
+                let [r, g, b] = bilinear(ex.view(), p);
+                [r, g, b, 1.0]
+            },
+        );
         assert_eq!((c.discs, c.cut_share), (DISCS, 0.0));
         let covered = c.mask.iter().filter(|&&m| m).count();
         assert!(covered > DISCS * DISC_RADIUS * DISC_RADIUS, "{covered}");
