@@ -54,7 +54,8 @@ const DISC_RADIUS: usize = 24;
 /// A texel more either way is allowed as well: a walk's error below a texel is not a tear.
 pub const TORN_STRETCH: f32 = 2.0;
 /// The area in texels above which a triangle unfolded the other way round from its disc is
-/// a fold: a sliver turned over by the walk's error is not.
+/// a fold (or above half its own area, for triangles smaller than a texel): a sliver turned
+/// over by the walk's error is not.
 const FOLDED_AREA: f32 = 0.5;
 const STREAM_DISC: u64 = 0x5ea0_0003;
 /// Samples along each seam edge.
@@ -179,8 +180,8 @@ fn disc_centre(k: usize, per_row: usize) -> Vec2 {
 /// coordinates the parameterization gives (§4.2.2's edge offsets, summed outward from the
 /// centre breadth first, to [`DISC_RADIUS`] texels), rasterizes their triangles there at one
 /// texel per exemplar texel, coloured by `colour(face, barycentrics)`, and packs the discs
-/// in a grid of tiles one texel apart. Where the unfolding tears or overlaps itself, the
-/// texels are left out of the mask ([`unfolded_discs_with`]).
+/// in a grid of tiles one texel apart. Where the unfolding tears, folds or overlaps itself,
+/// the texels are left out of the mask ([`unfolded_discs_with`]).
 pub fn unfolded_discs(
     triangles: &[[u32; 3]],
     offsets: &EdgeOffsets,
@@ -217,8 +218,8 @@ impl<F: FnMut(usize, usize, usize) -> Vec2> DiscStep for F {}
 /// count its shards and seams as the method's. So the mask leaves out every texel that a
 /// torn triangle (an edge unfolded [`TORN_STRETCH`] times longer or shorter than its own
 /// length, and a texel more) or a folded one (turned the other way round from most of its
-/// disc, over more than [`FOLDED_AREA`]) covers, and every texel that two triangles more
-/// than a ring apart both cover. What the mask loses shows as fewer scored patches; it
+/// disc's area, over more than [`FOLDED_AREA`] or half its own area) covers, and every texel
+/// that two triangles more than a ring apart both cover. What the mask loses shows as fewer scored patches; it
 /// depends on the geometry and the steps alone, never on the colours.
 pub fn unfolded_discs_with(
     triangles: &[[u32; 3]],
@@ -250,14 +251,15 @@ pub fn unfolded_discs_with(
     let (cw, ch) = (per_row * (tile + 1), rows * (tile + 1));
     let mut pixels = vec![[0.0f32; 4]; cw * ch];
     let mut mask = vec![false; cw * ch];
-    // The triangle that last covered each texel, and whether the texel is cut out: two
-    // triangles that share no corner cover it, or a torn one does.
+    // The triangles that first and last covered each texel, and whether the texel is cut
+    // out: two triangles more than a ring apart cover it, or a torn or folded one does.
+    let mut first = vec![u32::MAX; cw * ch];
     let mut owner = vec![u32::MAX; cw * ch];
     let mut cut = vec![false; cw * ch];
     let mut coord: Vec<Option<Vec2>> = vec![None; n];
     // Two triangles within a ring of each other: a corner of one is a corner of the other or
-    // its neighbour. Such triangles may overlap by the walk's error of a texel or so; two
-    // farther apart that cover one texel are two layers of the surface.
+    // its neighbour. Such triangles may overlap by the walk's error; two farther apart that
+    // cover one texel are two layers of the surface.
     let near = |s: [u32; 3], t: [u32; 3]| {
         s.iter().any(|&a| {
             let (lo, hi) = (
@@ -302,7 +304,10 @@ pub fn unfolded_discs_with(
         faces.dedup();
         // Each face's unfolded corners, the signed area, and whether it is torn: an edge
         // unfolded at a length other than its own (beyond TORN_STRETCH either way).
-        let unfolded: Vec<(usize, [Vec2; 3], f32, bool)> = (faces.into_iter())
+        // Each face's unfolded corners, its signed area (doubled), its own area (doubled, from
+        // its edges' own lengths), and whether it is torn: an edge unfolded at a length other
+        // than its own (beyond TORN_STRETCH either way, and a texel).
+        let unfolded: Vec<(usize, [Vec2; 3], f32, f32, bool)> = (faces.into_iter())
             .filter_map(|f| {
                 let t = triangles[f];
                 let c = [0, 1, 2].map(|k| coord[t[k] as usize].map(|p| p + origin));
@@ -311,25 +316,36 @@ pub fn unfolded_discs_with(
                 if det.abs() < 1e-12 || !det.is_finite() {
                     return None;
                 }
-                let torn = (0..3).any(|k| {
+                let own = [0, 1, 2].map(|k| {
                     let (a, b) = (t[k] as usize, t[(k + 1) % 3]);
                     let (lo, hi) = (param.adj_offsets[a] as usize, param.adj_offsets[a + 1]);
-                    let Some(j) = (lo..hi as usize).find(|&j| param.neighbors[j] == b) else {
-                        return false;
-                    };
-                    let (own, now) = (length(a, j), c[k].distance(c[(k + 1) % 3]));
-                    now > TORN_STRETCH * own + 1.0 || now * TORN_STRETCH + 1.0 < own
+                    let j = (lo..hi as usize).find(|&j| param.neighbors[j] == b);
+                    debug_assert!(j.is_some(), "edge {a}–{b} of face {f} not in the adjacency");
+                    j.map(|j| length(a, j))
                 });
-                Some((f, c, det, torn))
+                let torn = (0..3).any(|k| {
+                    let now = c[k].distance(c[(k + 1) % 3]);
+                    own[k].is_some_and(|own| {
+                        now > TORN_STRETCH * own + 1.0 || now * TORN_STRETCH + 1.0 < own
+                    })
+                });
+                let own_det = match own {
+                    [Some(a), Some(b), Some(c)] => 2.0 * heron(a, b, c),
+                    _ => det.abs(),
+                };
+                Some((f, c, det, own_det, torn))
             })
             .collect();
-        // The walk keeps the surface's orientation: faces unfolded the other way round are
-        // folded over (the disc past a rim, or past where geodesics meet).
-        // A sliver turned over by less than a texel's error is not a fold.
-        let positive = unfolded.iter().filter(|u| u.2 > 0.0).count();
-        let upright = 2 * positive >= unfolded.len();
-        for (f, c, det, torn) in unfolded {
-            let folded = (det > 0.0) != upright && det.abs() > 2.0 * FOLDED_AREA;
+        // The walk keeps the surface's orientation (the centre's ring is stepped straight
+        // from its frame): faces unfolded the other way round from most of the disc's area
+        // are folded over (the disc past a rim, or past where geodesics meet). A sliver
+        // turned over by the walk's error, over less than half its own area and
+        // FOLDED_AREA, is not a fold.
+        let signed: f32 = unfolded.iter().map(|u| u.2).sum();
+        let upright = signed >= 0.0;
+        for (f, c, det, own_det, torn) in unfolded {
+            let fold_area = (2.0 * FOLDED_AREA).min(0.5 * own_det);
+            let folded = (det > 0.0) != upright && det.abs() > fold_area;
             let cut_out = torn || folded;
             let (a, e1, e2) = (c[0], c[1] - c[0], c[2] - c[0]);
             let lo = c[0]
@@ -356,9 +372,15 @@ pub fn unfolded_discs_with(
                         cut[at] = true;
                         continue;
                     }
-                    let before = owner[at];
-                    if before != u32::MAX && !near(triangles[before as usize], triangles[f]) {
-                        cut[at] = true;
+                    // Against the first and the last triangle that covered the texel, so the
+                    // order they are drawn in cannot hide a layer between near ones.
+                    for before in [first[at], owner[at]] {
+                        if before != u32::MAX && !near(triangles[before as usize], triangles[f]) {
+                            cut[at] = true;
+                        }
+                    }
+                    if first[at] == u32::MAX {
+                        first[at] = f as u32;
                     }
                     owner[at] = f as u32;
                     pixels[at] = colour(f, bary);
@@ -388,6 +410,12 @@ pub fn unfolded_discs_with(
             0.0
         },
     }
+}
+
+/// The area of a triangle with sides `a`, `b`, `c` (Heron); 0 for sides that close no triangle.
+fn heron(a: f32, b: f32, c: f32) -> f32 {
+    let s = (a + b + c) / 2.0;
+    (s * (s - a) * (s - b) * (s - c)).max(0.0).sqrt()
 }
 
 fn count(flags: &[bool]) -> usize {

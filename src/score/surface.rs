@@ -409,7 +409,7 @@ impl TransportedFrame<'_> {
 
     /// The step for [`super::charts::unfolded_discs_with`]: `(centre, from, to)` to texels.
     fn step(&self) -> impl FnMut(usize, usize, usize) -> Vec2 + '_ {
-        // The transported frame (u, v = n × u) of every vertex the current disc reached.
+        // The centre's axes, carried to every vertex the current disc reached.
         let mut carried: HashMap<usize, (Vec3, Vec3)> = HashMap::new();
         let mut disc = usize::MAX;
         move |centre, from, to| {
