@@ -219,8 +219,8 @@ impl<F: FnMut(usize, usize, usize) -> Vec2> DiscStep for F {}
 /// torn triangle (an edge unfolded [`TORN_STRETCH`] times longer or shorter than its own
 /// length, and a texel more) or a folded one (turned the other way round from most of its
 /// disc's area, over more than [`FOLDED_AREA`] or half its own area) covers, and every texel
-/// that two triangles more than a ring apart both cover. What the mask loses shows as fewer scored patches; it
-/// depends on the geometry and the steps alone, never on the colours.
+/// that two triangles more than a ring apart both cover. What the mask loses shows as fewer
+/// scored patches; it depends on the geometry and the steps alone, never on the colours.
 pub fn unfolded_discs_with(
     triangles: &[[u32; 3]],
     offsets: &EdgeOffsets,
@@ -302,8 +302,6 @@ pub fn unfolded_discs_with(
             .collect();
         faces.sort_unstable();
         faces.dedup();
-        // Each face's unfolded corners, the signed area, and whether it is torn: an edge
-        // unfolded at a length other than its own (beyond TORN_STRETCH either way).
         // Each face's unfolded corners, its signed area (doubled), its own area (doubled, from
         // its edges' own lengths), and whether it is torn: an edge unfolded at a length other
         // than its own (beyond TORN_STRETCH either way, and a texel).
@@ -707,29 +705,21 @@ mod tests {
                 tris.push([idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]);
             }
         }
-        let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); (w * h) as usize];
-        for t in &tris {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                nbrs[a as usize].push(b);
-                nbrs[b as usize].push(a);
-            }
-        }
-        let (mut adj, mut neighbors, mut offs) = (vec![0u32], Vec::new(), Vec::new());
-        for (v, list) in nbrs.iter_mut().enumerate() {
-            list.sort_unstable();
-            list.dedup();
-            let a = ij(v as u32);
-            for &n in list.iter() {
-                let b = ij(n);
-                neighbors.push(n);
-                offs.push(place(b.0, b.1) - place(a.0, a.1) + extra(a, b));
-            }
-            adj.push(neighbors.len() as u32);
-        }
+        let adjacency = crate::geom::VertexAdjacency::build((w * h) as usize, &tris);
+        let offs: Vec<Vec2> = (0..(w * h) as usize)
+            .flat_map(|v| {
+                let a = ij(v as u32);
+                let (place, extra) = (&place, &extra);
+                (adjacency.neighbors(v).iter()).map(move |&n| {
+                    let b = ij(n);
+                    place(b.0, b.1) - place(a.0, a.1) + extra(a, b)
+                })
+            })
+            .collect();
+        let (adj, neighbors) = (&adjacency.offsets, &adjacency.neighbors);
         let offsets = EdgeOffsets {
-            adj_offsets: &adj,
-            neighbors: &neighbors,
+            adj_offsets: adj,
+            neighbors,
             edge_offsets: &offs,
         };
         let at = |t: [Vec2; 3], b: Vec3| t[0] * b.x + t[1] * b.y + t[2] * b.z;

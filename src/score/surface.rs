@@ -484,10 +484,11 @@ fn score_surface(
     ex: crate::image::ImageView,
     floor: Option<&mut DiscFloor>,
 ) -> Result<(), ScoreFailure> {
-    let (adj, neighbors) = adjacency(mesh);
+    let adjacency = mesh.adjacency();
+    let neighbors = &adjacency.neighbors;
     let edges = EdgeOffsets {
-        adj_offsets: &adj,
-        neighbors: &neighbors,
+        adj_offsets: &adjacency.offsets,
+        neighbors,
         edge_offsets: &[],
     };
     let to = |j: usize| neighbors[j] as usize;
@@ -512,27 +513,6 @@ fn score_surface(
         floor.add_to(run, item, &charts, ex)?;
     }
     run.score_into(item, charts.image.view(), Some(&charts.mask), ex)
-}
-
-/// Every vertex's neighbours along `mesh`'s edges, sorted, in compressed form: those of `v`
-/// are `neighbors[adj[v]..adj[v + 1]]`.
-fn adjacency(mesh: &crate::geom::Mesh) -> (Vec<u32>, Vec<u32>) {
-    let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); mesh.positions.len()];
-    for t in &mesh.triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            nbrs[a as usize].push(b);
-            nbrs[b as usize].push(a);
-        }
-    }
-    let (mut adj, mut neighbors) = (vec![0u32], Vec::new());
-    for list in nbrs.iter_mut() {
-        list.sort_unstable();
-        list.dedup();
-        neighbors.extend_from_slice(list);
-        adj.push(neighbors.len() as u32);
-    }
-    (adj, neighbors)
 }
 
 /// The discs' floor (ratio and gradient ratio): the exemplar laid out verbatim in every
