@@ -25,7 +25,8 @@
 //!    coarsest level), each of 4 sub-passes over the texels of one parity class `(i mod 2,
 //!    j mod 2)`. A texel's neighbourhood is the appearance vectors at the 3×3 sample offsets
 //!    `h Δ`: tap `Δ` is predicted from the grid neighbour `g = round(2^lift M⁻¹ Δ)` as its
-//!    coordinate `− 2^l M g + h Δ` (anisometric: 2006 §6); the candidates are the k-coherence
+//!    coordinate `− 2^l M g + h Δ` (anisometric: 2006 §6; where `g` rounds to the texel
+//!    itself, the neighbour one step in its direction); the candidates are the k-coherence
 //!    sets of the coordinates the neighbours imply for the texel (`− 2^l M g`), each keeping
 //!    that coordinate's sub-texel remainder. The nearest candidate neighbourhood wins (the
 //!    texel's current coordinate on ties; a candidate that continues no neighbour's run pays
@@ -40,7 +41,11 @@
 //! texels end bit-identical. Lai et al.'s separate boundary resynthesis is not needed: the
 //! correction passes already see both sides of every cut.
 //!
-//! Departures: coordinates are clamped inside the sample (samples are not assumed to tile);
+//! Departures: Lefebvre & Hoppe 2006 §5.1 read every tap from an immediate grid neighbour;
+//! here a tap is read from the neighbour `round(2^lift M⁻¹ Δ)`, several steps away where a
+//! step spans under a tap spacing, so the query still holds the sample's structure at the
+//! tap's distance (immediate neighbours only took relief_cow at density offset 0 from 0.910
+//! to 1.209 along the surface); coordinates are clamped inside the sample (samples are not assumed to tile);
 //! a tap beyond an open side or a corner has no neighbour to predict it, so it is left out of
 //! the distance (predicted from the texel itself, it would pull border texels towards whatever
 //! they hold: at `appearance_k = 4` the crack network of the tests then breaks into 11.2
@@ -178,7 +183,12 @@ fn apply(m: &[f32; 4], x: f64, y: f64) -> (f64, f64) {
     )
 }
 
-/// The grid offsets `round(lift · M⁻¹ Δ)` of the 3×3 taps (`(0, 0)` for a singular map).
+/// The grid offsets `round(lift · M⁻¹ Δ)` of the 3×3 taps (`(0, 0)` for a singular map). An
+/// outer tap that rounds onto the texel itself, where a grid step spans more than two tap
+/// spacings, is read from the grid neighbour nearest its direction instead
+/// ([`nearest_step`]): predicted from the texel itself it would hold what each candidate
+/// holds there, compare nothing, and leave neighbours across the map's long direction
+/// unconstrained by each other.
 fn tap_offsets(m: &[f32; 4], lift: f64) -> [(i64, i64); 9] {
     let (a, b, c, d) = (m[0] as f64, m[1] as f64, m[2] as f64, m[3] as f64);
     let det = a * d - b * c;
@@ -191,8 +201,26 @@ fn tap_offsets(m: &[f32; 4], lift: f64) -> [(i64, i64); 9] {
         let gx = (d * dx - b * dy) / det;
         let gy = (-c * dx + a * dy) / det;
         *o = ((gx + 0.5).floor() as i64, (gy + 0.5).floor() as i64);
+        if *o == (0, 0) && (dx, dy) != (0.0, 0.0) {
+            *o = nearest_step(gx, gy);
+        }
     }
     out
+}
+
+/// The one of the 8 grid steps around a texel nearest the direction `(gx, gy)`: each axis
+/// steps by the sign of its component when that component is at least half the larger one
+/// (Lefebvre & Hoppe 2006 §5.1 read every tap from such an immediate neighbour).
+fn nearest_step(gx: f64, gy: f64) -> (i64, i64) {
+    let big = gx.abs().max(gy.abs());
+    let unit = |v: f64| {
+        if v.abs() * 2.0 >= big {
+            v.signum() as i64
+        } else {
+            0
+        }
+    };
+    (unit(gx), unit(gy))
 }
 
 /// The factors a candidate's neighbourhood distance is weighed with.
@@ -486,6 +514,33 @@ mod tests {
     use glam::{Vec2, Vec3};
 
     /// A 64² sample of round bumps on a jittered lattice, as `(dx, dy, dn)`.
+    /// Every outer tap reads a grid neighbour, never the texel itself: under a map whose grid
+    /// step spans 5 sample texels along x (and 0.25 along y) the x taps round onto the texel
+    /// and are moved to the neighbour one step along x, and the y taps keep their far rows.
+    #[test]
+    fn a_tap_is_never_read_from_the_texel_itself() {
+        for m in [
+            [5.0, 0.0, 0.0, 0.25],
+            [3.0, 2.0, -2.0, 3.0],
+            [0.5, 0.0, 0.0, 0.5],
+        ] {
+            let taps = tap_offsets(&m, 1.0);
+            for (&g, &d) in taps.iter().zip(&TAPS_3X3) {
+                assert_eq!(g == (0, 0), d == (0, 0), "map {m:?}: tap {d:?} at {g:?}");
+            }
+        }
+        let taps = tap_offsets(&[5.0, 0.0, 0.0, 0.25], 1.0);
+        for (&g, &(dx, dy)) in taps.iter().zip(&TAPS_3X3) {
+            if dy == 0 {
+                assert_eq!(g, (dx, 0), "an x tap at {g:?}");
+            } else {
+                assert_eq!(g.1, 4 * dy, "a y tap at {g:?}");
+            }
+        }
+        assert_eq!(nearest_step(0.3, -0.1), (1, 0));
+        assert_eq!(nearest_step(-0.2, 0.15), (-1, 1));
+    }
+
     fn bumps() -> TexelImage {
         let mut s = TexelImage::new(64, 64, 3);
         for y in 0..64u32 {

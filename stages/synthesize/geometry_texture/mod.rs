@@ -106,7 +106,7 @@ pub use run::synthesize_geometry_texture;
 
 /// The `geometry_texture` node's algorithm and version (part of its key; bump on any change of output).
 pub const NODE: texsyn_core::algorithm::Algorithm =
-    texsyn_core::algorithm::Algorithm::new("geometry_texture", 6);
+    texsyn_core::algorithm::Algorithm::new("geometry_texture", 7);
 
 /// The per-sample controls of synthesis (§4.3), computed by the field stage.
 pub use crate::field::param_field::ParamField;
