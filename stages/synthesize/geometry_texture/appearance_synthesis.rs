@@ -41,11 +41,12 @@
 //! texels end bit-identical. Lai et al.'s separate boundary resynthesis is not needed: the
 //! correction passes already see both sides of every cut.
 //!
-//! Departures: Lefebvre & Hoppe 2006 §5.1 read every tap from an immediate grid neighbour;
-//! here a tap is read from the neighbour `round(2^lift M⁻¹ Δ)`, several steps away where a
-//! step spans under a tap spacing, so the query still holds the sample's structure at the
-//! tap's distance (immediate neighbours only took relief_cow at density offset 0 from 0.910
-//! to 1.209 along the surface); coordinates are clamped inside the sample (samples are not assumed to tile);
+//! Departures: Lefebvre & Hoppe 2006's anisometric synthesis reads every tap from an immediate
+//! grid neighbour; here a tap is read from the neighbour `round(2^lift M⁻¹ Δ)`, several steps
+//! away where a step spans under a tap spacing, so the query still holds the sample's
+//! structure at the tap's distance (reading immediate neighbours only scores relief_cow, seed
+//! 1, density offset 0, 1.209 along the surface against 0.913); coordinates are clamped inside
+//! the sample (samples are not assumed to tile);
 //! a tap beyond an open side or a corner has no neighbour to predict it, so it is left out of
 //! the distance (predicted from the texel itself, it would pull border texels towards whatever
 //! they hold: at `appearance_k = 4` the crack network of the tests then breaks into 11.2
@@ -186,9 +187,9 @@ fn apply(m: &[f32; 4], x: f64, y: f64) -> (f64, f64) {
 /// The grid offsets `round(lift · M⁻¹ Δ)` of the 3×3 taps (`(0, 0)` for a singular map). An
 /// outer tap that rounds onto the texel itself, where a grid step spans more than two tap
 /// spacings, is read from the grid neighbour nearest its direction instead
-/// ([`nearest_step`]): predicted from the texel itself it would hold what each candidate
-/// holds there, compare nothing, and leave neighbours across the map's long direction
-/// unconstrained by each other.
+/// ([`nearest_step`]): predicted from the texel itself it would compare every candidate with
+/// the texel's current coordinate there, hold the texel where it is, and leave neighbours
+/// across the map's long direction unconstrained by each other.
 fn tap_offsets(m: &[f32; 4], lift: f64) -> [(i64, i64); 9] {
     let (a, b, c, d) = (m[0] as f64, m[1] as f64, m[2] as f64, m[3] as f64);
     let det = a * d - b * c;
@@ -208,11 +209,16 @@ fn tap_offsets(m: &[f32; 4], lift: f64) -> [(i64, i64); 9] {
     out
 }
 
-/// The one of the 8 grid steps around a texel nearest the direction `(gx, gy)`: each axis
-/// steps by the sign of its component when that component is at least half the larger one
-/// (Lefebvre & Hoppe 2006 §5.1 read every tap from such an immediate neighbour).
+/// One of the 8 grid steps around a texel, in the direction `(gx, gy)`: `(gx, gy)` divided by
+/// its larger component and rounded, so each axis steps by the sign of its component when that
+/// component is at least half the larger one (`(0, 0)` for a zero or not finite direction).
+/// Lefebvre & Hoppe 2006's anisometric synthesis reads every tap from such an immediate
+/// neighbour.
 fn nearest_step(gx: f64, gy: f64) -> (i64, i64) {
     let big = gx.abs().max(gy.abs());
+    if !(gx.is_finite() && gy.is_finite() && big > 0.0) {
+        return (0, 0);
+    }
     let unit = |v: f64| {
         if v.abs() * 2.0 >= big {
             v.signum() as i64
@@ -513,7 +519,6 @@ mod tests {
     };
     use glam::{Vec2, Vec3};
 
-    /// A 64² sample of round bumps on a jittered lattice, as `(dx, dy, dn)`.
     /// Every outer tap reads a grid neighbour, never the texel itself: under a map whose grid
     /// step spans 5 sample texels along x (and 0.25 along y) the x taps round onto the texel
     /// and are moved to the neighbour one step along x, and the y taps keep their far rows.
@@ -539,8 +544,11 @@ mod tests {
         }
         assert_eq!(nearest_step(0.3, -0.1), (1, 0));
         assert_eq!(nearest_step(-0.2, 0.15), (-1, 1));
+        assert_eq!(nearest_step(0.0, 0.0), (0, 0));
+        assert_eq!(nearest_step(f64::NAN, 1.0), (0, 0));
     }
 
+    /// A 64² sample of round bumps on a jittered lattice, as `(dx, dy, dn)`.
     fn bumps() -> TexelImage {
         let mut s = TexelImage::new(64, 64, 3);
         for y in 0..64u32 {
